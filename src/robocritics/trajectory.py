@@ -1,0 +1,317 @@
+"""The motion-level trace critics read: the paper's s_t = {J_t, F_t, P_t, tau_t}, column-wise.
+
+A :class:`Trajectory` of ``T`` samples of an ``n``-joint robot with ``L`` named
+frames and ``K`` proximity pairs holds
+
+* ``q`` ``(T, n)`` joint angles, rad (J_t);
+* ``frames`` ``(T, L, 4, 4)`` link poses in the robot base frame, m (F_t);
+  the frame named ``tcp`` sits at the fingertip centre, and its **z axis is
+  the finger direction** (the way the fingers point);
+* ``proximity`` ``(T, K)`` signed distances, m, of the named pairs in ``pairs``
+  (P_t; <= 0 on penetration);
+* ``time`` ``(T,)`` seconds on the physical time axis the robot executes (tau_t);
+* ``gripper_opening_m`` ``(T,)`` distance between the fingers, m;
+* ``attached`` ``(T,)`` id of the object held by the gripper at each sample ('' for none);
+* ``step`` ``(T,)`` index into ``steps``: the program step (skill call, and so
+  the source line) that produced each sample;
+* ``limits``: the robot's joint limits, so critics need nothing else.
+
+Built by :func:`robocritics.robot.model.Robot.trajectory` from joint samples; validated
+on construction; :meth:`Trajectory.to_json` / :meth:`Trajectory.from_json` are lossless.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from typing import Iterator, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from .errors import TrajectoryError
+
+__all__ = ["Pair", "Step", "RobotLimits", "State", "Trajectory"]
+
+PairKind = Literal["self", "environment"]
+
+
+class Pair(BaseModel):
+    """A named proximity pair: robot part ``a`` against robot part or scene entity ``b``.
+
+    ``kind`` is ``self`` (two robot parts) or ``environment`` (a robot part or the
+    carried object against a scene entity). ``group_a`` / ``group_b`` say what
+    each side is: ``arm``, ``gripper``, ``attached`` (the carried object), or for
+    ``b`` of an environment pair ``object``, ``container`` or ``table``. ``b_entity``
+    is the scene id (a container's wall belongs to the container).
+    """
+
+    model_config = ConfigDict(frozen=True)
+    name: str
+    kind: PairKind
+    a: str
+    b: str
+    group_a: str
+    group_b: str
+    b_entity: str = ""
+
+
+class Step(BaseModel):
+    """One program step (a skill call) and where it came from in the source."""
+
+    model_config = ConfigDict(frozen=True)
+    skill: str
+    line: int = Field(0, description="1-based source line of the call (0 if unknown)")
+    args: str = ""
+    contacts: tuple[str, ...] = Field(
+        (), description="scene ids the gripper or carried object may touch during this step (grasp target, set-down surface)"
+    )
+    speed_fraction: float = Field(1.0, description="speed scaling in force for this step, (0, 1]")
+
+
+class RobotLimits(BaseModel):
+    """Joint limits of the robot that produced a trajectory."""
+
+    model_config = ConfigDict(frozen=True)
+    joint_names: tuple[str, ...]
+    lower_rad: tuple[float, ...]
+    upper_rad: tuple[float, ...]
+    velocity_rad_s: tuple[float, ...]
+    acceleration_rad_s2: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class State:
+    """One sample s_t of a trajectory (views into the arrays, not copies)."""
+
+    index: int
+    J: np.ndarray  # (n,) rad
+    F: np.ndarray  # (L, 4, 4)
+    P: np.ndarray  # (K,) m
+    tau: float  # s
+
+
+def _array(name: str, value, dtype=float, ndim: int | None = None) -> np.ndarray:
+    arr = np.asarray(value, dtype=dtype)
+    if ndim is not None and arr.ndim != ndim:
+        raise TrajectoryError(f"{name} must have {ndim} dimensions, got shape {arr.shape}")
+    if dtype is float and not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        raise TrajectoryError(f"{name} is not finite at index {tuple(int(i) for i in bad)}")
+    return arr
+
+
+class Trajectory:
+    """Columnar motion trace; see the module docstring for every field and its unit."""
+
+    def __init__(
+        self,
+        *,
+        q,
+        time,
+        frames,
+        frame_names,
+        proximity,
+        pairs,
+        gripper_opening_m,
+        attached,
+        step,
+        steps,
+        limits: RobotLimits,
+        robot_name: str = "",
+    ):
+        self.q = _array("q", q, ndim=2)
+        T, n = self.q.shape
+        self.time = _array("time", time, ndim=1)
+        self.frames = _array("frames", frames, ndim=4)
+        self.frame_names = tuple(frame_names)
+        self.proximity = _array("proximity", proximity, ndim=2)
+        self.pairs = tuple(p if isinstance(p, Pair) else Pair.model_validate(p) for p in pairs)
+        self.gripper_opening_m = _array("gripper_opening_m", gripper_opening_m, ndim=1)
+        self.attached = np.asarray(attached, dtype=str).reshape(-1)
+        self.step = np.asarray(step, dtype=np.int64).reshape(-1)
+        self.steps = tuple(s if isinstance(s, Step) else Step.model_validate(s) for s in steps)
+        self.limits = limits if isinstance(limits, RobotLimits) else RobotLimits.model_validate(limits)
+        self.robot_name = robot_name
+        self._validate(T, n)
+        for arr in (self.q, self.time, self.frames, self.proximity, self.gripper_opening_m, self.attached, self.step):
+            arr.setflags(write=False)
+
+    def _validate(self, T: int, n: int) -> None:
+        if T < 1:
+            raise TrajectoryError("a trajectory needs at least one sample")
+        for name, arr in (
+            ("time", self.time),
+            ("gripper_opening_m", self.gripper_opening_m),
+            ("attached", self.attached),
+            ("step", self.step),
+        ):
+            if arr.shape[0] != T:
+                raise TrajectoryError(f"{name} has {arr.shape[0]} samples but q has {T}")
+        if self.frames.shape[0] != T or self.frames.shape[2:] != (4, 4):
+            raise TrajectoryError(f"frames must have shape ({T}, L, 4, 4), got {self.frames.shape}")
+        if self.frames.shape[1] != len(self.frame_names):
+            raise TrajectoryError(f"frames hold {self.frames.shape[1]} frames but {len(self.frame_names)} names were given")
+        if self.proximity.shape != (T, len(self.pairs)):
+            raise TrajectoryError(f"proximity must have shape ({T}, {len(self.pairs)}), got {self.proximity.shape}")
+        if T > 1:
+            dt = np.diff(self.time)
+            if np.any(dt <= 0):
+                i = int(np.argmax(dt <= 0))
+                raise TrajectoryError(
+                    f"time must increase strictly: sample {i + 1} at {self.time[i + 1]} s follows {self.time[i]} s"
+                )
+        if len(self.limits.joint_names) != n:
+            raise TrajectoryError(f"limits name {len(self.limits.joint_names)} joints but q has {n} columns")
+        if len(self.steps) and (self.step.min() < 0 or self.step.max() >= len(self.steps)):
+            raise TrajectoryError(f"step indices must lie in [0, {len(self.steps)}), got {self.step.min()}..{self.step.max()}")
+        if not len(self.steps) and np.any(self.step != 0):
+            raise TrajectoryError("step indices given without steps")
+
+    # --- access --------------------------------------------------------------------
+
+    def __len__(self) -> int:
+        return self.q.shape[0]
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time[-1] - self.time[0])
+
+    def frame_index(self, name: str) -> int:
+        try:
+            return self.frame_names.index(name)
+        except ValueError:
+            raise TrajectoryError(f"no frame {name!r}; frames are {', '.join(self.frame_names)}") from None
+
+    @property
+    def tcp(self) -> np.ndarray:
+        """``(T, 4, 4)`` TCP poses in the base frame; column 2 of the rotation is the finger direction."""
+        return self.frames[:, self.frame_index("tcp")]
+
+    def pair_mask(self, kind: str | None = None, group_a: str | None = None, group_b: str | None = None) -> np.ndarray:
+        """Boolean ``(K,)`` selecting pairs by kind and groups."""
+        return np.array(
+            [
+                (kind is None or p.kind == kind)
+                and (group_a is None or p.group_a == group_a)
+                and (group_b is None or p.group_b == group_b)
+                for p in self.pairs
+            ],
+            dtype=bool,
+        )
+
+    def lines(self, samples: np.ndarray | None = None) -> list[int]:
+        """Sorted distinct program lines that produced ``samples`` (all samples if None)."""
+        if not self.steps:
+            return []
+        idx = self.step if samples is None else self.step[np.asarray(samples)]
+        return sorted({self.steps[int(i)].line for i in np.unique(idx) if self.steps[int(i)].line > 0})
+
+    def skills(self, samples: np.ndarray | None = None) -> list[str]:
+        """Distinct skill names (in order of first use) that produced ``samples``."""
+        if not self.steps:
+            return []
+        idx = self.step if samples is None else self.step[np.asarray(samples)]
+        out: list[str] = []
+        for i in np.unique(idx):
+            s = self.steps[int(i)].skill
+            if s not in out:
+                out.append(s)
+        return out
+
+    @property
+    def states(self) -> Iterator[State]:
+        """Per-sample (J, F, P, tau) views, for readers of the paper."""
+        for t in range(len(self)):
+            yield State(t, self.q[t], self.frames[t], self.proximity[t], float(self.time[t]))
+
+    # --- serialisation -------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        return {
+            "robot_name": self.robot_name,
+            "q": self.q.tolist(),
+            "time": self.time.tolist(),
+            "frames": self.frames.tolist(),
+            "frame_names": list(self.frame_names),
+            "proximity": self.proximity.tolist(),
+            "pairs": [p.model_dump() for p in self.pairs],
+            "gripper_opening_m": self.gripper_opening_m.tolist(),
+            "attached": self.attached.tolist(),
+            "step": self.step.tolist(),
+            "steps": [s.model_dump() for s in self.steps],
+            "limits": self.limits.model_dump(),
+        }
+
+    def to_json(self) -> str:
+        """JSON text; floats are written with ``repr`` precision so the round trip is exact."""
+        return json.dumps(self.to_dict())
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Trajectory":
+        try:
+            q = np.asarray(data["q"], dtype=float)
+            frames = np.asarray(data["frames"], dtype=float).reshape(q.shape[0], len(data["frame_names"]), 4, 4)
+            proximity = np.asarray(data["proximity"], dtype=float).reshape(q.shape[0], len(data["pairs"]))
+            return cls(
+                q=q,
+                time=data["time"],
+                frames=frames,
+                frame_names=data["frame_names"],
+                proximity=proximity,
+                pairs=data["pairs"],
+                gripper_opening_m=data["gripper_opening_m"],
+                attached=data["attached"],
+                step=data["step"],
+                steps=data["steps"],
+                limits=data["limits"],
+                robot_name=data.get("robot_name", ""),
+            )
+        except KeyError as exc:
+            raise TrajectoryError(f"trajectory data lacks the field {exc.args[0]!r}") from None
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, TrajectoryError):
+                raise
+            raise TrajectoryError(f"malformed trajectory data: {exc}") from None
+
+    @classmethod
+    def from_json(cls, text: str) -> "Trajectory":
+        return cls.from_dict(json.loads(text))
+
+    def content_hash(self) -> str:
+        """SHA-256 of the executed content (joint samples, time, gripper, attachment).
+
+        Binds a :class:`~robocritics.critic.Report` to the exact motion it judged,
+        so the deploy gate can refuse any other motion.
+        """
+        h = hashlib.sha256()
+        for arr in (self.q, self.time, self.gripper_opening_m):
+            h.update(np.ascontiguousarray(arr, dtype="<f8").tobytes())
+        h.update("\x00".join(self.attached.tolist()).encode())
+        h.update(",".join(self.limits.joint_names).encode())
+        return h.hexdigest()
+
+    def slice(self, start: int, stop: int) -> "Trajectory":
+        """Samples ``start:stop`` as a new trajectory (same pairs, steps, limits)."""
+        sl = slice(start, stop)
+        return Trajectory(
+            q=self.q[sl],
+            time=self.time[sl],
+            frames=self.frames[sl],
+            frame_names=self.frame_names,
+            proximity=self.proximity[sl],
+            pairs=self.pairs,
+            gripper_opening_m=self.gripper_opening_m[sl],
+            attached=self.attached[sl],
+            step=self.step[sl],
+            steps=self.steps,
+            limits=self.limits,
+            robot_name=self.robot_name,
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"Trajectory({len(self)} samples, {self.q.shape[1]} joints, {self.duration_s:.3f} s, "
+            f"{len(self.frame_names)} frames, {len(self.pairs)} pairs, {len(self.steps)} steps)"
+        )
