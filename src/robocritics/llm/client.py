@@ -463,7 +463,7 @@ class OpenAICompatible:
             message = response.text.strip()
         if not message:
             return ""
-        return f" (server says: {self._truncate(self._redact(message))})"
+        return f" (server says: {self._safe_excerpt(message)})"
 
     def _decode_json(self, response: httpx.Response, what: str) -> dict:
         try:
@@ -473,7 +473,7 @@ class OpenAICompatible:
             text = response.content.decode("utf-8", errors="replace")
             raise LLMError(
                 f"{what} at {response.request.url}: the server answered HTTP {response.status_code} "
-                f"({content_type}) with a body that is not JSON: {self._truncate(self._redact(text))!r}"
+                f"({content_type}) with a body that is not JSON: {self._safe_excerpt(text)!r}"
             ) from None
         if not isinstance(body, dict):
             raise LLMError(
@@ -486,11 +486,14 @@ class OpenAICompatible:
             text = json.dumps(value, ensure_ascii=False)
         except (TypeError, ValueError):
             text = repr(value)
-        return self._truncate(self._redact(text))
+        return self._safe_excerpt(text)
 
-    @staticmethod
-    def _truncate(text: str) -> str:
-        return text if len(text) <= _EXCERPT_CHARS else text[:_EXCERPT_CHARS] + f"... [{len(text)} chars, truncated]"
+    def _safe_excerpt(self, text: str) -> str:
+        """At most ``_EXCERPT_CHARS`` of ``text``, redacted, saying how long the original was."""
+        head = self._redact(text[: 2 * _EXCERPT_CHARS])
+        if len(text) <= _EXCERPT_CHARS and len(head) <= _EXCERPT_CHARS:
+            return head
+        return head[:_EXCERPT_CHARS] + f"... [{len(text)} chars, truncated]"
 
     def _redact(self, text: str) -> str:
         """Replace the API key, and any run of 8+ of its characters, with '***'."""
@@ -500,18 +503,34 @@ class OpenAICompatible:
 
 
 def _redact_secret(text: str, secret: str) -> str:
+    """``text`` with every run of ``_MIN_REDACTED_RUN``+ characters of ``secret`` replaced by '***'.
+
+    Linear in ``len(text)``: every window of the run length that occurs in the
+    secret marks its characters; each maximal marked span becomes '***'.
+    """
     if secret in text:
         text = text.replace(secret, "***")
-    n = len(secret)
-    if n < _MIN_REDACTED_RUN:
+    width = _MIN_REDACTED_RUN
+    if len(secret) < width or len(text) < width:
         return text
-    # Longest runs first, so a partial echo is removed whole.
-    for length in range(n - 1, _MIN_REDACTED_RUN - 1, -1):
-        for start in range(0, n - length + 1):
-            run = secret[start : start + length]
-            if run in text:
-                text = text.replace(run, "***")
-    return text
+    grams = {secret[i : i + width] for i in range(len(secret) - width + 1)}
+    covered = bytearray(len(text))
+    for i in range(len(text) - width + 1):
+        if text[i : i + width] in grams:
+            covered[i : i + width] = b"\x01" * width
+    if not any(covered):
+        return text
+    out: list[str] = []
+    i = 0
+    while i < len(text):
+        if covered[i]:
+            while i < len(text) and covered[i]:
+                i += 1
+            out.append("***")
+        else:
+            out.append(text[i])
+            i += 1
+    return "".join(out)
 
 
 def _normalise_base_url(base_url: str) -> str:

@@ -1,0 +1,52 @@
+"""pytest fixtures for the LLM tests: a fresh ``LLMServer`` and clients pointed at it.
+
+Import the fixtures into a test module: ``from llm_fixtures import llm_server, make_client``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import pytest
+from llm_server import LLMServer
+
+from robocritics.llm.client import OpenAICompatible
+
+TEST_MODEL = "test-chat"
+TEST_EMBEDDING_MODEL = "test-embed"
+
+
+@pytest.fixture
+def llm_server() -> Iterator[LLMServer]:
+    """A started ``LLMServer`` on 127.0.0.1, stopped after the test."""
+    with LLMServer() as server:
+        yield server
+
+
+@pytest.fixture
+def make_client(llm_server: LLMServer) -> Iterator[Callable[..., OpenAICompatible]]:
+    """Factory of ``OpenAICompatible`` clients for ``llm_server`` with fast retries.
+
+    Defaults: model ``test-chat``, embedding model ``test-embed``, timeout 2 s,
+    backoff base 0.01 s; any keyword overrides them. Clients are closed after the test.
+    """
+    clients: list[OpenAICompatible] = []
+
+    def make(**overrides) -> OpenAICompatible:
+        options = dict(
+            base_url=llm_server.url,
+            model=TEST_MODEL,
+            embedding_model=TEST_EMBEDDING_MODEL,
+            api_key="sk-test-not-a-secret",
+            timeout_s=2.0,
+            backoff_base_s=0.01,
+            backoff_max_s=0.05,
+        )
+        options.update(overrides)
+        client = OpenAICompatible(**options)
+        clients.append(client)
+        return client
+
+    yield make
+    for client in clients:
+        client.close()

@@ -1,0 +1,404 @@
+"""A real OpenAI-compatible HTTP server on 127.0.0.1 for tests.
+
+``LLMServer`` listens on an ephemeral loopback port (threaded, HTTP/1.1 with
+keep-alive) and answers ``POST /v1/chat/completions`` and ``POST
+/v1/embeddings`` with the JSON shapes OpenAI uses. What it answers is scripted:
+
+* ``server.script(...)`` queues actions; each incoming request (to either
+  endpoint) takes the next one: ``Reply(text)``, ``Fail(status,
+  retry_after=...)``, ``Delay(seconds, then=...)``, ``Garbage(body)``,
+  ``RawJSON(obj)``, ``Drop()``. ``server.reply(*texts)`` is shorthand for
+  queuing ``Reply`` actions.
+* With the queue empty, chat requests go to ``server.responder`` (a callable
+  ``request_json -> str | Action``; by default it echoes the last user message)
+  and embedding requests get ``hashed_embedding`` vectors.
+
+Every request is recorded (``server.requests``: path, headers, raw body,
+decoded JSON, arrival time) so a test can assert what the client really sent.
+``require_api_key`` makes the server answer 401 to any other key, echoing the
+key it received in the error message the way careless servers do.
+
+Use it as a context manager or through the ``llm_server`` fixture in
+``tests/llm_fixtures.py``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+import socket
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any, Union
+
+# -- scripted actions --------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Reply:
+    """Answer a chat request with assistant message ``content``."""
+
+    content: str
+    finish_reason: str = "stop"
+
+
+@dataclass(frozen=True)
+class Fail:
+    """Answer with HTTP ``status`` and an OpenAI-style error body (or ``body`` verbatim).
+
+    ``retry_after`` (seconds) becomes a ``Retry-After`` header.
+    """
+
+    status: int
+    retry_after: float | str | None = None
+    body: str | None = None
+    headers: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Delay:
+    """Sleep ``seconds`` before answering with ``then`` (default: the normal answer)."""
+
+    seconds: float
+    then: Action | None = None
+
+
+@dataclass(frozen=True)
+class Garbage:
+    """Answer HTTP ``status`` with ``body`` bytes that are not what the client expects."""
+
+    body: bytes | str = b"<html><body>502 Bad Gateway... just kidding, not JSON</body></html>"
+    status: int = 200
+    content_type: str = "text/html"
+
+
+@dataclass(frozen=True)
+class RawJSON:
+    """Answer HTTP ``status`` with ``obj`` serialised as JSON, whatever it is."""
+
+    obj: Any
+    status: int = 200
+
+
+@dataclass(frozen=True)
+class Drop:
+    """Read the request, then close the connection without sending any response."""
+
+
+Action = Union[Reply, Fail, Delay, Garbage, RawJSON, Drop]
+
+
+@dataclass(frozen=True)
+class RecordedRequest:
+    """One request as the server received it. ``time_s`` is ``time.monotonic()`` at arrival."""
+
+    method: str
+    path: str
+    headers: dict[str, str]
+    body: bytes
+    json: Any
+    time_s: float
+
+    @property
+    def messages(self) -> list[dict]:
+        """The chat messages of a chat request ([] otherwise)."""
+        return list(self.json.get("messages", [])) if isinstance(self.json, dict) else []
+
+    @property
+    def text(self) -> str:
+        """All message contents (or embedding inputs) joined by newlines, for `in` assertions."""
+        if not isinstance(self.json, dict):
+            return ""
+        if "messages" in self.json:
+            return "\n".join(str(m.get("content", "")) for m in self.json["messages"])
+        inputs = self.json.get("input", [])
+        return "\n".join(inputs) if isinstance(inputs, list) else str(inputs)
+
+
+# -- deterministic embeddings -----------------------------------------------
+
+_TOKEN = re.compile(r"[a-z0-9]+")
+
+
+def hashed_embedding(text: str, dim: int, model: str = "") -> list[float]:
+    """A unit vector of length ``dim``: signed hashed bag of lower-case words.
+
+    Deterministic across processes (blake2b, not ``hash``). The model name
+    seeds the hash, so different models give unrelated vectors for the same
+    text. Texts without words give a vector of zeros.
+    """
+    vector = [0.0] * dim
+    for token in _TOKEN.findall(text.lower()):
+        digest = hashlib.blake2b(f"{model}\x00{token}".encode(), digest_size=8).digest()
+        bucket = int.from_bytes(digest[:4], "little") % dim
+        sign = 1.0 if digest[4] & 1 else -1.0
+        vector[bucket] += sign
+    norm = math.sqrt(sum(v * v for v in vector))
+    return [v / norm for v in vector] if norm else vector
+
+
+def echo_last_user_message(request: dict) -> str:
+    """Default chat responder: the content of the last user message."""
+    for message in reversed(request.get("messages", [])):
+        if message.get("role") == "user":
+            return str(message.get("content", ""))
+    return ""
+
+
+# -- the server ---------------------------------------------------------------
+
+
+class LLMServer:
+    """An OpenAI-compatible server on 127.0.0.1:<ephemeral port>; see the module docstring.
+
+    ``url`` is the base URL to give a client (``http://127.0.0.1:PORT/v1``).
+    ``models``, if given, is the set of model names it knows; any other gets 404
+    like Ollama's "model not found". ``embedding_dim`` may be changed at any time.
+    """
+
+    def __init__(
+        self,
+        *,
+        embedding_dim: int = 64,
+        require_api_key: str | None = None,
+        models: set[str] | None = None,
+        responder: Callable[[dict], str | Action] = echo_last_user_message,
+    ):
+        self.embedding_dim = embedding_dim
+        self.require_api_key = require_api_key
+        self.models = models
+        self.responder = responder
+        self.requests: list[RecordedRequest] = []
+        self._actions: deque[Action] = deque()
+        self._lock = threading.Lock()
+        self._httpd: ThreadingHTTPServer | None = None
+        self._thread: threading.Thread | None = None
+
+    # lifecycle
+
+    def start(self) -> LLMServer:
+        handler = _make_handler(self)
+        self._httpd = ThreadingHTTPServer(("127.0.0.1", 0), handler)
+        self._httpd.daemon_threads = True
+        self._thread = threading.Thread(
+            target=self._httpd.serve_forever, kwargs={"poll_interval": 0.02}, name="llm-test-server", daemon=True
+        )
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        if self._httpd is not None:
+            self._httpd.shutdown()
+            self._httpd.server_close()
+            self._httpd = None
+
+    def __enter__(self) -> LLMServer:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    @property
+    def port(self) -> int:
+        assert self._httpd is not None, "server not started"
+        return self._httpd.server_address[1]
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}/v1"
+
+    # scripting
+
+    def script(self, *actions: Action) -> None:
+        """Queue actions; each request takes the next one, in order."""
+        with self._lock:
+            self._actions.extend(actions)
+
+    def reply(self, *contents: str) -> None:
+        """Queue chat replies with these contents."""
+        self.script(*(Reply(c) for c in contents))
+
+    @property
+    def pending(self) -> int:
+        """How many scripted actions have not been used yet."""
+        with self._lock:
+            return len(self._actions)
+
+    def _next_action(self) -> Action | None:
+        with self._lock:
+            return self._actions.popleft() if self._actions else None
+
+    def _record(self, request: RecordedRequest) -> None:
+        with self._lock:
+            self.requests.append(request)
+
+    # views of what was received
+
+    def chat_requests(self) -> list[RecordedRequest]:
+        with self._lock:
+            return [r for r in self.requests if r.path.endswith("/chat/completions")]
+
+    def embedding_requests(self) -> list[RecordedRequest]:
+        with self._lock:
+            return [r for r in self.requests if r.path.endswith("/embeddings")]
+
+
+def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
+    class Handler(BaseHTTPRequestHandler):
+        protocol_version = "HTTP/1.1"
+        server_version = "robocritics-test-llm/1.0"
+
+        def log_message(self, format: str, *args: Any) -> None:  # keep test output clean
+            pass
+
+        def do_GET(self) -> None:
+            if self.path.rstrip("/") == "/v1/models":
+                self._send_json(200, {"object": "list", "data": [{"id": m, "object": "model"} for m in sorted(server.models or [])]})
+            else:
+                self._send_json(404, {"error": {"message": f"no route {self.path}"}})
+
+        def do_POST(self) -> None:
+            arrived = time.monotonic()
+            length = int(self.headers.get("Content-Length") or 0)
+            raw = self.rfile.read(length) if length else b""
+            try:
+                decoded = json.loads(raw) if raw else None
+            except ValueError:
+                decoded = None
+            server._record(
+                RecordedRequest(
+                    method="POST",
+                    path=self.path,
+                    headers={k.lower(): v for k, v in self.headers.items()},
+                    body=raw,
+                    json=decoded,
+                    time_s=arrived,
+                )
+            )
+            try:
+                self._answer(decoded)
+            except (BrokenPipeError, ConnectionResetError, socket.timeout):
+                self.close_connection = True  # the client gave up (e.g. its timeout); nothing to do
+
+        def _answer(self, request: Any) -> None:
+            if server.require_api_key is not None:
+                auth = self.headers.get("Authorization", "")
+                given = auth.removeprefix("Bearer ").strip()
+                if given != server.require_api_key:
+                    self._send_json(
+                        401,
+                        {"error": {"message": f"Incorrect API key provided: {given}.", "type": "invalid_request_error"}},
+                    )
+                    return
+            action = server._next_action()
+            self._perform(action, request)
+
+        def _perform(self, action: Action | None, request: Any) -> None:
+            if isinstance(action, Delay):
+                time.sleep(action.seconds)
+                self._perform(action.then, request)
+            elif isinstance(action, Fail):
+                headers = dict(action.headers)
+                if action.retry_after is not None:
+                    headers["Retry-After"] = str(action.retry_after)
+                if action.body is not None:
+                    self._send(action.status, action.body.encode(), "application/json", headers)
+                else:
+                    body = {"error": {"message": f"scripted failure {action.status}", "code": action.status}}
+                    self._send_json(action.status, body, headers)
+            elif isinstance(action, Garbage):
+                body = action.body.encode() if isinstance(action.body, str) else action.body
+                self._send(action.status, body, action.content_type)
+            elif isinstance(action, RawJSON):
+                self._send_json(action.status, action.obj)
+            elif isinstance(action, Drop):
+                self.close_connection = True
+                self.connection.shutdown(socket.SHUT_RDWR)
+            else:
+                self._route(action, request)
+
+        def _route(self, action: Reply | None, request: Any) -> None:
+            path = self.path.rstrip("/")
+            if not isinstance(request, dict):
+                self._send_json(400, {"error": {"message": "request body is not a JSON object"}})
+                return
+            model = request.get("model")
+            if server.models is not None and model not in server.models:
+                self._send_json(404, {"error": {"message": f'model "{model}" not found, try pulling it first'}})
+                return
+            if path == "/v1/chat/completions":
+                if action is None:
+                    answer = server.responder(request)
+                    if not isinstance(answer, str):
+                        self._perform(answer, request)
+                        return
+                    action = Reply(answer)
+                self._send_chat(request, action)
+            elif path == "/v1/embeddings":
+                self._send_embeddings(request)
+            else:
+                self._send_json(404, {"error": {"message": f"no route {self.path}"}})
+
+        def _send_chat(self, request: dict, reply: Reply) -> None:
+            prompt_words = sum(len(str(m.get("content", "")).split()) for m in request.get("messages", []))
+            completion_words = len(reply.content.split())
+            self._send_json(
+                200,
+                {
+                    "id": f"chatcmpl-{len(server.requests)}",
+                    "object": "chat.completion",
+                    "created": int(time.time()),
+                    "model": request.get("model"),
+                    "choices": [
+                        {
+                            "index": 0,
+                            "message": {"role": "assistant", "content": reply.content},
+                            "finish_reason": reply.finish_reason,
+                        }
+                    ],
+                    "usage": {
+                        "prompt_tokens": prompt_words,
+                        "completion_tokens": completion_words,
+                        "total_tokens": prompt_words + completion_words,
+                    },
+                },
+            )
+
+        def _send_embeddings(self, request: dict) -> None:
+            inputs = request.get("input")
+            if isinstance(inputs, str):
+                inputs = [inputs]
+            if not isinstance(inputs, list) or not all(isinstance(t, str) for t in inputs):
+                self._send_json(400, {"error": {"message": "'input' must be a string or a list of strings"}})
+                return
+            model = str(request.get("model"))
+            data = [
+                {"object": "embedding", "index": i, "embedding": hashed_embedding(t, server.embedding_dim, model)}
+                for i, t in enumerate(inputs)
+            ]
+            tokens = sum(len(t.split()) for t in inputs)
+            self._send_json(
+                200,
+                {"object": "list", "data": data, "model": model, "usage": {"prompt_tokens": tokens, "total_tokens": tokens}},
+            )
+
+        def _send_json(self, status: int, obj: Any, headers: dict[str, str] | None = None) -> None:
+            self._send(status, json.dumps(obj).encode(), "application/json", headers)
+
+        def _send(self, status: int, body: bytes, content_type: str, headers: dict[str, str] | None = None) -> None:
+            self.send_response(status)
+            self.send_header("Content-Type", content_type)
+            self.send_header("Content-Length", str(len(body)))
+            for name, value in (headers or {}).items():
+                self.send_header(name, value)
+            self.end_headers()
+            self.wfile.write(body)
+            self.wfile.flush()
+
+    return Handler
