@@ -1,0 +1,732 @@
+"""Inverse kinematics: closed-form for Universal Robots arms, damped least squares otherwise.
+
+Units: metres for lengths and positions, radians for angles, everything in the
+robot base frame (z up) unless a docstring says otherwise.
+
+Kinematic convention (standard Denavit-Hartenberg, as published by Universal
+Robots)::
+
+    A_i(theta_i) = Rz(theta_i) · Tz(d_i) · Tx(a_i) · Rx(alpha_i)
+    T_06(q)      = A_1(q_1) · A_2(q_2) · ... · A_6(q_6)
+
+``T_06`` is the pose of the flange (``tool0``) in the base frame. A UR arm has
+``a_1 = a_4 = a_5 = a_6 = 0``, ``d_2 = d_3 = 0`` and
+``alpha = (pi/2, 0, 0, pi/2, -pi/2, 0)``: joints 2, 3 and 4 are parallel, and
+the last three axes do *not* intersect (there is no spherical wrist), which is
+why the closed form below (Hawkins 2013; Andersen 2018) goes through the
+wrist-2 centre rather than a wrist centre of the usual kind.
+
+The closed form (frame ``i`` has axes ``x_i, y_i, z_i``; the target flange pose
+has rotation ``R = [x_6 y_6 z_6]`` and position ``p``):
+
+1. Shoulder pan ``q1``. The wrist-2 centre ``p_5 = p - d_6 z_6`` lies at signed
+   distance ``d_4`` (more generally ``d_2 + d_3 + d_4``) from the arm plane, whose
+   normal is ``z_1 = (sin q1, -cos q1, 0)``: ``p_5 · z_1 = d_4``. With
+   ``p_5 = r (cos phi, sin phi, *)`` this is ``r sin(q1 - phi) = d_4``, so
+   ``q1 = phi + pi/2 ± acos(d_4 / r)`` (two branches, "shoulder left/right").
+   No solution when ``r < d_4``: the wrist would have to enter the cylinder of
+   radius ``d_4`` around the base axis.
+2. Wrist 2 ``q5``. Expressed in the flange frame, ``z_1 = (cos q6 sin q5,
+   -sin q6 sin q5, cos q5)``, so ``cos q5 = z_6 · z_1`` and
+   ``|sin q5| = |(x_6 · z_1, y_6 · z_1)|``; ``q5 = atan2(±|sin q5|, cos q5)``
+   (two branches, "wrist up/down"; the ``atan2`` form stays accurate near
+   ``q5 = 0`` where ``acos`` would lose half the digits).
+3. Wrist 3 ``q6 = atan2(-(y_6 · z_1) / sin q5, (x_6 · z_1) / sin q5)``. When
+   ``sin q5 ≈ 0`` (wrist singularity: axes 4 and 6 align) only ``q4 + q6`` or
+   ``q4 - q6`` is determined; ``q6`` is then set to a caller-chosen value (the
+   seed's, in :func:`ur_ik`) and ``q4`` absorbs the rest.
+4. Shoulder lift, elbow, wrist 1 (``q2, q3, q4``): a planar 3R arm. From the
+   flange frame, ``x_5 = cos q6 x_6 - sin q6 y_6``, ``z_4 = -(sin q6 x_6 + cos q6 y_6)``,
+   ``x_4 = cos q5 x_5 - sin q5 z_6``; the wrist-1 centre is
+   ``p_4 = p - d_6 z_6 - d_5 z_4``. In frame 1 (origin ``(0, 0, d_1)``, ``x_1 =
+   (cos q1, sin q1, 0)``, ``y_1 = (0, 0, 1)``) its planar coordinates ``X, Y``
+   satisfy ``X + iY = a_2 e^{i q2} + a_3 e^{i(q2+q3)}``, hence
+   ``cos q3 = (X² + Y² - a_2² - a_3²) / (2 a_2 a_3)`` (two branches, "elbow
+   up/down"; no solution when ``|cos q3| > 1``: the wrist is farther than
+   ``|a_2| + |a_3|`` from the shoulder, or closer than ``||a_2| - |a_3||``),
+   ``q2 = atan2(Y, X) - atan2(a_3 sin q3, a_2 + a_3 cos q3)`` and
+   ``q4 = atan2(x_4 · y_1, x_4 · x_1) - q2 - q3``.
+
+That gives up to 2 × 2 × 2 = 8 solutions. Every one is checked by forward
+kinematics (:func:`dh_forward`'s arithmetic) before it is returned.
+
+For arms that are not UR-like, :func:`numeric_ik` runs a damped-least-squares
+(Levenberg-Marquardt) iteration on a Pinocchio model with random restarts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from robocritics.errors import PlanningError, RobotModelError
+
+__all__ = [
+    "DH",
+    "UR3E_DH",
+    "dh_forward",
+    "dh_urdf",
+    "numeric_ik",
+    "ur_ik",
+    "ur_ik_all",
+    "ur_reach",
+]
+
+_PI = math.pi
+_TWO_PI = 2.0 * math.pi
+_HALF_PI = 0.5 * math.pi
+# |arg| of acos may exceed 1 by this much from rounding and still be clipped;
+# beyond it the target is genuinely out of reach. The FK check decides the rest.
+_CLIP_TOL = 1e-8
+# |sin q5| below this is the wrist singularity (q6 is then a free choice). At
+# this size any choice of q6 costs at most pi * 1e-10 rad of orientation error.
+_WRIST_SINGULAR = 1e-10
+# Forward-kinematics acceptance of a branch: position (m) and rotation (rad).
+_VERIFY_TOL = 1e-9
+# Slack when comparing an angle with a joint limit (rad).
+_LIMIT_SLACK = 1e-12
+_UR_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
+
+
+# --------------------------------------------------------------------------- #
+# DH parameters
+# --------------------------------------------------------------------------- #
+
+
+@dataclass(frozen=True)
+class DH:
+    """Standard Denavit-Hartenberg parameters of a 6-joint serial arm.
+
+    ``A_i = Rz(theta_i) Tz(d[i]) Tx(a[i]) Rx(alpha[i])``; ``d`` and ``a`` in
+    metres, ``alpha`` in radians, all three tuples of six floats (joint 1 first).
+    ``theta_i`` is the joint angle ``q_i`` (UR arms have no angle offsets).
+    Use :meth:`ur` to build a UR-like set from its six non-zero lengths.
+    """
+
+    d: tuple[float, ...]
+    a: tuple[float, ...]
+    alpha: tuple[float, ...]
+    name: str = "arm"
+
+    def __post_init__(self) -> None:
+        for field_name in ("d", "a", "alpha"):
+            raw = getattr(self, field_name)
+            try:
+                values = tuple(float(v) for v in raw)
+            except (TypeError, ValueError) as exc:
+                raise RobotModelError(f"DH {field_name}: expected 6 numbers, got {raw!r}") from exc
+            if len(values) != 6:
+                raise RobotModelError(f"DH {field_name}: expected 6 values, got {len(values)}")
+            if not all(math.isfinite(v) for v in values):
+                raise RobotModelError(f"DH {field_name}: values must be finite, got {values}")
+            object.__setattr__(self, field_name, values)
+
+    @classmethod
+    def ur(
+        cls, d1: float, a2: float, a3: float, d4: float, d5: float, d6: float, name: str = "ur"
+    ) -> DH:
+        """A UR-family parameter set: ``d = (d1, 0, 0, d4, d5, d6)``,
+        ``a = (0, a2, a3, 0, 0, 0)``, ``alpha = (pi/2, 0, 0, pi/2, -pi/2, 0)`` (m, rad)."""
+        return cls(
+            d=(d1, 0.0, 0.0, d4, d5, d6),
+            a=(0.0, a2, a3, 0.0, 0.0, 0.0),
+            alpha=_UR_ALPHA,
+            name=name,
+        )
+
+    # Named accessors for the UR lengths (m).
+    d1 = property(lambda self: self.d[0], doc="Base to shoulder height d1 (m).")
+    a2 = property(lambda self: self.a[1], doc="Upper-arm length a2 (m, negative for UR).")
+    a3 = property(lambda self: self.a[2], doc="Forearm length a3 (m, negative for UR).")
+    d4 = property(lambda self: self.d[3], doc="Shoulder-to-wrist lateral offset d4 (m).")
+    d5 = property(lambda self: self.d[4], doc="Wrist 1 to wrist 2 offset d5 (m).")
+    d6 = property(lambda self: self.d[5], doc="Wrist 2 to flange offset d6 (m).")
+
+    @property
+    def is_ur_like(self) -> bool:
+        """True when the closed form of :func:`ur_ik_all` applies: UR twist
+        angles, ``a1 = a4 = a5 = a6 = 0`` (``d2``, ``d3`` may be non-zero)."""
+        return (
+            all(abs(x - y) < 1e-12 for x, y in zip(self.alpha, _UR_ALPHA))
+            and self.a[0] == 0.0
+            and self.a[3] == 0.0
+            and self.a[4] == 0.0
+            and self.a[5] == 0.0
+            and self.a[1] != 0.0
+            and self.a[2] != 0.0
+        )
+
+    @cached_property
+    def _links(self) -> tuple[tuple[float, float, float, float], ...]:
+        """Per joint ``(a, d, cos alpha, sin alpha)`` for the scalar FK."""
+        return tuple(
+            (a, d, math.cos(al), math.sin(al)) for a, d, al in zip(self.a, self.d, self.alpha)
+        )
+
+    @cached_property
+    def _ur(self) -> tuple[float, ...]:
+        """Constants of the closed form: d1, a2, a3, d2+d3+d4, d5, d6, a2²+a3², 2 a2 a3."""
+        if not self.is_ur_like:
+            raise RobotModelError(
+                f"DH {self.name!r} is not UR-like (need alpha = (pi/2, 0, 0, pi/2, -pi/2, 0), "
+                f"a1 = a4 = a5 = a6 = 0, a2, a3 != 0): use numeric_ik instead"
+            )
+        d1, d2, d3, d4, d5, d6 = self.d
+        a2, a3 = self.a[1], self.a[2]
+        return (d1, a2, a3, d2 + d3 + d4, d5, d6, a2 * a2 + a3 * a3, 2.0 * a2 * a3)
+
+
+#: UR3e (e-series) nominal DH parameters, m / rad.
+UR3E_DH = DH.ur(d1=0.15185, a2=-0.24355, a3=-0.2132, d4=0.13105, d5=0.08535, d6=0.0921, name="ur3e")
+
+
+# --------------------------------------------------------------------------- #
+# Forward kinematics
+# --------------------------------------------------------------------------- #
+
+
+def dh_forward(dh: DH, q: Any) -> np.ndarray:
+    """Flange pose ``T_06(q) = A_1 ... A_6`` in the base frame.
+
+    ``q`` is ``(6,)`` rad → returns ``(4, 4)``; or ``(..., 6)`` → ``(..., 4, 4)``
+    (vectorised over leading axes). Translation in metres.
+    """
+    q = np.asarray(q, dtype=float)
+    if q.shape[-1:] != (6,):
+        raise RobotModelError(f"dh_forward: q must have 6 joint values in its last axis, got shape {q.shape}")
+    c = np.cos(q)
+    s = np.sin(q)
+    lead = q.shape[:-1]
+    T = np.broadcast_to(np.eye(4), lead + (4, 4)).copy()
+    A = np.zeros(lead + (4, 4))
+    A[..., 3, 3] = 1.0
+    for i, (a, d, ca, sa) in enumerate(dh._links):
+        ci, si = c[..., i], s[..., i]
+        A[..., 0, 0] = ci
+        A[..., 0, 1] = -si * ca
+        A[..., 0, 2] = si * sa
+        A[..., 0, 3] = a * ci
+        A[..., 1, 0] = si
+        A[..., 1, 1] = ci * ca
+        A[..., 1, 2] = -ci * sa
+        A[..., 1, 3] = a * si
+        A[..., 2, 1] = sa
+        A[..., 2, 2] = ca
+        A[..., 2, 3] = d
+        T = T @ A
+    return T
+
+
+def _fk_rows(links: tuple[tuple[float, float, float, float], ...], q: Sequence[float]) -> list[float]:
+    """Scalar FK in plain floats: the top 3 rows of ``T_06`` row-major (12 floats).
+
+    Right-multiplying a row ``(r0, r1, r2, r3)`` by ``A_i`` gives, with
+    ``u = r0 c + r1 s`` and ``v = r1 c - r0 s``,
+    ``(u, ca v + sa r2, ca r2 - sa v, a u + d r2 + r3)``.
+    """
+    x0, x1, x2, x3 = 1.0, 0.0, 0.0, 0.0
+    y0, y1, y2, y3 = 0.0, 1.0, 0.0, 0.0
+    z0, z1, z2, z3 = 0.0, 0.0, 1.0, 0.0
+    cos, sin = math.cos, math.sin
+    for (a, d, ca, sa), th in zip(links, q):
+        c = cos(th)
+        s = sin(th)
+        u = x0 * c + x1 * s
+        v = x1 * c - x0 * s
+        x0, x1, x2, x3 = u, ca * v + sa * x2, ca * x2 - sa * v, a * u + d * x2 + x3
+        u = y0 * c + y1 * s
+        v = y1 * c - y0 * s
+        y0, y1, y2, y3 = u, ca * v + sa * y2, ca * y2 - sa * v, a * u + d * y2 + y3
+        u = z0 * c + z1 * s
+        v = z1 * c - z0 * s
+        z0, z1, z2, z3 = u, ca * v + sa * z2, ca * z2 - sa * v, a * u + d * z2 + z3
+    return [x0, x1, x2, x3, y0, y1, y2, y3, z0, z1, z2, z3]
+
+
+def _pose_error(fk: Sequence[float], target: Sequence[float]) -> tuple[float, float]:
+    """(position error m, rotation error rad) between two 12-float row-major poses.
+
+    The rotation error uses ``||R_a - R_b||_F / sqrt(2)``, which equals
+    ``2 sin(theta/2)`` for a rotation by ``theta`` between them (≈ theta when small).
+    """
+    dp = math.sqrt(
+        (fk[3] - target[3]) ** 2 + (fk[7] - target[7]) ** 2 + (fk[11] - target[11]) ** 2
+    )
+    sq = 0.0
+    for i in (0, 1, 2, 4, 5, 6, 8, 9, 10):
+        e = fk[i] - target[i]
+        sq += e * e
+    return dp, math.sqrt(0.5 * sq)
+
+
+def dh_urdf(dh: DH, name: str | None = None, base: str = "base_link", tip: str = "tool0") -> str:
+    """A minimal URDF of the DH chain (for cross-checks and benchmarks).
+
+    Joint ``i`` (``joint_1`` ... ``joint_6``, revolute about its local z, limits
+    ±2π rad) sits at the end of the fixed part ``Tz(d) Tx(a) Rx(alpha)`` of link
+    ``i - 1``, i.e. URDF origin ``xyz = (a, 0, d)``, ``rpy = (alpha, 0, 0)``; a
+    fixed joint carries ``A_6``'s fixed part to the flange link ``tip``. Every
+    link gets a small inertia so that parsers that require one are satisfied.
+    """
+    name = name or dh.name
+    links = [base] + [f"link_{i}" for i in range(1, 7)] + [tip]
+    inertial = (
+        '<inertial><origin xyz="0 0 0" rpy="0 0 0"/><mass value="0.5"/>'
+        '<inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial>'
+    )
+    out = [f'<?xml version="1.0"?>', f'<robot name="{name}">']
+    for link in links:
+        out.append(f'  <link name="{link}">{inertial}</link>')
+    prev_a, prev_d, prev_alpha = 0.0, 0.0, 0.0
+    for i in range(6):
+        out.append(
+            f'  <joint name="joint_{i + 1}" type="revolute">'
+            f'<parent link="{links[i]}"/><child link="{links[i + 1]}"/>'
+            f'<origin xyz="{prev_a!r} 0 {prev_d!r}" rpy="{prev_alpha!r} 0 0"/>'
+            f'<axis xyz="0 0 1"/>'
+            f'<limit lower="{-_TWO_PI!r}" upper="{_TWO_PI!r}" effort="100" velocity="3.14159"/>'
+            f"</joint>"
+        )
+        prev_a, prev_d, prev_alpha = dh.a[i], dh.d[i], dh.alpha[i]
+    out.append(
+        f'  <joint name="flange" type="fixed"><parent link="{links[6]}"/><child link="{tip}"/>'
+        f'<origin xyz="{prev_a!r} 0 {prev_d!r}" rpy="{prev_alpha!r} 0 0"/></joint>'
+    )
+    out.append("</robot>")
+    return "\n".join(out)
+
+
+# --------------------------------------------------------------------------- #
+# Analytic UR inverse kinematics
+# --------------------------------------------------------------------------- #
+
+
+def _wrap(x: float) -> float:
+    """Angle wrapped to (-pi, pi]."""
+    x = math.remainder(x, _TWO_PI)
+    return x + _TWO_PI if x <= -_PI else x
+
+
+def _pose12(pose: Any) -> list[float]:
+    """The top 3 rows of a 4x4 homogeneous transform as 12 plain floats."""
+    if isinstance(pose, np.ndarray) and pose.shape == (4, 4):
+        return pose[:3].ravel().tolist()
+    homogeneous = getattr(pose, "homogeneous", None)  # pinocchio.SE3
+    arr = np.asarray(homogeneous if homogeneous is not None else pose, dtype=float)
+    if arr.shape != (4, 4):
+        raise PlanningError(f"target pose must be a 4x4 homogeneous transform, got shape {arr.shape}")
+    return arr[:3].ravel().tolist()
+
+
+def _branches(
+    k: tuple[float, ...], t: Sequence[float], q6_free: float, planar: list[float] | None = None
+) -> list[list[float]]:
+    """All closed-form branches (unwrapped angles, possibly duplicated) for the
+    12-float row-major target ``t``. See the module docstring for the maths.
+
+    If ``planar`` is a list, the shoulder-to-wrist-1 distance in the arm plane
+    (m) of every (shoulder, wrist) branch is appended to it (for diagnostics)."""
+    d1, a2, a3, d4, d5, d6, a2a3_sq, two_a2a3 = k
+    xx, yx, zx, px, xy, yy, zy, py, xz, yz, zz, pz = t
+    cos, sin, atan2, acos, sqrt = math.cos, math.sin, math.atan2, math.acos, math.sqrt
+
+    # 1. shoulder pan from the wrist-2 centre p5 = p - d6 z6
+    p5x = px - d6 * zx
+    p5y = py - d6 * zy
+    r = sqrt(p5x * p5x + p5y * p5y)
+    if r == 0.0:
+        return []
+    ratio = d4 / r
+    if ratio > 1.0:
+        if ratio > 1.0 + _CLIP_TOL:
+            return []
+        ratio = 1.0
+    elif ratio < -1.0:
+        if ratio < -1.0 - _CLIP_TOL:
+            return []
+        ratio = -1.0
+    phi = atan2(p5y, p5x) + _HALF_PI
+    dphi = acos(ratio)
+    out: list[list[float]] = []
+    for q1 in (phi + dphi, phi - dphi):
+        s1 = sin(q1)
+        c1 = cos(q1)
+        # z1 = (s1, -c1, 0) in the base frame
+        xz1 = xx * s1 - xy * c1  # = cos q6 sin q5
+        yz1 = yx * s1 - yy * c1  # = -sin q6 sin q5
+        zz1 = zx * s1 - zy * c1  # = cos q5
+        s5abs = sqrt(xz1 * xz1 + yz1 * yz1)
+        singular = s5abs < _WRIST_SINGULAR
+        # planar offsets of the shoulder in frame 1
+        for sign in (1.0, -1.0):
+            q5 = atan2(sign * s5abs, zz1)
+            q6 = q6_free if singular else atan2(-sign * yz1, sign * xz1)
+            c5 = cos(q5)
+            s5 = sin(q5)
+            c6 = cos(q6)
+            s6 = sin(q6)
+            # x5 = c6 x6 - s6 y6 ; z4 = -(s6 x6 + c6 y6) ; x4 = c5 x5 - s5 z6
+            z4x = -(s6 * xx + c6 * yx)
+            z4y = -(s6 * xy + c6 * yy)
+            z4z = -(s6 * xz + c6 * yz)
+            x4x = c5 * (c6 * xx - s6 * yx) - s5 * zx
+            x4y = c5 * (c6 * xy - s6 * yy) - s5 * zy
+            x4z = c5 * (c6 * xz - s6 * yz) - s5 * zz
+            # wrist-1 centre p4 = p - d6 z6 - d5 z4, in frame-1 planar coordinates
+            X = (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1
+            Y = pz - d6 * zz - d5 * z4z - d1
+            if planar is not None:
+                planar.append(sqrt(X * X + Y * Y))
+            c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
+            if c3 > 1.0:
+                if c3 > 1.0 + _CLIP_TOL:
+                    continue
+                c3 = 1.0
+            elif c3 < -1.0:
+                if c3 < -1.0 - _CLIP_TOL:
+                    continue
+                c3 = -1.0
+            q234 = atan2(x4z, x4x * c1 + x4y * s1)
+            base = atan2(Y, X)
+            t3 = acos(c3)
+            for q3 in (t3, -t3):
+                s3 = sin(q3)
+                q2 = base - atan2(a3 * s3, a2 + a3 * c3)
+                out.append([q1, q2, q3, q234 - q2 - q3, q5, q6])
+    return out
+
+
+def ur_reach(dh: DH) -> float:
+    """Largest distance (m) the flange can be from the shoulder (frame-1 origin).
+
+    In frame 1 the flange is ``X + iY = a2 e^{iq2} + a3 e^{iq23} + e^{iq234}(-d6 sin q5 - i d5)``
+    in the arm plane and ``d4 + d6 cos q5`` along its normal, so the maximum of
+    ``(|a2| + |a3| + sqrt(d5² + d6² sin² q5))² + (d4 + d6 cos q5)²`` over ``q5``.
+    """
+    return _ur_reach_cached(dh)
+
+
+_REACH_CACHE: dict[DH, float] = {}
+
+
+def _ur_reach_cached(dh: DH) -> float:
+    v = _REACH_CACHE.get(dh)
+    if v is None:
+        _, a2, a3, d4, d5, d6, _, _ = dh._ur
+        q5 = np.linspace(-_PI, _PI, 200_001)
+        ell = abs(a2) + abs(a3) + np.sqrt(d5 * d5 + (d6 * np.sin(q5)) ** 2)
+        v = float(np.sqrt(ell * ell + (d4 + d6 * np.cos(q5)) ** 2).max())
+        _REACH_CACHE[dh] = v
+    return v
+
+
+def _fmt_pos(t: Sequence[float]) -> str:
+    return f"({t[3]:.3f}, {t[7]:.3f}, {t[11]:.3f}) m"
+
+
+def _diagnose(dh: DH, t: Sequence[float]) -> str:
+    """Plain-words reason why the closed form found no branch for target ``t``."""
+    d1, a2, a3, d4, d5, d6, _, _ = dh._ur
+    rot = np.array([t[0:3], t[4:7], t[8:11]])
+    if not np.all(np.isfinite(t)):
+        return "the target pose contains NaN or infinite values"
+    ortho = float(np.abs(rot.T @ rot - np.eye(3)).max())
+    if ortho > 1e-6 or np.linalg.det(rot) < 0:
+        return f"the target orientation is not a rotation matrix (|R^T R - I| = {ortho:.2g})"
+    px, py, pz = t[3], t[7], t[11]
+    dist = math.sqrt(px * px + py * py + (pz - d1) ** 2)
+    reach = ur_reach(dh)
+    if dist > reach:
+        return f"out of reach: target is {dist:.3f} m from the shoulder, the arm reaches {reach:.3f} m"
+    p5x, p5y = px - d6 * t[2], py - d6 * t[6]
+    r = math.hypot(p5x, p5y)
+    if r < abs(d4):
+        return (
+            f"too close to the base axis: the wrist (flange minus d6 = {d6:.4f} m along the "
+            f"flange z-axis) is {r:.3f} m from the base z-axis, and the shoulder offset keeps it "
+            f"at least {abs(d4):.3f} m away"
+        )
+    # planar distance shoulder -> wrist-1 centre over the shoulder/wrist branches
+    reach_planar = abs(a2) + abs(a3)
+    fold = abs(abs(a2) - abs(a3))
+    dists: list[float] = []
+    _branches(dh._ur, t, 0.0, dists)
+    if not dists:
+        return "no branch found (numerical edge case)"
+    far = min(dists)
+    if far > reach_planar:
+        return (
+            f"out of reach in this orientation: target is {dist:.3f} m from the shoulder, but "
+            f"with the flange oriented this way the wrist would be about {far:.3f} m from the "
+            f"shoulder in the arm plane, and upper arm + forearm reach {reach_planar:.3f} m"
+        )
+    if max(dists) < fold:
+        return (
+            f"too close to the shoulder: the wrist would be {max(dists):.3f} m from the shoulder "
+            f"in the arm plane, and the elbow cannot fold tighter than {fold:.3f} m"
+        )
+    return (
+        f"out of reach in this orientation: target is {dist:.3f} m from the shoulder "
+        f"(the arm reaches {reach:.3f} m), but no elbow configuration places the wrist "
+        "for this flange orientation"
+    )
+
+
+def ur_ik_all(dh: DH, flange_pose: Any, *, q6_singular: float = 0.0) -> np.ndarray:
+    """All closed-form IK solutions of a UR arm for a flange pose.
+
+    ``flange_pose`` is the ``(4, 4)`` pose of ``tool0`` in the base frame (m)
+    (a ``pinocchio.SE3`` also works). Returns ``(k, 6)`` joint vectors in rad,
+    each wrapped to ``(-pi, pi]``, ``0 <= k <= 8``, duplicates (at shoulder,
+    elbow or wrist singularities) removed, every row verified:
+    ``dh_forward(dh, q)`` matches the pose within 1e-9 m and 1e-9 rad (rows that
+    do not — only possible at the very edge of the workspace — are dropped).
+    ``k = 0`` means unreachable; :func:`ur_ik` says why.
+
+    At the wrist singularity (``sin q5 ≈ 0``) ``q6`` is set to ``q6_singular``.
+    """
+    k = dh._ur
+    t = _pose12(flange_pose)
+    links = dh._links
+    sols: list[list[float]] = []
+    for b in _branches(k, t, q6_singular):
+        w = [_wrap(x) for x in b]
+        if any(max(abs(_wrap(u - v)) for u, v in zip(w, s)) < 1e-9 for s in sols):
+            continue
+        dp, dr = _pose_error(_fk_rows(links, w), t)
+        if dp <= _VERIFY_TOL and dr <= _VERIFY_TOL:
+            sols.append(w)
+    return np.array(sols, dtype=float).reshape(-1, 6)
+
+
+def _nearest_equivalent(x: float, seed: float, lo: float, hi: float) -> float | None:
+    """``x + 2 pi n`` within ``[lo, hi]`` nearest to ``seed``, or None if none fits."""
+    n = round((seed - x) / _TWO_PI)
+    v = x + n * _TWO_PI
+    if lo - _LIMIT_SLACK <= v <= hi + _LIMIT_SLACK:
+        return v
+    n_min = math.ceil((lo - _LIMIT_SLACK - x) / _TWO_PI)
+    n_max = math.floor((hi + _LIMIT_SLACK - x) / _TWO_PI)
+    if n_min > n_max:
+        return None
+    n = n_max if n > n_max else n_min
+    return x + n * _TWO_PI
+
+
+def ur_ik(
+    dh: DH,
+    flange_pose: Any,
+    seed: Any,
+    lower: Any,
+    upper: Any,
+    *,
+    weights: Any = None,
+    tol: float = _VERIFY_TOL,
+) -> np.ndarray:
+    """The closed-form IK solution nearest to ``seed`` within the joint limits.
+
+    Every branch of :func:`ur_ik_all` (plus its ``2 pi``-shifted equivalents,
+    as UR joints range ±2π) is moved per joint to the equivalent within
+    ``[lower, upper]`` nearest to ``seed``; the branch with the smallest
+    weighted joint distance ``sum_i w_i (q_i - seed_i)²`` (``weights`` default
+    all ones) wins. At the wrist singularity, ``q6`` keeps the seed's value.
+
+    Arguments: ``flange_pose`` ``(4, 4)`` pose of ``tool0`` in the base frame (m);
+    ``seed``, ``lower``, ``upper`` ``(6,)`` rad. Returns ``(6,)`` rad, verified
+    by forward kinematics to within ``tol`` m and ``tol`` rad.
+
+    Raises :class:`PlanningError` naming the target position and the reason:
+    out of reach (with the distance from the shoulder and the arm's reach), too
+    close to the base axis, or "no solution within the joint limits (branches
+    found: k)".
+    """
+    k = dh._ur
+    t = _pose12(flange_pose)
+    sd = seed.tolist() if isinstance(seed, np.ndarray) else [float(v) for v in seed]
+    lo = lower.tolist() if isinstance(lower, np.ndarray) else [float(v) for v in lower]
+    hi = upper.tolist() if isinstance(upper, np.ndarray) else [float(v) for v in upper]
+    if len(sd) != 6 or len(lo) != 6 or len(hi) != 6:
+        raise PlanningError("ur_ik: seed, lower and upper must each have 6 values")
+    if weights is None:
+        w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    else:
+        w = weights.tolist() if isinstance(weights, np.ndarray) else [float(v) for v in weights]
+    branches = _branches(k, t, sd[5])
+    if not branches:
+        raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_diagnose(dh, t)}")
+
+    pi2 = _TWO_PI
+    candidates: list[tuple[float, list[float]]] = []
+    for b in branches:
+        q: list[float] = []
+        cost = 0.0
+        for x, s, l, h, wi in zip(b, sd, lo, hi, w):
+            v = x + round((s - x) / pi2) * pi2
+            if not (l - _LIMIT_SLACK <= v <= h + _LIMIT_SLACK):
+                v = _nearest_equivalent(x, s, l, h)
+                if v is None:
+                    break
+            q.append(v)
+            cost += wi * (v - s) * (v - s)
+        else:
+            candidates.append((cost, q))
+    if not candidates:
+        n = len(ur_ik_all(dh, flange_pose, q6_singular=sd[5]))
+        raise PlanningError(
+            f"cannot reach flange target {_fmt_pos(t)}: no solution within the joint limits "
+            f"(branches found: {n})"
+        )
+    if len(candidates) > 1:
+        candidates.sort(key=lambda c: c[0])
+    links = dh._links
+    worst = (math.inf, math.inf)
+    for _, q in candidates:
+        dp, dr = _pose_error(_fk_rows(links, q), t)
+        if dp <= tol and dr <= tol:
+            return np.array(q)
+        worst = min(worst, (dp, dr))
+    raise PlanningError(
+        f"cannot reach flange target {_fmt_pos(t)}: at the edge of the workspace, no branch "
+        f"reproduces the pose within {tol:g} m / {tol:g} rad (best: {worst[0]:.2g} m, "
+        f"{worst[1]:.2g} rad); {_diagnose(dh, t)}"
+    )
+
+
+# --------------------------------------------------------------------------- #
+# Numeric IK (Pinocchio, damped least squares)
+# --------------------------------------------------------------------------- #
+
+
+def _parse_target(target: Any) -> tuple[np.ndarray, np.ndarray | None]:
+    """(position (3,) m, rotation (3, 3) or None for position-only)."""
+    import pinocchio as pin
+
+    if isinstance(target, pin.SE3):
+        return np.array(target.translation, dtype=float), np.array(target.rotation, dtype=float)
+    if isinstance(target, tuple) and len(target) == 2:
+        pos, rot = target
+        pos = np.asarray(pos, dtype=float).reshape(3)
+        return pos, None if rot is None else np.asarray(rot, dtype=float).reshape(3, 3)
+    arr = np.asarray(target, dtype=float)
+    if arr.shape == (4, 4):
+        return arr[:3, 3].copy(), arr[:3, :3].copy()
+    if arr.shape == (3,):
+        return arr.copy(), None
+    raise PlanningError(
+        f"numeric_ik: target must be a pin.SE3, a 4x4 transform, a 3-vector (position only) "
+        f"or (position, rotation-or-None), got shape {arr.shape}"
+    )
+
+
+def numeric_ik(
+    model: Any,
+    data: Any,
+    frame_id: int | str,
+    target: Any,
+    seed: Any,
+    lower: Any = None,
+    upper: Any = None,
+    *,
+    max_iter: int = 100,
+    tol: float = 1e-10,
+    damping: float = 1e-10,
+    restarts: int = 20,
+    max_step: float = 0.5,
+    rng: int | np.random.Generator = 0,
+) -> np.ndarray:
+    """Damped-least-squares IK on a Pinocchio model (any serial arm).
+
+    Solves ``oMf(q) = target`` for the frame ``frame_id`` (id or name).
+    ``target``: a ``pin.SE3`` or ``(4, 4)`` transform (full pose), a ``(3,)``
+    position, or ``(position, rotation)`` where ``rotation=None`` means
+    position-only. ``seed``: ``(nq,)`` rad. ``lower``/``upper``: ``(nq,)``
+    position limits (default: the model's); every iterate is clipped to them.
+
+    Iteration (full pose): with ``iMd = oMf⁻¹ · target`` the error is
+    ``e = log6(iMd)`` (local frame, m and rad), the Jacobian ``J = -Jlog6(iMd⁻¹) · J_f``
+    where ``J_f`` is the LOCAL frame Jacobian, and the step is
+    ``dq = -Jᵀ (J Jᵀ + λ I)⁻¹ e`` with ``λ = damping + |e|²·1e-3``, scaled so
+    that no joint moves more than ``max_step`` rad, applied with
+    ``pin.integrate``. Position-only uses ``e = p* - p`` and the translational
+    rows rotated to the base frame. Converged when the position error ≤ ``tol``
+    m and the rotation error ≤ ``tol`` rad; otherwise up to ``restarts`` more
+    attempts from random configurations within the limits (deterministic
+    ``rng``). Returns ``(nq,)``; raises :class:`PlanningError` with the best
+    residual (m, rad) if nothing converged.
+    """
+    import pinocchio as pin
+
+    fid = model.getFrameId(frame_id) if isinstance(frame_id, str) else int(frame_id)
+    if fid < 0 or fid >= model.nframes:
+        raise RobotModelError(f"numeric_ik: no frame {frame_id!r} in model {model.name!r}")
+    p_des, R_des = _parse_target(target)
+    oMdes = pin.SE3(R_des, p_des) if R_des is not None else None
+    lo = np.asarray(model.lowerPositionLimit if lower is None else lower, dtype=float)
+    hi = np.asarray(model.upperPositionLimit if upper is None else upper, dtype=float)
+    clip = model.nq == model.nv
+    gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+    eye = np.eye(6 if oMdes is not None else 3)
+
+    def attempt(q: np.ndarray) -> tuple[np.ndarray, float, float]:
+        best_q, best = q, (math.inf, math.inf)
+        for _ in range(max_iter):
+            pin.framesForwardKinematics(model, data, q)
+            oMf = data.oMf[fid]
+            if oMdes is None:
+                err = p_des - oMf.translation
+                dp, dr = float(np.linalg.norm(err)), 0.0
+            else:
+                iMd = oMf.actInv(oMdes)
+                err = pin.log6(iMd).vector
+                dp = float(np.linalg.norm(oMf.translation - p_des))
+                dr = float(np.linalg.norm(err[3:]))
+            if dp + dr < best[0] + best[1]:
+                best_q, best = q, (dp, dr)
+            if dp <= tol and dr <= tol:
+                break
+            Jf = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
+            lam = damping + 1e-3 * float(err @ err)
+            if oMdes is None:
+                J = oMf.rotation @ Jf[:3]
+                dq = J.T @ np.linalg.solve(J @ J.T + lam * eye, err)
+            else:
+                J = -pin.Jlog6(iMd.inverse()) @ Jf
+                dq = -J.T @ np.linalg.solve(J @ J.T + lam * eye, err)
+            big = float(np.abs(dq).max())
+            if big > max_step:
+                dq *= max_step / big
+            q = pin.integrate(model, q, dq)
+            if clip:
+                q = np.clip(q, lo, hi)
+        return best_q, best[0], best[1]
+
+    q0 = np.asarray(seed, dtype=float).reshape(model.nq)
+    if clip:
+        q0 = np.clip(q0, lo, hi)
+    best = (q0, math.inf, math.inf)
+    for k in range(restarts + 1):
+        if k == 0:
+            start = q0
+        elif clip:
+            rlo = np.where(np.isfinite(lo), lo, -_PI)
+            rhi = np.where(np.isfinite(hi), hi, _PI)
+            start = gen.uniform(rlo, rhi)
+        else:
+            start = pin.randomConfiguration(model)
+        q, dp, dr = attempt(start)
+        if dp + dr < best[1] + best[2]:
+            best = (q, dp, dr)
+        if dp <= tol and dr <= tol:
+            return np.array(q, dtype=float)
+    _, dp, dr = best
+    what = "position" if oMdes is None else "pose"
+    raise PlanningError(
+        f"numeric IK did not converge to the {what} target ({p_des[0]:.3f}, {p_des[1]:.3f}, "
+        f"{p_des[2]:.3f}) m for frame {model.frames[fid].name!r} after {restarts + 1} attempts: "
+        f"best residual {dp:.3g} m, {dr:.3g} rad (tolerance {tol:g})"
+    )
