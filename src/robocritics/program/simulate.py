@@ -1,0 +1,506 @@
+"""``simulate()``: a robot program to a physically timed, critic-ready trajectory.
+
+The program runs in the sandbox to a :class:`~robocritics.program.plan.Plan`
+(skill calls with source lines). The planner below turns each call into motion:
+
+* joint-space moves (``move_to``, ``move_above``, ``rotate_gripper``, ``home``)
+  solve IK at the target (fingers down, current yaw, nearest the current joints)
+  and are timed by ruckig; with obstacles declared by ``avoid_collision`` the
+  move first rises to a safe height over them, crosses, then descends;
+* Cartesian moves (``move_linear``, ``move_up``, ``move_down``) follow the
+  straight line exactly (IK at every sample);
+* the gripper takes 0.5 s to open or close; ``close_gripper`` grasps the
+  graspable object whose centre lies between the fingers (it then moves with
+  the TCP), ``open_gripper`` releases it and it settles on what is below it
+  (a container floor, another object, or the table);
+* ``reduce_speed``/``set_speed`` scale every later move's limits as a time
+  stretch (see :mod:`robocritics.robot.motion`).
+
+Every sample records the index of the step that produced it, and each step its
+source line and its *intended contacts*: the object being grasped or released
+and the surface a carried object is set down on, which the collision critic
+does not count as collisions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import PlanningError, ProgramError
+from ..robot.model import Robot, fingers_down
+from ..robot.motion import JOINT_SPEED_MARGIN, Limits, Segment, sample_times, time_joint_move, time_path_1d
+from ..scene import Container, Scene, SceneObject, rpy_matrix
+from ..trajectory import Step, Trajectory
+from .plan import Plan, SkillCall
+from .sandbox import run_program
+
+__all__ = ["simulate", "Execution", "Event", "PlannerSettings"]
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """Planner constants (SI units)."""
+
+    linear_speed_mps: float = 1.0  # TCP speed of straight-line moves at speed fraction 1
+    linear_accel_mps2: float = 2.5
+    linear_jerk_mps3: float = 25.0
+    gripper_time_s: float = 0.5  # Robotiq 2F-85 full stroke at its default speed
+    obstacle_clearance_m: float = 0.08  # how high above an avoided object's top the TCP crosses
+    line_step_m: float = 0.002  # dense-IK spacing used to bound joint speeds on lines
+    grasp_region_m: float = 0.03  # how far an object's centre may sit from the finger axis to be grasped
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something that happened during the program: grasp, release, speed change, note."""
+
+    kind: str
+    time_s: float
+    step: int
+    line: int
+    detail: str
+
+
+@dataclass
+class Execution:
+    """The result of :func:`simulate`.
+
+    ``trajectory`` is what the critics read and what is deployed; ``final_scene``
+    says where every object ended up.
+    """
+
+    trajectory: Trajectory
+    plan: Plan
+    events: list[Event]
+    final_scene: Scene
+    scene: Scene
+    robot: Robot = field(repr=False)
+
+    @property
+    def duration_s(self) -> float:
+        return self.trajectory.duration_s
+
+    def object_inside(self, obj_id: str, container_id: str) -> bool:
+        """Whether object ``obj_id`` ended inside container ``container_id``."""
+        holder = self.final_scene.container_holding(obj_id)
+        return holder is not None and holder.id == container_id
+
+
+class _Planner:
+    def __init__(self, scene: Scene, robot: Robot, sample_rate_hz: float, settings: PlannerSettings):
+        self.scene = scene
+        self.robot = robot
+        self.rate = float(sample_rate_hz)
+        self.settings = settings
+        self.limits = Limits(robot.velocity_limits, robot.acceleration_limits, robot.jerk_limits)
+        self.q = robot.home_q.copy()
+        self.yaw = 0.0
+        self.speed = 1.0
+        self.opening = robot.max_opening_m
+        self.attached: str = ""
+        self.grasp_offset = np.eye(4)  # object pose in the tcp frame while attached
+        self.objects: dict[str, SceneObject] = {o.id: o for o in scene.objects}
+        self.obstacles: list[str] = []
+        # accumulated samples
+        self.q_parts: list[np.ndarray] = []
+        self.t_parts: list[np.ndarray] = []
+        self.open_parts: list[np.ndarray] = []
+        self.att_parts: list[np.ndarray] = []
+        self.step_parts: list[np.ndarray] = []
+        self.t0 = 0.0
+        self.steps: list[Step] = []
+        self.events: list[Event] = []
+        # per attachment interval: (object id, first sample, last sample exclusive, offset)
+        self.carry: list[tuple[str, int, int, np.ndarray]] = []
+        self.sample_count = 0
+        # poses of objects at rest, changing when released: (object id, first sample, pose)
+        self.rest_changes: list[tuple[str, int, np.ndarray]] = []
+
+    # --- geometry helpers ---------------------------------------------------------------
+
+    def tcp(self, q=None) -> np.ndarray:
+        return self.robot.tcp_pose(self.q if q is None else q)
+
+    def entity_top(self, entity_id: str) -> tuple[np.ndarray, float]:
+        if entity_id in self.objects:
+            o = self.objects[entity_id]
+            return np.asarray(o.position, float), o.top
+        c = self.scene.entity(entity_id)
+        return np.asarray(c.position, float), c.top
+
+    def resolve_point(self, call: SkillCall) -> np.ndarray:
+        if "object" in call.args:
+            oid = call.args["object"]
+            if oid in self.objects:
+                return np.asarray(self.objects[oid].position, float)
+            return np.asarray(self.scene.entity(oid).position, float)
+        return np.asarray(call.args["target"], float)
+
+    def ik(self, point: np.ndarray, call: SkillCall, yaw: float | None = None, seed=None) -> np.ndarray:
+        try:
+            return self.robot.ik(point, seed=self.q if seed is None else seed, yaw_rad=self.yaw if yaw is None else yaw)
+        except PlanningError as exc:
+            raise PlanningError(f"{call.describe()}: {exc.reason}", line=call.line) from None
+
+    # --- sample bookkeeping ---------------------------------------------------------------
+
+    def emit(self, seg: Segment, step: int, opening: np.ndarray | float | None = None) -> None:
+        m = len(seg.time)
+        self.q_parts.append(seg.q)
+        self.t_parts.append(self.t0 + seg.time)
+        op = np.full(m, self.opening) if opening is None else np.broadcast_to(np.asarray(opening, float), (m,))
+        self.open_parts.append(np.array(op))
+        self.att_parts.append(np.full(m, self.attached, dtype=object))
+        self.step_parts.append(np.full(m, step))
+        self.sample_count += m
+        self.t0 += seg.duration_s
+
+    def add_step(self, call: SkillCall, contacts: set[str] = frozenset()) -> int:
+        self.steps.append(
+            Step(
+                skill=call.skill,
+                line=call.line,
+                args=call.describe(),
+                contacts=tuple(sorted(contacts)),
+                speed_fraction=self.speed,
+            )
+        )
+        return len(self.steps) - 1
+
+    def event(self, kind: str, step: int, call: SkillCall, detail: str) -> None:
+        self.events.append(Event(kind, self.t0, step, call.line, detail))
+
+    # --- intended contacts ---------------------------------------------------------------
+
+    def grasp_candidate(self, tcp: np.ndarray) -> str | None:
+        """The graspable object whose centre lies between the fingers at TCP pose ``tcp``."""
+        best, best_d = None, math.inf
+        inv = np.linalg.inv(tcp)
+        for oid, o in self.objects.items():
+            if oid == self.attached or not o.graspable:
+                continue
+            local = inv[:3, :3] @ np.asarray(o.position) + inv[:3, 3]
+            # local z: along the fingers (+ beyond the tips); y: closing axis; x: finger width
+            if abs(local[0]) > self.settings.grasp_region_m or abs(local[1]) > self.robot.max_opening_m / 2:
+                continue
+            if not (-0.05 <= local[2] <= o.half_height + 0.01):
+                continue
+            d = float(np.hypot(local[0], local[1]))
+            if d < best_d:
+                best, best_d = oid, d
+        return best
+
+    def support_below(self, oid: str, position: np.ndarray, half_height: float, radius: float) -> tuple[str, float]:
+        """The entity an object at ``position`` would settle on, and the z of that surface."""
+        best_id, best_z = "table", self.scene.table.top_z
+        for c in self.scene.containers:
+            if c.contains_point((position[0], position[1], c.floor_top + 1e-6)) and position[2] >= c.floor_top - 1e-6:
+                if c.floor_top > best_z:
+                    best_id, best_z = c.id, c.floor_top
+        for other_id, other in self.objects.items():
+            if other_id == oid:
+                continue
+            horizontal = math.hypot(other.position[0] - position[0], other.position[1] - position[1])
+            if horizontal < max(radius, other.width / 2) * 0.9 and other.top <= position[2] - half_height + 0.02:
+                if other.top > best_z:
+                    best_id, best_z = other_id, other.top
+        return best_id, best_z
+
+    def contacts_at(self, tcp: np.ndarray) -> set[str]:
+        out: set[str] = set()
+        cand = self.grasp_candidate(tcp)
+        if cand:
+            out.add(cand)
+            o = self.objects[cand]
+            out.add(self.support_below(cand, np.asarray(o.position), o.half_height, o.width / 2)[0])
+        if self.attached:
+            o = self.objects[self.attached]
+            pose = tcp @ self.grasp_offset
+            out.add(self.support_below(self.attached, pose[:3, 3], o.half_height, o.width / 2)[0])
+        return out
+
+    # --- moves ----------------------------------------------------------------------------
+
+    def joint_move(self, goal: np.ndarray, step: int) -> None:
+        seg = time_joint_move(self.q, goal, self.limits, self.speed, self.rate)
+        if seg.duration_s > 0:
+            self.emit(seg, step)
+        self.q = np.asarray(goal, float)
+
+    def routed_points(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
+        """Via points over obstacles that the straight xy path from ``start`` to ``goal`` passes near."""
+        if not self.obstacles:
+            return [goal]
+        a, b = start[:2], goal[:2]
+        safe_z = -math.inf
+        for oid in self.obstacles:
+            centre, top = self.entity_top(oid)
+            ent = self.objects.get(oid) or self.scene.entity(oid)
+            reach = (max(ent.size[:2]) / 2 if isinstance(ent, Container) else ent.width / 2) + 0.08
+            ab = b - a
+            t = 0.0 if not ab.any() else float(np.clip(np.dot(centre[:2] - a, ab) / np.dot(ab, ab), 0, 1))
+            if np.linalg.norm(a + t * ab - centre[:2]) <= reach:
+                carried = 2 * self.objects[self.attached].half_height if self.attached else 0.0
+                safe_z = max(safe_z, top + self.settings.obstacle_clearance_m + carried)
+        if safe_z == -math.inf or (start[2] >= safe_z and goal[2] >= safe_z):
+            return [goal]
+        return [np.array([a[0], a[1], max(safe_z, start[2])]), np.array([b[0], b[1], max(safe_z, goal[2])]), goal]
+
+    def move_joint_to_point(self, point: np.ndarray, call: SkillCall, step: int) -> None:
+        start = self.tcp()[:3, 3]
+        for via in self.routed_points(start, point):
+            self.joint_move(self.ik(via, call), step)
+
+    def line_move(self, goal: np.ndarray, call: SkillCall, step: int) -> None:
+        start = self.tcp()[:3, 3]
+        length = float(np.linalg.norm(goal - start))
+        if length < 1e-9:
+            return
+        direction = (goal - start) / length
+        # dense IK to bound |dq/ds| so the timed line respects every joint speed limit
+        n_grid = max(2, int(math.ceil(length / self.settings.line_step_m)) + 1)
+        grid = np.linspace(0.0, length, n_grid)
+        q_grid = np.empty((n_grid, self.robot.n))
+        seed = self.q
+        for i, s in enumerate(grid):
+            seed = q_grid[i] = self.ik(start + s * direction, call, seed=seed)
+            if i and np.max(np.abs(q_grid[i] - q_grid[i - 1])) > 0.5:
+                raise PlanningError(
+                    f"{call.describe()}: the straight line passes a singularity or a joint limit near "
+                    f"({(start + s * direction)[0]:.3f}, {(start + s * direction)[1]:.3f}, {(start + s * direction)[2]:.3f}) m; "
+                    "use move_to for this move",
+                    line=call.line,
+                )
+        dq_ds = np.max(np.abs(np.diff(q_grid, axis=0)), axis=0) / (length / (n_grid - 1))
+        joint_cap = np.min(JOINT_SPEED_MARGIN * self.limits.velocity / np.maximum(dq_ds, 1e-12))
+        f = self.speed
+        v = min(self.settings.linear_speed_mps, joint_cap) * f
+        a = self.settings.linear_accel_mps2 * f**2
+        j = self.settings.linear_jerk_mps3 * f**3
+        s, times, duration = time_path_1d(length, v, a, j, self.rate)
+        q = np.empty((len(s), self.robot.n))
+        # each sample solved exactly on the line, seeded by the nearest grid solution
+        idx = np.clip(np.searchsorted(grid, s), 0, n_grid - 1)
+        for i, si in enumerate(s):
+            q[i] = self.ik(start + si * direction, call, seed=q_grid[idx[i]])
+        self.emit(Segment(q, times, duration), step)
+        self.q = q_grid[-1]
+
+    def gripper_move(self, target_opening: float, step: int) -> None:
+        times = sample_times(self.settings.gripper_time_s, self.rate)
+        opening = self.opening + (target_opening - self.opening) * np.clip(times / self.settings.gripper_time_s, 0, 1)
+        self.emit(Segment(np.repeat(self.q[None, :], len(times), axis=0), times, self.settings.gripper_time_s), step, opening)
+        self.opening = target_opening
+
+    def hold(self, seconds: float, step: int) -> None:
+        if seconds <= 0:
+            return
+        times = sample_times(seconds, self.rate)
+        self.emit(Segment(np.repeat(self.q[None, :], len(times), axis=0), times, seconds), step)
+
+    # --- the skills ---------------------------------------------------------------------
+
+    def run(self, plan: Plan) -> None:
+        for call in plan.calls:
+            handler = getattr(self, f"do_{call.skill}", None)
+            if handler is None:
+                raise PlanningError(f"the planner does not know the skill {call.skill!r}", line=call.line)
+            handler(call)
+
+    def _move_contacts(self, goal_point: np.ndarray | None, call: SkillCall) -> set[str]:
+        contacts = self.contacts_at(self.tcp())
+        if goal_point is not None:
+            goal_tcp = np.eye(4)
+            goal_tcp[:3, :3], goal_tcp[:3, 3] = fingers_down(self.yaw), goal_point
+            contacts |= self.contacts_at(goal_tcp)
+        return contacts
+
+    def do_move_to(self, call: SkillCall) -> None:
+        point = self.resolve_point(call)
+        step = self.add_step(call, self._move_contacts(point, call))
+        self.move_joint_to_point(point, call, step)
+
+    def do_move_above(self, call: SkillCall) -> None:
+        if "object" in call.args:
+            centre, top = self.entity_top(call.args["object"])
+            point = np.array([centre[0], centre[1], top + call.args["height"]])
+        else:
+            point = np.asarray(call.args["target"], float) + np.array([0, 0, call.args["height"]])
+        step = self.add_step(call, self._move_contacts(point, call))
+        self.move_joint_to_point(point, call, step)
+
+    def do_move_linear(self, call: SkillCall) -> None:
+        point = self.resolve_point(call)
+        step = self.add_step(call, self._move_contacts(point, call))
+        self.line_move(point, call, step)
+
+    def _vertical(self, call: SkillCall, dz: float) -> None:
+        point = self.tcp()[:3, 3] + np.array([0.0, 0.0, dz])
+        step = self.add_step(call, self._move_contacts(point, call))
+        self.line_move(point, call, step)
+
+    def do_move_up(self, call: SkillCall) -> None:
+        self._vertical(call, float(call.args["dz"]))
+
+    def do_move_down(self, call: SkillCall) -> None:
+        self._vertical(call, -float(call.args["dz"]))
+
+    def do_rotate_gripper(self, call: SkillCall) -> None:
+        step = self.add_step(call, self._move_contacts(None, call))
+        angle = float(call.args["angle"])
+        self.joint_move(self.ik(self.tcp()[:3, 3], call, yaw=angle), step)
+        self.yaw = angle
+
+    def do_home(self, call: SkillCall) -> None:
+        step = self.add_step(call, self._move_contacts(None, call))
+        self.joint_move(self.robot.home_q, step)
+        self.yaw = 0.0
+
+    def do_wait(self, call: SkillCall) -> None:
+        step = self.add_step(call, self._move_contacts(None, call))
+        self.hold(float(call.args["seconds"]), step)
+
+    def do_set_speed(self, call: SkillCall) -> None:
+        self.speed = float(call.args["fraction"])
+        step = self.add_step(call)
+        self.event("speed", step, call, f"speed set to {self.speed * 100:.0f} % of full speed")
+
+    do_reduce_speed = do_set_speed
+
+    def do_avoid_collision(self, call: SkillCall) -> None:
+        oid = call.args["object"]
+        if oid not in self.obstacles:
+            self.obstacles.append(oid)
+        step = self.add_step(call)
+        self.event("obstacle", step, call, f"{oid} is an obstacle; later moves cross above it")
+
+    def do_close_gripper(self, call: SkillCall) -> None:
+        tcp = self.tcp()
+        cand = None if self.attached else self.grasp_candidate(tcp)
+        step = self.add_step(call, self.contacts_at(tcp))
+        if cand is None:
+            self.gripper_move(0.0, step)
+            if not self.attached:
+                self.event("grasp_missed", step, call, "closed on nothing: no graspable object between the fingers")
+            return
+        obj = self.objects[cand]
+        width = min(obj.width, self.robot.max_opening_m)
+        self.gripper_move(width, step)
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = rpy_matrix(obj.rpy), obj.position
+        self.grasp_offset = np.linalg.inv(tcp) @ pose
+        self.attached = cand
+        self.carry.append((cand, self.sample_count, -1, self.grasp_offset))
+        self.event("grasp", step, call, f"grasped {cand}")
+
+    def do_open_gripper(self, call: SkillCall) -> None:
+        tcp = self.tcp()
+        step = self.add_step(call, self.contacts_at(tcp))
+        released = self.attached
+        release_sample = self.sample_count
+        if released:
+            # the object leaves the fingers as they start to open
+            oid, first, _, offset = self.carry[-1]
+            self.carry[-1] = (oid, first, self.sample_count, offset)
+            self.attached = ""
+        self.gripper_move(self.robot.max_opening_m, step)
+        if released:
+            obj = self.objects[released]
+            pose = tcp @ self.grasp_offset
+            support, z = self.support_below(released, pose[:3, 3], obj.half_height, obj.width / 2)
+            drop = pose[2, 3] - obj.half_height - z
+            settled = (pose[0, 3], pose[1, 3], z + obj.half_height)
+            self.objects[released] = obj.moved_to(settled)
+            final_pose = np.eye(4)
+            final_pose[:3, :3], final_pose[:3, 3] = rpy_matrix(obj.rpy), settled
+            self.rest_changes.append((released, release_sample, final_pose))
+            self.event("release", step, call, f"released {released} onto {support} (dropped {max(drop, 0) * 100:.1f} cm)")
+
+    # --- assembly --------------------------------------------------------------------------
+
+    def finish(self) -> tuple[np.ndarray, ...]:
+        # the final configuration closes the trajectory
+        self.q_parts.append(self.q[None, :])
+        self.t_parts.append(np.array([self.t0]))
+        self.open_parts.append(np.array([self.opening]))
+        self.att_parts.append(np.array([self.attached], dtype=object))
+        last_step = len(self.steps) - 1 if self.steps else 0
+        self.step_parts.append(np.array([max(last_step, 0)]))
+        self.sample_count += 1
+        q = np.concatenate(self.q_parts)
+        t = np.concatenate(self.t_parts)
+        return (
+            q,
+            t,
+            np.concatenate(self.open_parts),
+            np.concatenate(self.att_parts).astype(str),
+            np.concatenate(self.step_parts),
+        )
+
+    def object_poses(self, tcp: np.ndarray) -> dict[str, np.ndarray]:
+        """Per-sample pose ``(T, 4, 4)`` of every object that moves during the program."""
+        T = tcp.shape[0]
+        moved = {c[0] for c in self.carry}
+        out: dict[str, np.ndarray] = {}
+        for oid in moved:
+            o = next(o for o in self.scene.objects if o.id == oid)
+            rest = np.eye(4)
+            rest[:3, :3], rest[:3, 3] = rpy_matrix(o.rpy), o.position
+            poses = np.broadcast_to(rest, (T, 4, 4)).copy()
+            events = sorted(
+                [(first, "carry", (last if last >= 0 else T), off) for (cid, first, last, off) in self.carry if cid == oid]
+                + [(first, "rest", None, pose) for (cid, first, pose) in self.rest_changes if cid == oid],
+                key=lambda e: e[0],
+            )
+            for first, kind, last, data in events:
+                if kind == "rest":
+                    poses[first:] = data
+                else:
+                    poses[first:last] = tcp[first:last] @ data
+                    if last < T:
+                        poses[last:] = tcp[last - 1] @ data
+            out[oid] = poses
+        return out
+
+
+def simulate(
+    program: str | Plan,
+    scene: Scene,
+    robot: Robot | None = None,
+    sample_rate_hz: float = 125.0,
+    settings: PlannerSettings | None = None,
+) -> Execution:
+    """Run ``program`` (source text or a Plan) in ``scene`` and build its timed :class:`Trajectory`.
+
+    Raises :class:`ProgramError` for a program the sandbox rejects and
+    :class:`PlanningError` (with the program line) for a motion that cannot be
+    planned, such as an unreachable target.
+    """
+    if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
+        raise PlanningError(f"sample_rate_hz must be a positive number, got {sample_rate_hz}")
+    robot = robot or Robot.ur3e()
+    plan = program if isinstance(program, Plan) else run_program(program, scene)
+    planner = _Planner(scene, robot, sample_rate_hz, settings or PlannerSettings())
+    planner.run(plan)
+    if not planner.steps:
+        raise ProgramError("the program made no skill calls, so there is no motion to check", line=1)
+    q, t, opening, attached, step = planner.finish()
+    frames = robot.forward(q, opening)
+    object_poses = planner.object_poses(frames[:, robot.tcp_index])
+    trajectory = robot.trajectory(
+        q=q,
+        time=t,
+        scene=scene,
+        gripper_opening_m=opening,
+        attached=attached,
+        step=step,
+        steps=planner.steps,
+        object_poses=object_poses,
+        frames=frames,
+    )
+    final_scene = scene.model_copy(update={"objects": [planner.objects[o.id] for o in scene.objects]})
+    return Execution(trajectory, plan, planner.events, final_scene, scene, robot)
+

@@ -1,0 +1,114 @@
+"""Write src/robocritics/robot/models/ur3e.urdf from UR's published e-series DH parameters.
+
+Link frames follow the DH chain: link i+1's frame is DH frame i rotated by
+q_{i+1} about its z axis, so joint i+1's origin is Tz(d_i) Tx(a_i) Rx(alpha_i)
+of the previous DH row, and tool0 is exactly DH frame 6 (the flange).
+
+Collision geometry: URDF has no capsule primitive, so each <cylinder> of a
+collision element is read by robocritics as the segment of a CAPSULE of the same
+radius (hemispherical caps beyond both ends). Sizes follow the real UR3e (shoulder
+offset 0.1198 m, elbow offset 0.0925 m, housings 0.09-0.095 m across) and a
+Robotiq 2F-85 gripper on a short coupling (TCP 0.15 m from the flange).
+
+Run: python tools/make_ur3e_urdf.py
+"""
+import math
+from pathlib import Path
+
+PI = math.pi
+d1, a2, a3, d4, d5, d6 = 0.15185, -0.24355, -0.2132, 0.13105, 0.08535, 0.0921
+masses = [1.98, 3.4445, 1.437, 0.871, 0.805, 0.261]
+# (name, origin xyz, origin rpy, lower, upper, velocity rad/s, effort N m)
+joints = [
+    ("shoulder_pan_joint", "base_link", "shoulder_link", (0, 0, 0), (0, 0, 0), -2 * PI, 2 * PI, PI, 56),
+    ("shoulder_lift_joint", "shoulder_link", "upper_arm_link", (0, 0, d1), (PI / 2, 0, 0), -2 * PI, 2 * PI, PI, 56),
+    ("elbow_joint", "upper_arm_link", "forearm_link", (a2, 0, 0), (0, 0, 0), -PI, PI, PI, 28),
+    ("wrist_1_joint", "forearm_link", "wrist_1_link", (a3, 0, 0), (0, 0, 0), -2 * PI, 2 * PI, 2 * PI, 12),
+    ("wrist_2_joint", "wrist_1_link", "wrist_2_link", (0, 0, d4), (PI / 2, 0, 0), -2 * PI, 2 * PI, 2 * PI, 12),
+    ("wrist_3_joint", "wrist_2_link", "wrist_3_link", (0, 0, d5), (-PI / 2, 0, 0), -2 * PI, 2 * PI, 2 * PI, 12),
+]
+SHOULDER_OFFSET, ELBOW_OFFSET = 0.1198, 0.0925
+# capsule segments (p0, p1) in the link frame and radius, m
+capsules = {
+    "base_link": ((0, 0, 0.0), (0, 0, 0.045), 0.064),
+    "shoulder_link": ((0, 0, 0.075), (0, 0, d1), 0.046),
+    "upper_arm_link": ((0, 0, SHOULDER_OFFSET), (a2, 0, SHOULDER_OFFSET), 0.044),
+    "forearm_link": ((0, 0, SHOULDER_OFFSET - ELBOW_OFFSET), (a3, 0, SHOULDER_OFFSET - ELBOW_OFFSET), 0.036),
+    "wrist_1_link": ((0, 0, 0.045), (0, 0, d4 - 0.01), 0.032),
+    "wrist_2_link": ((0, 0, 0.0), (0, 0, d5 - 0.025), 0.032),
+    "wrist_3_link": ((0, 0, 0.0), (0, 0, d6 - 0.035), 0.032),
+    "gripper_body": ((0, 0, 0.02), (0, 0, 0.055), 0.040),
+}
+MAX_OPENING, FINGER_R, TCP_Z = 0.085, 0.009, 0.15
+finger_y = MAX_OPENING / 2 + FINGER_R  # finger axis at full opening, inner face at opening/2
+finger_seg = ((0, 0, 0.0), (0, 0, 0.04))  # in the finger frame, which sits at z = 0.101
+FINGER_Z = TCP_Z - FINGER_R - 0.04
+
+
+def fmt(v):
+    return " ".join(f"{x:.10g}" for x in v)
+
+
+def capsule_xml(p0, p1, r):
+    import numpy as np
+
+    p0, p1 = np.array(p0, float), np.array(p1, float)
+    mid, d = (p0 + p1) / 2, p1 - p0
+    length = float(np.linalg.norm(d))
+    u = d / length
+    # rpy rotating z onto u
+    pitch = math.atan2(math.hypot(u[0], u[1]), u[2])
+    yaw = math.atan2(u[1], u[0])
+    return (
+        f'    <collision>\n      <origin xyz="{fmt(mid)}" rpy="0 {pitch:.10g} {yaw:.10g}"/>\n'
+        f'      <geometry><cylinder radius="{r}" length="{length:.10g}"/></geometry>\n    </collision>\n'
+    )
+
+
+def inertial(mass, p0, p1, r):
+    mid = [(a + b) / 2 for a, b in zip(p0, p1)]
+    i = mass * (3 * r * r) / 12 + 1e-4
+    return (
+        f'    <inertial>\n      <origin xyz="{fmt(mid)}" rpy="0 0 0"/>\n      <mass value="{mass}"/>\n'
+        f'      <inertia ixx="{i:.6g}" ixy="0" ixz="0" iyy="{i:.6g}" iyz="0" izz="{i:.6g}"/>\n    </inertial>\n'
+    )
+
+
+out = ['<?xml version="1.0"?>\n',
+       "<!-- UR3e (e-series DH) with a Robotiq 2F-85-sized gripper; written by robocritics' tools/make_ur3e_urdf.py.\n"
+       "     Collision <cylinder>s are capsule segments (hemispherical caps), see robocritics.robot.model.\n"
+       "     The finger direction is the +z axis of the tcp frame; the fingers close along its y axis. -->\n",
+       '<robot name="ur3e">\n']
+link_mass = dict(zip(["shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link", "wrist_3_link"], masses))
+link_mass.update({"base_link": 2.0, "gripper_body": 0.9})
+for name in ["base_link", "shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link", "wrist_3_link", "gripper_body"]:
+    p0, p1, r = capsules[name]
+    out.append(f'  <link name="{name}">\n' + inertial(link_mass[name], p0, p1, r) + capsule_xml(p0, p1, r) + "  </link>\n")
+for side, sign in (("left_finger", 1), ("right_finger", -1)):
+    out.append(f'  <link name="{side}">\n' + inertial(0.05, *finger_seg, FINGER_R) + capsule_xml(*finger_seg, FINGER_R) + "  </link>\n")
+out.append('  <link name="tool0"/>\n  <link name="tcp"/>\n')
+for name, parent, child, xyz, rpy, lo, hi, vel, eff in joints:
+    out.append(
+        f'  <joint name="{name}" type="revolute">\n    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
+        f'    <origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>\n    <axis xyz="0 0 1"/>\n'
+        f'    <limit lower="{lo:.10g}" upper="{hi:.10g}" velocity="{vel:.10g}" effort="{eff}"/>\n  </joint>\n'
+    )
+fixed = [
+    ("flange_joint", "wrist_3_link", "tool0", (0, 0, d6)),
+    ("gripper_mount_joint", "tool0", "gripper_body", (0, 0, 0)),
+    ("left_finger_joint", "gripper_body", "left_finger", (0, finger_y, FINGER_Z)),
+    ("right_finger_joint", "gripper_body", "right_finger", (0, -finger_y, FINGER_Z)),
+    ("tcp_joint", "gripper_body", "tcp", (0, 0, TCP_Z)),
+]
+for name, parent, child, xyz in fixed:
+    out.append(
+        f'  <joint name="{name}" type="fixed">\n    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
+        f'    <origin xyz="{fmt(xyz)}" rpy="0 0 0"/>\n  </joint>\n'
+    )
+out.append(
+    f'  <!-- robocritics gripper: fingers at full opening {MAX_OPENING} m; they move along tcp y. -->\n'
+    f'  <gripper name="robotiq_2f85" max_opening="{MAX_OPENING}" finger_axis="0 0 1" closing_axis="0 1 0" '
+    f'tcp="tcp" fingers="left_finger right_finger"/>\n'
+)
+out.append("</robot>\n")
+Path(__file__).resolve().parents[1].joinpath("src/robocritics/robot/models/ur3e.urdf").write_text("".join(out))
