@@ -1,0 +1,85 @@
+"""robocritics: LLM robot programming you can check before it moves a robot.
+
+A language model writes a program against a small skill API; :func:`simulate`
+turns it into a physically timed motion trace (:class:`Trajectory`); expert-informed
+critics (:func:`critique`) flag joint speed, space usage, collision, spearing
+and pinch-point problems with explanations and fix hints (:class:`Report`);
+:class:`Loop` sends that feedback back to the model; only a verified trace is
+deployed to a UR3e (:mod:`robocritics.robot.ur`).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.1.0"
+
+# Public names and the modules that define them. Imported lazily so that
+# `import robocritics` stays cheap and a missing optional part never breaks it.
+_EXPORTS = {
+    "Robot": "robocritics.robot.model",
+    "Scene": "robocritics.scene",
+    "Trajectory": "robocritics.trajectory",
+    "State": "robocritics.trajectory",
+    "simulate": "robocritics.program.simulate",
+    "Execution": "robocritics.program.simulate",
+    "critique": "robocritics.critic",
+    "Flag": "robocritics.critic",
+    "Verdict": "robocritics.critic",
+    "Report": "robocritics.critic",
+    "Critic": "robocritics.critic",
+    "Loop": "robocritics.llm.loop",
+    "Attempt": "robocritics.llm.loop",
+    "OpenAICompatible": "robocritics.llm.client",
+}
+_ERRORS = (
+    "RoboCriticsError",
+    "SceneError",
+    "ProgramError",
+    "PlanningError",
+    "TrajectoryError",
+    "RobotModelError",
+    "CriticError",
+    "LLMError",
+    "DeployError",
+    "RTDEError",
+)
+
+from .errors import (  # noqa: E402
+    CriticError,
+    DeployError,
+    LLMError,
+    PlanningError,
+    ProgramError,
+    RobotModelError,
+    RoboCriticsError,
+    RTDEError,
+    SceneError,
+    TrajectoryError,
+)
+
+__all__ = [*_EXPORTS, *_ERRORS]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'robocritics' has no attribute {name!r}")
+    value = getattr(import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .critic import Critic, Flag, Report, Verdict, critique
+    from .llm.client import OpenAICompatible
+    from .llm.loop import Attempt, Loop
+    from .program.simulate import Execution, simulate
+    from .robot.model import Robot
+    from .scene import Scene
+    from .trajectory import State, Trajectory
