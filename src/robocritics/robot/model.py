@@ -274,6 +274,15 @@ class Robot:
         p1 = np.einsum("tcij,cj->tci", R, self._capsule_p1) + t
         return p0, p1
 
+    def trajectory(self, q: np.ndarray, time: np.ndarray, scene, **kwargs):
+        """The :class:`~robocritics.trajectory.Trajectory` of joint samples ``q`` at ``time`` in ``scene``.
+
+        See :func:`robocritics.robot.trace.build_trajectory` for the optional arguments.
+        """
+        from .trace import build_trajectory
+
+        return build_trajectory(self, scene, q, time, **kwargs)
+
     def in_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:
         q = np.asarray(q)
         return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
