@@ -88,6 +88,9 @@ _CLIP_TOL = 1e-8
 _WRIST_SINGULAR = 1e-10
 # Forward-kinematics acceptance of a branch: position (m) and rotation (rad).
 _VERIFY_TOL = 1e-9
+# Branches closer than this (rad, every joint) are one configuration (they
+# differ only by rounding at a shoulder, elbow or wrist singularity).
+_DUPLICATE_TOL = 1e-7
 # Slack when comparing an angle with a joint limit (rad).
 _LIMIT_SLACK = 1e-12
 _UR_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
@@ -362,35 +365,38 @@ def _branches(
         zz1 = zx * s1 - zy * c1  # = cos q5
         s5abs = sqrt(xz1 * xz1 + yz1 * yz1)
         singular = s5abs < _WRIST_SINGULAR
-        # planar offsets of the shoulder in frame 1
         for sign in (1.0, -1.0):
             q5 = atan2(sign * s5abs, zz1)
-            q6 = q6_free if singular else atan2(-sign * yz1, sign * xz1)
             c5 = cos(q5)
             s5 = sin(q5)
-            c6 = cos(q6)
-            s6 = sin(q6)
-            # x5 = c6 x6 - s6 y6 ; z4 = -(s6 x6 + c6 y6) ; x4 = c5 x5 - s5 z6
-            z4x = -(s6 * xx + c6 * yx)
-            z4y = -(s6 * xy + c6 * yy)
-            z4z = -(s6 * xz + c6 * yz)
+            q6 = q6_free if singular else atan2(-sign * yz1, sign * xz1)
+            for attempt in (0, 1):
+                c6 = cos(q6)
+                s6 = sin(q6)
+                # z4 = -(s6 x6 + c6 y6); wrist-1 centre p4 = p5 - d5 z4 in frame-1 planar coordinates
+                z4x = -(s6 * xx + c6 * yx)
+                z4y = -(s6 * xy + c6 * yy)
+                z4z = -(s6 * xz + c6 * yz)
+                X = (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1
+                Y = pz - d6 * zz - d5 * z4z - d1
+                if planar is not None and attempt == 0:
+                    planar.append(sqrt(X * X + Y * Y))
+                c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
+                if -1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL:
+                    break
+                if not singular or attempt:
+                    break
+                q6n = _singular_q6(k, t, c1, s1, p5x, p5y, q6, c3 > 1.0)
+                if q6n is None:
+                    break
+                q6 = q6n
+            if not (-1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL):
+                continue
+            c3 = 1.0 if c3 > 1.0 else (-1.0 if c3 < -1.0 else c3)
+            # x4 = c5 x5 - s5 z6 with x5 = c6 x6 - s6 y6
             x4x = c5 * (c6 * xx - s6 * yx) - s5 * zx
             x4y = c5 * (c6 * xy - s6 * yy) - s5 * zy
             x4z = c5 * (c6 * xz - s6 * yz) - s5 * zz
-            # wrist-1 centre p4 = p - d6 z6 - d5 z4, in frame-1 planar coordinates
-            X = (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1
-            Y = pz - d6 * zz - d5 * z4z - d1
-            if planar is not None:
-                planar.append(sqrt(X * X + Y * Y))
-            c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
-            if c3 > 1.0:
-                if c3 > 1.0 + _CLIP_TOL:
-                    continue
-                c3 = 1.0
-            elif c3 < -1.0:
-                if c3 < -1.0 - _CLIP_TOL:
-                    continue
-                c3 = -1.0
             q234 = atan2(x4z, x4x * c1 + x4y * s1)
             base = atan2(Y, X)
             t3 = acos(c3)
@@ -399,6 +405,50 @@ def _branches(
                 q2 = base - atan2(a3 * s3, a2 + a3 * c3)
                 out.append([q1, q2, q3, q234 - q2 - q3, q5, q6])
     return out
+
+
+def _singular_q6(
+    k: tuple[float, ...],
+    t: Sequence[float],
+    c1: float,
+    s1: float,
+    p5x: float,
+    p5y: float,
+    q6: float,
+    too_far: bool,
+) -> float | None:
+    """At the wrist singularity (flange z parallel to the shoulder axes), the
+    value of ``q6`` nearest to ``q6`` that brings the wrist-1 centre within the
+    elbow's range, or None.
+
+    In the arm plane the wrist-1 centre is ``P4 = P5 - d5 u`` with ``u`` the
+    planar direction of ``z4 = -(sin q6 x6 + cos q6 y6)``; so
+    ``|P4|² = R² + d5² - 2 d5 R cos(psi - theta)`` with ``P5 = R e^{i theta}``,
+    ``u = e^{i psi}``. The elbow reaches ``|P4|² = a2² + a3² ± 2 a2 a3``; the
+    boundary ``psi = theta ± acos((R² + d5² - D²) / (2 d5 R))`` nearest to the
+    current ``psi`` is taken and mapped back to ``q6 = atan2(-u·x6, -u·y6)``.
+    """
+    d1, a2, a3, d4, d5, d6, a2a3_sq, two_a2a3 = k
+    xx, yx, zx, px, xy, yy, zy, py, xz, yz, zz, pz = t
+    PX = p5x * c1 + p5y * s1
+    PY = pz - d6 * zz - d1
+    R = math.hypot(PX, PY)
+    if R == 0.0 or d5 == 0.0:
+        return None
+    D2 = a2a3_sq + (two_a2a3 if too_far else -two_a2a3)
+    cb = (R * R + d5 * d5 - D2) / (2.0 * d5 * R)
+    if not -1.0 - _CLIP_TOL <= cb <= 1.0 + _CLIP_TOL:
+        return None
+    cb = 1.0 if cb > 1.0 else (-1.0 if cb < -1.0 else cb)
+    x6p = (xx * c1 + xy * s1, xz)
+    y6p = (yx * c1 + yy * s1, yz)
+    s6, c6 = math.sin(q6), math.cos(q6)
+    psi0 = math.atan2(-(s6 * x6p[1] + c6 * y6p[1]), -(s6 * x6p[0] + c6 * y6p[0]))
+    theta = math.atan2(PY, PX)
+    beta = math.acos(cb)
+    psi = min((theta + beta, theta - beta), key=lambda a: abs(_wrap(a - psi0)))
+    ux, uy = math.cos(psi), math.sin(psi)
+    return math.atan2(-(ux * x6p[0] + uy * x6p[1]), -(ux * y6p[0] + uy * y6p[1]))
 
 
 def ur_reach(dh: DH) -> float:
@@ -496,7 +546,7 @@ def ur_ik_all(dh: DH, flange_pose: Any, *, q6_singular: float = 0.0) -> np.ndarr
     sols: list[list[float]] = []
     for b in _branches(k, t, q6_singular):
         w = [_wrap(x) for x in b]
-        if any(max(abs(_wrap(u - v)) for u, v in zip(w, s)) < 1e-9 for s in sols):
+        if any(max(abs(_wrap(u - v)) for u, v in zip(w, s)) < _DUPLICATE_TOL for s in sols):
             continue
         dp, dr = _pose_error(_fk_rows(links, w), t)
         if dp <= _VERIFY_TOL and dr <= _VERIFY_TOL:
@@ -560,17 +610,43 @@ def ur_ik(
     if not branches:
         raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_diagnose(dh, t)}")
 
+    links = dh._links
+    # Fast path: branch-and-bound on the weighted distance (a branch is dropped
+    # as soon as its partial cost exceeds the best so far), then FK-verify the winner.
     pi2 = _TWO_PI
-    candidates: list[tuple[float, list[float]]] = []
+    slack = _LIMIT_SLACK
+    best_cost = math.inf
+    best_q: list[float] | None = None
     for b in branches:
         q: list[float] = []
         cost = 0.0
         for x, s, l, h, wi in zip(b, sd, lo, hi, w):
             v = x + round((s - x) / pi2) * pi2
-            if not (l - _LIMIT_SLACK <= v <= h + _LIMIT_SLACK):
+            if not (l - slack <= v <= h + slack):
                 v = _nearest_equivalent(x, s, l, h)
                 if v is None:
                     break
+            cost += wi * (v - s) * (v - s)
+            if cost >= best_cost:
+                break
+            q.append(v)
+        else:
+            best_cost, best_q = cost, q
+    if best_q is not None:
+        dp, dr = _pose_error(_fk_rows(links, best_q), t)
+        if dp <= tol and dr <= tol:
+            return np.array(best_q)
+
+    # Slow path (no branch within limits, or the nearest failed the FK check):
+    # rank every branch within limits and take the first that verifies.
+    candidates: list[tuple[float, list[float]]] = []
+    for b in branches:
+        q = []
+        cost = 0.0
+        for x, s, l, h, wi in zip(b, sd, lo, hi, w):
+            v = _nearest_equivalent(x, s, l, h)
+            if v is None:
+                break
             q.append(v)
             cost += wi * (v - s) * (v - s)
         else:
@@ -581,9 +657,7 @@ def ur_ik(
             f"cannot reach flange target {_fmt_pos(t)}: no solution within the joint limits "
             f"(branches found: {n})"
         )
-    if len(candidates) > 1:
-        candidates.sort(key=lambda c: c[0])
-    links = dh._links
+    candidates.sort(key=lambda c: c[0])
     worst = (math.inf, math.inf)
     for _, q in candidates:
         dp, dr = _pose_error(_fk_rows(links, q), t)
