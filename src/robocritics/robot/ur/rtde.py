@@ -1,0 +1,841 @@
+"""RTDE (Universal Robots Real-Time Data Exchange) client, protocol version 2 with fallback to 1.
+
+The wire format (all integers big-endian)::
+
+    package  = uint16 size (whole package, header included) | uint8 type | payload
+    'V' 86   request protocol version   payload >H version      reply >B accepted
+    'v' 118  controller version         payload (none)          reply >IIII major, minor, bugfix, build
+    'O' 79   setup outputs              v2: >d frequency + b"name,name,..."   v1: b"name,..."
+                                        reply v2: >B recipe id + b"TYPE,TYPE,..."   v1: b"TYPE,..."
+    'I' 73   setup inputs               b"name,name,..."        reply >B recipe id + b"TYPE,..."
+    'S' 83   start                      (none)                  reply >B accepted
+    'P' 80   pause                      (none)                  reply >B accepted
+    'U' 85   data package               inputs: >B recipe id + values
+                                        outputs: v2 >B recipe id + values, v1 values only
+    'M' 77   text message               v2: >B len, message, >B len, source, >B level
+                                        v1: >B level, message
+
+A reply type of ``NOT_FOUND`` marks a field the controller does not know, ``IN_USE``
+an input another client or a fieldbus already owns.
+
+Typical use::
+
+    with RTDEClient("192.168.1.10", timeout_s=2.0) as rtde:
+        rtde.setup_outputs(["timestamp", "actual_q", "runtime_state"], frequency_hz=500)
+        setpoint = rtde.setup_inputs(["input_int_register_24", "input_double_register_24"])
+        rtde.start()
+        state = rtde.wait_next(timeout_s=0.1)      # blocks for the next package
+        rtde.send({"input_int_register_24": 1, "input_double_register_24": 0.5})
+        q = rtde.latest()["actual_q"]               # newest values, never blocks
+
+A background thread reads the socket all the time, so the controller never drops
+the connection because the client stopped reading; every data package lands in
+:meth:`RTDEClient.latest` and in a bounded buffer (:meth:`RTDEClient.drain`).
+Every socket operation has a timeout; a dropped or silent controller raises
+:class:`~robocritics.errors.RTDEError` naming host, port and what was going on.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import math
+import socket
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+from robocritics.errors import RTDEError
+
+__all__ = [
+    "RTDE_PORT",
+    "Command",
+    "DATA_TYPES",
+    "MessageLevel",
+    "Recipe",
+    "OutputRecipe",
+    "InputRecipe",
+    "TextMessage",
+    "RTDEClient",
+    "pack_package",
+    "encode_text_message",
+    "decode_text_message",
+]
+
+log = logging.getLogger(__name__)
+
+RTDE_PORT = 30004
+"""Default RTDE TCP port of a UR controller."""
+
+MAX_FREQUENCY_HZ = 500.0
+"""Highest output frequency of an e-series controller [Hz] (CB3: 125 Hz)."""
+
+V1_FREQUENCY_HZ = 125.0
+"""Output frequency of protocol version 1, which cannot choose one [Hz]."""
+
+_HEADER = struct.Struct(">HB")
+
+
+class Command:
+    """RTDE package types (ASCII codes)."""
+
+    REQUEST_PROTOCOL_VERSION = 86  # 'V'
+    GET_URCONTROL_VERSION = 118  # 'v'
+    TEXT_MESSAGE = 77  # 'M'
+    DATA_PACKAGE = 85  # 'U'
+    CONTROL_PACKAGE_SETUP_OUTPUTS = 79  # 'O'
+    CONTROL_PACKAGE_SETUP_INPUTS = 73  # 'I'
+    CONTROL_PACKAGE_START = 83  # 'S'
+    CONTROL_PACKAGE_PAUSE = 80  # 'P'
+
+
+_COMMAND_NAMES = {
+    Command.REQUEST_PROTOCOL_VERSION: "'V' (request protocol version)",
+    Command.GET_URCONTROL_VERSION: "'v' (get controller version)",
+    Command.TEXT_MESSAGE: "'M' (text message)",
+    Command.DATA_PACKAGE: "'U' (data package)",
+    Command.CONTROL_PACKAGE_SETUP_OUTPUTS: "'O' (setup outputs)",
+    Command.CONTROL_PACKAGE_SETUP_INPUTS: "'I' (setup inputs)",
+    Command.CONTROL_PACKAGE_START: "'S' (start)",
+    Command.CONTROL_PACKAGE_PAUSE: "'P' (pause)",
+}
+
+
+class MessageLevel:
+    """Levels of an RTDE text message."""
+
+    EXCEPTION = 0
+    ERROR = 1
+    WARNING = 2
+    INFO = 3
+
+
+DATA_TYPES: dict[str, tuple[str, int]] = {
+    "BOOL": ("?", 1),
+    "UINT8": ("B", 1),
+    "UINT32": ("I", 1),
+    "INT32": ("i", 1),
+    "UINT64": ("Q", 1),
+    "DOUBLE": ("d", 1),
+    "VECTOR3D": ("d", 3),
+    "VECTOR6D": ("d", 6),
+    "VECTOR6INT32": ("i", 6),
+    "VECTOR6UINT32": ("I", 6),
+}
+"""RTDE type name -> (struct code of one element, number of elements), big-endian."""
+
+
+def pack_package(command: int, payload: bytes = b"") -> bytes:
+    """Frame ``payload`` as one RTDE package: ``>HB`` size (header included), type."""
+    size = _HEADER.size + len(payload)
+    if size > 0xFFFF:
+        raise RTDEError(f"RTDE package {_COMMAND_NAMES.get(command, command)} too large: {size} bytes > 65535")
+    return _HEADER.pack(size, command) + payload
+
+
+@dataclass(frozen=True)
+class TextMessage:
+    """An RTDE text message ('M'). ``level`` is a :class:`MessageLevel` value."""
+
+    message: str
+    source: str = ""
+    level: int = MessageLevel.INFO
+
+    @property
+    def level_name(self) -> str:
+        return {0: "EXCEPTION", 1: "ERROR", 2: "WARNING", 3: "INFO"}.get(self.level, str(self.level))
+
+
+def encode_text_message(msg: TextMessage, protocol: int = 2) -> bytes:
+    """Payload of an 'M' package (v2: ``>B%dsB%dsB`` message, source, level; v1: level + message)."""
+    text = msg.message.encode("utf-8")
+    if protocol == 1:
+        return struct.pack(">B", msg.level) + text
+    src = msg.source.encode("utf-8")[:255]
+    text = text[:255]
+    return struct.pack(f">B{len(text)}sB{len(src)}sB", len(text), text, len(src), src, msg.level)
+
+
+def decode_text_message(payload: bytes, protocol: int = 2) -> TextMessage:
+    """Parse the payload of an 'M' package; raises :class:`RTDEError` if it is truncated."""
+    try:
+        if protocol == 1:
+            (level,) = struct.unpack_from(">B", payload, 0)
+            return TextMessage(payload[1:].decode("utf-8", "replace"), "", level)
+        n = payload[0]
+        text = payload[1 : 1 + n]
+        m = payload[1 + n]
+        src = payload[2 + n : 2 + n + m]
+        level = payload[2 + n + m]
+        if len(text) != n or len(src) != m:
+            raise IndexError
+        return TextMessage(text.decode("utf-8", "replace"), src.decode("utf-8", "replace"), level)
+    except (IndexError, struct.error):
+        raise RTDEError(f"malformed RTDE text message ({len(payload)} bytes, protocol {protocol}): {payload[:40]!r}")
+
+
+@dataclass
+class Recipe:
+    """A configured RTDE recipe: the field names, their types and the packing layout.
+
+    ``recipe_id`` is the id the controller assigned (0 on protocol version 1 outputs,
+    which carry none). Values are ``bool`` (BOOL), ``int`` (UINT8/UINT32/INT32/UINT64),
+    ``float`` (DOUBLE) or a tuple of 3 or 6 numbers (VECTOR3D, VECTOR6D, VECTOR6INT32,
+    VECTOR6UINT32), in the controller's units (rad, m, s, rad/s, …).
+    """
+
+    recipe_id: int
+    names: tuple[str, ...]
+    types: tuple[str, ...]
+    _struct: struct.Struct = field(init=False, repr=False)
+    _layout: tuple[tuple[str, int, int], ...] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.names = tuple(self.names)
+        self.types = tuple(self.types)
+        if len(self.names) != len(self.types):
+            raise RTDEError(
+                f"RTDE recipe has {len(self.names)} names but the controller returned {len(self.types)} types: "
+                f"{list(self.names)} / {list(self.types)}"
+            )
+        fmt = ">"
+        layout = []
+        pos = 0
+        for name, typ in zip(self.names, self.types):
+            if typ not in DATA_TYPES:
+                raise RTDEError(f"RTDE field {name!r} has unknown type {typ!r} (known: {', '.join(DATA_TYPES)})")
+            code, count = DATA_TYPES[typ]
+            fmt += code * count
+            layout.append((name, pos, count if count > 1 else 0))
+            pos += count
+        self._struct = struct.Struct(fmt)
+        self._layout = tuple(layout)
+
+    @property
+    def size(self) -> int:
+        """Size of the packed values in bytes (recipe id not included)."""
+        return self._struct.size
+
+    def unpack(self, data: bytes | memoryview, offset: int = 0) -> dict[str, Any]:
+        """Decode the packed values starting at ``offset`` into ``{name: value}``."""
+        if len(data) - offset != self._struct.size:
+            raise RTDEError(
+                f"RTDE data package for recipe {self.recipe_id} has {len(data) - offset} bytes of values, "
+                f"expected {self._struct.size} for {list(self.types)}"
+            )
+        flat = self._struct.unpack_from(data, offset)
+        out: dict[str, Any] = {}
+        for name, pos, count in self._layout:
+            out[name] = flat[pos : pos + count] if count else flat[pos]
+        return out
+
+    def pack_values(self, values: Sequence[Any]) -> bytes:
+        """Encode values given in recipe order (vectors as sequences); no name checks, for hot loops."""
+        flat: list[Any] = []
+        for (_name, _pos, count), v in zip(self._layout, values):
+            if count:
+                flat.extend(v)
+            else:
+                flat.append(v)
+        return self._struct.pack(*flat)
+
+    def pack(self, values: Mapping[str, Any]) -> bytes:
+        """Encode ``{name: value}`` (exactly this recipe's names) into packed values."""
+        missing = [n for n in self.names if n not in values]
+        extra = [n for n in values if n not in self.names]
+        if missing or extra:
+            parts = []
+            if missing:
+                parts.append(f"missing {missing}")
+            if extra:
+                parts.append(f"not in the recipe {extra}")
+            raise RTDEError(f"values for RTDE recipe {self.recipe_id} {list(self.names)} do not match: {'; '.join(parts)}")
+        flat: list[Any] = []
+        for (name, _pos, count), typ in zip(self._layout, self.types):
+            v = values[name]
+            if count:
+                try:
+                    seq = list(v)
+                except TypeError:
+                    raise RTDEError(f"RTDE field {name!r} ({typ}) needs {count} numbers, got {v!r}") from None
+                if len(seq) != count:
+                    raise RTDEError(f"RTDE field {name!r} ({typ}) needs {count} numbers, got {len(seq)}")
+                flat.extend(seq)
+            else:
+                flat.append(v)
+        try:
+            return self._struct.pack(*flat)
+        except struct.error as exc:
+            bad = _find_bad_value(self, values)
+            raise RTDEError(f"cannot encode RTDE values: {bad or exc}") from None
+
+
+def _find_bad_value(recipe: Recipe, values: Mapping[str, Any]) -> str:
+    for name, typ in zip(recipe.names, recipe.types):
+        code, count = DATA_TYPES[typ]
+        v = values[name]
+        try:
+            struct.pack(">" + code * count, *(list(v) if count > 1 else [v]))
+        except (struct.error, TypeError) as exc:
+            return f"field {name!r} ({typ}) value {v!r}: {exc}"
+    return ""
+
+
+class OutputRecipe(Recipe):
+    """An output recipe (controller → client) and its output frequency [Hz]."""
+
+    frequency_hz: float = 0.0
+
+
+class InputRecipe(Recipe):
+    """An input recipe (client → controller); pass values to :meth:`RTDEClient.send`."""
+
+
+def _names_arg(names: Iterable[str] | str) -> list[str]:
+    if isinstance(names, str):
+        names = [n for n in names.split(",")]
+    out = [n.strip() for n in names]
+    if not out or any(not n for n in out):
+        raise RTDEError(f"RTDE recipe needs non-empty field names, got {list(out)}")
+    dup = sorted({n for n in out if out.count(n) > 1})
+    if dup:
+        raise RTDEError(f"RTDE recipe lists field(s) {dup} more than once")
+    return out
+
+
+class RTDEClient:
+    """A client for the RTDE interface of a UR controller (TCP port 30004).
+
+    Parameters
+    ----------
+    host, port:
+        Controller address; ``port`` defaults to 30004.
+    timeout_s:
+        Timeout of every socket operation and of every request/reply exchange [s].
+    protocol_version:
+        Highest protocol version to ask for (2); the client falls back to 1 if the
+        controller refuses 2.
+    buffer_size:
+        How many data packages the bounded buffer keeps (oldest dropped first).
+
+    The constructor does not connect; :meth:`connect` (or ``with``) does, and
+    negotiates the protocol version and reads the controller version. All methods
+    raise :class:`~robocritics.errors.RTDEError` on failure.
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int = RTDE_PORT,
+        timeout_s: float = 2.0,
+        protocol_version: int = 2,
+        buffer_size: int = 2048,
+    ) -> None:
+        if protocol_version not in (1, 2):
+            raise RTDEError(f"RTDE protocol_version must be 1 or 2, got {protocol_version}")
+        if not timeout_s > 0:
+            raise RTDEError(f"timeout_s must be > 0 seconds, got {timeout_s}")
+        self.host = host
+        self.port = int(port)
+        self.timeout_s = float(timeout_s)
+        self._max_protocol = protocol_version
+        self.protocol_version: int = 0
+        """Negotiated protocol version (0 before :meth:`connect`)."""
+        self.controller_version: tuple[int, int, int, int] | None = None
+        """(major, minor, bugfix, build) of the controller software, after :meth:`connect`."""
+        self._sock: socket.socket | None = None
+        self._reader: threading.Thread | None = None
+        self._send_lock = threading.Lock()
+        self._request_lock = threading.Lock()
+        self._cond = threading.Condition()
+        self._replies: collections.deque[tuple[int, bytes]] = collections.deque()
+        self._outputs: dict[int, OutputRecipe] = {}
+        self._v1_output: OutputRecipe | None = None
+        self._inputs: dict[int, InputRecipe] = {}
+        self._latest: dict[str, Any] = {}
+        self._buffer: collections.deque[dict[str, Any]] = collections.deque(maxlen=buffer_size)
+        self._messages: collections.deque[TextMessage] = collections.deque(maxlen=256)
+        self._count = 0
+        self._dropped = 0
+        self._last_rx = 0.0
+        self._error: str | None = None
+        self._closing = False
+        self._started = False
+        self._activity = "idle"
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def __enter__(self) -> "RTDEClient":
+        self.connect()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def address(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    @property
+    def connected(self) -> bool:
+        """True while the TCP connection is up and no error was seen."""
+        return self._sock is not None and self._error is None and not self._closing
+
+    @property
+    def started(self) -> bool:
+        """True between :meth:`start` and :meth:`pause`."""
+        return self._started
+
+    def connect(self) -> None:
+        """Open the TCP connection, start the reader thread, negotiate the protocol, read the version."""
+        if self._sock is not None:
+            raise RTDEError(f"RTDE client for {self.address} is already connected")
+        self._activity = "connecting"
+        try:
+            sock = socket.create_connection((self.host, self.port), timeout=self.timeout_s)
+        except socket.timeout:
+            raise RTDEError(
+                f"cannot connect to RTDE at {self.address}: no answer within {self.timeout_s:g} s "
+                "(controller off, wrong address, or a firewall?)"
+            ) from None
+        except OSError as exc:
+            raise RTDEError(
+                f"cannot connect to RTDE at {self.address}: {exc.strerror or exc} "
+                "(is the controller on and the RTDE interface enabled?)"
+            ) from None
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.settimeout(self.timeout_s)
+        self._sock = sock
+        self._closing = False
+        self._error = None
+        self._reader = threading.Thread(target=self._read_loop, name=f"rtde-reader-{self.address}", daemon=True)
+        self._reader.start()
+        try:
+            self._negotiate()
+            self.controller_version = self.get_controller_version()
+        except BaseException:
+            self.close()
+            raise
+        self._activity = "connected, not started"
+
+    def close(self) -> None:
+        """Pause synchronisation (best effort), close the socket and stop the reader thread."""
+        sock = self._sock
+        if sock is None:
+            return
+        if self._started and self._error is None:
+            try:
+                self._send_raw(pack_package(Command.CONTROL_PACKAGE_PAUSE), "pausing before close")
+            except RTDEError:
+                pass
+        self._closing = True
+        self._started = False
+        try:
+            sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        sock.close()
+        if self._reader is not None and self._reader is not threading.current_thread():
+            self._reader.join(timeout=self.timeout_s)
+        self._sock = None
+        self._reader = None
+        with self._cond:
+            self._cond.notify_all()
+
+    # ------------------------------------------------------------------ handshake
+
+    def _negotiate(self) -> None:
+        for version in range(self._max_protocol, 0, -1):
+            reply = self._request(
+                Command.REQUEST_PROTOCOL_VERSION, struct.pack(">H", version), f"negotiating protocol version {version}"
+            )
+            if len(reply) != 1:
+                raise RTDEError(f"RTDE {self.address}: malformed reply to protocol version request: {reply!r}")
+            if reply[0]:
+                self.protocol_version = version
+                return
+            log.info("RTDE %s refused protocol version %d", self.address, version)
+        raise RTDEError(
+            f"RTDE controller at {self.address} accepted none of protocol versions "
+            f"{', '.join(str(v) for v in range(self._max_protocol, 0, -1))}"
+        )
+
+    def get_controller_version(self) -> tuple[int, int, int, int]:
+        """Ask the controller for its software version: (major, minor, bugfix, build)."""
+        reply = self._request(Command.GET_URCONTROL_VERSION, b"", "reading the controller version")
+        if len(reply) != 16:
+            raise RTDEError(f"RTDE {self.address}: controller version reply has {len(reply)} bytes, expected 16")
+        return struct.unpack(">IIII", reply)  # type: ignore[return-value]
+
+    # ------------------------------------------------------------------ recipes
+
+    def setup_outputs(self, names: Sequence[str] | str, frequency_hz: float = 125.0) -> OutputRecipe:
+        """Ask the controller to send ``names`` at ``frequency_hz`` [Hz, 0 < f <= 500].
+
+        Protocol version 1 has no frequency field; the controller then sends at
+        125 Hz. Raises :class:`RTDEError` naming any field the controller does
+        not know (``NOT_FOUND``).
+        """
+        names = _names_arg(names)
+        freq = float(frequency_hz)
+        if not (0.0 < freq <= MAX_FREQUENCY_HZ) or math.isnan(freq):
+            raise RTDEError(f"RTDE output frequency must be in (0, {MAX_FREQUENCY_HZ:g}] Hz, got {frequency_hz}")
+        text = ",".join(names).encode("ascii")
+        if self.protocol_version >= 2:
+            payload = struct.pack(">d", freq) + text
+        else:
+            payload = text
+            freq = V1_FREQUENCY_HZ
+        reply = self._request(Command.CONTROL_PACKAGE_SETUP_OUTPUTS, payload, f"setting up outputs {names}")
+        if self.protocol_version >= 2:
+            if not reply:
+                raise RTDEError(f"RTDE {self.address}: empty reply to output setup")
+            rid, types_txt = reply[0], reply[1:]
+        else:
+            rid, types_txt = 0, reply
+        types = types_txt.decode("ascii", "replace").split(",") if types_txt else []
+        self._check_types(names, types, "output")
+        if self.protocol_version >= 2 and rid == 0:
+            raise RTDEError(f"RTDE controller at {self.address} refused output recipe {names} (recipe id 0)")
+        recipe = OutputRecipe(rid, tuple(names), tuple(types))
+        recipe.frequency_hz = freq
+        with self._cond:
+            if self.protocol_version >= 2:
+                self._outputs[rid] = recipe
+            else:
+                self._v1_output = recipe
+                self._outputs = {0: recipe}
+        return recipe
+
+    def setup_inputs(self, names: Sequence[str] | str) -> InputRecipe:
+        """Register an input recipe (fields the client will write with :meth:`send`).
+
+        Raises :class:`RTDEError` naming fields that are unknown (``NOT_FOUND``) or
+        owned by another client or a fieldbus (``IN_USE``).
+        """
+        names = _names_arg(names)
+        reply = self._request(
+            Command.CONTROL_PACKAGE_SETUP_INPUTS, ",".join(names).encode("ascii"), f"setting up inputs {names}"
+        )
+        if not reply:
+            raise RTDEError(f"RTDE {self.address}: empty reply to input setup")
+        rid = reply[0]
+        types = reply[1:].decode("ascii", "replace").split(",") if len(reply) > 1 else []
+        self._check_types(names, types, "input")
+        if rid == 0:
+            raise RTDEError(f"RTDE controller at {self.address} refused input recipe {names} (recipe id 0)")
+        recipe = InputRecipe(rid, tuple(names), tuple(types))
+        self._inputs[rid] = recipe
+        return recipe
+
+    def _check_types(self, names: list[str], types: list[str], kind: str) -> None:
+        if len(types) != len(names):
+            raise RTDEError(
+                f"RTDE controller at {self.address} answered {len(types)} types for {len(names)} {kind} fields: "
+                f"{types} for {names}"
+            )
+        not_found = [n for n, t in zip(names, types) if t == "NOT_FOUND"]
+        in_use = [n for n, t in zip(names, types) if t == "IN_USE"]
+        version = ".".join(str(v) for v in self.controller_version) if self.controller_version else "unknown"
+        if not_found:
+            raise RTDEError(
+                f"RTDE {kind} field(s) {', '.join(repr(n) for n in not_found)} NOT_FOUND: the controller at "
+                f"{self.address} (software {version}) doesn't know them — misspelt, or older firmware that lacks "
+                "them? Check the RTDE field list for this software version."
+            )
+        if in_use:
+            raise RTDEError(
+                f"RTDE input field(s) {', '.join(repr(n) for n in in_use)} IN_USE at {self.address}: another RTDE "
+                "client or a fieldbus (EtherNet/IP, PROFINET, Modbus) already owns them. Fieldbuses hold registers "
+                "0-23; use registers 24-47, or stop the other client."
+            )
+
+    # ------------------------------------------------------------------ start / pause
+
+    def start(self) -> None:
+        """Start data synchronisation (needs at least one output recipe)."""
+        if not self._outputs:
+            raise RTDEError(f"RTDE {self.address}: call setup_outputs() before start()")
+        reply = self._request(Command.CONTROL_PACKAGE_START, b"", "starting synchronisation")
+        if reply[:1] != b"\x01":
+            raise RTDEError(f"RTDE controller at {self.address} refused to start synchronisation (reply {reply!r})")
+        self._started = True
+        self._activity = "streaming (synchronisation started)"
+
+    def pause(self) -> None:
+        """Pause data synchronisation; recipes stay configured, :meth:`start` resumes."""
+        reply = self._request(Command.CONTROL_PACKAGE_PAUSE, b"", "pausing synchronisation")
+        if reply[:1] != b"\x01":
+            raise RTDEError(f"RTDE controller at {self.address} refused to pause (reply {reply!r})")
+        self._started = False
+        self._activity = "connected, paused"
+
+    # ------------------------------------------------------------------ data
+
+    def send(self, input_values: Mapping[str, Any], recipe: InputRecipe | None = None) -> None:
+        """Send one input data package.
+
+        ``input_values`` maps every field of one input recipe to its value; the
+        recipe is found by its field names unless given. Needs :meth:`start` first.
+        """
+        self._raise_if_failed("sending inputs")
+        if not self._started:
+            raise RTDEError(f"RTDE {self.address}: call start() before send()")
+        if recipe is None:
+            recipe = self._find_input_recipe(input_values)
+        payload = bytes((recipe.recipe_id,)) + recipe.pack(input_values)
+        self._send_raw(pack_package(Command.DATA_PACKAGE, payload), "sending inputs")
+
+    def _find_input_recipe(self, values: Mapping[str, Any]) -> InputRecipe:
+        keys = set(values)
+        for r in self._inputs.values():
+            if set(r.names) == keys:
+                return r
+        if not self._inputs:
+            raise RTDEError(f"RTDE {self.address}: no input recipe set up; call setup_inputs() first")
+        known = [list(r.names) for r in self._inputs.values()]
+        raise RTDEError(f"RTDE input values {sorted(keys)} match no input recipe; recipes are {known}")
+
+    def send_message(self, message: str, source: str = "robocritics", level: int = MessageLevel.INFO) -> None:
+        """Send a text message to the controller log."""
+        payload = encode_text_message(TextMessage(message, source, level), self.protocol_version or 2)
+        self._send_raw(pack_package(Command.TEXT_MESSAGE, payload), "sending a text message")
+
+    def latest(self) -> dict[str, Any]:
+        """The newest value of every output field received so far (empty before the first package).
+
+        Never blocks. Raises :class:`RTDEError` once the connection has dropped.
+        """
+        self._raise_if_failed("reading the latest data")
+        with self._cond:
+            return dict(self._latest)
+
+    def wait_next(self, timeout_s: float | None = None) -> dict[str, Any]:
+        """Block until the next data package arrives and return :meth:`latest` at that moment.
+
+        ``timeout_s`` defaults to the client's ``timeout_s`` [s]. Raises
+        :class:`RTDEError` if nothing arrives in time (silent controller) or the
+        connection drops.
+        """
+        timeout = self.timeout_s if timeout_s is None else float(timeout_s)
+        self._raise_if_failed("waiting for data")
+        if not self._started:
+            raise RTDEError(f"RTDE {self.address}: call start() before waiting for data")
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            start = self._count
+            while self._count == start:
+                if self._error is not None:
+                    break
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise RTDEError(
+                        f"no RTDE data package from {self.address} within {timeout:g} s while {self._activity} "
+                        f"(controller silent or overloaded; last package {self._age_text()})"
+                    )
+                self._cond.wait(remaining)
+            if self._error is None:
+                return dict(self._latest)
+        self._raise_if_failed("waiting for data")
+        raise AssertionError("unreachable")
+
+    receive = wait_next
+    """Alias of :meth:`wait_next` (the name the official RTDE client uses)."""
+
+    def wait_for(self, predicate: Callable[[dict[str, Any]], bool], timeout_s: float, what: str) -> dict[str, Any]:
+        """Wait until ``predicate(latest())`` is true; ``what`` describes the condition for the error [s]."""
+        deadline = time.monotonic() + timeout_s
+        state = self.latest()
+        while not (state and predicate(state)):
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise RTDEError(f"RTDE {self.address}: timed out after {timeout_s:g} s waiting for {what}; last state {state}")
+            state = self.wait_next(min(remaining, self.timeout_s) if remaining > 0 else 0.001)
+        return state
+
+    def drain(self) -> list[dict[str, Any]]:
+        """Remove and return every buffered data package (oldest first), one dict per package."""
+        with self._cond:
+            out = list(self._buffer)
+            self._buffer.clear()
+        return out
+
+    def messages(self) -> list[TextMessage]:
+        """Remove and return the text messages the controller sent (oldest first)."""
+        with self._cond:
+            out = list(self._messages)
+            self._messages.clear()
+        return out
+
+    @property
+    def packages_received(self) -> int:
+        """Number of data packages received since :meth:`connect`."""
+        return self._count
+
+    @property
+    def packages_dropped(self) -> int:
+        """Packages pushed out of the bounded buffer before :meth:`drain` took them."""
+        return self._dropped
+
+    def age_s(self) -> float:
+        """Seconds since the last data package arrived (``inf`` if none did)."""
+        return time.monotonic() - self._last_rx if self._count else math.inf
+
+    @property
+    def output_recipes(self) -> list[OutputRecipe]:
+        return list(self._outputs.values())
+
+    @property
+    def input_recipes(self) -> list[InputRecipe]:
+        return list(self._inputs.values())
+
+    # ------------------------------------------------------------------ plumbing
+
+    def _age_text(self) -> str:
+        age = self.age_s()
+        return "never" if math.isinf(age) else f"{age:.3f} s ago"
+
+    def _raise_if_failed(self, doing: str) -> None:
+        if self._error is not None:
+            raise RTDEError(self._error)
+        if self._sock is None:
+            raise RTDEError(f"RTDE client for {self.address} is not connected (while {doing}); call connect() first")
+
+    def _send_raw(self, data: bytes, doing: str) -> None:
+        sock = self._sock
+        if sock is None:
+            raise RTDEError(f"RTDE client for {self.address} is not connected (while {doing})")
+        try:
+            with self._send_lock:
+                sock.sendall(data)
+        except socket.timeout:
+            raise RTDEError(
+                f"sending to RTDE {self.address} timed out after {self.timeout_s:g} s while {doing} "
+                "(controller not reading?)"
+            ) from None
+        except OSError as exc:
+            msg = self._error or (
+                f"RTDE connection to {self.address} failed while {doing}: {exc.strerror or exc} "
+                f"(after {self._count} data packages; last package {self._age_text()})"
+            )
+            self._fail(msg)
+            raise RTDEError(msg) from None
+
+    def _request(self, command: int, payload: bytes, doing: str) -> bytes:
+        self._raise_if_failed(doing)
+        with self._request_lock:
+            with self._cond:
+                self._replies.clear()
+            previous = self._activity
+            self._activity = doing
+            self._send_raw(pack_package(command, payload), doing)
+            deadline = time.monotonic() + self.timeout_s
+            with self._cond:
+                while True:
+                    while self._replies:
+                        cmd, body = self._replies.popleft()
+                        if cmd == command:
+                            self._activity = previous
+                            return body
+                        log.warning("RTDE %s: unexpected reply %s while %s", self.address, _COMMAND_NAMES.get(cmd, cmd), doing)
+                    if self._error is not None:
+                        raise RTDEError(self._error)
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0:
+                        raise RTDEError(
+                            f"no reply to {_COMMAND_NAMES.get(command, command)} from RTDE {self.address} within "
+                            f"{self.timeout_s:g} s while {doing} (controller silent or overloaded)"
+                        )
+                    self._cond.wait(remaining)
+
+    def _fail(self, message: str) -> None:
+        with self._cond:
+            if self._error is None:
+                self._error = message
+            self._started = False
+            self._cond.notify_all()
+
+    def _read_loop(self) -> None:
+        sock = self._sock
+        assert sock is not None
+        buf = bytearray()
+        try:
+            while not self._closing:
+                try:
+                    chunk = sock.recv(65536)
+                except socket.timeout:
+                    continue
+                if not chunk:
+                    if not self._closing:
+                        self._fail(
+                            f"RTDE connection to {self.address} was closed by the controller while {self._activity} "
+                            f"(after {self._count} data packages; last package {self._age_text()})"
+                        )
+                    return
+                buf += chunk
+                pos = 0
+                n = len(buf)
+                while n - pos >= 3:
+                    size, cmd = _HEADER.unpack_from(buf, pos)
+                    if size < 3:
+                        raise RTDEError(f"RTDE {self.address} sent a package with invalid size {size}")
+                    if n - pos < size:
+                        break
+                    self._dispatch(cmd, bytes(buf[pos + 3 : pos + size]))
+                    pos += size
+                if pos:
+                    del buf[:pos]
+        except RTDEError as exc:
+            self._fail(str(exc))
+        except OSError as exc:
+            if not self._closing:
+                self._fail(
+                    f"RTDE connection to {self.address} failed while {self._activity}: {exc.strerror or exc} "
+                    f"(after {self._count} data packages; last package {self._age_text()})"
+                )
+        except Exception as exc:  # a parse bug must not die silently
+            self._fail(f"RTDE reader for {self.address} stopped: {type(exc).__name__}: {exc}")
+
+    def _dispatch(self, cmd: int, payload: bytes) -> None:
+        if cmd == Command.DATA_PACKAGE:
+            if self.protocol_version >= 2:
+                if not payload:
+                    raise RTDEError(f"RTDE {self.address} sent an empty data package")
+                recipe = self._outputs.get(payload[0])
+                if recipe is None:
+                    log.warning("RTDE %s: data package for unknown recipe %d", self.address, payload[0])
+                    return
+                values = recipe.unpack(payload, 1)
+            else:
+                recipe = self._v1_output
+                if recipe is None:
+                    return
+                values = recipe.unpack(payload, 0)
+            now = time.monotonic()
+            with self._cond:
+                self._latest.update(values)
+                if len(self._buffer) == self._buffer.maxlen:
+                    self._dropped += 1
+                self._buffer.append(values)
+                self._count += 1
+                self._last_rx = now
+                self._cond.notify_all()
+        elif cmd == Command.TEXT_MESSAGE:
+            msg = decode_text_message(payload, self.protocol_version or 2)
+            log.log(
+                logging.ERROR if msg.level <= MessageLevel.ERROR else logging.WARNING if msg.level == 2 else logging.INFO,
+                "RTDE %s %s [%s]: %s",
+                self.address,
+                msg.level_name,
+                msg.source,
+                msg.message,
+            )
+            with self._cond:
+                self._messages.append(msg)
+                self._cond.notify_all()
+        else:
+            with self._cond:
+                self._replies.append((cmd, payload))
+                self._cond.notify_all()

@@ -1,0 +1,1520 @@
+"""A loopback UR controller: real TCP servers on 127.0.0.1 speaking RTDE, Dashboard and the secondary interface.
+
+:class:`URSim` is what the tests and benchmarks deploy to. It is not a physics
+simulator and does not interpret URScript; it is a protocol-exact stand-in for
+an e-series controller (UR3e joint limits) that runs *our* streaming program:
+
+* **RTDE** (default port 30004): protocol versions 2 and 1 byte for byte —
+  version negotiation, controller version, output recipes (v2 with a frequency
+  up to 500 Hz; v1 at 125 Hz without recipe ids), input recipes, start/pause,
+  data packages, text messages. It knows the real field names and types
+  (``timestamp``, ``actual_q``, ``actual_TCP_pose`` from UR3e forward kinematics,
+  ``robot_mode``, ``safety_mode``, ``runtime_state``, all registers, …), answers
+  ``NOT_FOUND`` for unknown fields and ``IN_USE`` for inputs another client holds
+  (or registers 0-23 when ``fieldbus_registers=True``). Output packages are
+  produced by the 500 Hz control loop (a recipe at f Hz gets f of every 500
+  cycles). A client that does not read its data for ``slow_client_timeout_s``
+  is disconnected, as a real controller does.
+* **Dashboard** (default 29999): greeting, power on/off, brake release, load,
+  play, stop, pause, robotmode, safetystatus, unlock protective stop (refused for
+  ``unlock_delay_s`` after the stop, 5 s like the real controller),
+  is in remote control, programState, running, quit.
+* **Secondary interface** (default 30002): accepts program text. Programs made
+  by :func:`~robocritics.robot.ur.urscript.streaming_program` (recognised by their
+  marker line, parameters parsed from the text) are simulated; anything else is
+  rejected with an RTDE text message (level ERROR) and an event.
+
+The simulated streaming program follows :mod:`~robocritics.robot.ur.urscript`
+statement by statement, once per 2 ms control cycle:
+
+* ``servoj`` tracking: joint velocity = setpoint velocity (difference of the
+  last two setpoints over their sequence distance × 2 ms) + (target − q)/τ with
+  τ = lookahead_time × 300 / gain (at least 2 ms), clipped to the UR3e joint
+  speed limits (π rad/s joints 0-2, 2π rad/s joints 3-5).
+* RTDE watchdog: no update of ``input_int_register_24`` for longer than
+  ``1/min_hz`` s → the controller stops the program (``runtime_state`` STOPPED,
+  joints decelerate at 4 rad/s²) and sends a text message.
+* Stall check (the program's own): the counter's *value* unchanged for more than
+  ``stall_limit`` cycles → state STALLED, ``stopj``.
+* **Protective stop rule**: when a new setpoint arrives, the speed it asks for is
+  |Δq_j| / (Δseq × 2 ms) (each sequence step is 2 ms of trajectory). If that
+  exceeds ``jump_margin`` (default 1.5) × the joint's speed limit on any joint,
+  the controller protective-stops: ``safety_mode`` 3 (PROTECTIVE_STOP), the
+  program is stopped, the joints decelerate at 10 rad/s².
+* ``stopj(a)`` on the done command, then the program ends (STOPPED).
+
+Fault injection: :meth:`URSim.inject_drop`, :meth:`URSim.trigger_protective_stop`,
+:meth:`URSim.set_slow`, :meth:`URSim.set_silent`, :meth:`URSim.set_remote_control`,
+and the constructor's ``fieldbus_registers``.
+
+Run it from a shell with ``python -m robocritics.robot.ur.sim`` (or the
+``robocritics ursim`` command); Ctrl-C stops it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import logging
+import math
+import re
+import socket
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Sequence
+
+from robocritics.errors import DeployError
+from robocritics.robot.ur import urscript
+from robocritics.robot.ur.rtde import (
+    DATA_TYPES,
+    MAX_FREQUENCY_HZ,
+    V1_FREQUENCY_HZ,
+    Command,
+    MessageLevel,
+    Recipe,
+    TextMessage,
+    decode_text_message,
+    encode_text_message,
+    pack_package,
+)
+
+__all__ = ["URSim", "SimSnapshot", "SimEvent", "OUTPUT_FIELDS", "INPUT_FIELDS", "main"]
+
+log = logging.getLogger(__name__)
+
+DT = 0.002
+"""Control period of an e-series controller [s] (500 Hz)."""
+
+UR3E_SPEED_LIMITS = (math.pi, math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 * math.pi)
+"""UR3e joint speed limits [rad/s]."""
+
+HOME_Q = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
+"""Default initial joint positions [rad]."""
+
+_DH_D = (0.15185, 0.0, 0.0, 0.13105, 0.08535, 0.0921)
+_DH_A = (0.0, -0.24355, -0.2132, 0.0, 0.0, 0.0)
+_DH_ALPHA = (math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0)
+
+CONTROLLER_STOP_DECEL = 4.0
+"""Deceleration when the controller stops a program (watchdog, dashboard stop) [rad/s²]."""
+PROTECTIVE_STOP_DECEL = 10.0
+"""Deceleration of a protective stop [rad/s²]."""
+
+ROBOT_MODES = {
+    -1: "NO_CONTROLLER",
+    0: "DISCONNECTED",
+    1: "CONFIRM_SAFETY",
+    2: "BOOTING",
+    3: "POWER_OFF",
+    4: "POWER_ON",
+    5: "IDLE",
+    6: "BACKDRIVE",
+    7: "RUNNING",
+}
+SAFETY_MODES = {
+    1: "NORMAL",
+    2: "REDUCED",
+    3: "PROTECTIVE_STOP",
+    4: "RECOVERY",
+    5: "SAFEGUARD_STOP",
+    6: "SYSTEM_EMERGENCY_STOP",
+    7: "ROBOT_EMERGENCY_STOP",
+    8: "VIOLATION",
+    9: "FAULT",
+}
+RUNTIME_STATES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED", 5: "RESUMING"}
+POWER_OFF, IDLE, RUNNING = 3, 5, 7
+NORMAL, PROTECTIVE_STOP = 1, 3
+STOPPED, PLAYING, PAUSED = 1, 2, 4
+_JOINT_MODE = {POWER_OFF: 239, IDLE: 255, RUNNING: 253}
+
+LOCAL_CONTROL_REPLY = "Command is not allowed due to safety reasons: the robot is in local control"
+UNLOCK_TOO_EARLY_REPLY = (
+    "Cannot unlock protective stop until 5s after occurrence. Always inspect cause of protective stop before unlocking"
+)
+
+
+# ---------------------------------------------------------------------------- kinematics
+
+
+def _dh(theta: float, i: int) -> list[list[float]]:
+    ct, st = math.cos(theta), math.sin(theta)
+    ca, sa = math.cos(_DH_ALPHA[i]), math.sin(_DH_ALPHA[i])
+    a, d = _DH_A[i], _DH_D[i]
+    return [[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0.0, sa, ca, d]]
+
+
+def _mul(m: list[list[float]], n: list[list[float]]) -> list[list[float]]:
+    return [
+        [
+            m[r][0] * n[0][c] + m[r][1] * n[1][c] + m[r][2] * n[2][c] + (m[r][3] if c == 3 else 0.0)
+            for c in range(4)
+        ]
+        for r in range(3)
+    ]
+
+
+def _rotvec(r: list[list[float]]) -> tuple[float, float, float]:
+    tr = r[0][0] + r[1][1] + r[2][2]
+    cos = max(-1.0, min(1.0, (tr - 1.0) / 2.0))
+    angle = math.acos(cos)
+    if angle < 1e-9:
+        return (0.0, 0.0, 0.0)
+    if math.pi - angle < 1e-6:
+        # axis from the largest diagonal element of (R + I)/2
+        xx, yy, zz = (r[0][0] + 1) / 2, (r[1][1] + 1) / 2, (r[2][2] + 1) / 2
+        if xx >= yy and xx >= zz:
+            x = math.sqrt(max(xx, 0.0))
+            y, z = (r[0][1] + r[1][0]) / (4 * x), (r[0][2] + r[2][0]) / (4 * x)
+        elif yy >= zz:
+            y = math.sqrt(max(yy, 0.0))
+            x, z = (r[0][1] + r[1][0]) / (4 * y), (r[1][2] + r[2][1]) / (4 * y)
+        else:
+            z = math.sqrt(max(zz, 0.0))
+            x, y = (r[0][2] + r[2][0]) / (4 * z), (r[1][2] + r[2][1]) / (4 * z)
+        return (x * angle, y * angle, z * angle)
+    k = angle / (2 * math.sin(angle))
+    return ((r[2][1] - r[1][2]) * k, (r[0][2] - r[2][0]) * k, (r[1][0] - r[0][1]) * k)
+
+
+def ur3e_fk(q: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, float, float]]:
+    """UR3e forward kinematics (flange, no tool): ((x, y, z [m], rx, ry, rz [rad, rotation vector]), elbow xyz [m])."""
+    t = _dh(q[0], 0)
+    elbow = (0.0, 0.0, 0.0)
+    for i in range(1, 6):
+        t = _mul(t, _dh(q[i], i))
+        if i == 1:
+            elbow = (t[0][3], t[1][3], t[2][3])
+    rv = _rotvec(t)
+    return (t[0][3], t[1][3], t[2][3], *rv), elbow
+
+
+# ---------------------------------------------------------------------------- state
+
+
+class _State:
+    """Everything the controller knows; guarded by ``URSim._lock``."""
+
+    def __init__(self, q: Sequence[float], robot_mode: int) -> None:
+        self.tick = 0
+        self.q = [float(v) for v in q]
+        self.qd = [0.0] * 6
+        self.target_q = list(self.q)
+        self.target_qd = [0.0] * 6
+        self.target_qdd = [0.0] * 6
+        self.robot_mode = robot_mode
+        self.safety_mode = NORMAL
+        self.runtime_state = STOPPED
+        self.in_int = [0] * 48
+        self.in_double = [0.0] * 48
+        self.in_bits = 0  # 128 bits
+        self.out_int = [0] * 48
+        self.out_double = [0.0] * 48
+        self.out_bits = 0
+        self.digital_out = 0  # bits 0-7 standard, 8-15 configurable, 16-17 tool
+        self.analog_out = [0.0, 0.0]
+        self.speed_slider_fraction = 1.0
+        self.external_force_torque = (0.0,) * 6
+        self.gripper_opening_m = 0.0
+        self.extras: dict[str, Any] = {}
+        self.input_update_tick: dict[str, int] = {}
+        self.exec_time_ms = 0.0
+        self._fk_tick = -1
+        self._fk: tuple[tuple[float, ...], tuple[float, float, float]] = ((0.0,) * 6, (0.0, 0.0, 0.0))
+        self._tfk_tick = -1
+        self._tfk: tuple[float, ...] = (0.0,) * 6
+
+    def fk(self) -> tuple[tuple[float, ...], tuple[float, float, float]]:
+        if self._fk_tick != self.tick:
+            self._fk = ur3e_fk(self.q)
+            self._fk_tick = self.tick
+        return self._fk
+
+    def target_fk(self) -> tuple[float, ...]:
+        if self._tfk_tick != self.tick:
+            self._tfk = ur3e_fk(self.target_q)[0]
+            self._tfk_tick = self.tick
+        return self._tfk
+
+    @property
+    def powered(self) -> bool:
+        return self.robot_mode >= 4
+
+    def robot_status_bits(self) -> int:
+        return (1 if self.powered else 0) | (2 if self.runtime_state == PLAYING else 0)
+
+    def safety_status_bits(self) -> int:
+        bit = {1: 0, 2: 1, 3: 2, 4: 3, 5: 4, 6: 5, 7: 6, 8: 8, 9: 9}.get(self.safety_mode, 0)
+        bits = 1 << bit
+        if self.safety_mode in (6, 7):
+            bits |= 1 << 7
+        if self.safety_mode != NORMAL and self.safety_mode != 2:
+            bits |= 1 << 10
+        return bits
+
+
+_Z6 = (0.0,) * 6
+_Getter = Callable[[_State], Any]
+_Setter = Callable[[_State, Any, dict], None]
+
+
+def _build_outputs() -> dict[str, tuple[str, _Getter]]:
+    o: dict[str, tuple[str, _Getter]] = {
+        "timestamp": ("DOUBLE", lambda s: s.tick * DT),
+        "target_q": ("VECTOR6D", lambda s: s.target_q),
+        "target_qd": ("VECTOR6D", lambda s: s.target_qd),
+        "target_qdd": ("VECTOR6D", lambda s: s.target_qdd),
+        "target_current": ("VECTOR6D", lambda s: _Z6),
+        "target_moment": ("VECTOR6D", lambda s: _Z6),
+        "actual_q": ("VECTOR6D", lambda s: s.q),
+        "actual_qd": ("VECTOR6D", lambda s: s.qd),
+        "actual_current": ("VECTOR6D", lambda s: _Z6),
+        "actual_current_window": ("VECTOR6D", lambda s: _Z6),
+        "actual_current_as_torque": ("VECTOR6D", lambda s: _Z6),
+        "joint_control_output": ("VECTOR6D", lambda s: _Z6),
+        "actual_TCP_pose": ("VECTOR6D", lambda s: s.fk()[0]),
+        "actual_TCP_speed": ("VECTOR6D", lambda s: _Z6),
+        "actual_TCP_force": ("VECTOR6D", lambda s: _Z6),
+        "target_TCP_pose": ("VECTOR6D", lambda s: s.target_fk()),
+        "target_TCP_speed": ("VECTOR6D", lambda s: _Z6),
+        "actual_digital_input_bits": ("UINT64", lambda s: 0),
+        "joint_temperatures": ("VECTOR6D", lambda s: (25.0,) * 6),
+        "actual_execution_time": ("DOUBLE", lambda s: s.exec_time_ms),
+        "robot_mode": ("INT32", lambda s: s.robot_mode),
+        "joint_mode": ("VECTOR6INT32", lambda s: (_JOINT_MODE.get(s.robot_mode, 239),) * 6),
+        "safety_mode": ("INT32", lambda s: s.safety_mode),
+        "safety_status": ("INT32", lambda s: s.safety_mode),
+        "actual_tool_accelerometer": ("VECTOR3D", lambda s: (0.0, 0.0, 9.81)),
+        "speed_scaling": ("DOUBLE", lambda s: s.speed_slider_fraction),
+        "target_speed_fraction": ("DOUBLE", lambda s: s.speed_slider_fraction),
+        "actual_momentum": ("DOUBLE", lambda s: 0.0),
+        "actual_main_voltage": ("DOUBLE", lambda s: 48.0),
+        "actual_robot_voltage": ("DOUBLE", lambda s: 48.0 if s.powered else 0.0),
+        "actual_robot_current": ("DOUBLE", lambda s: 0.4 if s.powered else 0.0),
+        "actual_joint_voltage": ("VECTOR6D", lambda s: (48.0,) * 6 if s.powered else _Z6),
+        "actual_digital_output_bits": ("UINT64", lambda s: s.digital_out),
+        "runtime_state": ("UINT32", lambda s: s.runtime_state),
+        "elbow_position": ("VECTOR3D", lambda s: s.fk()[1]),
+        "elbow_velocity": ("VECTOR3D", lambda s: (0.0, 0.0, 0.0)),
+        "robot_status_bits": ("UINT32", lambda s: s.robot_status_bits()),
+        "safety_status_bits": ("UINT32", lambda s: s.safety_status_bits()),
+        "joint_position_deviation_ratio": ("DOUBLE", lambda s: 0.0),
+        "collision_detection_ratio": ("DOUBLE", lambda s: 0.0),
+        "time_scale_source": ("INT32", lambda s: 0),
+        "analog_io_types": ("UINT32", lambda s: 0),
+        "standard_analog_input0": ("DOUBLE", lambda s: 0.0),
+        "standard_analog_input1": ("DOUBLE", lambda s: 0.0),
+        "standard_analog_output0": ("DOUBLE", lambda s: s.analog_out[0]),
+        "standard_analog_output1": ("DOUBLE", lambda s: s.analog_out[1]),
+        "io_current": ("DOUBLE", lambda s: 0.0),
+        "euromap67_input_bits": ("UINT32", lambda s: 0),
+        "euromap67_output_bits": ("UINT32", lambda s: 0),
+        "euromap67_24V_voltage": ("DOUBLE", lambda s: 0.0),
+        "euromap67_24V_current": ("DOUBLE", lambda s: 0.0),
+        "tool_mode": ("UINT32", lambda s: 0),
+        "tool_analog_input_types": ("UINT32", lambda s: 0),
+        "tool_analog_input0": ("DOUBLE", lambda s: 0.0),
+        "tool_analog_input1": ("DOUBLE", lambda s: 0.0),
+        "tool_output_voltage": ("INT32", lambda s: 24 if s.powered else 0),
+        "tool_output_current": ("DOUBLE", lambda s: 0.0),
+        "tool_temperature": ("DOUBLE", lambda s: 30.0),
+        "tcp_force_scalar": ("DOUBLE", lambda s: 0.0),
+        "tool_output_mode": ("UINT8", lambda s: 0),
+        "tool_digital_output0_mode": ("UINT8", lambda s: 1),
+        "tool_digital_output1_mode": ("UINT8", lambda s: 1),
+        "ft_raw_wrench": ("VECTOR6D", lambda s: _Z6),
+        "payload": ("DOUBLE", lambda s: 0.0),
+        "payload_cog": ("VECTOR3D", lambda s: (0.0, 0.0, 0.0)),
+        "payload_inertia": ("VECTOR6D", lambda s: _Z6),
+        "script_control_line": ("UINT32", lambda s: 0),
+        "output_bit_registers0_to_31": ("UINT32", lambda s: s.out_bits & 0xFFFFFFFF),
+        "output_bit_registers32_to_63": ("UINT32", lambda s: (s.out_bits >> 32) & 0xFFFFFFFF),
+        "input_bit_registers0_to_31": ("UINT32", lambda s: s.in_bits & 0xFFFFFFFF),
+        "input_bit_registers32_to_63": ("UINT32", lambda s: (s.in_bits >> 32) & 0xFFFFFFFF),
+    }
+    for n in range(64, 128):
+        o[f"output_bit_register_{n}"] = ("BOOL", lambda s, n=n: bool((s.out_bits >> n) & 1))
+        o[f"input_bit_register_{n}"] = ("BOOL", lambda s, n=n: bool((s.in_bits >> n) & 1))
+    for n in range(48):
+        o[f"output_int_register_{n}"] = ("INT32", lambda s, n=n: s.out_int[n])
+        o[f"output_double_register_{n}"] = ("DOUBLE", lambda s, n=n: s.out_double[n])
+        o[f"input_int_register_{n}"] = ("INT32", lambda s, n=n: s.in_int[n])
+        o[f"input_double_register_{n}"] = ("DOUBLE", lambda s, n=n: s.in_double[n])
+    return o
+
+
+def _set_bits(s: _State, lo: int, width: int, value: int) -> None:
+    mask = ((1 << width) - 1) << lo
+    s.in_bits = (s.in_bits & ~mask) | ((int(value) << lo) & mask)
+
+
+def _build_inputs() -> dict[str, tuple[str, _Setter]]:
+    def pend(key: str) -> _Setter:
+        return lambda s, v, p: p.__setitem__(key, v)
+
+    i: dict[str, tuple[str, _Setter]] = {
+        "speed_slider_mask": ("UINT32", pend("slider_mask")),
+        "speed_slider_fraction": ("DOUBLE", pend("slider_fraction")),
+        "standard_digital_output_mask": ("UINT8", pend("std_mask")),
+        "standard_digital_output": ("UINT8", pend("std")),
+        "configurable_digital_output_mask": ("UINT8", pend("conf_mask")),
+        "configurable_digital_output": ("UINT8", pend("conf")),
+        "tool_digital_output_mask": ("UINT8", pend("tool_mask")),
+        "tool_digital_output": ("UINT8", pend("tool")),
+        "standard_analog_output_mask": ("UINT8", pend("ao_mask")),
+        "standard_analog_output_type": ("UINT8", pend("ao_type")),
+        "standard_analog_output_0": ("DOUBLE", pend("ao0")),
+        "standard_analog_output_1": ("DOUBLE", pend("ao1")),
+        "input_bit_registers0_to_31": ("UINT32", lambda s, v, p: _set_bits(s, 0, 32, v)),
+        "input_bit_registers32_to_63": ("UINT32", lambda s, v, p: _set_bits(s, 32, 32, v)),
+        "external_force_torque": ("VECTOR6D", lambda s, v, p: setattr(s, "external_force_torque", tuple(v))),
+    }
+    for n in range(64, 128):
+        i[f"input_bit_register_{n}"] = ("BOOL", lambda s, v, p, n=n: _set_bits(s, n, 1, 1 if v else 0))
+    for n in range(48):
+        i[f"input_int_register_{n}"] = ("INT32", lambda s, v, p, n=n: s.in_int.__setitem__(n, v))
+        i[f"input_double_register_{n}"] = ("DOUBLE", lambda s, v, p, n=n: s.in_double.__setitem__(n, v))
+    return i
+
+
+def _apply_pending(s: _State, p: dict) -> None:
+    if not p:
+        return
+    if "slider_mask" in p and p["slider_mask"] & 1 and "slider_fraction" in p:
+        s.speed_slider_fraction = min(1.0, max(0.0, float(p["slider_fraction"])))
+    for key, lo in (("std", 0), ("conf", 8), ("tool", 16)):
+        mask = p.get(key + "_mask", 0) & (0xFF if key != "tool" else 0x3)
+        if mask:
+            val = p.get(key, 0)
+            s.digital_out = (s.digital_out & ~(mask << lo)) | ((val & mask) << lo)
+    ao_mask = p.get("ao_mask", 0)
+    if ao_mask & 1 and "ao0" in p:
+        s.analog_out[0] = float(p["ao0"])
+    if ao_mask & 2 and "ao1" in p:
+        s.analog_out[1] = float(p["ao1"])
+
+
+OUTPUT_FIELDS: dict[str, tuple[str, _Getter]] = _build_outputs()
+"""Output fields the loopback controller knows: name → (RTDE type, getter)."""
+INPUT_FIELDS: dict[str, tuple[str, _Setter]] = _build_inputs()
+"""Input fields the loopback controller accepts: name → (RTDE type, setter)."""
+
+FIELDBUS_FIELDS = frozenset(
+    [f"input_int_register_{n}" for n in range(24)]
+    + [f"input_double_register_{n}" for n in range(24)]
+    + ["input_bit_registers0_to_31", "input_bit_registers32_to_63"]
+)
+"""Inputs a configured fieldbus (EtherNet/IP, PROFINET) owns: registers 0-23 and bit registers 0-63."""
+
+
+# ---------------------------------------------------------------------------- public records
+
+
+@dataclass(frozen=True)
+class SimEvent:
+    """Something that happened in the controller: ``time_s`` is controller time [s]."""
+
+    time_s: float
+    kind: str
+    message: str
+
+
+@dataclass(frozen=True)
+class SimSnapshot:
+    """A consistent copy of the controller state. Angles rad, speeds rad/s, time s."""
+
+    time_s: float
+    q: tuple[float, ...]
+    qd: tuple[float, ...]
+    target_q: tuple[float, ...]
+    robot_mode: int
+    safety_mode: int
+    runtime_state: int
+    program: str | None
+    """Name of the running program, None if none runs."""
+    program_state: int
+    """output_int_register_25 (the streaming program's state)."""
+    applied_seq: int
+    """output_int_register_24 (last sequence number the program applied)."""
+    gripper_opening_m: float
+    digital_out: int
+
+    @property
+    def robot_mode_name(self) -> str:
+        return ROBOT_MODES.get(self.robot_mode, str(self.robot_mode))
+
+    @property
+    def safety_mode_name(self) -> str:
+        return SAFETY_MODES.get(self.safety_mode, str(self.safety_mode))
+
+    @property
+    def runtime_state_name(self) -> str:
+        return RUNTIME_STATES.get(self.runtime_state, str(self.runtime_state))
+
+
+# ---------------------------------------------------------------------------- programs
+
+
+class _StreamProgram:
+    """Our streaming program, executed one statement group per control cycle (see module doc)."""
+
+    def __init__(self, sim: "URSim", params: urscript.StreamingProgramParams) -> None:
+        self.sim = sim
+        self.p = params
+        self.name = params.name
+        self.phase = "start"
+        self.last_seq = 0
+        self.stall = 0
+        self.applied = [0.0] * 6
+        self.v_ff = [0.0] * 6
+        self.fresh = False
+        self.last_opening = -1.0
+        self.tau = max(DT, params.lookahead_time_s * 300.0 / params.gain)
+        self.wd_limit_ticks = max(1, math.ceil(1.0 / (params.watchdog_min_hz * DT) - 1e-9))
+        self.wd_armed_tick = 0
+
+    def step(self, s: _State) -> None:
+        sim = self.sim
+        if self.phase == "start":
+            s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.STARTING
+            self.wd_armed_tick = s.tick
+            q_t = s.in_double[24:30]
+            worst = max(range(6), key=lambda j: abs(q_t[j] - s.q[j]))
+            if abs(q_t[worst] - s.q[worst]) > self.p.max_start_deviation_rad:
+                s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.START_REJECTED
+                sim._end_program(
+                    "start_rejected",
+                    f"{self.name}: first setpoint of joint {worst} is {q_t[worst]:.4f} rad but the joint is at "
+                    f"{s.q[worst]:.4f} rad (> {self.p.max_start_deviation_rad} rad); not starting",
+                    CONTROLLER_STOP_DECEL,
+                )
+                return
+            self.last_seq = s.in_int[urscript.SEQ_REGISTER]
+            self.applied = list(q_t)
+            s.out_int[urscript.APPLIED_SEQ_REGISTER] = self.last_seq
+            s.out_int[urscript.SESSION_ECHO_REGISTER] = s.in_int[urscript.SESSION_REGISTER]
+            s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.STREAMING
+            self.phase = "run"
+            self._gripper(s)
+            self._servo(s)
+            return
+        if self.phase == "stopping":
+            if sim._decelerate(s, self.p.stop_deceleration_rad_s2):
+                sim._end_program("program_ended", f"{self.name} ended", None)
+            return
+        # running: the controller's watchdog first
+        last_update = max(self.wd_armed_tick, s.input_update_tick.get(urscript.WATCHDOG_VARIABLE, -1))
+        if s.tick - last_update > self.wd_limit_ticks:
+            sim._end_program(
+                "watchdog",
+                f"RTDE watchdog: {urscript.WATCHDOG_VARIABLE} not updated for "
+                f"{(s.tick - last_update) * DT:.3f} s (> 1/{self.p.watchdog_min_hz:g} Hz); program {self.name} stopped",
+                CONTROLLER_STOP_DECEL,
+            )
+            return
+        if s.in_int[urscript.COMMAND_REGISTER] == urscript.Command.DONE:
+            s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.DONE
+            sim._event("done", f"{self.name}: done command received, stopj({self.p.stop_deceleration_rad_s2:g})")
+            self.phase = "stopping"
+            self.step(s)
+            return
+        seq = s.in_int[urscript.SEQ_REGISTER]
+        if seq != self.last_seq:
+            new = s.in_double[24:30]
+            dseq = (seq - self.last_seq) & 0xFFFFFFFF
+            if dseq == 0 or dseq > 0x7FFFFFFF:
+                dseq = 1  # counter reset or went backwards: treat as one step
+            span = dseq * DT
+            for j in range(6):
+                speed = abs(new[j] - self.applied[j]) / span
+                if speed > sim.jump_margin * sim.speed_limits[j]:
+                    sim._protective_stop(
+                        f"setpoint jump on joint {j}: {new[j] - self.applied[j]:+.4f} rad in {dseq} step(s) "
+                        f"({dseq * DT * 1000:.0f} ms) needs {speed:.2f} rad/s > {sim.jump_margin:g} x limit "
+                        f"{sim.speed_limits[j]:.3f} rad/s"
+                    )
+                    return
+            self.v_ff = [(new[j] - self.applied[j]) / span for j in range(6)]
+            self.applied = list(new)
+            self.fresh = True
+            self.last_seq = seq
+            self.stall = 0
+            s.out_int[urscript.APPLIED_SEQ_REGISTER] = seq
+        else:
+            self.fresh = False
+            self.stall += 1
+            if self.stall > self.p.stall_limit_cycles:
+                s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.STALLED
+                sim._event(
+                    "stalled",
+                    f"{self.name}: sequence counter stayed at {seq} for {self.stall} cycles; stopping",
+                )
+                sim._broadcast(TextMessage("robocritics: sequence counter stalled; stopping", self.name, MessageLevel.WARNING))
+                self.phase = "stopping"
+                self.step(s)
+                return
+        self._gripper(s)
+        self._servo(s)
+
+    def _gripper(self, s: _State) -> None:
+        opening = s.in_double[urscript.GRIPPER_REGISTER]
+        if opening != self.last_opening:
+            s.gripper_opening_m = opening
+            s.out_double[urscript.GRIPPER_APPLIED_REGISTER] = opening
+            if self.p.gripper_close_below_m is not None:
+                closed = opening < self.p.gripper_close_below_m
+                s.digital_out = (s.digital_out & ~(1 << 16)) | ((1 << 16) if closed else 0)
+            self.last_opening = opening
+
+    def _servo(self, s: _State) -> None:
+        limits = self.sim.speed_limits
+        for j in range(6):
+            ff = self.v_ff[j] if self.fresh else 0.0
+            v = ff + (self.applied[j] - s.q[j]) / self.tau
+            lim = limits[j]
+            if v > lim:
+                v = lim
+            elif v < -lim:
+                v = -lim
+            s.target_qdd[j] = (v - s.qd[j]) / DT
+            s.qd[j] = v
+            s.q[j] += v * DT
+        s.target_q = list(self.applied)
+        s.target_qd = list(self.v_ff) if self.fresh else [0.0] * 6
+
+
+class _HoldProgram:
+    """A program started with the dashboard (``load`` + ``play``): it keeps the arm still."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def step(self, s: _State) -> None:
+        pass
+
+
+# ---------------------------------------------------------------------------- connections
+
+
+@dataclass
+class _OutRecipe:
+    recipe: Recipe
+    getters: list[_Getter]
+    frequency_hz: float
+    acc: float = 0.0
+
+
+@dataclass
+class _InRecipe:
+    recipe: Recipe
+    setters: list[_Setter]
+
+
+@dataclass(eq=False)
+class _RTDEConn:
+    sock: socket.socket
+    peer: str
+    protocol: int = 1
+    outputs: dict[int, _OutRecipe] = field(default_factory=dict)
+    inputs: dict[int, _InRecipe] = field(default_factory=dict)
+    next_id: int = 1
+    started: bool = False
+    outbuf: bytearray = field(default_factory=bytearray)
+    backlog_since: float | None = None
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    packages_sent: int = 0
+    closed: bool = False
+
+
+# ---------------------------------------------------------------------------- the controller
+
+
+class URSim:
+    """Loopback UR3e controller. See the module docstring for what it simulates.
+
+    Parameters
+    ----------
+    host:
+        Address to listen on (keep 127.0.0.1).
+    rtde_port, dashboard_port, secondary_port:
+        Ports; 0 picks a free ephemeral port. The bound ports are in the
+        attributes of the same name after :meth:`start`.
+    initial_q:
+        Joint positions at start [rad].
+    robot_mode:
+        ``"POWER_OFF"`` (like a freshly booted controller), ``"IDLE"`` or ``"RUNNING"``.
+    remote_control:
+        False = local control: the dashboard refuses commands that move the
+        robot and the secondary interface refuses programs.
+    fieldbus_registers:
+        True = a fieldbus owns input registers 0-23 (they answer ``IN_USE``).
+    protocol_versions:
+        RTDE protocol versions the controller accepts; ``(1,)`` imitates old firmware.
+    controller_version:
+        (major, minor, bugfix, build) reported by RTDE 'v'.
+    jump_margin:
+        Protective-stop threshold as a multiple of the joint speed limit (see module doc).
+    unlock_delay_s:
+        Time after a protective stop before ``unlock protective stop`` is accepted [s].
+    slow_client_timeout_s:
+        A client whose data has been waiting unsent this long is disconnected [s].
+    extra_outputs, extra_inputs:
+        Additional fields, name → RTDE type (e.g. a newer firmware's fields); their
+        values are in :attr:`extras` (outputs read it, inputs write it).
+    speed_limits:
+        Joint speed limits [rad/s], default UR3e.
+    """
+
+    def __init__(
+        self,
+        host: str = "127.0.0.1",
+        rtde_port: int = 30004,
+        dashboard_port: int = 29999,
+        secondary_port: int = 30002,
+        initial_q: Sequence[float] = HOME_Q,
+        robot_mode: str = "POWER_OFF",
+        remote_control: bool = True,
+        fieldbus_registers: bool = False,
+        protocol_versions: Iterable[int] = (1, 2),
+        controller_version: tuple[int, int, int, int] = (5, 15, 0, 0),
+        jump_margin: float = 1.5,
+        unlock_delay_s: float = 5.0,
+        slow_client_timeout_s: float = 1.0,
+        extra_outputs: dict[str, str] | None = None,
+        extra_inputs: dict[str, str] | None = None,
+        speed_limits: Sequence[float] = UR3E_SPEED_LIMITS,
+    ) -> None:
+        if len(initial_q) != 6:
+            raise DeployError(f"URSim initial_q needs 6 joint positions [rad], got {len(initial_q)}")
+        modes = {v: k for k, v in ROBOT_MODES.items()}
+        if robot_mode.upper() not in ("POWER_OFF", "IDLE", "RUNNING"):
+            raise DeployError(f"URSim robot_mode must be POWER_OFF, IDLE or RUNNING, got {robot_mode!r}")
+        for fields_ in (extra_outputs or {}, extra_inputs or {}):
+            for n, t in fields_.items():
+                if t not in DATA_TYPES:
+                    raise DeployError(f"URSim extra field {n!r} has unknown RTDE type {t!r}")
+        self.host = host
+        self.rtde_port = rtde_port
+        self.dashboard_port = dashboard_port
+        self.secondary_port = secondary_port
+        self.remote_control = remote_control
+        self.fieldbus_registers = fieldbus_registers
+        self.protocol_versions = tuple(protocol_versions)
+        self.controller_version = tuple(controller_version)
+        self.jump_margin = float(jump_margin)
+        self.unlock_delay_s = float(unlock_delay_s)
+        self.slow_client_timeout_s = float(slow_client_timeout_s)
+        self.speed_limits = tuple(float(v) for v in speed_limits)
+        self._lock = threading.RLock()
+        self._state = _State(initial_q, modes[robot_mode.upper()])
+        self._outputs = dict(OUTPUT_FIELDS)
+        self._inputs = dict(INPUT_FIELDS)
+        for n, t in (extra_outputs or {}).items():
+            self._outputs[n] = (t, lambda s, n=n, t=t: s.extras.get(n, _zero(t)))
+        for n, t in (extra_inputs or {}).items():
+            self._inputs[n] = (t, lambda s, v, p, n=n: s.extras.__setitem__(n, v))
+            self._outputs.setdefault(n, (t, lambda s, n=n, t=t: s.extras.get(n, _zero(t))))
+        self._program: _StreamProgram | _HoldProgram | None = None
+        self._stopping_decel: float | None = None
+        self._loaded_program: str | None = None
+        self._protective_stop_time: float | None = None
+        self._conns: list[_RTDEConn] = []
+        self._input_owner: dict[str, _RTDEConn] = {}
+        self._events: list[SimEvent] = []
+        self._running = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._listeners: list[socket.socket] = []
+        self._aux_socks: set[socket.socket] = set()
+        self._reply_delay_s = 0.0
+        self._rate_factor = 1.0
+        self._silent_rtde = False
+        self._silent_dashboard = False
+        self._drop_after_packages: int | None = None
+        self._drop_at: float | None = None
+        self._packages_total = 0
+        self.loop_overruns = 0
+        """Control cycles that started more than 2 ms late (the host was busy)."""
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def __enter__(self) -> "URSim":
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start(self) -> "URSim":
+        """Bind the three servers and start the control loop; returns self."""
+        if self._running.is_set():
+            raise DeployError("URSim is already running")
+        bound = []
+        try:
+            for attr, handler in (
+                ("rtde_port", self._serve_rtde),
+                ("dashboard_port", self._serve_dashboard),
+                ("secondary_port", self._serve_secondary),
+            ):
+                ls = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+                ls.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                try:
+                    ls.bind((self.host, getattr(self, attr)))
+                except OSError as exc:
+                    ls.close()
+                    raise DeployError(
+                        f"URSim cannot listen on {self.host}:{getattr(self, attr)} ({attr}): {exc.strerror or exc}"
+                    ) from None
+                ls.listen(8)
+                ls.settimeout(0.1)
+                setattr(self, attr, ls.getsockname()[1])
+                bound.append((ls, handler))
+        except BaseException:
+            for ls, _ in bound:
+                ls.close()
+            raise
+        self._running.set()
+        for ls, handler in bound:
+            self._listeners.append(ls)
+            self._spawn(self._accept_loop, ls, handler, name=f"ursim-accept-{ls.getsockname()[1]}")
+        self._spawn(self._control_loop, name="ursim-control")
+        self._event("started", f"listening on {self.host}: RTDE {self.rtde_port}, dashboard {self.dashboard_port}, secondary {self.secondary_port}")
+        return self
+
+    def stop(self) -> None:
+        """Close every connection and listener and stop all threads (bounded wait)."""
+        if not self._running.is_set():
+            return
+        self._running.clear()
+        for ls in self._listeners:
+            ls.close()
+        self._listeners.clear()
+        with self._lock:
+            conns = list(self._conns)
+            aux = list(self._aux_socks)
+        for c in conns:
+            self._close_conn(c, "controller shutting down")
+        for s in aux:
+            _shutdown(s)
+        me = threading.current_thread()
+        for t in self._threads:
+            if t is not me:
+                t.join(timeout=2.0)
+        self._threads.clear()
+
+    def _spawn(self, target: Callable[..., None], *args: Any, name: str) -> None:
+        t = threading.Thread(target=target, args=args, name=name, daemon=True)
+        self._threads = [th for th in self._threads if th.is_alive()]
+        self._threads.append(t)
+        t.start()
+
+    def _accept_loop(self, ls: socket.socket, handler: Callable[[socket.socket, str], None]) -> None:
+        while self._running.is_set():
+            try:
+                sock, addr = ls.accept()
+            except socket.timeout:
+                continue
+            except OSError:
+                return
+            sock.settimeout(None)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._spawn(handler, sock, f"{addr[0]}:{addr[1]}", name=f"ursim-conn-{addr[1]}")
+
+    # ------------------------------------------------------------------ inspection
+
+    def snapshot(self) -> SimSnapshot:
+        """A consistent copy of the controller state."""
+        with self._lock:
+            s = self._state
+            return SimSnapshot(
+                time_s=s.tick * DT,
+                q=tuple(s.q),
+                qd=tuple(s.qd),
+                target_q=tuple(s.target_q),
+                robot_mode=s.robot_mode,
+                safety_mode=s.safety_mode,
+                runtime_state=s.runtime_state,
+                program=self._program.name if self._program is not None else None,
+                program_state=s.out_int[urscript.STATE_REGISTER],
+                applied_seq=s.out_int[urscript.APPLIED_SEQ_REGISTER],
+                gripper_opening_m=s.gripper_opening_m,
+                digital_out=s.digital_out,
+            )
+
+    @property
+    def q(self) -> tuple[float, ...]:
+        """Actual joint positions [rad]."""
+        with self._lock:
+            return tuple(self._state.q)
+
+    @property
+    def extras(self) -> dict[str, Any]:
+        """Values of the ``extra_outputs`` / ``extra_inputs`` fields (mutable, guarded by the sim)."""
+        return self._state.extras
+
+    def events(self, kind: str | None = None) -> list[SimEvent]:
+        """Events so far (all, or those of one ``kind``: started, rtde_connected, rtde_closed,
+        program_started, program_rejected, program_ended, start_rejected, done, stalled, watchdog,
+        protective_stop, protective_stop_released, dashboard, client_message, stopped)."""
+        with self._lock:
+            return [e for e in self._events if kind is None or e.kind == kind]
+
+    def wait_for(self, predicate: Callable[[SimSnapshot], bool], timeout_s: float, what: str = "condition") -> SimSnapshot:
+        """Poll :meth:`snapshot` until ``predicate`` holds; raises TimeoutError after ``timeout_s`` [s]."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            snap = self.snapshot()
+            if predicate(snap):
+                return snap
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"URSim: {what} not reached within {timeout_s:g} s; state {snap}")
+            time.sleep(0.002)
+
+    # ------------------------------------------------------------------ direct control
+
+    def set_joint_positions(self, q: Sequence[float]) -> None:
+        """Teleport the arm to ``q`` [rad] (only while no program runs)."""
+        with self._lock:
+            if self._program is not None:
+                raise DeployError("URSim: cannot set joint positions while a program runs")
+            self._state.q = [float(v) for v in q]
+            self._state.target_q = list(self._state.q)
+            self._state.qd = [0.0] * 6
+
+    def power_on(self, brake_release: bool = True) -> None:
+        """Power on (→ IDLE) and by default release the brakes (→ RUNNING), as the dashboard would."""
+        with self._lock:
+            self._state.robot_mode = RUNNING if brake_release else max(self._state.robot_mode, IDLE)
+
+    def write_output_register(self, kind: str, n: int, value: Any) -> None:
+        """Set an output register as a program would: ``kind`` is "int", "double" or "bit"."""
+        with self._lock:
+            s = self._state
+            if kind == "int":
+                s.out_int[n] = int(value)
+            elif kind == "double":
+                s.out_double[n] = float(value)
+            elif kind == "bit":
+                s.out_bits = (s.out_bits & ~(1 << n)) | ((1 if value else 0) << n)
+            else:
+                raise DeployError(f"unknown register kind {kind!r}; one of int, double, bit")
+
+    def broadcast_message(self, message: str, level: int = MessageLevel.INFO, source: str = "URSim") -> None:
+        """Send an RTDE text message to every connected RTDE client."""
+        self._broadcast(TextMessage(message, source, level))
+
+    # ------------------------------------------------------------------ fault injection
+
+    def inject_drop(self, after_packages: int | None = None, after_s: float | None = None) -> None:
+        """Close every RTDE connection once ``after_packages`` more data packages have been
+        sent (to all clients together) or ``after_s`` seconds have passed, whichever comes first.
+        With neither, drop now. One-shot."""
+        with self._lock:
+            if after_packages is None and after_s is None:
+                self._drop_after_packages = self._packages_total
+            else:
+                self._drop_after_packages = None if after_packages is None else self._packages_total + int(after_packages)
+                self._drop_at = None if after_s is None else time.monotonic() + float(after_s)
+
+    def trigger_protective_stop(self, reason: str = "injected fault") -> None:
+        """Protective-stop the robot now (safety_mode 3, program stopped)."""
+        with self._lock:
+            self._protective_stop(reason)
+
+    def set_slow(self, reply_delay_s: float = 0.0, output_rate_factor: float = 1.0) -> None:
+        """Slow controller: delay every RTDE and dashboard reply by ``reply_delay_s`` [s] and
+        send data at ``output_rate_factor`` × the requested frequency (0 < factor <= 1)."""
+        if not (0 < output_rate_factor <= 1):
+            raise DeployError(f"output_rate_factor must be in (0, 1], got {output_rate_factor}")
+        self._reply_delay_s = max(0.0, float(reply_delay_s))
+        self._rate_factor = float(output_rate_factor)
+
+    def set_silent(self, rtde: bool = True, dashboard: bool = False) -> None:
+        """Silent controller: keep connections open but send nothing (no data, no replies)."""
+        self._silent_rtde = bool(rtde)
+        self._silent_dashboard = bool(dashboard)
+
+    def set_remote_control(self, enabled: bool) -> None:
+        """Switch between remote control (True) and local control (False)."""
+        self.remote_control = bool(enabled)
+        self._event("remote_control", f"remote control {'on' if enabled else 'off'}")
+
+    # ------------------------------------------------------------------ control loop
+
+    def _control_loop(self) -> None:
+        next_t = time.perf_counter()
+        while self._running.is_set():
+            t0 = time.perf_counter()
+            with self._lock:
+                self._tick()
+                self._publish()
+                self._state.exec_time_ms = (time.perf_counter() - t0) * 1000.0
+            self._flush_all()
+            self._check_drop()
+            next_t += DT
+            delay = next_t - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            elif delay < -DT:
+                self.loop_overruns += 1
+                if delay < -0.05:  # far behind (host stalled): resynchronise instead of bursting
+                    next_t = time.perf_counter()
+
+    def _tick(self) -> None:
+        s = self._state
+        s.tick += 1
+        if self._program is not None:
+            self._program.step(s)
+        elif self._stopping_decel is not None:
+            if self._decelerate(s, self._stopping_decel):
+                self._stopping_decel = None
+        else:
+            s.qd = [0.0] * 6
+            s.target_qd = [0.0] * 6
+
+    def _decelerate(self, s: _State, decel: float) -> bool:
+        """One cycle of braking at ``decel`` [rad/s²]; True once every joint stands still."""
+        dv = decel * DT
+        still = True
+        for j in range(6):
+            v = s.qd[j]
+            v = v - dv if v > dv else v + dv if v < -dv else 0.0
+            s.qd[j] = v
+            s.q[j] += v * DT
+            if v != 0.0:
+                still = False
+        s.target_q = list(s.q)
+        s.target_qd = list(s.qd)
+        return still
+
+    def _end_program(self, kind: str, message: str, decel: float | None) -> None:
+        """Stop the running program (lock held); ``decel`` None = joints already still."""
+        self._program = None
+        self._state.runtime_state = STOPPED
+        self._stopping_decel = decel
+        self._event(kind, message)
+        level = MessageLevel.INFO if kind in ("program_ended",) else MessageLevel.ERROR
+        self._broadcast(TextMessage(message, "Controller", level))
+
+    def _protective_stop(self, reason: str) -> None:
+        s = self._state
+        s.safety_mode = PROTECTIVE_STOP
+        self._protective_stop_time = time.monotonic()
+        if self._program is not None:
+            self._program = None
+            s.runtime_state = STOPPED
+        self._stopping_decel = PROTECTIVE_STOP_DECEL
+        self._event("protective_stop", f"protective stop: {reason}")
+        self._broadcast(TextMessage(f"Protective stop: {reason}", "Controller", MessageLevel.ERROR))
+
+    def _start_program(self, program: _StreamProgram | _HoldProgram) -> None:
+        self._program = program
+        self._stopping_decel = None
+        self._state.runtime_state = PLAYING
+        self._event("program_started", f"program {program.name} started")
+
+    def _event(self, kind: str, message: str) -> None:
+        with self._lock:
+            self._events.append(SimEvent(self._state.tick * DT, kind, message))
+        log.info("URSim %s: %s", kind, message)
+
+    # ------------------------------------------------------------------ RTDE server
+
+    def _serve_rtde(self, sock: socket.socket, peer: str) -> None:
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 65536)
+        except OSError:
+            pass
+        conn = _RTDEConn(sock, peer)
+        with self._lock:
+            self._conns.append(conn)
+        self._event("rtde_connected", f"RTDE client {peer} connected")
+        buf = bytearray()
+        reason = "client closed the connection"
+        try:
+            while self._running.is_set() and not conn.closed:
+                chunk = sock.recv(65536)
+                if not chunk:
+                    break
+                buf += chunk
+                pos = 0
+                while len(buf) - pos >= 3:
+                    size, cmd = struct.unpack_from(">HB", buf, pos)
+                    if size < 3:
+                        raise ValueError(f"invalid package size {size}")
+                    if len(buf) - pos < size:
+                        break
+                    self._rtde_package(conn, cmd, bytes(buf[pos + 3 : pos + size]))
+                    pos += size
+                del buf[:pos]
+        except (OSError, ValueError) as exc:
+            reason = f"{type(exc).__name__}: {exc}"
+        finally:
+            self._close_conn(conn, reason)
+
+    def _close_conn(self, conn: _RTDEConn, reason: str) -> None:
+        with self._lock:
+            if conn.closed:
+                return
+            conn.closed = True
+            if conn in self._conns:
+                self._conns.remove(conn)
+            for name in [n for n, c in self._input_owner.items() if c is conn]:
+                del self._input_owner[name]
+        _shutdown(conn.sock)
+        self._event("rtde_closed", f"RTDE client {conn.peer} disconnected: {reason}")
+
+    def _reply(self, conn: _RTDEConn, cmd: int, payload: bytes) -> None:
+        if self._silent_rtde:
+            return
+        if self._reply_delay_s:
+            time.sleep(self._reply_delay_s)
+        self._queue(conn, pack_package(cmd, payload))
+        self._flush(conn)
+
+    def _send_text(self, conn: _RTDEConn, msg: TextMessage) -> None:
+        if self._silent_rtde or conn.closed:
+            return
+        self._queue(conn, pack_package(Command.TEXT_MESSAGE, encode_text_message(msg, conn.protocol)))
+        self._flush(conn)
+
+    def _broadcast(self, msg: TextMessage) -> None:
+        with self._lock:
+            conns = list(self._conns)
+        for c in conns:
+            self._send_text(c, msg)
+
+    def _rtde_package(self, conn: _RTDEConn, cmd: int, payload: bytes) -> None:
+        if cmd == Command.REQUEST_PROTOCOL_VERSION:
+            if len(payload) != 2:
+                self._send_text(conn, TextMessage("protocol version request needs a uint16", "RTDE", MessageLevel.ERROR))
+                return
+            (version,) = struct.unpack(">H", payload)
+            ok = version in self.protocol_versions
+            if ok:
+                conn.protocol = version
+            self._reply(conn, cmd, struct.pack(">B", 1 if ok else 0))
+        elif cmd == Command.GET_URCONTROL_VERSION:
+            self._reply(conn, cmd, struct.pack(">IIII", *self.controller_version))
+        elif cmd == Command.CONTROL_PACKAGE_SETUP_OUTPUTS:
+            self._setup_outputs(conn, payload)
+        elif cmd == Command.CONTROL_PACKAGE_SETUP_INPUTS:
+            self._setup_inputs(conn, payload)
+        elif cmd == Command.CONTROL_PACKAGE_START:
+            with self._lock:
+                ok = bool(conn.outputs)
+                if ok:
+                    for rec in conn.outputs.values():
+                        rec.acc = 1.0  # first package on the next cycle
+                    conn.started = True
+            if not ok:
+                self._send_text(conn, TextMessage("start refused: no output recipe set up", "RTDE", MessageLevel.ERROR))
+            self._reply(conn, cmd, b"\x01" if ok else b"\x00")
+        elif cmd == Command.CONTROL_PACKAGE_PAUSE:
+            with self._lock:
+                conn.started = False
+            self._reply(conn, cmd, b"\x01")
+        elif cmd == Command.DATA_PACKAGE:
+            self._input_package(conn, payload)
+        elif cmd == Command.TEXT_MESSAGE:
+            try:
+                msg = decode_text_message(payload, conn.protocol)
+            except Exception as exc:
+                self._send_text(conn, TextMessage(f"malformed text message: {exc}", "RTDE", MessageLevel.ERROR))
+                return
+            self._event("client_message", f"{conn.peer} [{msg.source}] {msg.level_name}: {msg.message}")
+        else:
+            self._send_text(conn, TextMessage(f"unknown RTDE package type {cmd}", "RTDE", MessageLevel.ERROR))
+
+    def _setup_outputs(self, conn: _RTDEConn, payload: bytes) -> None:
+        if conn.protocol >= 2:
+            if len(payload) < 8:
+                self._send_text(conn, TextMessage("output setup needs a frequency", "RTDE", MessageLevel.ERROR))
+                self._reply(conn, Command.CONTROL_PACKAGE_SETUP_OUTPUTS, b"\x00")
+                return
+            (freq,) = struct.unpack_from(">d", payload)
+            text = payload[8:]
+        else:
+            freq, text = V1_FREQUENCY_HZ, payload
+        names = [n for n in text.decode("ascii", "replace").split(",") if n.strip()]
+        names = [n.strip() for n in names]
+        types = [self._outputs[n][0] if n in self._outputs else "NOT_FOUND" for n in names]
+        ok = bool(names) and "NOT_FOUND" not in types
+        if not (0 < freq <= MAX_FREQUENCY_HZ) or math.isnan(freq):
+            clamped = min(max(freq if not math.isnan(freq) else MAX_FREQUENCY_HZ, 1.0), MAX_FREQUENCY_HZ)
+            self._send_text(
+                conn, TextMessage(f"output frequency {freq} Hz out of range, using {clamped:g} Hz", "RTDE", MessageLevel.WARNING)
+            )
+            freq = clamped
+        rid = 0
+        if ok:
+            with self._lock:
+                if conn.protocol >= 2:
+                    rid = conn.next_id
+                    conn.next_id += 1
+                else:
+                    conn.outputs.clear()
+                conn.outputs[rid] = _OutRecipe(Recipe(rid, tuple(names), tuple(types)), [self._outputs[n][1] for n in names], freq)
+        body = ",".join(types).encode("ascii")
+        self._reply(conn, Command.CONTROL_PACKAGE_SETUP_OUTPUTS, (bytes([rid]) + body) if conn.protocol >= 2 else body)
+
+    def _setup_inputs(self, conn: _RTDEConn, payload: bytes) -> None:
+        names = [n.strip() for n in payload.decode("ascii", "replace").split(",") if n.strip()]
+        with self._lock:
+            types = []
+            for n in names:
+                if n not in self._inputs:
+                    types.append("NOT_FOUND")
+                elif (self.fieldbus_registers and n in FIELDBUS_FIELDS) or (
+                    n in self._input_owner and self._input_owner[n] is not conn
+                ):
+                    types.append("IN_USE")
+                else:
+                    types.append(self._inputs[n][0])
+            rid = 0
+            if names and "NOT_FOUND" not in types and "IN_USE" not in types:
+                rid = conn.next_id
+                conn.next_id += 1
+                conn.inputs[rid] = _InRecipe(Recipe(rid, tuple(names), tuple(types)), [self._inputs[n][1] for n in names])
+                for n in names:
+                    self._input_owner[n] = conn
+        self._reply(conn, Command.CONTROL_PACKAGE_SETUP_INPUTS, bytes([rid]) + ",".join(types).encode("ascii"))
+
+    def _input_package(self, conn: _RTDEConn, payload: bytes) -> None:
+        if not payload:
+            self._send_text(conn, TextMessage("empty data package", "RTDE", MessageLevel.ERROR))
+            return
+        rec = conn.inputs.get(payload[0])
+        if rec is None:
+            self._send_text(conn, TextMessage(f"data package for unknown input recipe {payload[0]}", "RTDE", MessageLevel.ERROR))
+            return
+        try:
+            values = rec.recipe.unpack(payload, 1)
+        except Exception as exc:
+            self._send_text(conn, TextMessage(str(exc), "RTDE", MessageLevel.ERROR))
+            return
+        if not conn.started:
+            self._send_text(conn, TextMessage("input ignored: synchronisation not started", "RTDE", MessageLevel.WARNING))
+            return
+        with self._lock:
+            s = self._state
+            pending: dict[str, Any] = {}
+            for name, setter in zip(rec.recipe.names, rec.setters):
+                setter(s, values[name], pending)
+                s.input_update_tick[name] = s.tick
+            _apply_pending(s, pending)
+
+    def _publish(self) -> None:
+        """Queue the data packages due this cycle (lock held)."""
+        if self._silent_rtde:
+            return
+        s = self._state
+        step = self._rate_factor / 500.0
+        for conn in self._conns:
+            if not conn.started:
+                continue
+            for rid, rec in conn.outputs.items():
+                rec.acc += rec.frequency_hz * step
+                if rec.acc < 1.0 - 1e-9:
+                    continue
+                rec.acc -= 1.0
+                if rec.acc > 1.0:
+                    rec.acc = 0.0
+                body = rec.recipe.pack_values([g(s) for g in rec.getters])
+                if conn.protocol >= 2:
+                    body = bytes((rid,)) + body
+                with conn.lock:
+                    conn.outbuf += pack_package(Command.DATA_PACKAGE, body)
+                conn.packages_sent += 1
+                self._packages_total += 1
+
+    def _queue(self, conn: _RTDEConn, data: bytes) -> None:
+        with conn.lock:
+            conn.outbuf += data
+
+    def _flush_all(self) -> None:
+        with self._lock:
+            conns = list(self._conns)
+        for c in conns:
+            self._flush(c)
+
+    def _flush(self, conn: _RTDEConn) -> None:
+        drop = None
+        with conn.lock:
+            if conn.closed:
+                conn.outbuf.clear()
+                return
+            if conn.outbuf:
+                try:
+                    n = conn.sock.send(conn.outbuf, socket.MSG_DONTWAIT)
+                except (BlockingIOError, InterruptedError):
+                    n = 0
+                except OSError as exc:
+                    n = 0
+                    drop = f"send failed: {exc.strerror or exc}"
+                if n:
+                    del conn.outbuf[:n]
+            now = time.monotonic()
+            if not conn.outbuf:
+                conn.backlog_since = None
+            elif conn.backlog_since is None:
+                conn.backlog_since = now
+            elif now - conn.backlog_since > self.slow_client_timeout_s or len(conn.outbuf) > 8 << 20:
+                drop = (
+                    f"client not reading: {len(conn.outbuf)} bytes unsent for "
+                    f"{now - conn.backlog_since:.2f} s (> {self.slow_client_timeout_s:g} s)"
+                )
+        if drop:
+            self._close_conn(conn, drop)
+
+    def _check_drop(self) -> None:
+        due = False
+        with self._lock:
+            if self._drop_after_packages is not None and self._packages_total >= self._drop_after_packages:
+                due = True
+            if self._drop_at is not None and time.monotonic() >= self._drop_at:
+                due = True
+            if due:
+                self._drop_after_packages = None
+                self._drop_at = None
+                conns = list(self._conns)
+        if due:
+            for c in conns:
+                self._close_conn(c, f"injected connection drop after {c.packages_sent} data packages")
+
+    # ------------------------------------------------------------------ dashboard server
+
+    def _serve_dashboard(self, sock: socket.socket, peer: str) -> None:
+        with self._lock:
+            self._aux_socks.add(sock)
+        try:
+            sock.sendall(b"Connected: Universal Robots Dashboard Server\n")
+            f = sock.makefile("rb")
+            for raw in f:
+                line = raw.decode("utf-8", "replace").strip()
+                if not line:
+                    continue
+                reply, close = self._dashboard_command(line)
+                self._event("dashboard", f"{peer}: {line!r} -> {reply!r}")
+                if self._silent_dashboard:
+                    continue
+                if self._reply_delay_s:
+                    time.sleep(self._reply_delay_s)
+                sock.sendall(reply.encode("utf-8") + b"\n")
+                if close:
+                    break
+        except OSError:
+            pass
+        finally:
+            with self._lock:
+                self._aux_socks.discard(sock)
+            _shutdown(sock)
+
+    def _dashboard_command(self, line: str) -> tuple[str, bool]:
+        low = re.sub(r"\s+", " ", line.strip()).lower()
+        with self._lock:
+            s = self._state
+            remote = self.remote_control
+            if low == "quit":
+                return "Disconnected", True
+            if low == "robotmode":
+                return f"Robotmode: {ROBOT_MODES.get(s.robot_mode, 'UNKNOWN')}", False
+            if low == "safetystatus":
+                return f"Safetystatus: {SAFETY_MODES.get(s.safety_mode, 'UNKNOWN')}", False
+            if low == "safetymode":
+                return f"Safetymode: {SAFETY_MODES.get(s.safety_mode, 'UNKNOWN')}", False
+            if low == "is in remote control":
+                return ("true" if remote else "false"), False
+            if low == "running":
+                return f"Program running: {'true' if s.runtime_state == PLAYING else 'false'}", False
+            if low == "programstate":
+                state = RUNTIME_STATES.get(s.runtime_state, "STOPPED")
+                name = self._program.name if self._program is not None else (self._loaded_program or "<unnamed>")
+                return f"{state} {name}", False
+            if low == "polyscopeversion":
+                return "URSoftware {}.{}.{}.{} (robocritics URSim)".format(*self.controller_version), False
+            if low == "get loaded program":
+                return (f"Loaded program: {self._loaded_program}" if self._loaded_program else "No program loaded"), False
+            if low == "close safety popup":
+                return "closing safety popup", False
+            if low == "close popup":
+                return "closing popup", False
+            if low in ("power on", "power off", "brake release", "play", "stop", "pause", "unlock protective stop") or low.startswith("load "):
+                if not remote:
+                    return LOCAL_CONTROL_REPLY, False
+            if low == "power on":
+                if s.robot_mode < IDLE:
+                    s.robot_mode = IDLE
+                return "Powering on", False
+            if low == "power off":
+                if self._program is not None:
+                    self._end_program("program_ended", f"{self._program.name} stopped: power off", None)
+                s.robot_mode = POWER_OFF
+                s.qd = [0.0] * 6
+                self._stopping_decel = None
+                return "Powering off", False
+            if low == "brake release":
+                s.robot_mode = RUNNING
+                return "Brake releasing", False
+            if low.startswith("load "):
+                prog = line.strip()[5:].strip()
+                if not prog.endswith(".urp"):
+                    return f"File not found: {prog}", False
+                self._loaded_program = prog
+                return f"Loading program: {prog}", False
+            if low == "play":
+                if self._loaded_program is None or s.robot_mode != RUNNING or s.safety_mode != NORMAL:
+                    return "Failed to execute: play", False
+                if self._program is None:
+                    self._start_program(_HoldProgram(self._loaded_program))
+                elif s.runtime_state == PAUSED:
+                    s.runtime_state = PLAYING
+                return "Starting program", False
+            if low == "stop":
+                if self._program is None:
+                    return "Failed to execute: stop", False
+                self._end_program("program_ended", f"{self._program.name} stopped from the dashboard", CONTROLLER_STOP_DECEL)
+                return "Stopped", False
+            if low == "pause":
+                if self._program is None:
+                    return "Failed to execute: pause", False
+                s.runtime_state = PAUSED
+                return "Pausing program", False
+            if low == "unlock protective stop":
+                if s.safety_mode == PROTECTIVE_STOP:
+                    since = time.monotonic() - (self._protective_stop_time or 0.0)
+                    if since < self.unlock_delay_s:
+                        return UNLOCK_TOO_EARLY_REPLY, False
+                    s.safety_mode = NORMAL
+                    self._event("protective_stop_released", "protective stop released from the dashboard")
+                return "Protective stop releasing", False
+        return f"could not understand: '{line}'", False
+
+    # ------------------------------------------------------------------ secondary interface
+
+    def _serve_secondary(self, sock: socket.socket, peer: str) -> None:
+        with self._lock:
+            self._aux_socks.add(sock)
+        text = ""
+        try:
+            while self._running.is_set():
+                chunk = sock.recv(65536)
+                if not chunk:
+                    break
+                text += chunk.decode("utf-8", "replace")
+                text = self._take_programs(text, peer, final=False)
+            self._take_programs(text, peer, final=True)
+        except OSError:
+            pass
+        finally:
+            with self._lock:
+                self._aux_socks.discard(sock)
+            _shutdown(sock)
+
+    def _take_programs(self, text: str, peer: str, final: bool) -> str:
+        while True:
+            m = re.search(r"^end[ \t]*\r?$", text, flags=re.MULTILINE)
+            if m is None or not re.search(r"^def\s", text[: m.start()], flags=re.MULTILINE):
+                break
+            self._receive_script(text[: m.end()], peer)
+            text = text[m.end() :].lstrip("\r\n")
+        if final and text.strip():
+            self._receive_script(text, peer)
+            text = ""
+        return text
+
+    def _receive_script(self, script: str, peer: str) -> None:
+        with self._lock:
+            s = self._state
+            reason = None
+            params = None
+            if not self.remote_control:
+                reason = "the robot is in local control (enable remote control on the teach pendant)"
+            elif s.robot_mode != RUNNING:
+                reason = f"the robot is not running (robot mode {ROBOT_MODES.get(s.robot_mode)}); power on and release the brakes"
+            elif s.safety_mode != NORMAL:
+                reason = f"safety mode is {SAFETY_MODES.get(s.safety_mode)}; unlock the protective stop first"
+            else:
+                try:
+                    params = urscript.parse_streaming_program(script)
+                except DeployError as exc:
+                    reason = f"{exc} — this loopback controller only runs robocritics streaming programs"
+            if reason is not None or params is None:
+                msg = f"program from {peer} rejected: {reason}"
+                self._event("program_rejected", msg)
+                self._broadcast(TextMessage(msg, "Controller", MessageLevel.ERROR))
+                return
+            if self._program is not None:
+                self._event("program_ended", f"{self._program.name} replaced by a new program")
+            self._start_program(_StreamProgram(self, params))
+
+
+def _zero(t: str) -> Any:
+    code, count = DATA_TYPES[t]
+    one: Any = False if code == "?" else 0.0 if code == "d" else 0
+    return (one,) * count if count > 1 else one
+
+
+def _shutdown(sock: socket.socket) -> None:
+    try:
+        sock.shutdown(socket.SHUT_RDWR)
+    except OSError:
+        pass
+    try:
+        sock.close()
+    except OSError:
+        pass
+
+
+# ---------------------------------------------------------------------------- CLI
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``robocritics ursim``: run the loopback controller until Ctrl-C."""
+    ap = argparse.ArgumentParser(prog="robocritics ursim", description="Loopback UR3e controller (RTDE, Dashboard, secondary interface) on 127.0.0.1.")
+    ap.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    ap.add_argument("--rtde-port", type=int, default=30004, help="RTDE port (0 = any free port; default 30004)")
+    ap.add_argument("--dashboard-port", type=int, default=29999, help="Dashboard port (default 29999)")
+    ap.add_argument("--secondary-port", type=int, default=30002, help="secondary interface port (default 30002)")
+    ap.add_argument("--initial-q", type=float, nargs=6, metavar="RAD", default=list(HOME_Q), help="initial joint positions [rad]")
+    ap.add_argument("--robot-mode", default="RUNNING", choices=["POWER_OFF", "IDLE", "RUNNING"], help="initial robot mode (default RUNNING)")
+    ap.add_argument("--local-control", action="store_true", help="start in local control (programs are refused)")
+    ap.add_argument("--fieldbus", action="store_true", help="a fieldbus holds input registers 0-23")
+    ap.add_argument("--protocol", type=int, choices=[1, 2], default=2, help="highest RTDE protocol version accepted")
+    ap.add_argument("-v", "--verbose", action="store_true", help="log every event")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
+    sim = URSim(
+        host=args.host,
+        rtde_port=args.rtde_port,
+        dashboard_port=args.dashboard_port,
+        secondary_port=args.secondary_port,
+        initial_q=args.initial_q,
+        robot_mode=args.robot_mode,
+        remote_control=not args.local_control,
+        fieldbus_registers=args.fieldbus,
+        protocol_versions=tuple(range(1, args.protocol + 1)),
+    )
+    try:
+        sim.start()
+    except DeployError as exc:
+        print(f"error: {exc}")
+        return 2
+    print(
+        f"URSim on {sim.host}: RTDE {sim.rtde_port}, dashboard {sim.dashboard_port}, "
+        f"secondary {sim.secondary_port} — Ctrl-C to stop",
+        flush=True,
+    )
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sim.stop()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
