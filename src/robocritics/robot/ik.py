@@ -86,13 +86,28 @@ _CLIP_TOL = 1e-8
 # |sin q5| below this is the wrist singularity (q6 is then a free choice). At
 # this size any choice of q6 costs at most pi * 1e-10 rad of orientation error.
 _WRIST_SINGULAR = 1e-10
+# Below this |sin q5| the computed q6 is only known to ~1e-16 / |sin q5| rad; if
+# that leaves the wrist just out of the elbow's range (a pose at the edge of
+# the workspace), q6 is nudged to the nearest value that reaches, which moves
+# the flange orientation by at most |sin q5| times the nudge. The FK check
+# below has the last word.
+_WRIST_NEAR_SINGULAR = 1e-6
 # Forward-kinematics acceptance of a branch: position (m) and rotation (rad).
 _VERIFY_TOL = 1e-9
 # Branches closer than this (rad, every joint) are one configuration (they
 # differ only by rounding at a shoulder, elbow or wrist singularity).
 _DUPLICATE_TOL = 1e-7
-# Slack when comparing an angle with a joint limit (rad).
-_LIMIT_SLACK = 1e-12
+# A solution this close outside a joint limit (rad) counts as on it and is
+# clamped to it (the closed form is accurate to ~1e-11 rad near singularities).
+_LIMIT_SLACK = 1e-10
+_JOINT_NAMES = (
+    "joint 1 (base)",
+    "joint 2 (shoulder)",
+    "joint 3 (elbow)",
+    "joint 4 (wrist 1)",
+    "joint 5 (wrist 2)",
+    "joint 6 (wrist 3)",
+)
 _UR_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
 
 
@@ -384,7 +399,7 @@ def _branches(
                 c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
                 if -1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL:
                     break
-                if not singular or attempt:
+                if attempt or s5abs >= _WRIST_NEAR_SINGULAR:
                     break
                 q6n = _singular_q6(k, t, c1, s1, p5x, p5y, q6, c3 > 1.0)
                 if q6n is None:
@@ -554,18 +569,19 @@ def ur_ik_all(dh: DH, flange_pose: Any, *, q6_singular: float = 0.0) -> np.ndarr
     return np.array(sols, dtype=float).reshape(-1, 6)
 
 
-def _nearest_equivalent(x: float, seed: float, lo: float, hi: float) -> float | None:
-    """``x + 2 pi n`` within ``[lo, hi]`` nearest to ``seed``, or None if none fits."""
+def _nearest_equivalent(
+    x: float, seed: float, lo: float, hi: float, slack: float = _LIMIT_SLACK
+) -> float | None:
+    """``x + 2 pi n`` within ``[lo, hi]`` nearest to ``seed`` (clamped into the
+    limits if it is at most ``slack`` outside), or None if none fits."""
     n = round((seed - x) / _TWO_PI)
-    v = x + n * _TWO_PI
-    if lo - _LIMIT_SLACK <= v <= hi + _LIMIT_SLACK:
-        return v
-    n_min = math.ceil((lo - _LIMIT_SLACK - x) / _TWO_PI)
-    n_max = math.floor((hi + _LIMIT_SLACK - x) / _TWO_PI)
+    n_min = math.ceil((lo - slack - x) / _TWO_PI)
+    n_max = math.floor((hi + slack - x) / _TWO_PI)
     if n_min > n_max:
         return None
-    n = n_max if n > n_max else n_min
-    return x + n * _TWO_PI
+    n = n_max if n > n_max else (n_min if n < n_min else n)
+    v = x + n * _TWO_PI
+    return hi if v > hi else (lo if v < lo else v)
 
 
 def ur_ik(
@@ -614,7 +630,6 @@ def ur_ik(
     # Fast path: branch-and-bound on the weighted distance (a branch is dropped
     # as soon as its partial cost exceeds the best so far), then FK-verify the winner.
     pi2 = _TWO_PI
-    slack = _LIMIT_SLACK
     best_cost = math.inf
     best_q: list[float] | None = None
     for b in branches:
@@ -622,7 +637,7 @@ def ur_ik(
         cost = 0.0
         for x, s, l, h, wi in zip(b, sd, lo, hi, w):
             v = x + round((s - x) / pi2) * pi2
-            if not (l - slack <= v <= h + slack):
+            if not (l <= v <= h):
                 v = _nearest_equivalent(x, s, l, h)
                 if v is None:
                     break
@@ -639,23 +654,33 @@ def ur_ik(
 
     # Slow path (no branch within limits, or the nearest failed the FK check):
     # rank every branch within limits and take the first that verifies.
+    # (Each branch twice: clamped onto a limit it overshoots by rounding, and
+    # strictly inside the limits, in case the clamp spoils the FK check.)
     candidates: list[tuple[float, list[float]]] = []
-    for b in branches:
-        q = []
-        cost = 0.0
-        for x, s, l, h, wi in zip(b, sd, lo, hi, w):
-            v = _nearest_equivalent(x, s, l, h)
-            if v is None:
-                break
-            q.append(v)
-            cost += wi * (v - s) * (v - s)
-        else:
-            candidates.append((cost, q))
+    blocked: dict[int, int] = {}
+    for slack in (_LIMIT_SLACK, 0.0):
+        for b in branches:
+            q = []
+            cost = 0.0
+            for j, (x, s, l, h, wi) in enumerate(zip(b, sd, lo, hi, w)):
+                v = _nearest_equivalent(x, s, l, h, slack)
+                if v is None:
+                    if slack:
+                        blocked[j] = blocked.get(j, 0) + 1
+                    break
+                q.append(v)
+                cost += wi * (v - s) * (v - s)
+            else:
+                candidates.append((cost, q))
     if not candidates:
         n = len(ur_ik_all(dh, flange_pose, q6_singular=sd[5]))
+        which = ", ".join(
+            f"{_JOINT_NAMES[j]} [{lo[j]:.3f}, {hi[j]:.3f}] rad rules out {c}"
+            for j, c in sorted(blocked.items())
+        )
         raise PlanningError(
             f"cannot reach flange target {_fmt_pos(t)}: no solution within the joint limits "
-            f"(branches found: {n})"
+            f"(branches found: {n}; {which})"
         )
     candidates.sort(key=lambda c: c[0])
     worst = (math.inf, math.inf)
