@@ -99,7 +99,7 @@ class Streamer:
             self.pace()
 
     def finish(self, timeout_s: float = 2.0) -> dict:
-        self.send(self.q, done=True)
+        self.send(self.q, done=True, bump=False)
         return self.client.wait_for(lambda s: s["runtime_state"] == 1, timeout_s, "the program to end")
 
 

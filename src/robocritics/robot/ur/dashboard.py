@@ -74,7 +74,8 @@ class DashboardClient:
         return f"{self.host}:{self.port}"
 
     def __enter__(self) -> "DashboardClient":
-        self.connect()
+        if self._sock is None:
+            self.connect()
         return self
 
     def __exit__(self, *exc: object) -> None:
