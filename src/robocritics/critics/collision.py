@@ -1,0 +1,228 @@
+r"""Collision critic (RoboCritics paper §3.1.2; CoFrame).
+
+Maths and units
+---------------
+Reads the trajectory's **environment** proximity pairs: ``d_{t,k}`` (m) is
+the signed distance between robot part / carried object ``a_k`` and scene
+entity ``b_k`` at sample ``t`` (``<= 0``: touching or penetrating). Some
+contacts are the task itself and are excluded, per sample:
+
+* pairs whose ``a`` side is the gripper (``group_a == "gripper"``) or the
+  carried object (``"attached"``) and whose ``b_entity`` is listed in
+  ``steps[step[t]].contacts`` (the grasp target during its grasp, the surface
+  or container an object is set down on or into);
+* the gripper (or the carried object) against the object attached at ``t``
+  (``attached[t]``).
+
+Arm links against anything always count. With ``D_t = min_k d_{t,k}`` over the
+counted pairs:
+
+* ERROR if ``min_t D_t <= penetration_m`` (0 m: touching or penetration);
+* WARNING if ``min_t D_t < d_warn_m`` (0.05 m, CoFrame's default safety margin);
+* OK otherwise.
+
+The message names the robot part and the object, the time and the program
+line; the hint proposes ``avoid_collision(<object>)`` from the paper's skill API.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from ..critic import CriticParams, Flag, Verdict, during, fmt_length, fmt_value, hookimpl, make_evidence, make_signal
+
+__all__ = ["CollisionCritic", "register_critics", "counted_mask", "counted_distances"]
+
+
+class Params(CriticParams):
+    d_warn_m: float = Field(
+        0.05, gt=0, description="warning when a counted pair comes closer than this, m (source: CoFrame default, 5 cm)"
+    )
+    penetration_m: float = Field(
+        0.0, le=0, description="error when a counted pair's signed distance is at or below this, m (0 = any contact)"
+    )
+    ignore_pairs: tuple[str, ...] = Field((), description="names of proximity pairs never to count (e.g. a mount plate)")
+
+    @model_validator(mode="after")
+    def _order(self) -> "Params":
+        if self.penetration_m >= self.d_warn_m:
+            raise ValueError(f"penetration_m ({self.penetration_m}) must be below d_warn_m ({self.d_warn_m})")
+        return self
+
+
+def _run_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Run-length code a 1-D array: (run id per element, value of each run). No per-sample Python."""
+    change = np.empty(len(values), dtype=bool)
+    change[0] = True
+    change[1:] = values[1:] != values[:-1]
+    starts = np.flatnonzero(change)
+    return np.cumsum(change) - 1, values[starts]
+
+
+def counted_mask(trajectory, ignore_pairs=()) -> tuple[np.ndarray, np.ndarray | None]:
+    """Which proximity columns count, per sample.
+
+    Returns ``(columns (K,) bool, per_sample (T, K) bool or None)``: ``columns``
+    selects the environment pairs (minus ``ignore_pairs``); ``per_sample`` further
+    removes intended contacts at each sample (None when no contact is intended
+    anywhere, i.e. ``columns`` applies to every sample).
+    """
+    pairs = trajectory.pairs
+    T, K = trajectory.proximity.shape
+    columns = np.array([p.kind == "environment" and p.name not in ignore_pairs for p in pairs], dtype=bool)
+    gcols = np.flatnonzero(columns & np.array([p.group_a in ("gripper", "attached") for p in pairs], dtype=bool))
+    if gcols.size == 0:
+        return columns, None
+    entities = [pairs[k].b_entity for k in gcols]
+    intended = None
+    # contacts allowed by each program step: an (S, Kg) table, indexed by the step of each sample
+    if trajectory.steps:
+        table = np.array([[e != "" and e in s.contacts for e in entities] for s in trajectory.steps], dtype=bool)
+        if table.any():
+            intended = table[trajectory.step]
+    # the object held at t: run-length code `attached` (it changes a few times per program)
+    run, held = _run_ids(trajectory.attached)
+    if held.size > 1 or held[0] != "":
+        att_table = np.array([[h != "" and e == h for e in entities] for h in held.tolist()], dtype=bool)
+        if att_table.any():
+            intended = att_table[run] if intended is None else intended | att_table[run]
+    if intended is None:
+        return columns, None
+    per_sample = np.empty((T, K), dtype=bool)
+    per_sample[:] = columns
+    per_sample[:, gcols] = ~intended
+    return columns, per_sample
+
+
+def counted_distances(trajectory, ignore_pairs=()) -> np.ndarray:
+    """``(T, K)`` proximity with every pair that does not count (self pairs, ignored pairs,
+    intended contacts) set to +inf, m. For tests and plots; the critic avoids this copy."""
+    columns, per_sample = counted_mask(trajectory, ignore_pairs)
+    where = per_sample if per_sample is not None else np.broadcast_to(columns, trajectory.proximity.shape)
+    return np.where(where, trajectory.proximity, np.inf)
+
+
+def _part(pair) -> str:
+    return f"the carried {pair.a}" if pair.group_a == "attached" else f"the {pair.a}"
+
+
+def _thing(pair) -> str:
+    return pair.b_entity or pair.b
+
+
+class CollisionCritic:
+    name = "collision"
+    description = "Distance between the robot (and what it carries) and the scene, excluding intended contacts."
+    Params = Params
+
+    def check(self, trajectory, scene, params: Params) -> Verdict:
+        time = trajectory.time
+        P = trajectory.proximity
+        columns, per_sample_mask = counted_mask(trajectory, params.ignore_pairs)
+        if not columns.any():
+            return Verdict(
+                critic=self.name,
+                flag=Flag.OK,
+                message="The trajectory has no robot-environment proximity pairs to check.",
+                threshold=params.d_warn_m,
+                unit="m",
+            )
+        where = per_sample_mask if per_sample_mask is not None else columns
+        # D_t: closest counted pair per sample, without copying the (T, K) proximity
+        per_sample = np.min(P, axis=1, where=where, initial=np.inf)
+        wt = int(np.argmin(per_sample))
+        worst = float(per_sample[wt])
+        pairs = trajectory.pairs
+        signal = make_signal(
+            time,
+            np.where(np.isfinite(per_sample), per_sample, np.nan),
+            label="closest robot-environment distance (intended contacts excluded)",
+            unit="m",
+            warning=params.d_warn_m,
+            error=params.penetration_m,
+            worse="below",
+        )
+        if not np.isfinite(worst):
+            return Verdict(
+                critic=self.name,
+                flag=Flag.OK,
+                message="Every robot-environment contact in this trajectory is intended (grasps and set-downs).",
+                threshold=params.d_warn_m,
+                unit="m",
+                signal=signal,
+            )
+
+        def row_where(rows):
+            return per_sample_mask[rows] if per_sample_mask is not None else columns
+
+        wk = int(np.argmin(np.where(row_where(wt), P[wt], np.inf)))
+        wp = pairs[wk]
+        details = {"closest_pair": wp.name, "closest_distance_m": worst}
+
+        def involved(threshold: float, strict: bool) -> tuple[np.ndarray, list[str], list[str]]:
+            mask = per_sample < threshold if strict else per_sample <= threshold
+            rows = np.flatnonzero(mask)
+            sub = np.where(row_where(rows), P[rows], np.inf)
+            hit = (sub < threshold) if strict else (sub <= threshold)
+            col_hit = np.flatnonzero(hit.any(axis=0))
+            links = list(dict.fromkeys(pairs[k].a for k in col_hit))
+            objects = list(dict.fromkeys(_thing(pairs[k]) for k in col_hit))
+            return mask, links, objects
+
+        if worst <= params.penetration_m:
+            mask, links, objects = involved(params.penetration_m, strict=False)
+            ev = make_evidence(trajectory, mask, worst=wt, links=links, objects=objects)
+            depth = -worst
+            what = "penetrates" if worst < 0 else "touches"
+            extra = f" by {fmt_length(depth)}" if worst < 0 else ""
+            others = [o for o in objects if o != _thing(wp)]
+            also = f" It also hits {', '.join(others)}." if others else ""
+            return Verdict(
+                critic=self.name,
+                flag=Flag.ERROR,
+                message=f"Collision: {_part(wp)} {what} the {_thing(wp)}{extra} at {time[wt]:.2f} s "
+                f"(sample {wt}).{also}",
+                hint=f"To avoid the collision, you can consider using avoid_collision({_thing(wp)}) or moving through "
+                f"a higher or farther waypoint{during(ev)}.",
+                value=worst,
+                threshold=params.penetration_m,
+                unit="m",
+                evidence=ev,
+                signal=signal,
+                details=details,
+            )
+        if worst < params.d_warn_m:
+            mask, links, objects = involved(params.d_warn_m, strict=True)
+            ev = make_evidence(trajectory, mask, worst=wt, links=links, objects=objects)
+            return Verdict(
+                critic=self.name,
+                flag=Flag.WARNING,
+                message=f"{_part(wp).capitalize()} comes within {fmt_length(worst)} of the {_thing(wp)} at {time[wt]:.2f} s, "
+                f"closer than the {fmt_length(params.d_warn_m)} safety margin.",
+                hint=f"To keep a safe distance, you can consider using avoid_collision({_thing(wp)}) or moving through "
+                f"a higher or farther waypoint{during(ev)}.",
+                value=worst,
+                threshold=params.d_warn_m,
+                unit="m",
+                evidence=ev,
+                signal=signal,
+                details=details,
+            )
+        return Verdict(
+            critic=self.name,
+            flag=Flag.OK,
+            message=f"The robot keeps at least {fmt_length(worst)} from the scene outside intended contacts "
+            f"(margin {fmt_value(params.d_warn_m)} m).",
+            value=worst,
+            threshold=params.d_warn_m,
+            unit="m",
+            evidence=make_evidence(trajectory, None, worst=wt, links=[wp.a], objects=[_thing(wp)]),
+            signal=signal,
+            details=details,
+        )
+
+
+@hookimpl
+def register_critics(register):
+    register(CollisionCritic())

@@ -1,0 +1,164 @@
+r"""End-effector pose ("spearing") critic (RoboCritics paper §3.1.2; CoFrame).
+
+Risk: the gripper moving fast in the direction its fingers point, like a spear.
+
+Maths and units
+---------------
+With ``p_t`` the TCP position (m, base frame; the TCP sits at the fingertips)
+and ``f_t`` the unit finger direction (the TCP frame's z axis, rotation column
+2: straight down is ``(0, 0, -1)``), the TCP velocity is the derivative of
+position over the **physical** time axis, by second-order central differences
+on the (possibly uneven) sample times and one-sided differences at the ends
+(``numpy.gradient``)::
+
+    v_t = dp/dtau (t)                                   [m/s]
+    s_t = max(0, v_t · f_t) = |v_t| max(0, cos angle(v_t, f_t))   [m/s]
+
+``s_t``, the spearing speed, grows with speed and with the alignment between
+motion and fingers; only motion *toward* where the fingers point counts
+(moving back, along -f, or sideways scores 0). Because it is a velocity, not a
+per-sample displacement, the same motion sampled at 125 Hz or 500 Hz gives the
+same verdict.
+
+* ERROR if ``max_t s_t > max_speed_m_s`` (0.5 m/s: edged or pointed tools at
+  up to 0.5 m/s generally prevented open wounds in hand-surrogate tests,
+  Kirschner et al. 2024);
+* WARNING if ``max_t s_t > warn_speed_m_s`` (0.25 m/s: ISO 10218-1 reduced speed);
+* OK otherwise.
+
+A finger direction that is zero (the authors' prototype's defect) is refused
+with a :class:`~robocritics.errors.CriticError` rather than judged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from ..critic import CriticParams, Flag, Verdict, during, fmt_value, hookimpl, make_evidence, make_signal
+from ..errors import CriticError
+
+__all__ = ["EndEffectorPoseCritic", "register_critics", "spearing_speed"]
+
+
+class Params(CriticParams):
+    warn_speed_m_s: float = Field(
+        0.25,
+        gt=0,
+        description="warning above this spearing speed, m/s (source: ISO 10218-1 reduced speed, 250 mm/s)",
+    )
+    max_speed_m_s: float = Field(
+        0.5,
+        gt=0,
+        description="error above this spearing speed, m/s (source: Kirschner et al. 2024, edged/pointed tools "
+        "at <= 0.5 m/s generally prevented open wounds)",
+    )
+    frame: str = Field("tcp", description="frame at the fingertips whose z axis is the finger direction")
+
+    @model_validator(mode="after")
+    def _order(self) -> "Params":
+        if self.warn_speed_m_s > self.max_speed_m_s:
+            raise ValueError(
+                f"warn_speed_m_s ({self.warn_speed_m_s}) must not exceed max_speed_m_s ({self.max_speed_m_s})"
+            )
+        return self
+
+
+def spearing_speed(poses: np.ndarray, time: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(s (T,), v (T, 3), f (T, 3))``: spearing speed m/s, TCP velocity m/s, unit finger direction."""
+    p = poses[:, :3, 3]
+    f = poses[:, :3, 2]
+    norm = np.sqrt(np.einsum("ti,ti->t", f, f))
+    if np.any(norm < 1e-9):
+        i = int(np.argmax(norm < 1e-9))
+        raise CriticError(f"the finger direction (z axis of the TCP frame) is zero at sample {i}; cannot judge spearing")
+    f = f / norm[:, None]
+    if len(time) < 2:
+        v = np.zeros_like(p)
+    else:
+        v = np.gradient(p, time, axis=0)
+    s = np.maximum(np.einsum("ti,ti->t", v, f), 0.0)
+    return s, v, f
+
+
+class EndEffectorPoseCritic:
+    name = "end_effector_pose"
+    description = "Spearing: speed of the gripper toward where its fingers point (speed x alignment)."
+    Params = Params
+
+    def check(self, trajectory, scene, params: Params) -> Verdict:
+        time = trajectory.time
+        poses = trajectory.frames[:, trajectory.frame_index(params.frame)]
+        s, v, f = spearing_speed(poses, time)
+        wt = int(np.argmax(s))
+        worst = float(s[wt])
+        speed = float(np.linalg.norm(v[wt]))
+        details = {
+            "max_spearing_speed_m_s": worst,
+            "tcp_speed_at_worst_m_s": speed,
+            "alignment_at_worst": worst / speed if speed > 0 else 0.0,
+            "max_tcp_speed_m_s": float(np.sqrt(np.einsum("ti,ti->t", v, v)).max()),
+        }
+        signal = make_signal(
+            time,
+            s,
+            label="speed toward where the fingers point",
+            unit="m/s",
+            warning=params.warn_speed_m_s,
+            error=params.max_speed_m_s,
+        )
+        angle = float(np.degrees(np.arccos(np.clip(worst / speed, -1, 1)))) if speed > 0 else 90.0
+        how = f"{worst:.2f} m/s ({speed:.2f} m/s at {angle:.0f}° from the finger direction) at {time[wt]:.2f} s"
+        hint_tail = (
+            ", or approaching so that the fingers do not point along the motion. "
+            "This potentially increases the cycle time of the program."
+        )
+        if worst > params.max_speed_m_s:
+            ev = make_evidence(trajectory, s > params.max_speed_m_s, worst=wt, links=[params.frame])
+            return Verdict(
+                critic=self.name,
+                flag=Flag.ERROR,
+                message=f"The gripper moves in the direction its fingers point faster than the "
+                f"{fmt_value(params.max_speed_m_s)} m/s limit for pointed tools: {how}.",
+                hint=f"To reduce the risk of spearing, you can consider reducing the speed of the robot{during(ev)}"
+                + hint_tail,
+                value=worst,
+                threshold=params.max_speed_m_s,
+                unit="m/s",
+                evidence=ev,
+                signal=signal,
+                details=details,
+            )
+        if worst > params.warn_speed_m_s:
+            ev = make_evidence(trajectory, s > params.warn_speed_m_s, worst=wt, links=[params.frame])
+            return Verdict(
+                critic=self.name,
+                flag=Flag.WARNING,
+                message=f"The gripper moves in the direction its fingers point faster than the recommended "
+                f"{fmt_value(params.warn_speed_m_s)} m/s: {how}.",
+                hint=f"To reduce the risk of spearing, you can consider reducing the speed of the robot{during(ev)}"
+                + hint_tail,
+                value=worst,
+                threshold=params.warn_speed_m_s,
+                unit="m/s",
+                evidence=ev,
+                signal=signal,
+                details=details,
+            )
+        return Verdict(
+            critic=self.name,
+            flag=Flag.OK,
+            message=f"The gripper never moves toward where its fingers point faster than "
+            f"{fmt_value(params.warn_speed_m_s)} m/s (at most {worst:.2f} m/s).",
+            value=worst,
+            threshold=params.warn_speed_m_s,
+            unit="m/s",
+            evidence=make_evidence(trajectory, None, worst=wt, links=[params.frame]),
+            signal=signal,
+            details=details,
+        )
+
+
+@hookimpl
+def register_critics(register):
+    register(EndEffectorPoseCritic())

@@ -1,0 +1,39 @@
+"""The one hook specification of robocritics plugins.
+
+A plugin is a module (or any object) registered under the ``robocritics``
+entry-point group, with a function marked ``@hookimpl`` named
+``register_critics``::
+
+    # pyproject.toml of a plugin package
+    [project.entry-points.robocritics]
+    cycle_time = "robocritics_cycle_time"
+
+    # robocritics_cycle_time.py
+    from robocritics.hookspecs import hookimpl
+
+    @hookimpl
+    def register_critics(register):
+        register(CycleTimeCritic())
+
+The built-in critics are registered in exactly this way, through robocritics'
+own entry points.
+"""
+
+from __future__ import annotations
+
+import pluggy
+
+__all__ = ["hookspec", "hookimpl", "register_critics"]
+
+hookspec = pluggy.HookspecMarker("robocritics")
+hookimpl = pluggy.HookimplMarker("robocritics")
+
+
+@hookspec
+def register_critics(register):  # type: ignore[no-untyped-def]
+    """Register this plugin's critics: call ``register(critic)`` once for each.
+
+    ``critic`` follows the :class:`robocritics.critic.Critic` protocol: a
+    ``name``, a ``description``, a pydantic ``Params`` model whose fields all
+    have defaults, and a pure ``check(trajectory, scene, params) -> Verdict``.
+    """

@@ -1,0 +1,198 @@
+"""The plugin manager: loads every ``robocritics`` entry point and collects the critics.
+
+There is one :data:`pm` (``pluggy.PluginManager("robocritics")``) with the
+hookspecs of :mod:`robocritics.hookspecs`. :func:`load_plugins` walks the
+``robocritics`` entry-point group itself (rather than pluggy's
+``load_setuptools_entrypoints``) so that a plugin that fails to import is
+reported **by name**, with a :class:`PluginWarning` and an entry in
+:data:`plugin_errors`, and skipped; the other plugins still load. The built-in
+critics come in through robocritics' own entry points, like any third-party
+package's.
+
+:func:`get_critics` calls each plugin's ``register_critics`` hook and returns
+the critics by name; :func:`critic_sources` tells which distribution provides
+each one.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import warnings
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+from typing import Any
+
+import pluggy
+from pydantic import BaseModel
+
+from . import hookspecs
+
+__all__ = [
+    "pm",
+    "PluginError",
+    "PluginWarning",
+    "plugin_errors",
+    "load_plugins",
+    "get_critics",
+    "critic_sources",
+    "critic_distributions",
+    "ENTRY_POINT_GROUP",
+]
+
+ENTRY_POINT_GROUP = "robocritics"
+log = logging.getLogger("robocritics.plugins")
+
+pm = pluggy.PluginManager("robocritics")
+pm.add_hookspecs(hookspecs)
+
+
+class PluginWarning(UserWarning):
+    """A plugin could not be loaded or registered a bad critic; it was skipped."""
+
+
+@dataclass(frozen=True)
+class PluginError:
+    """One plugin (entry point) or critic that was skipped, and why."""
+
+    name: str  # entry-point name (or critic name for a rejected critic)
+    value: str  # entry-point value, e.g. "robocritics_cycle_time"
+    distribution: str  # "name version" of the package that declared it
+    error: str  # "ImportError: ..."
+
+    def __str__(self) -> str:
+        return f"{self.name} ({self.distribution or 'unknown package'}): {self.error}"
+
+
+#: Plugins and critics skipped so far, in the order they failed.
+plugin_errors: list[PluginError] = []
+
+_plugin_dist: dict[str, tuple[str, str]] = {}  # plugin name -> (distribution name, version)
+_loaded = False
+_cache_key: frozenset[int] | None = None
+_critics: dict[str, Any] = {}
+_sources: dict[str, tuple[str, str]] = {}
+
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_.\-]*$")
+
+
+def _report(err: PluginError) -> None:
+    if err in plugin_errors:
+        return
+    plugin_errors.append(err)
+    message = f"robocritics plugin {err.name!r} skipped: {err.error}" + (
+        f" (from {err.distribution})" if err.distribution else ""
+    )
+    log.warning(message)
+    warnings.warn(message, PluginWarning, stacklevel=3)
+
+
+def load_plugins() -> None:
+    """Import and register every entry point of the ``robocritics`` group (once per process)."""
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    eps = list(entry_points(group=ENTRY_POINT_GROUP))
+    # robocritics' own critics first, then third parties alphabetically: a stable order.
+    eps.sort(key=lambda ep: (_dist_of(ep)[0] != "robocritics", ep.name))
+    for ep in eps:
+        dist = _dist_of(ep)
+        dist_label = " ".join(p for p in dist if p)
+        if pm.has_plugin(ep.name) or pm.is_blocked(ep.name):
+            continue
+        try:
+            plugin = ep.load()
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - a broken plugin never crashes a run
+            _report(PluginError(ep.name, ep.value, dist_label, f"{type(exc).__name__}: {exc}"))
+            continue
+        try:
+            pm.register(plugin, name=ep.name)
+        except Exception as exc:  # noqa: BLE001 - pluggy.PluginValidationError, or the same module twice
+            _report(PluginError(ep.name, ep.value, dist_label, f"{type(exc).__name__}: {exc}"))
+            continue
+        _plugin_dist[ep.name] = dist
+
+
+def _dist_of(ep) -> tuple[str, str]:
+    dist = getattr(ep, "dist", None)
+    if dist is None:
+        return ("", "")
+    try:
+        return (dist.name or "", dist.version or "")
+    except Exception:  # noqa: BLE001 - malformed metadata
+        return ("", "")
+
+
+def _critic_problem(critic: Any) -> str:
+    """Why ``critic`` does not follow the Critic protocol ('' if it does)."""
+    name = getattr(critic, "name", None)
+    if not isinstance(name, str) or not _NAME.match(name):
+        return f"critic {critic!r} needs a `name` (letters, digits, _ . -), got {name!r}"
+    if not isinstance(getattr(critic, "description", None), str):
+        return f"critic {name!r} needs a `description` string"
+    params = getattr(critic, "Params", None)
+    if not (isinstance(params, type) and issubclass(params, BaseModel)):
+        return f"critic {name!r} needs a pydantic `Params` model class"
+    try:
+        params()
+    except Exception as exc:  # noqa: BLE001
+        return f"critic {name!r}: every field of Params needs a default ({exc})"
+    if not callable(getattr(critic, "check", None)):
+        return f"critic {name!r} needs a `check(trajectory, scene, params)` method"
+    return ""
+
+
+def _collect() -> None:
+    global _cache_key, _critics, _sources
+    load_plugins()
+    key = frozenset(id(p) for p in pm.get_plugins())
+    if key == _cache_key:
+        return
+    critics: dict[str, Any] = {}
+    sources: dict[str, tuple[str, str]] = {}
+    # get_hookimpls() lists implementations in registration order.
+    for impl in pm.hook.register_critics.get_hookimpls():
+        plugin_name = pm.get_name(impl.plugin) or repr(impl.plugin)
+        dist = _plugin_dist.get(plugin_name, ("", ""))
+        dist_label = " ".join(p for p in dist if p)
+
+        def register(critic: Any, _plugin: str = plugin_name, _dist: tuple[str, str] = dist, _label: str = dist_label) -> None:
+            problem = _critic_problem(critic)
+            if problem:
+                _report(PluginError(_plugin, _plugin, _label, f"CriticError: {problem}"))
+                return
+            if critic.name in critics:
+                other = " ".join(p for p in sources[critic.name] if p) or "another plugin"
+                _report(
+                    PluginError(
+                        critic.name, _plugin, _label, f"CriticError: a critic named {critic.name!r} is already provided by {other}"
+                    )
+                )
+                return
+            critics[critic.name] = critic
+            sources[critic.name] = _dist
+
+        try:
+            impl.function(**{arg: register for arg in impl.argnames})
+        except Exception as exc:  # noqa: BLE001 - a plugin's hook failing skips only that plugin
+            _report(PluginError(plugin_name, plugin_name, dist_label, f"{type(exc).__name__}: {exc}"))
+    _critics, _sources, _cache_key = critics, sources, key
+
+
+def get_critics() -> dict[str, Any]:
+    """Every installed critic by name (built-ins first, then plugins alphabetically)."""
+    _collect()
+    return dict(_critics)
+
+
+def critic_sources() -> dict[str, str]:
+    """Name of the distribution (package) that provides each critic ('' if registered by hand)."""
+    _collect()
+    return {name: dist[0] for name, dist in _sources.items()}
+
+
+def critic_distributions() -> dict[str, tuple[str, str]]:
+    """``(distribution name, version)`` providing each critic."""
+    _collect()
+    return dict(_sources)
