@@ -259,7 +259,9 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
 
         def do_GET(self) -> None:
             if self.path.rstrip("/") == "/v1/models":
-                self._send_json(200, {"object": "list", "data": [{"id": m, "object": "model"} for m in sorted(server.models or [])]})
+                self._send_json(
+                    200, {"object": "list", "data": [{"id": m, "object": "model"} for m in sorted(server.models or [])]}
+                )
             else:
                 self._send_json(404, {"error": {"message": f"no route {self.path}"}})
 
@@ -283,7 +285,7 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
             )
             try:
                 self._answer(decoded)
-            except (BrokenPipeError, ConnectionResetError, socket.timeout):
+            except (BrokenPipeError, ConnectionResetError, TimeoutError):
                 self.close_connection = True  # the client gave up (e.g. its timeout); nothing to do
 
         def _answer(self, request: Any) -> None:
@@ -293,7 +295,12 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
                 if given != server.require_api_key:
                     self._send_json(
                         401,
-                        {"error": {"message": f"Incorrect API key provided: {given}.", "type": "invalid_request_error"}},
+                        {
+                            "error": {
+                                "message": f"Incorrect API key provided: {given}.",
+                                "type": "invalid_request_error",
+                            }
+                        },
                     )
                     return
             action = server._next_action()
@@ -385,7 +392,12 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
             tokens = sum(len(t.split()) for t in inputs)
             self._send_json(
                 200,
-                {"object": "list", "data": data, "model": model, "usage": {"prompt_tokens": tokens, "total_tokens": tokens}},
+                {
+                    "object": "list",
+                    "data": data,
+                    "model": model,
+                    "usage": {"prompt_tokens": tokens, "total_tokens": tokens},
+                },
             )
 
         def _send_json(self, status: int, obj: Any, headers: dict[str, str] | None = None) -> None:

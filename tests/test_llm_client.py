@@ -1,5 +1,7 @@
 """OpenAICompatible against a real HTTP server on 127.0.0.1 (tests/llm_server.py)."""
 
+# ruff: noqa: F811  (pytest fixtures imported from llm_fixtures are parameters here)
+
 from __future__ import annotations
 
 import email.utils
@@ -335,6 +337,13 @@ def test_wrong_path_gives_404_hint(llm_server):
         client.complete(USER)
 
 
+def test_a_redirect_points_at_base_url(llm_server, make_client):
+    llm_server.script(Fail(301, headers={"Location": "https://example.invalid/v1/chat/completions"}))
+    with pytest.raises(LLMError, match="redirected \\(HTTP 301\\) to https://example.invalid/.*check base_url"):
+        make_client().complete(USER)
+    assert len(llm_server.requests) == 1  # not followed anywhere
+
+
 def test_other_client_errors_carry_the_server_message(llm_server, make_client):
     llm_server.script(Fail(400, body='{"error": {"message": "max_tokens is too large"}}'))
     with pytest.raises(LLMError, match="HTTP 400.*max_tokens is too large"):
@@ -443,9 +452,7 @@ def test_partial_echoes_of_the_key_are_scrubbed_from_retried_errors(llm_server, 
         Fail(503, body=f'{{"error": {{"message": "overloaded for key {masked}"}}}}'),
         Fail(503, body=f'{{"error": {{"message": "overloaded for key {SECRET}"}}}}'),
     )
-    client = OpenAICompatible(
-        base_url=llm_server.url, model="m", api_key=SECRET, max_retries=1, backoff_base_s=0.01
-    )
+    client = OpenAICompatible(base_url=llm_server.url, model="m", api_key=SECRET, max_retries=1, backoff_base_s=0.01)
     with client, pytest.raises(LLMError) as caught:
         client.complete(USER)
     assert "overloaded for key" in str(caught.value)
@@ -489,7 +496,9 @@ def test_embed_returns_one_float_row_per_text(llm_server, make_client):
     assert vectors.dtype == np.float64
     np.testing.assert_allclose(np.linalg.norm(vectors, axis=1), 1.0)
     np.testing.assert_array_equal(vectors[0], vectors[2])
-    np.testing.assert_allclose(vectors[1], hashed_embedding("white box", llm_server.embedding_dim, TEST_EMBEDDING_MODEL))
+    np.testing.assert_allclose(
+        vectors[1], hashed_embedding("white box", llm_server.embedding_dim, TEST_EMBEDDING_MODEL)
+    )
     (request,) = llm_server.requests
     assert request.path == "/v1/embeddings"
     assert request.json == {"model": TEST_EMBEDDING_MODEL, "input": texts}

@@ -28,7 +28,7 @@ def move_above_pos(pos, height=0.1):
         f"```python\n{PROGRAM}```",
         f"```py\n{PROGRAM}```",
         f"```Python3\n{PROGRAM}```",
-        f"```python title=\"pick.py\"\n{PROGRAM}```",
+        f'```python title="pick.py"\n{PROGRAM}```',
         f"```{{python}}\n{PROGRAM}```",
         f"~~~python\n{PROGRAM}~~~",
         f"````python\n{PROGRAM}````",
@@ -66,7 +66,7 @@ def test_several_python_blocks_are_joined_in_order():
 def test_python_blocks_win_over_untagged_and_other_languages():
     reply = (
         "Output will look like:\n```\nmoved to (0.1, 0.2, 0.3)\n```\n"
-        "Scene:\n```json\n{\"objects\": []}\n```\n"
+        'Scene:\n```json\n{"objects": []}\n```\n'
         f"Program:\n```python\n{PROGRAM}```\n"
         "Run it with:\n```bash\npython pick.py\n```\n"
     )
@@ -130,7 +130,9 @@ def test_tilde_and_backtick_fences_do_not_close_each_other():
 
 
 def test_indentation_inside_the_program_is_kept():
-    assert extract_code(f"```python\n{HELPER}\nmove_above_pos((0, 0, 0))\n```") == HELPER + "\nmove_above_pos((0, 0, 0))\n"
+    assert (
+        extract_code(f"```python\n{HELPER}\nmove_above_pos((0, 0, 0))\n```") == HELPER + "\nmove_above_pos((0, 0, 0))\n"
+    )
 
 
 # -- property-based ----------------------------------------------------------------
@@ -141,9 +143,11 @@ identifiers = st.from_regex(r"[a-z_][a-z0-9_]{0,8}", fullmatch=True).filter(
 numbers = st.floats(min_value=-1, max_value=1, allow_nan=False).map(lambda x: f"{x:.3f}")
 calls = st.builds(lambda f, args: f"lib.{f}({', '.join(args)})", identifiers, st.lists(numbers, max_size=3))
 assignments = st.builds(lambda name, value: f"{name} = {value}", identifiers, numbers)
-programs = st.lists(st.one_of(calls, assignments), min_size=1, max_size=8).filter(
-    lambda lines: any(line.startswith("lib.") for line in lines)
-).map(lambda lines: "\n".join(lines) + "\n")
+programs = (
+    st.lists(st.one_of(calls, assignments), min_size=1, max_size=8)
+    .filter(lambda lines: any(line.startswith("lib.") for line in lines))
+    .map(lambda lines: "\n".join(lines) + "\n")
+)
 prose = st.lists(
     st.sampled_from(
         [

@@ -1,5 +1,7 @@
 """InteractionMemory: storage, retrieval (BM25 and embeddings), concurrency, durability."""
 
+# ruff: noqa: F811  (pytest fixtures imported from llm_fixtures are parameters here)
+
 from __future__ import annotations
 
 import dataclasses
@@ -59,7 +61,10 @@ class TableEmbedder:
 
 
 def fill(memory: InteractionMemory, session: str = "s1") -> list[int]:
-    return [memory.add(session, task, f"# program {i}\nlib.open_gripper()\n", f"feedback {i}", float(i)) for i, task in enumerate(TASKS)]
+    return [
+        memory.add(session, task, f"# program {i}\nlib.open_gripper()\n", f"feedback {i}", float(i))
+        for i, task in enumerate(TASKS)
+    ]
 
 
 # -- storing and reading -------------------------------------------------------------
@@ -387,7 +392,8 @@ WRITER = textwrap.dedent(
     import os, sys, time
     from robocritics.llm.memory import InteractionMemory
 
-    path, name, count, size, go = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
+    path, name, go = sys.argv[1], sys.argv[2], sys.argv[5]
+    count, size, pause_s = int(sys.argv[3]), int(sys.argv[4]), float(sys.argv[6])
     memory = InteractionMemory(path, busy_timeout_s=30)
     if go:
         print("ready", flush=True)
@@ -397,17 +403,20 @@ WRITER = textwrap.dedent(
         program = f"# {name} {i}\\n" + "x" * size
         row = memory.add(name, f"request {i}", program, f"feedback {i}", i % 11)
         print(row, i, flush=True)  # printed only after the commit returned
+        time.sleep(pause_s)  # like the LLM call between two interactions
     """
 )
 
 
-def run_writer(path, name: str, count: int, size: int = 10, go: str = "") -> subprocess.Popen:
+def run_writer(path, name: str, count: int, size: int = 10, go: str = "", pause_s: float = 0.0) -> subprocess.Popen:
     """A process adding ``count`` interactions to ``path``, printing "<id> <i>" after each commit.
 
     With ``go`` it opens the memory, prints "ready", then waits until the file ``go`` exists.
+    It sleeps ``pause_s`` after each write (without, one writer can hold on to the lock:
+    SQLite's busy handler is not fair).
     """
     return subprocess.Popen(
-        [sys.executable, "-c", WRITER, str(path), name, str(count), str(size), go],
+        [sys.executable, "-c", WRITER, str(path), name, str(count), str(size), go, str(pause_s)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -417,12 +426,12 @@ def run_writer(path, name: str, count: int, size: int = 10, go: str = "") -> sub
 def test_several_processes_writing_one_file(tmp_path):
     path = tmp_path / "shared.sqlite"
     go = tmp_path / "go"
-    writers = [run_writer(path, f"proc-{n}", 100, go=str(go)) for n in range(4)]
+    writers = [run_writer(path, f"proc-{n}", 100, go=str(go), pause_s=0.002) for n in range(4)]
     for writer in writers:
         assert writer.stdout is not None and writer.stdout.readline() == "ready\n"
     go.touch()
     outputs = [w.communicate(timeout=120) for w in writers]
-    for writer, (out, err) in zip(writers, outputs):
+    for writer, (_, err) in zip(writers, outputs):
         assert writer.returncode == 0, err
     with InteractionMemory(path) as memory:
         assert len(memory) == 400
@@ -460,7 +469,7 @@ def test_a_killed_writer_loses_nothing_committed(tmp_path, kill_after_s):
         assert raw.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
     with InteractionMemory(path) as memory:
         stored = {i.id: i for i in memory.history("victim")}
-        for row, i in committed:
+        for row, _ in committed:
             assert row in stored
         for n, interaction in enumerate(sorted(stored.values(), key=lambda x: x.id)):
             # every stored row is whole: no torn program, in order, nothing skipped

@@ -16,8 +16,8 @@ Failure policy of ``OpenAICompatible``:
   ``backoff_max_s``). A ``Retry-After`` header (seconds or HTTP date; or
   ``retry-after-ms``) is honoured: the wait is at least
   ``min(retry_after * retry_after_scale, retry_after_cap_s)``.
-* 401/403 raise ``LLMError`` pointing at the API key, 404 at ``base_url`` and
-  the model name, other 4xx carry the server's own message.
+* 401/403 raise ``LLMError`` pointing at the API key, 404 and redirects at
+  ``base_url`` (and the model name), other 4xx carry the server's own message.
 * A body that is not JSON, or JSON without ``choices[0].message.content``,
   raises ``LLMError`` quoting (a truncated, redacted excerpt of) what arrived.
 * The API key never appears in ``repr``/``str``, log records or error messages;
@@ -213,8 +213,7 @@ class OpenAICompatible:
             )
         if not model:
             raise LLMError(
-                f"no chat model configured: pass model= or set {ENV_MODEL} "
-                "(e.g. gpt-4o-mini, or llama3.1 for Ollama)"
+                f"no chat model configured: pass model= or set {ENV_MODEL} (e.g. gpt-4o-mini, or llama3.1 for Ollama)"
             )
         self.base_url = _normalise_base_url(base_url)
         self.model = str(model)
@@ -303,7 +302,8 @@ class OpenAICompatible:
         content, finish_reason = self._parse_choice(body)
         if finish_reason == "length":
             log.warning("model %s stopped at its token limit; the reply is truncated", self.model)
-        usage = body.get("usage") if isinstance(body.get("usage"), dict) else {}
+        raw_usage = body.get("usage")
+        usage: dict[str, Any] = raw_usage if isinstance(raw_usage, dict) else {}
         return ChatReply(
             content=content,
             model=str(body.get("model") or self.model),
@@ -329,7 +329,7 @@ class OpenAICompatible:
             raise LLMError(f"chat reply's first choice has no 'message' object; received {self._excerpt(body)}")
         content = message.get("content")
         if isinstance(content, list):  # content parts: [{"type": "text", "text": ...}, ...]
-            texts = [p.get("text") for p in content if isinstance(p, dict) and isinstance(p.get("text"), str)]
+            texts = [str(p["text"]) for p in content if isinstance(p, dict) and isinstance(p.get("text"), str)]
             content = "".join(texts) if texts else None
         if not isinstance(content, str):
             hint = " (the model answered with tool calls, not text)" if message.get("tool_calls") else ""
@@ -375,7 +375,9 @@ class OpenAICompatible:
             detail = f"the server's error: {server_message}" if server_message else f"received {self._excerpt(body)}"
             raise LLMError(f"embeddings reply from {self._url('/embeddings')} has no 'data' list; {detail}")
         if len(data) != expected:
-            raise LLMError(f"embeddings reply has {len(data)} vectors for {expected} texts; received {self._excerpt(body)}")
+            raise LLMError(
+                f"embeddings reply has {len(data)} vectors for {expected} texts; received {self._excerpt(body)}"
+            )
         items = sorted(data, key=lambda d: d.get("index", 0) if isinstance(d, dict) else 0)
         vectors = []
         for item in items:
@@ -386,7 +388,9 @@ class OpenAICompatible:
                 else:
                     vector = np.asarray(raw, dtype=np.float64)
             except (ValueError, TypeError) as exc:
-                raise LLMError(f"embeddings reply holds a vector that is not numbers; received {self._excerpt(body)}") from exc
+                raise LLMError(
+                    f"embeddings reply holds a vector that is not numbers; received {self._excerpt(body)}"
+                ) from exc
             if vector.ndim != 1 or vector.size == 0 or not np.all(np.isfinite(vector)):
                 raise LLMError(
                     f"embeddings reply holds an empty, nested or non-finite vector; received {self._excerpt(body)}"
@@ -414,6 +418,12 @@ class OpenAICompatible:
                 last_problem = f"connection failed ({type(exc).__name__}: {self._redact(str(exc))})"
             else:
                 status = response.status_code
+                if 300 <= status < 400:
+                    location = self._redact(response.headers.get("location", "?"))
+                    raise LLMError(
+                        f"{what} at {url} was redirected (HTTP {status}) to {location}: check base_url "
+                        "(http vs https, a missing or extra path part)"
+                    )
                 if status < 400:
                     return self._decode_json(response, what), attempt + 1
                 if status in RETRYABLE_STATUSES or status >= 500:
@@ -476,9 +486,7 @@ class OpenAICompatible:
                 f"({content_type}) with a body that is not JSON: {self._safe_excerpt(text)!r}"
             ) from None
         if not isinstance(body, dict):
-            raise LLMError(
-                f"{what} at {response.request.url}: expected a JSON object, received {self._excerpt(body)}"
-            )
+            raise LLMError(f"{what} at {response.request.url}: expected a JSON object, received {self._excerpt(body)}")
         return body
 
     def _excerpt(self, value: Any) -> str:
@@ -539,7 +547,9 @@ def _normalise_base_url(base_url: str) -> str:
         if url.endswith(suffix):
             url = url[: -len(suffix)]
     if not url.startswith(("http://", "https://")):
-        raise LLMError(f"base_url must start with http:// or https://, got {url!r} (argument base_url= or {ENV_BASE_URL})")
+        raise LLMError(
+            f"base_url must start with http:// or https://, got {url!r} (argument base_url= or {ENV_BASE_URL})"
+        )
     return url
 
 

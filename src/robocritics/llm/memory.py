@@ -158,9 +158,7 @@ class InteractionMemory:
         return self._conn
 
     def _open(self) -> sqlite3.Connection:
-        conn = sqlite3.connect(
-            self.path, timeout=self.busy_timeout_s, isolation_level=None, check_same_thread=False
-        )
+        conn = sqlite3.connect(self.path, timeout=self.busy_timeout_s, isolation_level=None, check_same_thread=False)
         conn.execute(f"PRAGMA busy_timeout = {int(self.busy_timeout_s * 1000)}")
         conn.execute("PRAGMA foreign_keys = ON")
         if not self._in_memory:
@@ -267,6 +265,7 @@ class InteractionMemory:
                 "VALUES (?, ?, ?, ?, ?, ?)",
                 (session, request, program, feedback, score, now),
             )
+            assert cursor.lastrowid is not None  # an INSERT always sets it
             return int(cursor.lastrowid)
 
     def get(self, interaction_id: int) -> Interaction:
@@ -305,9 +304,7 @@ class InteractionMemory:
         """
         return [interaction for interaction, _ in self.search_scored(query, k, session)]
 
-    def search_scored(
-        self, query: str, k: int = 3, session: str | None = None
-    ) -> list[tuple[Interaction, float]]:
+    def search_scored(self, query: str, k: int = 3, session: str | None = None) -> list[tuple[Interaction, float]]:
         """Like ``search``, with each result's similarity: cosine (−1…1) or BM25 score (> 0)."""
         if k < 0:
             raise ValueError(f"k must be >= 0, got {k}")
