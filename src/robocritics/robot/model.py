@@ -84,7 +84,7 @@ class Robot:
         jerk_limits: np.ndarray | None = None,
         home: np.ndarray | None = None,
         self_pairs: list[tuple[str, str]] | None = None,
-        fixed_links: tuple[str, ...] = ("base_link",),
+        fixed_links: tuple[str, ...] = ("base_link", "shoulder_link"),
     ):
         self.urdf_path = Path(urdf_path)
         try:
@@ -201,6 +201,7 @@ class Robot:
             fk = self._forward_static(np.zeros(self.n))
             tcp_in_flange = np.linalg.inv(fk[self._frame_index["tool0"]]) @ fk[self.tcp_index]
         self.tcp_in_flange = tcp_in_flange
+        self._flange_in_tcp = None if tcp_in_flange is None else np.linalg.inv(tcp_in_flange)
         self._capsule_frame = np.array([self._frame_index[c.frame] for c in self.capsules])
         self._capsule_p0 = np.array([c.p0 for c in self.capsules])
         self._capsule_p1 = np.array([c.p1 for c in self.capsules])
@@ -314,7 +315,7 @@ class Robot:
         seed = self.home_q if seed is None else np.asarray(seed, float)
         try:
             if self.dh is not None and self.tcp_in_flange is not None:
-                flange = target @ np.linalg.inv(self.tcp_in_flange)
+                flange = target @ self._flange_in_tcp
                 return _ik.ur_ik(self.dh, flange, seed, self.lower, self.upper)
             return _ik.numeric_ik(
                 self.model, self.data, self.model.getFrameId(self.tcp_frame), target, seed, self.lower, self.upper
@@ -374,14 +375,16 @@ def _ur3e_cached() -> Robot:
         from .ik import UR3E_DH
 
         path = resources.files("robocritics.robot") / "models" / "ur3e.urdf"
-        home = np.array([0.0, -1.5707963267948966, 1.5707963267948966, -1.5707963267948966, -1.5707963267948966, 0.0])
-        _UR3E = Robot(
+        robot = Robot(
             str(path),
             tcp_frame="tcp",
             name="ur3e",
             dh=UR3E_DH,
             acceleration_limits=np.array([5.0, 5.0, 5.0, 10.0, 10.0, 10.0]),
             jerk_limits=np.array([50.0, 50.0, 50.0, 100.0, 100.0, 100.0]),
-            home=home,
         )
+        # home: TCP 0.25 m in front of the base and 0.25 m above the table, fingers down, elbow up
+        upright = np.array([math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0])
+        robot.home_q = robot.ik((0.25, 0.0, 0.25), seed=upright)
+        _UR3E = robot
     return _UR3E

@@ -98,7 +98,7 @@ def build_trajectory(
             d = None
             for shape in shapes:
                 pose = object_poses.get(shape.owner, shape.pose)
-                ds = prox.capsule_shape(p0[:, ci], p1[:, ci], radii[ci], shape.kind, shape.size, pose)
+                ds = prox.capsule_shape(p0[:, ci], p1[:, ci], radii[ci], shape, pose)
                 d = ds if d is None else np.minimum(d, ds)
             pairs.append(
                 Pair(
@@ -117,14 +117,21 @@ def build_trajectory(
     for oid in carried:
         obj = scene.entity(oid)
         (own,) = obj.shapes()
-        own_pose = object_poses.get(oid, own.pose)
+        own_pose = np.broadcast_to(np.asarray(object_poses.get(oid, own.pose), float), (T, 4, 4))
+        # while at rest the object's pose is piecewise constant: evaluate each distinct pose once
+        poses_flat = own_pose.reshape(T, 16)
+        unique_poses, inverse = np.unique(poses_flat, axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
         for eid, group, shapes in entities:
             if eid == oid:
                 continue
             d = None
             for shape in shapes:
-                pose = object_poses.get(shape.owner, shape.pose)
-                ds = prox.shape_shape(own.kind, own.size, own_pose, shape.kind, shape.size, pose)
+                other = object_poses.get(shape.owner)
+                if other is None:
+                    ds = prox.shape_shape(own, shape, unique_poses.reshape(-1, 4, 4), shape.pose)[inverse]
+                else:
+                    ds = prox.shape_shape(own, shape, own_pose, other)
                 d = ds if d is None else np.minimum(d, ds)
             pairs.append(
                 Pair(

@@ -1,0 +1,34 @@
+# Sorting ("apple jam"): ripe (red) apples go to the brown box for jam,
+# the unripe green apple goes to the white box.
+# Careful: moderate speed in free space, slow straight approaches along the
+# fingers, grasp at the apple's centre, release low inside the box.
+lib.set_speed(0.3)
+
+
+def pick(obj):
+    lib.open_gripper()
+    lib.move_above(obj, 0.10)
+    lib.reduce_speed(15)
+    lib.move_linear(obj.x, obj.y, obj.z)
+    lib.close_gripper()
+    lib.move_up(0.15)
+    lib.set_speed(0.3)
+
+
+def place_in(box):
+    lib.move_above(box, 0.12)
+    lib.reduce_speed(15)
+    lib.move_down(0.08)
+    lib.open_gripper()
+    lib.move_up(0.08)
+    lib.set_speed(0.3)
+
+
+for apple in objects:
+    pick(apple)
+    if apple.ripeness == "ripe":
+        place_in(brown_box)
+    else:
+        place_in(white_box)
+
+lib.home()

@@ -1,0 +1,72 @@
+"""Scene schema: built-in scenes load, bad input raises SceneError naming the field."""
+
+import json
+import math
+
+import pytest
+
+from robocritics import Scene, SceneError
+
+GOOD_OBJECT = {"id": "cube", "shape": "box", "size": [0.04, 0.04, 0.04], "position": [0.3, 0.0, 0.02]}
+
+
+@pytest.mark.parametrize("name", ["recycling", "sorting", "breakfast"])
+def test_builtin_scenes_are_within_reach(name):
+    scene = Scene.builtin(name)
+    assert scene.objects and scene.containers
+    for item in (*scene.objects, *scene.containers):
+        assert scene.workspace.outside_distance([item.position[0], item.position[1], item.top]) < 0, item.id
+
+
+def test_scene_files_match_builtins():
+    for name in Scene.builtin_names():
+        assert Scene.load(f"examples/scenes/{name}.json") == Scene.builtin(name)
+
+
+@pytest.mark.parametrize(
+    "patch, path, words",
+    [
+        ({"shape": "cone"}, "objects[0].shape", "unknown shape 'cone'"),
+        ({"size": [0.04, -0.04, 0.04]}, "objects[0]", "size[1] is -0.04"),
+        ({"position": [0.3, math.nan, 0.02]}, "objects[0].position", "nan"),
+        ({"size": [0.04, 0.04]}, "objects[0]", "a box needs 3 numbers"),
+        ({"id": "__class__"}, "objects[0].id", "identifier"),
+        ({"colour": "red"}, "objects[0].colour", "Extra inputs"),
+    ],
+)
+def test_invalid_objects_name_the_field(patch, path, words):
+    with pytest.raises(SceneError) as info:
+        Scene.model_validate({"objects": [{**GOOD_OBJECT, **patch}]})
+    assert info.value.path == path
+    assert words in str(info.value)
+
+
+def test_duplicate_ids_are_refused():
+    with pytest.raises(SceneError, match=r"objects\[1\]\.id: duplicate id 'cube'"):
+        Scene.model_validate({"objects": [GOOD_OBJECT, GOOD_OBJECT]})
+
+
+def test_load_reports_json_position(tmp_path):
+    bad = tmp_path / "s.json"
+    bad.write_text('{"objects": [}')
+    with pytest.raises(SceneError, match="line 1, column 14"):
+        Scene.load(bad)
+    with pytest.raises(SceneError, match="no such scene file"):
+        Scene.load(tmp_path / "missing.json")
+    with pytest.raises(SceneError, match="did you mean 'sorting'"):
+        Scene.builtin("sortin")
+
+
+def test_container_inside_is_free_space():
+    scene = Scene.builtin("sorting")
+    box = scene.entity("white_box")
+    assert box.contains_point((box.position[0], box.position[1], box.floor_top + 0.02))
+    assert not box.contains_point((box.position[0], box.position[1], box.top + 0.02))
+    shapes = [s for s in scene.shapes() if s.owner == "white_box"]
+    assert len(shapes) == 5  # floor and four walls
+    assert math.isclose(scene.workspace.volume_m3, 4 / 3 * math.pi * 0.5**3)
+
+
+def test_round_trip_json():
+    scene = Scene.builtin("breakfast")
+    assert Scene.model_validate(json.loads(scene.to_json())) == scene

@@ -1,0 +1,88 @@
+"""Trajectory: validation, lossless JSON, per-sample states, content hash."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from robocritics import Robot, Scene, Trajectory, TrajectoryError, simulate
+
+
+@pytest.fixture(scope="module")
+def execution():
+    return simulate("move_to(0.3, 0.1, 0.2)\nmove_down(0.05)\nclose_gripper()\n", Scene.builtin("sorting"))
+
+
+def test_shapes_and_provenance(execution):
+    traj = execution.trajectory
+    T = len(traj)
+    assert traj.q.shape == (T, 6)
+    assert traj.frames.shape == (T, len(traj.frame_names), 4, 4)
+    assert traj.proximity.shape == (T, len(traj.pairs))
+    assert {p.kind for p in traj.pairs} == {"self", "environment"}
+    assert np.all(np.diff(traj.time) > 0)
+    assert [traj.steps[i].line for i in np.unique(traj.step)] == [1, 2, 3]
+    assert traj.lines() == [1, 2, 3]
+
+
+def test_json_round_trip_is_lossless(execution):
+    traj = execution.trajectory
+    back = Trajectory.from_json(traj.to_json())
+    for name in ("q", "time", "frames", "proximity", "gripper_opening_m", "step"):
+        assert np.array_equal(getattr(back, name), getattr(traj, name)), name
+    assert back.pairs == traj.pairs and back.steps == traj.steps and back.limits == traj.limits
+    assert back.content_hash() == traj.content_hash()
+
+
+def test_states_are_views(execution):
+    traj = execution.trajectory
+    states = list(traj.states)
+    assert len(states) == len(traj)
+    s = states[7]
+    assert s.index == 7 and s.tau == traj.time[7]
+    assert np.shares_memory(s.J, traj.q) and np.array_equal(s.P, traj.proximity[7])
+
+
+def _kwargs(T=4):
+    robot = Robot.ur3e()
+    q = np.tile(robot.home_q, (T, 1))
+    return dict(
+        q=q,
+        time=np.arange(T) * 0.01,
+        frames=robot.forward(q),
+        frame_names=robot.frame_names,
+        proximity=np.zeros((T, 0)),
+        pairs=[],
+        gripper_opening_m=np.full(T, 0.085),
+        attached=[""] * T,
+        step=np.zeros(T, int),
+        steps=[],
+        limits=robot.limits,
+    )
+
+
+@pytest.mark.parametrize(
+    "patch, words",
+    [
+        ({"time": np.array([0.0, 0.01, 0.01, 0.02])}, "time must increase strictly: sample 2"),
+        ({"q": np.full((4, 6), np.nan)}, "q is not finite at index (0, 0)"),
+        ({"gripper_opening_m": np.zeros(3)}, "gripper_opening_m has 3 samples but q has 4"),
+        ({"frames": np.zeros((4, 2, 4, 4))}, "frames hold 2 frames"),
+        ({"step": np.array([0, 0, 1, 0])}, "step indices given without steps"),
+    ],
+)
+def test_validation_names_the_problem(patch, words):
+    with pytest.raises(TrajectoryError) as info:
+        Trajectory(**{**_kwargs(), **patch})
+    assert words in str(info.value)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-3, 3), min_size=6, max_size=6), st.floats(1e-6, 1e-3))
+def test_hash_binds_the_motion(values, nudge):
+    kw = _kwargs()
+    kw["q"] = np.tile(values, (4, 1))
+    a = Trajectory(**kw)
+    kw["q"] = kw["q"].copy()
+    kw["q"][2, 1] += nudge
+    assert Trajectory(**kw).content_hash() != a.content_hash()
