@@ -437,10 +437,11 @@ class _Checker:
                 if alias.name == "*":
                     add(node, where, f"'from {module} import *' is not allowed; import the names you need")
                 elif alias.name not in members:
+                    hint = _suggest(alias.name, members)
                     add(
                         alias,
                         where,
-                        f"cannot import {alias.name!r} from {module}{_suggest(alias.name, members)} "
+                        f"cannot import {alias.name!r} from {module}{hint or '.'} "
                         f"{module} provides: {', '.join(sorted(members))}",
                     )
                 if alias.asname and alias.asname.startswith("_"):
@@ -550,7 +551,7 @@ class _Builtin:
         self.fn = fn
         self.kind = kind
         self.interp = interp
-        self.sig = inspect.signature(fn) if bind else None
+        self.sig = _signature(fn) if bind else None
         if kind == "skill" or name == "print":
             self.usage = _skills.usage(name)
         elif self.sig is not None:
@@ -1054,7 +1055,8 @@ class _Interpreter:
                 hint = _suggest(key, keys) if isinstance(key, str) else ""
                 shown = ", ".join(repr(k) for k in list(obj)[:20])
                 raise self._error(
-                    f"KeyError: key {_short_repr(key)} is not in the dict{hint} Keys: {shown or '(none)'}", node
+                    f"KeyError: key {_short_repr(key)} is not in the dict{hint or '.'} Keys: {shown or '(none)'}",
+                    node,
                 ) from None
         if t is list or t is tuple or t is str or t is range:
             if type(key) is slice:
@@ -1595,10 +1597,15 @@ class _Interpreter:
         local_names = self._locals_cache.get(id(node))
         if local_names is None:
             names = set()
-            for g in node.generators:
-                for n in ast.walk(g.target):
-                    if isinstance(n, ast.Name):
-                        names.add(n.id)
+            stack = [g.target for g in node.generators]
+            while stack:  # (ast.walk would import collections at run time)
+                n = stack.pop()
+                if isinstance(n, ast.Name):
+                    names.add(n.id)
+                elif isinstance(n, (ast.Tuple, ast.List)):
+                    stack.extend(n.elts)
+                elif isinstance(n, ast.Starred):
+                    stack.append(n.value)
             local_names = frozenset(names)
             self._locals_cache[id(node)] = local_names
         inner = _Scope({}, local_names, scope, scope.fname)
@@ -1908,6 +1915,21 @@ _EXPR_TYPES = (
 )  # fmt: skip
 
 
+_SIGNATURES: dict[Any, inspect.Signature] = {}
+
+
+def _signature(fn: Callable, method: bool = False) -> inspect.Signature:
+    """The signature of a skill or a builtin method (without ``self``), computed once per process."""
+    func = getattr(fn, "__func__", fn)
+    sig = _SIGNATURES.get(func)
+    if sig is None:
+        sig = inspect.signature(func)
+        if method or func is not fn:
+            sig = sig.replace(parameters=list(sig.parameters.values())[1:])
+        _SIGNATURES[func] = sig
+    return sig
+
+
 def _check_callable(fn: Any, what: str) -> None:
     if type(fn) not in (_SandboxFunction, _Builtin, _Method):
         raise TypeError(f"{what} must be a function, got {_tname(fn)}")
@@ -1936,8 +1958,9 @@ def _attr_message(obj: Any, name: str) -> str:
         return f"{_tname(obj)} {getattr(obj, 'name', '')!r} has no attribute {name!r}; functions have no fields"
     allowed = _METHODS.get(t)
     if allowed is not None:
+        hint = _suggest(name, allowed, 1)
         return (
-            f"'{t.__name__}' method {name!r} is not available{_suggest(name, allowed, 1)} "
+            f"'{t.__name__}' method {name!r} is not available{hint or '.'} "
             f"{t.__name__} methods you can use: {', '.join(sorted(allowed))}"
         )
     return f"'{_tname(obj)}' object has no attribute {name!r}"
@@ -1966,3 +1989,12 @@ def run_program(source: str, scene: Scene | None = None, budget: Budget | None =
     tree = check_program(source, b)
     scene = scene if scene is not None else Scene()
     return _Interpreter(source, tree, scene, b).run()
+
+
+# Compute every signature at import time so that running a program never imports anything.
+for _fn in SKILLS.values():
+    _signature(_fn)
+for _name in dir(_Interpreter):
+    if _name.startswith(("_b_", "_m_")):
+        _signature(getattr(_Interpreter, _name), method=True)
+_signature(_skills.print)

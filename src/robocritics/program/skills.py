@@ -158,9 +158,9 @@ class ObjectView:
         if name in self._attrs and not name.startswith("_"):
             return _plain(self._attrs[name])
         names = self._names()
+        hint = _suggest(name, names, 1)
         raise AttributeError(
-            f"{self._fields['kind']} {self._id!r} has no attribute {name!r}{_suggest(name, names, 1)} "
-            f"It has: {', '.join(names)}"
+            f"{self._fields['kind']} {self._id!r} has no attribute {name!r}{hint or '.'} It has: {', '.join(names)}"
         )
 
     def __getattr__(self, name: str) -> Any:
@@ -205,8 +205,9 @@ class Namespace:
     def _lookup(self, name: str) -> Any:
         if name in self._members and not name.startswith("_"):
             return self._members[name]
+        hint = _suggest(name, self._members, 3)
         raise AttributeError(
-            f"{self._name} has no {self._what} {name!r}{_suggest(name, self._members, 3)} "
+            f"{self._name} has no {self._what} {name!r}{hint or '.'} "
             f"{self._name} provides: {', '.join(sorted(self._members))}"
         )
 
@@ -287,8 +288,9 @@ class Recorder:
         if isinstance(value, str):
             if value in self.views:
                 return value
+            hint = _suggest(value, self.views)
             raise self.error(
-                f"{skill}: unknown object {value!r}{_suggest(value, self.views)} "
+                f"{skill}: unknown object {value!r}{hint or '.'} "
                 f"Objects and containers: {', '.join(self.views) or '(none)'}"
             )
         raise self.error(f"{skill}: {arg} must be a scene object (e.g. {self._example()}), got {_describe(value)}")
