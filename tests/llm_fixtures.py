@@ -1,6 +1,9 @@
 """pytest fixtures for the LLM tests: a fresh ``LLMServer`` and clients pointed at it.
 
 Import the fixtures into a test module: ``from llm_fixtures import llm_server, make_client``.
+Modules that build clients from the environment should also use ``clean_llm_env``
+(e.g. ``pytestmark = pytest.mark.usefixtures("clean_llm_env")``), so a developer's
+real configuration or API key never reaches a test server.
 """
 
 from __future__ import annotations
@@ -14,6 +17,21 @@ from robocritics.llm.client import OpenAICompatible
 
 TEST_MODEL = "test-chat"
 TEST_EMBEDDING_MODEL = "test-embed"
+
+LLM_ENVIRONMENT = (
+    "ROBOCRITICS_BASE_URL",
+    "ROBOCRITICS_MODEL",
+    "ROBOCRITICS_EMBEDDING_MODEL",
+    "ROBOCRITICS_API_KEY",
+    "OPENAI_API_KEY",
+)
+
+
+@pytest.fixture
+def clean_llm_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Remove every environment variable ``OpenAICompatible`` reads, for the test's duration."""
+    for name in LLM_ENVIRONMENT:
+        monkeypatch.delenv(name, raising=False)
 
 
 @pytest.fixture

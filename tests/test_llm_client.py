@@ -14,7 +14,7 @@ import traceback
 import httpx
 import numpy as np
 import pytest
-from llm_fixtures import TEST_EMBEDDING_MODEL, TEST_MODEL, llm_server, make_client  # noqa: F401
+from llm_fixtures import TEST_EMBEDDING_MODEL, TEST_MODEL, clean_llm_env, llm_server, make_client  # noqa: F401
 from llm_server import Delay, Drop, Fail, Garbage, LLMServer, RawJSON, Reply, hashed_embedding
 
 from robocritics.errors import LLMError, RoboCriticsError
@@ -27,6 +27,8 @@ from robocritics.llm.client import (
     _retry_after_seconds,
     embedding_space_name,
 )
+
+pytestmark = pytest.mark.usefixtures("clean_llm_env")
 
 USER = [{"role": "user", "content": "put the green apple in the white box"}]
 

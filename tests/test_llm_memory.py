@@ -16,12 +16,14 @@ import time
 
 import numpy as np
 import pytest
-from llm_fixtures import TEST_EMBEDDING_MODEL, llm_server, make_client  # noqa: F401
+from llm_fixtures import TEST_EMBEDDING_MODEL, clean_llm_env, llm_server, make_client  # noqa: F401
 from llm_server import Fail, hashed_embedding
 
 from robocritics.errors import LLMError, RoboCriticsError
 from robocritics.llm.bm25 import bm25_scores, tokenize
 from robocritics.llm.memory import Interaction, InteractionMemory
+
+pytestmark = pytest.mark.usefixtures("clean_llm_env")
 
 TASKS = [
     "throw the coffee cup and the water bottle into the trash bin",

@@ -124,6 +124,8 @@ class InteractionMemory:
         busy_timeout_s: float = 30.0,
         embed_batch_size: int = 64,
     ):
+        if embed_batch_size < 1:
+            raise ValueError(f"embed_batch_size must be >= 1, got {embed_batch_size}")
         self.path = str(path)
         self.embedder = embedder
         self.busy_timeout_s = float(busy_timeout_s)
