@@ -79,7 +79,8 @@ def test_urdf_limits_and_masses(robot):
     assert robot.n == 6
     np.testing.assert_allclose(robot.velocity_limits, [math.pi] * 3 + [2 * math.pi] * 3)
     masses = [robot.model.inertias[j].mass for j in range(1, 7)]
-    np.testing.assert_allclose(masses, [1.98, 3.4445, 1.437, 0.871, 0.805, 0.261])
+    # Pinocchio lumps the fixed gripper (0.9 kg body, 2 x 0.05 kg fingers) into wrist 3
+    np.testing.assert_allclose(masses, [1.98, 3.4445, 1.437, 0.871, 0.805, 0.261 + 1.0])
     assert robot.max_opening_m == pytest.approx(0.085)
     assert set(robot.capsule_groups) == {"arm", "gripper"}
     assert robot.limits.velocity_rad_s == tuple(robot.velocity_limits)

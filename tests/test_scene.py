@@ -27,9 +27,9 @@ def test_scene_files_match_builtins():
     "patch, path, words",
     [
         ({"shape": "cone"}, "objects[0].shape", "unknown shape 'cone'"),
-        ({"size": [0.04, -0.04, 0.04]}, "objects[0]", "size[1] is -0.04"),
-        ({"position": [0.3, math.nan, 0.02]}, "objects[0].position", "nan"),
-        ({"size": [0.04, 0.04]}, "objects[0]", "a box needs 3 numbers"),
+        ({"size": [0.04, -0.04, 0.04]}, "objects[0].size[1]", "-0.04 is not a positive length"),
+        ({"position": [0.3, math.nan, 0.02]}, "objects[0].position[1]", "nan is not a finite number"),
+        ({"size": [0.04, 0.04]}, "objects[0].size", "a box needs 3 numbers"),
         ({"id": "__class__"}, "objects[0].id", "identifier"),
         ({"colour": "red"}, "objects[0].colour", "Extra inputs"),
     ],

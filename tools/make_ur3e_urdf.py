@@ -46,7 +46,7 @@ FINGER_Z = TCP_Z - FINGER_R - 0.04
 
 
 def fmt(v):
-    return " ".join(f"{x:.10g}" for x in v)
+    return " ".join(f"{x:.17g}" for x in v)
 
 
 def capsule_xml(p0, p1, r):
@@ -60,8 +60,8 @@ def capsule_xml(p0, p1, r):
     pitch = math.atan2(math.hypot(u[0], u[1]), u[2])
     yaw = math.atan2(u[1], u[0])
     return (
-        f'    <collision>\n      <origin xyz="{fmt(mid)}" rpy="0 {pitch:.10g} {yaw:.10g}"/>\n'
-        f'      <geometry><cylinder radius="{r}" length="{length:.10g}"/></geometry>\n    </collision>\n'
+        f'    <collision>\n      <origin xyz="{fmt(mid)}" rpy="0 {pitch:.17g} {yaw:.17g}"/>\n'
+        f'      <geometry><cylinder radius="{r}" length="{length:.17g}"/></geometry>\n    </collision>\n'
     )
 
 
@@ -91,7 +91,7 @@ for name, parent, child, xyz, rpy, lo, hi, vel, eff in joints:
     out.append(
         f'  <joint name="{name}" type="revolute">\n    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
         f'    <origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>\n    <axis xyz="0 0 1"/>\n'
-        f'    <limit lower="{lo:.10g}" upper="{hi:.10g}" velocity="{vel:.10g}" effort="{eff}"/>\n  </joint>\n'
+        f'    <limit lower="{lo:.17g}" upper="{hi:.17g}" velocity="{vel:.17g}" effort="{eff}"/>\n  </joint>\n'
     )
 fixed = [
     ("flange_joint", "wrist_3_link", "tool0", (0, 0, d6)),

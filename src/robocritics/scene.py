@@ -23,6 +23,7 @@ from __future__ import annotations
 import difflib
 import json
 import math
+import re
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -54,7 +55,7 @@ def rpy_matrix(rpy: Vec3) -> np.ndarray:
 def _finite(values: Any, what: str) -> Any:
     for i, v in enumerate(values):
         if not math.isfinite(v):
-            raise ValueError(f"{what}[{i}] is {v}; coordinates must be finite numbers")
+            raise ValueError(f"[{i}]: {v} is not a finite number")
     return values
 
 
@@ -104,7 +105,7 @@ class SceneObject(_Model):
             )
         for i, s in enumerate(self.size):
             if not math.isfinite(s) or s <= 0:
-                raise ValueError(f"size[{i}] is {s}; sizes are positive lengths in metres")
+                raise ValueError(f"size[{i}]: {s} is not a positive length in metres")
         return self
 
     @property
@@ -163,7 +164,7 @@ class Container(_Model):
     def _check_size(cls, v: Vec3) -> Vec3:
         for i, s in enumerate(v):
             if not math.isfinite(s) or s <= 0:
-                raise ValueError(f"size[{i}] is {s}; sizes are positive lengths in metres")
+                raise ValueError(f"[{i}]: {s} is not a positive length in metres")
         return v
 
     @model_validator(mode="after")
@@ -364,6 +365,12 @@ def _scene_error(exc: ValidationError) -> SceneError:
     message = err["msg"]
     if message.startswith("Value error, "):
         message = message[len("Value error, ") :]
+    # validators name the sub-field they reject ("size[1]: ...", "objects[2].id: ...")
+    sub = re.match(r"^((?:[A-Za-z_]\w*)?(?:\[\d+\])*(?:\.[A-Za-z_]\w*(?:\[\d+\])*)*): (.*)$", message, re.S)
+    if sub and sub.group(1):
+        field = sub.group(1)
+        path = field if not path else path + (field if field.startswith("[") else "." + field)
+        message = sub.group(2)
     if err["type"] == "literal_error" and path.endswith("shape"):
         message = f"unknown shape {err.get('input')!r}; use one of box, cylinder, sphere"
     more = len(exc.errors()) - 1

@@ -397,9 +397,7 @@ def _branches(
                 if planar is not None and attempt == 0:
                     planar.append(sqrt(X * X + Y * Y))
                 c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
-                if -1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL:
-                    break
-                if attempt or s5abs >= _WRIST_NEAR_SINGULAR:
+                if -1.0 <= c3 <= 1.0 or attempt or s5abs >= _WRIST_NEAR_SINGULAR:
                     break
                 q6n = _singular_q6(k, t, c1, s1, p5x, p5y, q6, c3 > 1.0)
                 if q6n is None:
@@ -584,6 +582,144 @@ def _nearest_equivalent(
     return hi if v > hi else (lo if v < lo else v)
 
 
+def _nearest_branch(
+    k: tuple[float, ...],
+    t: Sequence[float],
+    sd: Sequence[float],
+    lo: Sequence[float],
+    hi: Sequence[float],
+    w: Sequence[float],
+) -> list[float] | None:
+    """Fast path of :func:`ur_ik`: the closed form of :func:`_branches` fused
+    with a branch-and-bound search for the seed-nearest branch.
+
+    Every angle is moved to its ``2 pi``-equivalent within the limits nearest
+    to the seed as soon as it is known; a shoulder branch is abandoned when
+    ``w1 dq1²`` already exceeds the best complete cost, a wrist branch when
+    ``w1 dq1² + w5 dq5² + w6 dq6²`` does, so the trigonometry of branches that
+    cannot win is never evaluated. Returns None when nothing is found, or
+    when the wrist is (nearly) singular, ``|sin q5| < 1e-6`` (``q6`` is then
+    free, or noisy and possibly in need of the nudge of :func:`_branches`):
+    the caller then takes the general path.
+    """
+    d1, a2, a3, d4, d5, d6, a2a3_sq, two_a2a3 = k
+    xx, yx, zx, px, xy, yy, zy, py, xz, yz, zz, pz = t
+    s0, s1_, s2, s3_, s4, s5_ = sd
+    l0, l1, l2, l3, l4, l5 = lo
+    h0, h1, h2, h3, h4, h5 = hi
+    w0, w1, w2, w3, w4, w5 = w
+    cos, sin, atan2, acos, sqrt = math.cos, math.sin, math.atan2, math.acos, math.sqrt
+    pi2 = _TWO_PI
+    near = _nearest_equivalent
+
+    p5x = px - d6 * zx
+    p5y = py - d6 * zy
+    r = sqrt(p5x * p5x + p5y * p5y)
+    if r == 0.0:
+        return None
+    ratio = d4 / r
+    if not -1.0 - _CLIP_TOL <= ratio <= 1.0 + _CLIP_TOL:
+        return None
+    ratio = 1.0 if ratio > 1.0 else (-1.0 if ratio < -1.0 else ratio)
+    phi = atan2(p5y, p5x) + _HALF_PI
+    dphi = acos(ratio)
+
+    shoulders = []
+    for q1 in (phi + dphi, phi - dphi):
+        v1 = q1 + round((s0 - q1) / pi2) * pi2
+        if not l0 <= v1 <= h0:
+            v1 = near(q1, s0, l0, h0)
+            if v1 is None:
+                continue
+        shoulders.append((w0 * (v1 - s0) * (v1 - s0), q1, v1))
+    if len(shoulders) == 2 and shoulders[1][0] < shoulders[0][0]:
+        shoulders.reverse()
+
+    best = math.inf
+    best_q: list[float] | None = None
+    for cost1, q1, v1 in shoulders:
+        if cost1 >= best:
+            break
+        s1 = sin(q1)
+        c1 = cos(q1)
+        xz1 = xx * s1 - xy * c1
+        yz1 = yx * s1 - yy * c1
+        zz1 = zx * s1 - zy * c1
+        s5abs = sqrt(xz1 * xz1 + yz1 * yz1)
+        if s5abs < _WRIST_NEAR_SINGULAR:
+            return None  # wrist (near-)singular: q6 is free or noisy, general path
+        wrists = []
+        for sign in (1.0, -1.0):
+            q5 = atan2(sign * s5abs, zz1)
+            q6 = atan2(-sign * yz1, sign * xz1)
+            v5 = q5 + round((s4 - q5) / pi2) * pi2
+            if not l4 <= v5 <= h4:
+                v5 = near(q5, s4, l4, h4)
+                if v5 is None:
+                    continue
+            v6 = q6 + round((s5_ - q6) / pi2) * pi2
+            if not l5 <= v6 <= h5:
+                v6 = near(q6, s5_, l5, h5)
+                if v6 is None:
+                    continue
+            cost = cost1 + w4 * (v5 - s4) * (v5 - s4) + w5 * (v6 - s5_) * (v6 - s5_)
+            wrists.append((cost, q5, q6, v5, v6))
+        if len(wrists) == 2 and wrists[1][0] < wrists[0][0]:
+            wrists.reverse()
+        for cost56, q5, q6, v5, v6 in wrists:
+            if cost56 >= best:
+                break
+            c5 = cos(q5)
+            s5 = sin(q5)
+            c6 = cos(q6)
+            s6 = sin(q6)
+            z4x = -(s6 * xx + c6 * yx)
+            z4y = -(s6 * xy + c6 * yy)
+            z4z = -(s6 * xz + c6 * yz)
+            X = (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1
+            Y = pz - d6 * zz - d5 * z4z - d1
+            c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
+            if not -1.0 <= c3 <= 1.0:
+                if not -1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL:
+                    continue
+                c3 = 1.0 if c3 > 1.0 else -1.0
+            x4x = c5 * (c6 * xx - s6 * yx) - s5 * zx
+            x4y = c5 * (c6 * xy - s6 * yy) - s5 * zy
+            x4z = c5 * (c6 * xz - s6 * yz) - s5 * zz
+            q234 = atan2(x4z, x4x * c1 + x4y * s1)
+            base = atan2(Y, X)
+            t3 = acos(c3)
+            for q3 in (t3, -t3):
+                v3 = q3 + round((s2 - q3) / pi2) * pi2
+                if not l2 <= v3 <= h2:
+                    v3 = near(q3, s2, l2, h2)
+                    if v3 is None:
+                        continue
+                cost3 = cost56 + w2 * (v3 - s2) * (v3 - s2)
+                if cost3 >= best:
+                    continue
+                q2 = base - atan2(a3 * sin(q3), a2 + a3 * c3)
+                v2 = q2 + round((s1_ - q2) / pi2) * pi2
+                if not l1 <= v2 <= h1:
+                    v2 = near(q2, s1_, l1, h1)
+                    if v2 is None:
+                        continue
+                cost2 = cost3 + w1 * (v2 - s1_) * (v2 - s1_)
+                if cost2 >= best:
+                    continue
+                q4 = q234 - q2 - q3
+                v4 = q4 + round((s3_ - q4) / pi2) * pi2
+                if not l3 <= v4 <= h3:
+                    v4 = near(q4, s3_, l3, h3)
+                    if v4 is None:
+                        continue
+                cost = cost2 + w3 * (v4 - s3_) * (v4 - s3_)
+                if cost < best:
+                    best = cost
+                    best_q = [v1, v2, v3, v4, v5, v6]
+    return best_q
+
+
 def ur_ik(
     dh: DH,
     flange_pose: Any,
@@ -622,35 +758,17 @@ def ur_ik(
         w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
     else:
         w = weights.tolist() if isinstance(weights, np.ndarray) else [float(v) for v in weights]
-    branches = _branches(k, t, sd[5])
-    if not branches:
-        raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_diagnose(dh, t)}")
-
     links = dh._links
-    # Fast path: branch-and-bound on the weighted distance (a branch is dropped
-    # as soon as its partial cost exceeds the best so far), then FK-verify the winner.
-    pi2 = _TWO_PI
-    best_cost = math.inf
-    best_q: list[float] | None = None
-    for b in branches:
-        q: list[float] = []
-        cost = 0.0
-        for x, s, l, h, wi in zip(b, sd, lo, hi, w):
-            v = x + round((s - x) / pi2) * pi2
-            if not (l <= v <= h):
-                v = _nearest_equivalent(x, s, l, h)
-                if v is None:
-                    break
-            cost += wi * (v - s) * (v - s)
-            if cost >= best_cost:
-                break
-            q.append(v)
-        else:
-            best_cost, best_q = cost, q
+    # Fast path: fused closed form + branch-and-bound, then FK-verify the winner.
+    best_q = _nearest_branch(k, t, sd, lo, hi, w)
     if best_q is not None:
         dp, dr = _pose_error(_fk_rows(links, best_q), t)
         if dp <= tol and dr <= tol:
             return np.array(best_q)
+
+    branches = _branches(k, t, sd[5])
+    if not branches:
+        raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_diagnose(dh, t)}")
 
     # Slow path (no branch within limits, or the nearest failed the FK check):
     # rank every branch within limits and take the first that verifies.

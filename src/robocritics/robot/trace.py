@@ -118,10 +118,13 @@ def build_trajectory(
         obj = scene.entity(oid)
         (own,) = obj.shapes()
         own_pose = np.broadcast_to(np.asarray(object_poses.get(oid, own.pose), float), (T, 4, 4))
-        # while at rest the object's pose is piecewise constant: evaluate each distinct pose once
-        poses_flat = own_pose.reshape(T, 16)
-        unique_poses, inverse = np.unique(poses_flat, axis=0, return_inverse=True)
-        inverse = inverse.reshape(-1)
+        # the pose is piecewise constant while the object rests: evaluate each run of equal poses once
+        flat = own_pose.reshape(T, 16)
+        changed = np.empty(T, dtype=bool)
+        changed[0] = True
+        np.any(flat[1:] != flat[:-1], axis=1, out=changed[1:])
+        inverse = np.cumsum(changed) - 1
+        unique_poses = flat[changed]
         for eid, group, shapes in entities:
             if eid == oid:
                 continue

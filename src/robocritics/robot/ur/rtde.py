@@ -189,8 +189,8 @@ class Recipe:
     recipe_id: int
     names: tuple[str, ...]
     types: tuple[str, ...]
-    _struct: struct.Struct = field(init=False, repr=False)
-    _layout: tuple[tuple[str, int, int], ...] = field(init=False, repr=False)
+    _struct: struct.Struct = field(init=False, repr=False, compare=False)
+    _layout: tuple[tuple[str, int, int], ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.names = tuple(self.names)
@@ -603,12 +603,15 @@ class RTDEClient:
         payload = encode_text_message(TextMessage(message, source, level), self.protocol_version or 2)
         self._send_raw(pack_package(Command.TEXT_MESSAGE, payload), "sending a text message")
 
-    def latest(self) -> dict[str, Any]:
+    def latest(self, allow_stale: bool = False) -> dict[str, Any]:
         """The newest value of every output field received so far (empty before the first package).
 
-        Never blocks. Raises :class:`RTDEError` once the connection has dropped.
+        Never blocks. Raises :class:`RTDEError` once the connection has dropped,
+        unless ``allow_stale`` (then it returns the last values received, e.g. for
+        a post-mortem of where the robot was).
         """
-        self._raise_if_failed("reading the latest data")
+        if not allow_stale:
+            self._raise_if_failed("reading the latest data")
         with self._cond:
             return dict(self._latest)
 
@@ -652,7 +655,11 @@ class RTDEClient:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise RTDEError(f"RTDE {self.address}: timed out after {timeout_s:g} s waiting for {what}; last state {state}")
-            state = self.wait_next(min(remaining, self.timeout_s) if remaining > 0 else 0.001)
+            try:
+                state = self.wait_next(min(remaining, self.timeout_s))
+            except RTDEError:
+                if self._error is not None or time.monotonic() < deadline:
+                    raise
         return state
 
     def drain(self) -> list[dict[str, Any]]:
@@ -744,10 +751,15 @@ class RTDEClient:
                         raise RTDEError(self._error)
                     remaining = deadline - time.monotonic()
                     if remaining <= 0:
-                        raise RTDEError(
+                        msg = (
                             f"no reply to {_COMMAND_NAMES.get(command, command)} from RTDE {self.address} within "
                             f"{self.timeout_s:g} s while {doing} (controller silent or overloaded)"
                         )
+                        # a late reply would be taken for the answer to the next request: give up on this connection
+                        self._error = msg
+                        self._started = False
+                        self._cond.notify_all()
+                        raise RTDEError(msg)
                     self._cond.wait(remaining)
 
     def _fail(self, message: str) -> None:
@@ -823,7 +835,11 @@ class RTDEClient:
                 self._last_rx = now
                 self._cond.notify_all()
         elif cmd == Command.TEXT_MESSAGE:
-            msg = decode_text_message(payload, self.protocol_version or 2)
+            try:
+                msg = decode_text_message(payload, self.protocol_version or 2)
+            except RTDEError as exc:
+                log.warning("RTDE %s: %s", self.address, exc)
+                return
             log.log(
                 logging.ERROR if msg.level <= MessageLevel.ERROR else logging.WARNING if msg.level == 2 else logging.INFO,
                 "RTDE %s %s [%s]: %s",
