@@ -774,48 +774,53 @@ class _Interpreter:
         return value
 
     def _weigh(self, value: Any, node: Any, chars: bool = False) -> int:
-        """Walk nested data; refuse it if an operation on it could do more than max_nodes steps.
+        """Walk nested data; refuse it if an operation on it (compare, hash, repr) could do too much work.
 
-        Returns an estimate of its printed length in characters.
+        Every occurrence of a shared sub-list counts (that is what the C code walks), and
+        nesting deeper than ``max_nesting`` is refused (C recursion). Returns an upper
+        estimate of the printed length in characters when ``chars`` is set.
         """
-        t = type(value)
-        if t not in _DEEP:
+        if type(value) not in _DEEP:
             return 0
         limit = self.b.max_nodes
+        max_depth = self.b.max_nesting
         count = 0
         nchars = 0
-        stack = [value]
+        stack: list[tuple[Any, int]] = [(value, 0)]
         pop, extend = stack.pop, stack.extend
         while stack:
-            v = pop()
+            v, depth = pop()
             t = type(v)
             if t is str:
                 count += 1 + len(v) // 64
                 nchars += len(v) + 2
-            elif t is dict:
-                count += 1 + 2 * len(v)
-                nchars += 2 + 4 * len(v)
-                if count > limit:
-                    break
-                extend([x for x in v.keys() if type(x) in _DEEP])
-                extend([x for x in v.values() if type(x) in _DEEP])
-            elif t in _DEEP:
-                count += 1 + len(v)
-                nchars += 2 + 2 * len(v)
-                if count > limit:
-                    break
-                extend([x for x in v if type(x) in _DEEP])
+                continue
+            if depth >= max_depth:
+                raise self._error(
+                    f"this value is nested more than {max_depth} levels deep (lists inside lists, or a list "
+                    "that contains itself); keep data structures flat",
+                    node,
+                )
+            elems: Any = [*v.keys(), *v.values()] if t is dict else v
+            n = len(elems)
+            count += 1 + n
             if count > limit:
                 break
+            nchars += 2 + 2 * n
+            extend([(x, depth + 1) for x in elems if type(x) in _DEEP])
+            if chars:
+                for x in elems:
+                    tx = type(x)
+                    if tx is int:
+                        nchars += (x.bit_length() * 3) // 10 + 2
+                    elif tx not in _DEEP:
+                        nchars += 24
         if count > limit:
             raise self._error(
                 f"this value is too large to compare, hash or print (more than {limit} nested elements; "
                 "lists that share or contain themselves count every time); keep data structures small",
                 node,
             )
-        if chars:
-            # numbers and other atoms print in ~20 characters; 2 per element above counts separators only
-            nchars += 20 * count
         return nchars
 
     # ---- iteration helpers ---------------------------------------------------------------

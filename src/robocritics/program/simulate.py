@@ -46,8 +46,8 @@ class PlannerSettings:
     """Planner constants (SI units)."""
 
     linear_speed_mps: float = 1.0  # TCP speed of straight-line moves at speed fraction 1
-    linear_accel_mps2: float = 2.5
-    linear_jerk_mps3: float = 25.0
+    linear_accel_mps2: float = 4.0
+    linear_jerk_mps3: float = 40.0
     gripper_time_s: float = 0.5  # Robotiq 2F-85 full stroke at its default speed
     obstacle_clearance_m: float = 0.08  # how high above an avoided object's top the TCP crosses
     line_step_m: float = 0.005  # dense-IK spacing on straight lines (spline in between)
