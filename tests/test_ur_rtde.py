@@ -344,6 +344,7 @@ def test_connection_drop_gives_a_typed_error_in_bounded_time(sim):
         c.send({"input_int_register_24": 1})
     with pytest.raises(RTDEError, match="closed by the controller"):
         c.latest()
+    assert c.latest(allow_stale=True)["actual_q"] == pytest.approx(sim.q)  # where the robot was, for the report
     c.close()
 
 
@@ -363,6 +364,8 @@ def test_silent_controller_times_out_with_a_typed_error(sim):
         with pytest.raises(RTDEError, match=r"no reply to 'P' \(pause\).*within 0\.3 s"):
             c.pause()
         assert c.age_s() > 0.2
+        with pytest.raises(RTDEError, match="no reply to 'P'"):  # the conversation is out of sync: stay failed
+            c.latest()
 
 
 def test_slow_controller_sends_at_a_lower_rate_and_replies_late(sim):

@@ -78,7 +78,7 @@ def test_local_control_refuses_commands_and_programs(sim):
         while not (msgs := c.messages()) and time.monotonic() < deadline:
             time.sleep(0.01)
         assert msgs and "local control" in msgs[0].message
-        assert c.latest()["runtime_state"] == 1
+        assert c.wait_next(1.0)["runtime_state"] == 1
     (ev,) = sim.events("program_rejected")
     assert "local control" in ev.message
 
