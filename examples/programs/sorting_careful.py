@@ -15,20 +15,20 @@ def pick(obj):
     lib.set_speed(0.3)
 
 
-def place_in(box):
-    lib.move_above(box, 0.12)
+def place_in(box, dy):
+    # release low inside the box, each apple at its own spot
+    lib.move_to(box.x, box.y + dy, box.top + 0.12)
     lib.reduce_speed(15)
-    lib.move_down(0.08)
+    lib.move_down(0.12)
     lib.open_gripper()
-    lib.move_up(0.08)
+    lib.move_up(0.12)
     lib.set_speed(0.3)
 
 
+spots = {"brown_box": [-0.04, 0.04], "white_box": [0.0]}
 for apple in objects:
     pick(apple)
-    if apple.ripeness == "ripe":
-        place_in(brown_box)
-    else:
-        place_in(white_box)
+    box = brown_box if apple.ripeness == "ripe" else white_box
+    place_in(box, spots[box.id].pop())
 
 lib.home()

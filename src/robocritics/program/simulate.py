@@ -98,6 +98,8 @@ class _Planner:
         self.settings = settings
         self.limits = Limits(robot.velocity_limits, robot.acceleration_limits, robot.jerk_limits)
         self.q = robot.home_q.copy()
+        home_tcp = robot.tcp_pose(robot.home_q)[:3, 3]
+        self.home_heading = math.atan2(home_tcp[1], home_tcp[0])
         self.yaw = 0.0
         self.speed = 1.0
         self.opening = robot.max_opening_m
@@ -250,10 +252,27 @@ class _Planner:
             return [goal]
         return [np.array([a[0], a[1], max(safe_z, start[2])]), np.array([b[0], b[1], max(safe_z, goal[2])]), goal]
 
+    def posture_seed(self, point: np.ndarray, yaw: float | None = None) -> np.ndarray:
+        """The home posture turned to face ``point``: an IK seed that keeps the arm in its
+        natural branch (shoulder facing the target, elbow up, wrist down).
+
+        Nearest-to-the-current-joints alone would let the arm lean back over itself for
+        a target behind it, folding the gripper onto the upper arm.
+        """
+        home = self.robot.home_q
+        seed = home.copy()
+        turn = math.atan2(point[1], point[0]) - self.home_heading
+        # the equivalent base angle closest to where the base is now
+        seed[0] = home[0] + turn
+        seed[0] += 2 * math.pi * round((self.q[0] - seed[0]) / (2 * math.pi))
+        seed[-1] = home[-1] + turn + ((self.yaw if yaw is None else yaw) - 0.0)
+        seed[-1] += 2 * math.pi * round((self.q[-1] - seed[-1]) / (2 * math.pi))
+        return seed
+
     def move_joint_to_point(self, point: np.ndarray, call: SkillCall, step: int) -> None:
         start = self.tcp()[:3, 3]
         for via in self.routed_points(start, point):
-            self.joint_move(self.ik(via, call), step)
+            self.joint_move(self.ik(via, call, seed=self.posture_seed(via)), step)
 
     def line_move(self, goal: np.ndarray, call: SkillCall, step: int) -> None:
         start = self.tcp()[:3, 3]
@@ -350,7 +369,8 @@ class _Planner:
     def do_rotate_gripper(self, call: SkillCall) -> None:
         step = self.add_step(call, self._move_contacts(None, call))
         angle = float(call.args["angle"])
-        self.joint_move(self.ik(self.tcp()[:3, 3], call, yaw=angle), step)
+        here = self.tcp()[:3, 3]
+        self.joint_move(self.ik(here, call, yaw=angle, seed=self.posture_seed(here, angle)), step)
         self.yaw = angle
 
     def do_home(self, call: SkillCall) -> None:

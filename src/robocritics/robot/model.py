@@ -380,8 +380,8 @@ def _ur3e_cached() -> Robot:
             tcp_frame="tcp",
             name="ur3e",
             dh=UR3E_DH,
-            acceleration_limits=np.array([5.0, 5.0, 5.0, 10.0, 10.0, 10.0]),
-            jerk_limits=np.array([50.0, 50.0, 50.0, 100.0, 100.0, 100.0]),
+            acceleration_limits=np.array([10.0, 10.0, 10.0, 20.0, 20.0, 20.0]),
+            jerk_limits=np.array([100.0, 100.0, 100.0, 200.0, 200.0, 200.0]),
         )
         # home: TCP 0.25 m in front of the base and 0.25 m above the table, fingers down, elbow up
         upright = np.array([math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0])
