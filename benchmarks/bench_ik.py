@@ -1,0 +1,270 @@
+"""UR3e inverse-kinematics benchmark: closed form vs Pinocchio DLS vs lively-tk.
+
+Reproduce with::
+
+    .venv/bin/python benchmarks/bench_ik.py            # 200 targets, seed 7
+    .venv/bin/python benchmarks/bench_ik.py --n 1000 --seed 1
+
+What is measured
+----------------
+* 200 reachable targets (fixed seed): joint vectors drawn uniformly in
+  [-pi, pi]^6, flange poses by forward kinematics of the UR3e e-series DH.
+  Every solver gets the same seed configuration per target: the generating
+  configuration plus N(0, 0.2 rad) noise per joint (what a motion planner's
+  previous waypoint looks like). Joint limits are the UR3e's +-2 pi.
+* Time per solve (wall clock, ``time.perf_counter_ns``), median and 90th
+  percentile in microseconds. Only the solve is timed: building models,
+  converting the target to each solver's input type and resetting a solver's
+  state to the seed happen outside the timed region (which favours lively and
+  Pinocchio, not us).
+* Accuracy: the returned joints are pushed through ``dh_forward`` and compared
+  with the target: position error (m) and rotation angle error (rad). Maxima
+  over all targets are reported, plus how many targets were solved to 1e-6 m
+  and 1e-6 rad.
+* Solvers:
+  - ``robocritics ur_ik``: closed form, all branches, nearest to the seed
+    within the limits, FK-verified (the function the planner calls).
+  - ``robocritics ur_ik_all``: all (up to 8) branches, each FK-verified.
+  - ``Pinocchio DLS``: ``robocritics.robot.ik.numeric_ik`` on a Pinocchio model
+    built from a URDF generated from the same DH table (tol 1e-10).
+  - ``lively-tk``: the optimisation IK of the paper authors' prototype
+    (``lively.Solver`` with a PositionMatch (weight 50) and an
+    OrientationMatch (weight 25) objective on ``tool0``, URDF generated from
+    the same DH table, state reset to the seed before each target). "1 call"
+    is one ``solve`` (how the prototype used it); "converged" repeats
+    ``solve`` until the joints move less than 1e-6 rad between calls (at
+    most 50 calls) and times all calls.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import gc
+import math
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pinocchio as pin
+
+from robocritics.robot.ik import UR3E_DH, dh_forward, dh_urdf, numeric_ik, ur_ik, ur_ik_all
+
+REPRO = ".venv/bin/python benchmarks/bench_ik.py"
+LOWER = np.full(6, -2.0 * math.pi)
+UPPER = np.full(6, 2.0 * math.pi)
+JOINTS = [f"joint_{i}" for i in range(1, 7)]
+
+
+@contextlib.contextmanager
+def quiet_stdout() -> Iterator[None]:
+    """Silence fd 1 (lively's Rust core prints the parsed URDF on construction)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(devnull)
+        os.close(saved)
+
+
+def make_targets(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q_true (n, 6), poses (n, 4, 4), seeds (n, 6))."""
+    rng = np.random.default_rng(seed)
+    q_true = rng.uniform(-math.pi, math.pi, (n, 6))
+    poses = dh_forward(UR3E_DH, q_true)
+    seeds = np.clip(q_true + rng.normal(0.0, 0.2, (n, 6)), LOWER, UPPER)
+    return q_true, poses, seeds
+
+
+def pose_error(q: np.ndarray, T: np.ndarray) -> tuple[float, float]:
+    F = dh_forward(UR3E_DH, q)
+    dp = float(np.linalg.norm(F[:3, 3] - T[:3, 3]))
+    dr = float(np.linalg.norm(pin.log3(F[:3, :3].T @ T[:3, :3])))
+    return dp, dr
+
+
+class Result:
+    def __init__(self, name: str, times_ns: list[int], errors: list[tuple[float, float]], failed: int):
+        self.name = name
+        self.times_us = np.array(times_ns, dtype=float) / 1e3
+        self.errors = np.array(errors, dtype=float).reshape(-1, 2)
+        self.failed = failed
+
+    @property
+    def median(self) -> float:
+        return float(np.median(self.times_us))
+
+    @property
+    def p90(self) -> float:
+        return float(np.percentile(self.times_us, 90))
+
+
+def run(
+    name: str,
+    n: int,
+    prepare: Callable[[int], object],
+    solve: Callable[[int, object], np.ndarray],
+    poses: np.ndarray,
+    warmup: int = 20,
+) -> Result:
+    """Time ``solve(i, prepare(i))`` for every target; errors computed afterwards."""
+    for i in range(min(warmup, n)):
+        try:
+            solve(i, prepare(i))
+        except Exception:
+            pass
+    times, errors, failed = [], [], 0
+    gc_was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        for i in range(n):
+            arg = prepare(i)
+            t0 = time.perf_counter_ns()
+            try:
+                q = solve(i, arg)
+            except Exception:
+                times.append(time.perf_counter_ns() - t0)
+                failed += 1
+                errors.append((math.inf, math.inf))
+                continue
+            times.append(time.perf_counter_ns() - t0)
+            errors.append(q)  # type: ignore[arg-type]
+    finally:
+        if gc_was_enabled:
+            gc.enable()
+    errs = []
+    for i, e in enumerate(errors):
+        if isinstance(e, tuple):
+            errs.append(e)
+        else:
+            q = np.asarray(e, dtype=float)
+            if q.ndim == 2:  # all branches: worst branch
+                per = [pose_error(row, poses[i]) for row in q] or [(math.inf, math.inf)]
+                errs.append((max(p for p, _ in per), max(r for _, r in per)))
+            else:
+                errs.append(pose_error(q, poses[i]))
+    return Result(name, times, errs, failed)
+
+
+def bench_ours(poses: np.ndarray, seeds: np.ndarray) -> list[Result]:
+    n = len(poses)
+    r1 = run("robocritics ur_ik (analytic)", n, lambda i: None,
+             lambda i, _: ur_ik(UR3E_DH, poses[i], seeds[i], LOWER, UPPER), poses)
+    r2 = run("robocritics ur_ik_all (8 branches)", n, lambda i: None,
+             lambda i, _: ur_ik_all(UR3E_DH, poses[i]), poses)
+    return [r1, r2]
+
+
+def bench_pinocchio(poses: np.ndarray, seeds: np.ndarray) -> Result:
+    model = pin.buildModelFromXML(dh_urdf(UR3E_DH))
+    data = model.createData()
+    fid = model.getFrameId("tool0")
+    targets = [pin.SE3(T) for T in poses]
+    return run("Pinocchio DLS (numeric_ik)", len(poses), lambda i: None,
+               lambda i, _: numeric_ik(model, data, fid, targets[i], seeds[i], LOWER, UPPER),
+               poses)
+
+
+def bench_lively(poses: np.ndarray, seeds: np.ndarray) -> list[Result]:
+    import lively
+
+    objectives = {
+        "position": lively.PositionMatchObjective(name="EE position", link="tool0", weight=50),
+        "orientation": lively.OrientationMatchObjective(name="EE orientation", link="tool0", weight=25),
+    }
+    with quiet_stdout():
+        solver = lively.Solver(urdf=dh_urdf(UR3E_DH), objectives=objectives)
+    goals = []
+    for T in poses:
+        quat = pin.Quaternion(T[:3, :3])
+        goals.append({
+            "position": lively.Translation(float(T[0, 3]), float(T[1, 3]), float(T[2, 3])),
+            "orientation": lively.Rotation(x=quat.x, y=quat.y, z=quat.z, w=quat.w),
+        })
+    states = [lively.State(origin=lively.Transform.identity(), joints=dict(zip(JOINTS, map(float, s))))
+              for s in seeds]
+
+    def reset(i: int) -> None:
+        with quiet_stdout():
+            solver.reset(states[i], {})
+
+    def one_call(i: int, _: object) -> np.ndarray:
+        st = solver.solve(goals=goals[i], weights={}, time=0.0)
+        j = st.joints
+        return np.array([j[n] for n in JOINTS])
+
+    def converged(i: int, _: object) -> np.ndarray:
+        prev = None
+        for _call in range(50):
+            st = solver.solve(goals=goals[i], weights={}, time=0.0)
+            j = st.joints
+            q = np.array([j[n] for n in JOINTS])
+            if prev is not None and np.abs(q - prev).max() < 1e-6:
+                break
+            prev = q
+        return q
+
+    n = len(poses)
+    return [
+        run("lively-tk Solver.solve (1 call)", n, reset, one_call, poses, warmup=5),
+        run("lively-tk Solver.solve (converged)", n, reset, converged, poses, warmup=2),
+    ]
+
+
+def table(results: list[Result], reference: Result | None) -> str:
+    head = (f"{'solver':<38} {'median us':>10} {'p90 us':>10} {'max pos err m':>14} "
+            f"{'max rot err rad':>16} {'ok 1e-6':>8} {'speed-up vs lively':>19}")
+    lines = [head, "-" * len(head)]
+    for r in results:
+        ok = int(np.sum((r.errors[:, 0] < 1e-6) & (r.errors[:, 1] < 1e-6)))
+        ratio = reference.median / r.median if reference is not None else math.nan
+        speed = "n/a" if reference is None else (f"{ratio:.0f}x" if ratio >= 10 else f"{ratio:.2f}x")
+        lines.append(
+            f"{r.name:<38} {r.median:>10.1f} {r.p90:>10.1f} {r.errors[:, 0].max():>14.2e} "
+            f"{r.errors[:, 1].max():>16.2e} {ok:>4}/{len(r.errors):<3} {speed:>19}"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=200, help="number of targets (default 200)")
+    ap.add_argument("--seed", type=int, default=7, help="random seed (default 7)")
+    ap.add_argument("--no-lively", action="store_true", help="skip lively-tk")
+    args = ap.parse_args(argv)
+
+    q_true, poses, seeds = make_targets(args.n, args.seed)
+    results = bench_ours(poses, seeds)
+    results.append(bench_pinocchio(poses, seeds))
+    reference = None
+    if not args.no_lively:
+        try:
+            lv = bench_lively(poses, seeds)
+        except ImportError:
+            print("lively-tk not installed (pip install lively-tk): skipped")
+        else:
+            results.extend(lv)
+            reference = lv[0]
+
+    print(f"UR3e IK benchmark: {args.n} reachable random targets (seed {args.seed}), "
+          f"seed configuration = truth + N(0, 0.2 rad)")
+    print(f"python {platform.python_version()}, numpy {np.__version__}, pinocchio {pin.__version__}, "
+          f"{platform.machine()} {os.cpu_count()} CPUs")
+    print()
+    print(table(results, reference))
+    print()
+    if reference is not None:
+        print("speed-up = median time of 'lively-tk Solver.solve (1 call)' / median time of the row")
+    print(f"reproduce: {REPRO}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
