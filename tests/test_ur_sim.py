@@ -177,7 +177,7 @@ def test_watchdog_stops_the_program_when_the_client_goes_quiet(sim):
         quiet_from = time.monotonic()
         state = st.client.wait_for(lambda s: s["runtime_state"] == 1, 1.0, "the watchdog to stop the program")
         stopped_after = time.monotonic() - quiet_from
-        assert 0.09 < stopped_after < 0.5  # 1/10 Hz plus transport
+        assert 0.05 < stopped_after < 0.5  # 1/10 Hz plus transport (the controller may catch up on late cycles)
         assert state["output_int_register_25"] == ProgramState.STREAMING  # the controller, not the program, stopped it
         deadline = time.monotonic() + 1.0
         msgs = []
@@ -191,10 +191,10 @@ def test_watchdog_stops_the_program_when_the_client_goes_quiet(sim):
 
 def test_a_counter_that_stops_changing_stalls_the_program(sim):
     with Streamer(sim) as st:
-        st.start_program(watchdog_min_hz=10.0)
+        st.start_program(watchdog_min_hz=4.0)  # stall after 125 unchanged cycles; updates keep the watchdog quiet
         st.hold(20)
         t0 = time.monotonic()
-        while time.monotonic() - t0 < 0.5 and st.client.latest()["runtime_state"] == 2:
+        while time.monotonic() - t0 < 1.0 and st.client.latest()["runtime_state"] == 2:
             st.send(st.q, bump=False)  # updates keep coming (watchdog happy) but the counter is frozen
             st.pace()
         state = st.client.wait_for(lambda s: s["runtime_state"] == 1, 1.0, "the stall check")

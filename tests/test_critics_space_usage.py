@@ -1,0 +1,139 @@
+"""space_usage: convex hull of the swept link points against the allowed workspace."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial import ConvexHull
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
+from critic_reference import ref_space_usage
+from robocritics.critic import Flag
+from robocritics.critics.space_usage import hull_points, hull_volume, outside_distance, volume_error_bound
+from robocritics.scene import Scene, Workspace
+from strategies import trajectories
+from synth import make_trajectory, realistic_trajectory
+
+CENTRE = np.array([0.0, 0.0, 0.15185])
+
+
+def circle(radius, z=0.15185, samples=200, frames=1):
+    """Frames moving on a horizontal circle around the shoulder."""
+    a = np.linspace(0, 2 * math.pi, samples)
+    pos = np.stack([radius * np.cos(a), radius * np.sin(a), np.full_like(a, z)], axis=-1)
+    pos = np.repeat(pos[:, None, :], frames, axis=1)
+    for f in range(1, frames):
+        pos[:, f, 2] += 0.05 * f
+    return make_trajectory(np.linspace(0, 4, samples), pos)
+
+
+def test_point_leaving_the_sphere_errs_naming_link_and_sample():
+    time = np.linspace(0, 1, 101)
+    pos = np.zeros((101, 3, 3)) + CENTRE
+    pos[:, 1, 0] = np.linspace(0.1, 0.55, 101)  # link_1 ends 5 cm outside the 0.5 m sphere
+    traj = make_trajectory(time, pos, frame_names=("base_link", "forearm_link", "tcp"))
+    v = run("space_usage", traj, Scene())
+    assert v.flag is Flag.ERROR
+    assert v.value == pytest.approx(0.05)
+    assert v.unit == "m" and v.threshold == 0.0
+    assert "forearm_link" in v.message and "sample 100" in v.message and "5.0 cm outside" in v.message
+    first = int(np.argmax(pos[:, 1, 0] > 0.5))
+    assert v.evidence.first_sample == first and v.evidence.last_sample == 100
+    assert v.evidence.links == ["forearm_link"]
+    assert_well_formed(v, "space_usage")
+
+
+def test_large_sweep_warns_small_one_is_ok():
+    scene = Scene()
+    # a solid cylinder of radius 0.44 and height 0.44 inside the sphere: 0.268 m^3 = 51 % of 0.524 m^3
+    z0 = 0.15185 - 0.22
+    big = circle(0.44, z=z0, frames=2)
+    frames = big.frames.copy()
+    frames[:, 1, 2, 3] = z0 + 0.44
+    big = make_trajectory(big.time, frames=frames, frame_names=("link_0", "tcp"))
+    v = run("space_usage", big, scene)
+    assert v.flag is Flag.WARNING, v.message
+    assert v.value == pytest.approx(math.pi * 0.44**2 * 0.44, rel=0.01)
+    assert v.threshold == pytest.approx(0.5 * scene.workspace.volume_m3)
+    assert "%" in v.message and v.unit == "m³"
+    assert_well_formed(v, "space_usage")
+    small = circle(0.2, frames=2)
+    v = run("space_usage", small, scene)
+    assert v.flag is Flag.OK
+
+
+def test_degenerate_point_sets_have_zero_volume():
+    assert hull_volume(np.zeros((0, 3)))[0] == 0.0
+    assert hull_volume(np.zeros((3, 3)))[0] == 0.0
+    flat = np.random.default_rng(0).uniform(-1, 1, (50, 3))
+    flat[:, 2] = 0.1
+    assert hull_volume(flat)[0] == 0.0
+    v = run("space_usage", circle(0.3))  # one frame on a circle: a flat disc
+    assert v.flag is Flag.OK and v.value == 0.0
+
+
+def test_decimated_hull_is_within_its_error_bound_of_the_exact_hull():
+    traj = realistic_trajectory(duration_s=6.0, rate_hz=500.0, seed=3, n_waypoints=4)
+    X = np.ascontiguousarray(traj.frames[:, :, :3, 3])
+    exact, _, _ = hull_volume(hull_points(X, 0.0)[0])
+    for tol in (1e-4, 5e-4, 2e-3):
+        P, ti, li = hull_points(X, tol)
+        assert len(P) < X.shape[0] * X.shape[1] / 2
+        vol, area, _ = hull_volume(P)
+        bound = volume_error_bound(P, area, tol)
+        assert vol <= exact + 1e-12
+        assert exact - vol <= bound
+        np.testing.assert_array_equal(P, X[ti, li])
+        # every point, dropped or not, lies within tol of the kept hull (facet distances)
+        eq = ConvexHull(P).equations
+        beyond = (X.reshape(-1, 3) @ eq[:, :3].T + eq[:, 3]).max(axis=1)
+        assert beyond.max() <= tol + 1e-12
+
+
+def test_fast_outside_distance_matches_the_workspace_definition():
+    ws = Workspace(center=(0.1, -0.2, 0.3), radius_m=0.4)
+    X = np.random.default_rng(1).uniform(-1, 1, (50, 4, 3))
+    np.testing.assert_allclose(outside_distance(ws, X), ws.outside_distance(X), rtol=0, atol=1e-12)
+
+
+def test_critic_uses_a_custom_workspace_method():
+    class Box(Workspace):
+        def outside_distance(self, points):
+            return np.asarray(points)[..., 0] - 0.1  # everything beyond x = 0.1 is outside
+
+    scene = Scene().model_copy(update={"workspace": Box()})
+    v = run("space_usage", circle(0.3), scene)
+    assert v.flag is Flag.ERROR and v.value == pytest.approx(0.2)
+
+
+@st.composite
+def params(draw):
+    return {
+        "warn_fraction": draw(st.sampled_from([0.0005, 0.005, 0.05, 0.5])),
+        "outside_tolerance_m": draw(st.sampled_from([0.0, 0.1, 0.5])),
+        "hull_tolerance_m": draw(st.sampled_from([0.0, 1e-4, 1e-3])),
+    }
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(traj=trajectories(max_samples=80), overrides=params(), radius=st.sampled_from([0.3, 0.5, 0.8]))
+def test_agrees_with_the_per_sample_reference(traj, overrides, radius):
+    scene = Scene(workspace=Workspace(radius_m=radius))
+    c = critic("space_usage")
+    p = c.Params(**overrides)
+    v = c.check(traj, scene, p)
+    ref = ref_space_usage(traj, scene, p)
+    assert_well_formed(v, "space_usage")
+    if ref["flag"] is Flag.ERROR:
+        assert_matches_reference(v, ref)
+        return
+    # the volume may be under-estimated by at most the decimation bound
+    bound = v.details["volume_error_bound_m3"] + 1e-12 * max(1.0, ref["volume"])
+    assert ref["volume"] - bound <= v.value <= ref["volume"] + 1e-9 * max(1.0, ref["volume"])
+    limit = p.warn_fraction * scene.workspace.volume_m3
+    if abs(ref["volume"] - limit) > bound:
+        assert v.flag is ref["flag"]
