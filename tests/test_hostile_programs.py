@@ -105,6 +105,8 @@ HOSTILE: list[tuple[str, str, str]] = [
     ("deep_data_compare", "a = []\nb = []\nfor i in range(3000):\n    a = [a]\n    b = [b]\nx = a == b", "nested more"),
     ("deep_data_hash", "t = ()\nfor i in range(3000):\n    t = (t,)\nd = {t: 1}", "nested more than 100 levels"),
     ("append_forever", "a = []\nwhile True:\n    a.append('x' * 100000)", "in total"),
+    ("retained_strings", "a = []\nb = list(range(5000))\nwhile True:\n    a.append(str(b))", "in total"),
+    ("retained_tuples", "a = []\nb = list(range(10000))\nwhile True:\n    a.append(list(zip(b, b)))", "in total"),
     ("append_to_iterated", "a = [1]\nfor x in a:\n    a.append(x)", "10001 elements"),
     ("string_doubling", "x = 'a'\nwhile True:\n    x = x + x", "characters"),
     ("join_bomb", "s = ' '.join(['a' * 10000] * 10000)", "characters"),

@@ -102,7 +102,7 @@ class Budget:
     """Elements of one list/tuple/dict/set, or of any sequence materialised from an iterable (e.g. ``list(range(n))``)."""
     max_str_len: int = 100_000
     """Characters of one string."""
-    max_alloc: int = 5_000_000
+    max_alloc: int = 2_000_000
     """Elements plus characters the program may create over the whole run."""
     max_int_bits: int = 4_096
     """Bit length of any integer (``2**4096`` is ~1234 digits)."""
@@ -1744,8 +1744,8 @@ class _Interpreter:
             text = repr(value)
         else:
             text = repr(value)
-        if len(text) > self.b.max_str_len:
-            self._check_str(len(text), node)
+        if text is not value:
+            self._check_str(len(text), node)  # counts the new string against the allocation budget
         return text
 
     # ---- builtins -----------------------------------------------------------------------

@@ -265,7 +265,9 @@ class _Planner:
         # the equivalent base angle closest to where the base is now
         seed[0] = home[0] + turn
         seed[0] += 2 * math.pi * round((self.q[0] - seed[0]) / (2 * math.pi))
-        seed[-1] = home[-1] + turn + ((self.yaw if yaw is None else yaw) - 0.0)
+        # with the fingers down, turning the base by `turn` turns the fingers by +turn and
+        # wrist 3 turns them by minus its angle: compensate both to keep the requested yaw
+        seed[-1] = home[-1] + turn - (self.yaw if yaw is None else yaw)
         seed[-1] += 2 * math.pi * round((self.q[-1] - seed[-1]) / (2 * math.pi))
         return seed
 
