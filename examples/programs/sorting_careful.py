@@ -25,7 +25,7 @@ def place_in(box, dy):
     lib.set_speed(0.3)
 
 
-spots = {"brown_box": [-0.04, 0.04], "white_box": [0.0]}
+spots = {"brown_box": [-0.035, 0.035], "white_box": [0.0]}
 for apple in objects:
     pick(apple)
     box = brown_box if apple.ripeness == "ripe" else white_box
