@@ -73,6 +73,7 @@ __all__ = [
     "Verdict",
     "Report",
     "critique",
+    "select_critics",
     "get_critics",
     "critic_sources",
     "critic_distributions",
@@ -189,6 +190,28 @@ def _select(critics: Any, available: dict[str, Any]) -> list[Any]:
     return selected
 
 
+def select_critics(
+    critics: Iterable[str | Critic] | str | None = None,
+    params: Mapping[str, ParamsArg] | None = None,
+) -> list[tuple[Critic, BaseModel]]:
+    """Resolve a critic selection and its parameters without running anything.
+
+    Returns ``[(critic, params), ...]`` in run order. Raises :class:`CriticError`
+    for unknown critic names (with a did-you-mean), unknown or invalid parameters
+    (naming the critic and the field), or params given for a critic that is not
+    installed. :func:`critique` calls this first; a CLI can call it before a
+    slow simulation to fail fast.
+    """
+    available = get_critics()
+    selected = _select(critics, available)
+    params = dict(params or {})
+    selected_names = {c.name for c in selected}
+    for name in params:
+        if not isinstance(name, str) or (name not in available and name not in selected_names):
+            raise CriticError(f"params given for unknown critic {name!r}{_did_you_mean(str(name), available)}")
+    return [(critic, resolve_params(critic, params.get(critic.name))) for critic in selected]
+
+
 def critique(
     trajectory: "Trajectory",
     scene: "Scene",
@@ -198,27 +221,20 @@ def critique(
     """Run critics on a trajectory in a scene and collect their verdicts in a :class:`Report`.
 
     ``critics``: names (or a comma-separated string, or critic objects) to run,
-    in that order; default every installed critic (:func:`get_critics`).
-    ``params``: ``{critic_name: {field: value} | ParamsInstance}`` overriding
-    thresholds. Unknown critic names, unknown or invalid parameters raise
-    :class:`CriticError` naming the critic and the field; so does a critic that
-    fails or returns something other than a :class:`Verdict`.
+    in that order; default every installed critic (:func:`get_critics`: the five
+    built-ins plus any plugin's). ``params``: ``{critic_name: {field: value} |
+    ParamsInstance}`` overriding thresholds. Unknown critic names, unknown or
+    invalid parameters raise :class:`CriticError` naming the critic and the
+    field; so does a critic that fails or returns something other than a
+    :class:`Verdict`.
     """
-    available = get_critics()
-    selected = _select(critics, available)
-    params = dict(params or {})
-    selected_names = {c.name for c in selected}
-    for name in params:
-        if name not in available and name not in selected_names:
-            raise CriticError(f"params given for unknown critic {name!r}{_did_you_mean(name, available)}")
     verdicts: list[Verdict] = []
     used: dict[str, dict[str, Any]] = {}
-    for critic in selected:
-        p = resolve_params(critic, params.get(critic.name))
+    for critic, p in select_critics(critics, params):
         try:
             verdict = critic.check(trajectory, scene, p)
-        except CriticError:
-            raise
+        except CriticError as exc:
+            raise CriticError(f"critic {critic.name!r}: {exc}") from exc
         except RoboCriticsError as exc:
             raise CriticError(f"critic {critic.name!r} cannot judge this trajectory: {exc}") from exc
         except Exception as exc:  # a plugin's bug: say which critic

@@ -38,9 +38,12 @@ __all__ = [
     "critic_sources",
     "critic_distributions",
     "ENTRY_POINT_GROUP",
+    "BUILTIN_CRITICS",
 ]
 
 ENTRY_POINT_GROUP = "robocritics"
+#: The paper's five critics, in the order the paper lists them (and the order they run in).
+BUILTIN_CRITICS = ("space_usage", "collision", "joint_speed", "end_effector_pose", "pinch_point")
 log = logging.getLogger("robocritics.plugins")
 
 pm = pluggy.PluginManager("robocritics")
@@ -94,8 +97,9 @@ def load_plugins() -> None:
         return
     _loaded = True
     eps = list(entry_points(group=ENTRY_POINT_GROUP))
-    # robocritics' own critics first, then third parties alphabetically: a stable order.
-    eps.sort(key=lambda ep: (_dist_of(ep)[0] != "robocritics", ep.name))
+    # robocritics' own critics first (in the paper's order), then third parties alphabetically.
+    order = {name: i for i, name in enumerate(BUILTIN_CRITICS)}
+    eps.sort(key=lambda ep: (_dist_of(ep)[0] != "robocritics", order.get(ep.name, len(order)), ep.name))
     for ep in eps:
         dist = _dist_of(ep)
         dist_label = " ".join(p for p in dist if p)

@@ -19,12 +19,11 @@ from typing import Any, Iterable
 from pydantic import BaseModel, ConfigDict, Field, computed_field
 
 from .errors import CriticError
+from .plugins import BUILTIN_CRITICS
 from .verdict import Flag, Signal, Verdict, fmt_value, format_lines
 
 __all__ = ["Report", "BUILTIN_CRITICS", "ALL_PASSED"]
 
-#: The paper's five critics, in the order the paper lists them.
-BUILTIN_CRITICS = ("space_usage", "collision", "joint_speed", "end_effector_pose", "pinch_point")
 ALL_PASSED = "All selected critics passed."
 
 _FLAG_COLOURS = {"OK": "#1a7f37", "WARNING": "#b35900", "ERROR": "#c62828"}

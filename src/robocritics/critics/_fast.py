@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["positions", "sq_norm3", "row_max", "row_min", "take_columns"]
+__all__ = ["positions", "sq_norm3", "row_max", "row_min", "take_columns", "time_derivative"]
 
 
 def positions(frames: np.ndarray, select=None) -> np.ndarray:
     """Contiguous ``(T, L, 3)`` frame origins, m, from ``(T, L, 4, 4)`` poses (one gather)."""
     if select is not None:
-        return np.ascontiguousarray(frames[:, select, :3, 3])
+        return np.ascontiguousarray(frames[:, select][:, :, :3, 3])
     return np.ascontiguousarray(frames[:, :, :3, 3])
 
 
@@ -53,3 +53,30 @@ def take_columns(a: np.ndarray, cols: np.ndarray) -> np.ndarray:
     if cols.size and cols[-1] - cols[0] + 1 == cols.size and np.all(np.diff(cols) == 1):
         return np.ascontiguousarray(a[:, cols[0] : cols[-1] + 1])
     return np.take(a, cols, axis=1)
+
+
+def time_derivative(y: np.ndarray, time: np.ndarray) -> np.ndarray:
+    """d y / d time along the last axis of ``y (..., T)``, for uneven ``time (T,)``.
+
+    Second-order central differences inside, first-order one-sided differences
+    at both ends: the same numbers as ``numpy.gradient(y, time, axis=-1)``
+    (``edge_order=1``), computed on contiguous rows. Zero for a single sample.
+    """
+    T = y.shape[-1]
+    out = np.empty_like(y, dtype=float)
+    if T < 2:
+        out[...] = 0.0
+        return out
+    dt = np.diff(time)
+    out[..., 0] = (y[..., 1] - y[..., 0]) / dt[0]
+    out[..., -1] = (y[..., -1] - y[..., -2]) / dt[-1]
+    if T > 2:
+        h1, h2 = dt[:-1], dt[1:]  # t_i - t_{i-1}, t_{i+1} - t_i
+        a = -h2 / (h1 * (h1 + h2))
+        b = (h2 - h1) / (h1 * h2)
+        c = h1 / (h2 * (h1 + h2))
+        mid = out[..., 1:-1]
+        np.multiply(y[..., :-2], a, out=mid)
+        mid += y[..., 1:-1] * b
+        mid += y[..., 2:] * c
+    return out

@@ -31,8 +31,9 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from ..critic import CriticParams, Flag, Verdict, during, fmt_length, fmt_value, hookimpl, make_evidence, make_signal
+from ._fast import take_columns
 
-__all__ = ["CollisionCritic", "register_critics", "counted_mask", "counted_distances"]
+__all__ = ["CollisionCritic", "register_critics", "Counted", "counted_distances"]
 
 
 class Params(CriticParams):
@@ -60,47 +61,66 @@ def _run_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.cumsum(change) - 1, values[starts]
 
 
-def counted_mask(trajectory, ignore_pairs=()) -> tuple[np.ndarray, np.ndarray | None]:
-    """Which proximity columns count, per sample.
+class Counted:
+    """Which proximity pairs count for the collision critic, per sample.
 
-    Returns ``(columns (K,) bool, per_sample (T, K) bool or None)``: ``columns``
-    selects the environment pairs (minus ``ignore_pairs``); ``per_sample`` further
-    removes intended contacts at each sample (None when no contact is intended
-    anywhere, i.e. ``columns`` applies to every sample).
+    ``columns (K,)`` selects the environment pairs (minus ignored ones);
+    ``gcols`` are those whose a-side is the gripper or the carried object, and
+    ``intended (T, len(gcols))`` marks, per sample, which of them are intended
+    contacts (None when none ever is). Built from per-step and per-attachment
+    tables indexed by sample: no loop over samples.
     """
-    pairs = trajectory.pairs
-    T, K = trajectory.proximity.shape
-    columns = np.array([p.kind == "environment" and p.name not in ignore_pairs for p in pairs], dtype=bool)
-    gcols = np.flatnonzero(columns & np.array([p.group_a in ("gripper", "attached") for p in pairs], dtype=bool))
-    if gcols.size == 0:
-        return columns, None
-    entities = [pairs[k].b_entity for k in gcols]
-    intended = None
-    # contacts allowed by each program step: an (S, Kg) table, indexed by the step of each sample
-    if trajectory.steps:
-        table = np.array([[e != "" and e in s.contacts for e in entities] for s in trajectory.steps], dtype=bool)
-        if table.any():
-            intended = table[trajectory.step]
-    # the object held at t: run-length code `attached` (it changes a few times per program)
-    run, held = _run_ids(trajectory.attached)
-    if held.size > 1 or held[0] != "":
-        att_table = np.array([[h != "" and e == h for e in entities] for h in held.tolist()], dtype=bool)
-        if att_table.any():
-            intended = att_table[run] if intended is None else intended | att_table[run]
-    if intended is None:
-        return columns, None
-    per_sample = np.empty((T, K), dtype=bool)
-    per_sample[:] = columns
-    per_sample[:, gcols] = ~intended
-    return columns, per_sample
+
+    def __init__(self, trajectory, ignore_pairs=()):
+        pairs = trajectory.pairs
+        self.columns = np.array([p.kind == "environment" and p.name not in ignore_pairs for p in pairs], dtype=bool)
+        self.gcols = np.flatnonzero(
+            self.columns & np.array([p.group_a in ("gripper", "attached") for p in pairs], dtype=bool)
+        )
+        self.intended: np.ndarray | None = None
+        if self.gcols.size == 0:
+            return
+        entities = [pairs[k].b_entity for k in self.gcols]
+        intended = None
+        # contacts allowed by each program step: an (S, Kg) table, indexed by the step of each sample
+        if trajectory.steps:
+            table = np.array([[e != "" and e in s.contacts for e in entities] for s in trajectory.steps], dtype=bool)
+            if table.any():
+                intended = table[trajectory.step]
+        # the object held at t: run-length code `attached` (it changes a few times per program)
+        run, held = _run_ids(trajectory.attached)
+        if held.size > 1 or held[0] != "":
+            att_table = np.array([[h != "" and e == h for e in entities] for h in held.tolist()], dtype=bool)
+            if att_table.any():
+                intended = att_table[run] if intended is None else intended | att_table[run]
+        self.intended = intended
+
+    def row_mask(self, rows) -> np.ndarray:
+        """``(len(rows), K)`` (or ``(K,)`` for one row) mask of the pairs that count at ``rows``."""
+        if self.intended is None:
+            return self.columns
+        rows = np.asarray(rows)
+        mask = np.empty(rows.shape + self.columns.shape, dtype=bool)
+        mask[...] = self.columns
+        mask[..., self.gcols] = ~self.intended[rows]
+        return mask
+
+    def closest(self, P: np.ndarray) -> np.ndarray:
+        """``(T,)`` closest counted distance per sample, m (+inf where nothing counts)."""
+        if self.intended is None:
+            return np.min(P, axis=1, where=self.columns, initial=np.inf)
+        always = self.columns.copy()
+        always[self.gcols] = False
+        out = np.min(P, axis=1, where=always, initial=np.inf)
+        gripper = np.min(take_columns(P, self.gcols), axis=1, where=~self.intended, initial=np.inf)
+        return np.minimum(out, gripper, out=out)
 
 
 def counted_distances(trajectory, ignore_pairs=()) -> np.ndarray:
-    """``(T, K)`` proximity with every pair that does not count (self pairs, ignored pairs,
-    intended contacts) set to +inf, m. For tests and plots; the critic avoids this copy."""
-    columns, per_sample = counted_mask(trajectory, ignore_pairs)
-    where = per_sample if per_sample is not None else np.broadcast_to(columns, trajectory.proximity.shape)
-    return np.where(where, trajectory.proximity, np.inf)
+    """``(T, K)`` proximity, m, with every pair that does not count (self pairs, ignored pairs,
+    intended contacts) set to +inf. For tests and plots; the critic avoids this copy."""
+    counted = Counted(trajectory, ignore_pairs)
+    return np.where(counted.row_mask(np.arange(len(trajectory))), trajectory.proximity, np.inf)
 
 
 def _part(pair) -> str:
@@ -119,8 +139,8 @@ class CollisionCritic:
     def check(self, trajectory, scene, params: Params) -> Verdict:
         time = trajectory.time
         P = trajectory.proximity
-        columns, per_sample_mask = counted_mask(trajectory, params.ignore_pairs)
-        if not columns.any():
+        counted = Counted(trajectory, params.ignore_pairs)
+        if not counted.columns.any():
             return Verdict(
                 critic=self.name,
                 flag=Flag.OK,
@@ -128,9 +148,7 @@ class CollisionCritic:
                 threshold=params.d_warn_m,
                 unit="m",
             )
-        where = per_sample_mask if per_sample_mask is not None else columns
-        # D_t: closest counted pair per sample, without copying the (T, K) proximity
-        per_sample = np.min(P, axis=1, where=where, initial=np.inf)
+        per_sample = counted.closest(P)  # D_t, without copying the (T, K) proximity
         wt = int(np.argmin(per_sample))
         worst = float(per_sample[wt])
         pairs = trajectory.pairs
@@ -153,17 +171,14 @@ class CollisionCritic:
                 signal=signal,
             )
 
-        def row_where(rows):
-            return per_sample_mask[rows] if per_sample_mask is not None else columns
-
-        wk = int(np.argmin(np.where(row_where(wt), P[wt], np.inf)))
+        wk = int(np.argmin(np.where(counted.row_mask(wt), P[wt], np.inf)))
         wp = pairs[wk]
         details = {"closest_pair": wp.name, "closest_distance_m": worst}
 
         def involved(threshold: float, strict: bool) -> tuple[np.ndarray, list[str], list[str]]:
             mask = per_sample < threshold if strict else per_sample <= threshold
             rows = np.flatnonzero(mask)
-            sub = np.where(row_where(rows), P[rows], np.inf)
+            sub = np.where(counted.row_mask(rows), P[rows], np.inf)
             hit = (sub < threshold) if strict else (sub <= threshold)
             col_hit = np.flatnonzero(hit.any(axis=0))
             links = list(dict.fromkeys(pairs[k].a for k in col_hit))

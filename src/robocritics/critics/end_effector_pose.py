@@ -37,6 +37,7 @@ from pydantic import Field, model_validator
 
 from ..critic import CriticParams, Flag, Verdict, during, fmt_value, hookimpl, make_evidence, make_signal
 from ..errors import CriticError
+from ._fast import time_derivative
 
 __all__ = ["EndEffectorPoseCritic", "register_critics", "spearing_speed"]
 
@@ -65,19 +66,22 @@ class Params(CriticParams):
 
 
 def spearing_speed(poses: np.ndarray, time: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(s (T,), v (T, 3), f (T, 3))``: spearing speed m/s, TCP velocity m/s, unit finger direction."""
-    p = poses[:, :3, 3]
-    f = poses[:, :3, 2]
-    norm = np.sqrt(np.einsum("ti,ti->t", f, f))
+    """``(s (T,), v (3, T), f (3, T))``: spearing speed m/s, TCP velocity m/s, unit finger direction.
+
+    ``poses (T, 4, 4)`` are the TCP poses; component rows (3, T) keep every operation contiguous.
+    """
+    p = np.ascontiguousarray(poses[:, :3, 3].T)  # (3, T) m
+    f = np.ascontiguousarray(poses[:, :3, 2].T)  # (3, T) finger direction
+    norm = np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
     if np.any(norm < 1e-9):
         i = int(np.argmax(norm < 1e-9))
         raise CriticError(f"the finger direction (z axis of the TCP frame) is zero at sample {i}; cannot judge spearing")
-    f = f / norm[:, None]
-    if len(time) < 2:
-        v = np.zeros_like(p)
-    else:
-        v = np.gradient(p, time, axis=0)
-    s = np.maximum(np.einsum("ti,ti->t", v, f), 0.0)
+    f /= norm
+    v = time_derivative(p, time)  # (3, T) m/s
+    s = v[0] * f[0]
+    s += v[1] * f[1]
+    s += v[2] * f[2]
+    np.maximum(s, 0.0, out=s)
     return s, v, f
 
 
@@ -92,12 +96,12 @@ class EndEffectorPoseCritic:
         s, v, f = spearing_speed(poses, time)
         wt = int(np.argmax(s))
         worst = float(s[wt])
-        speed = float(np.linalg.norm(v[wt]))
+        speed = float(np.linalg.norm(v[:, wt]))
         details = {
             "max_spearing_speed_m_s": worst,
             "tcp_speed_at_worst_m_s": speed,
             "alignment_at_worst": worst / speed if speed > 0 else 0.0,
-            "max_tcp_speed_m_s": float(np.sqrt(np.einsum("ti,ti->t", v, v)).max()),
+            "max_tcp_speed_m_s": float(np.sqrt((v * v).sum(axis=0)).max()),
         }
         signal = make_signal(
             time,

@@ -104,7 +104,7 @@ class JointSpeedCritic:
         if params.frames:
             sel = [trajectory.frame_index(n) for n in params.frames]
             names = tuple(names[i] for i in sel)
-            positions = trajectory.frames[:, sel, :3, 3]
+            positions = trajectory.frames[:, sel][:, :, :3, 3]
         else:
             positions = trajectory.frames[:, :, :3, 3]  # strided view, no copy
         time = trajectory.time

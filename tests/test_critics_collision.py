@@ -1,0 +1,124 @@
+"""collision: environment proximity, minus intended contacts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
+from critic_reference import ref_collision
+from robocritics.critic import Flag
+from robocritics.critics.collision import counted_distances
+from robocritics.trajectory import Step
+from strategies import trajectories
+from synth import env_pair, make_trajectory, self_pair
+
+T = 50
+TIME = np.arange(T) / 125.0
+
+
+def traj_with(pairs, distances, steps=None, step=None, attached=None):
+    prox = np.ones((T, len(pairs)))
+    for k, d in distances.items():
+        prox[:, k] = d
+    return make_trajectory(TIME, np.zeros((T, 1, 3)), pairs=pairs, proximity=prox, steps=steps, step=step, attached=attached)
+
+
+def dip(depth, at=slice(20, 30)):
+    d = np.full(T, 0.2)
+    d[at] = depth
+    return d
+
+
+def test_gripper_tip_inside_a_box_errs_naming_part_object_time_and_line():
+    pairs = [env_pair("left_finger", "white_box.wall_x+", group_b="container", entity="white_box")]
+    steps = [Step(skill="move_to", line=3), Step(skill="move_down", line=7)]
+    step = (np.arange(T) >= 15).astype(int)
+    v = run("collision", traj_with(pairs, {0: dip(-0.01)}, steps=steps, step=step))
+    assert v.flag is Flag.ERROR
+    assert v.value == pytest.approx(-0.01) and v.threshold == 0.0 and v.unit == "m"
+    assert "left_finger" in v.message and "white_box" in v.message and "penetrates" in v.message
+    assert "1.0 cm" in v.message and f"{TIME[20]:.2f} s" in v.message
+    assert v.evidence.lines == [7] and v.evidence.skills == ["move_down"]
+    assert v.evidence.objects == ["white_box"] and v.evidence.links == ["left_finger"]
+    assert (v.evidence.first_sample, v.evidence.last_sample) == (20, 29)
+    assert "avoid_collision(white_box)" in v.hint and "line 7" in v.hint
+    assert_well_formed(v, "collision")
+
+
+def test_close_pass_warns_far_is_ok():
+    pairs = [env_pair("forearm_link", "brown_box", group_a="arm", group_b="container")]
+    v = run("collision", traj_with(pairs, {0: dip(0.03)}))
+    assert v.flag is Flag.WARNING and v.value == pytest.approx(0.03) and v.threshold == 0.05
+    assert "forearm_link" in v.message and "brown_box" in v.message
+    assert_well_formed(v, "collision")
+    v = run("collision", traj_with(pairs, {0: dip(0.08)}))
+    assert v.flag is Flag.OK and v.value == pytest.approx(0.08)
+
+
+def test_intended_contacts_do_not_count():
+    pairs = [
+        env_pair("left_finger", "apple", entity="apple"),  # the grasp target
+        env_pair("gripper_body", "table", group_b="table", entity="table"),  # set-down surface
+        env_pair("left_finger", "box", group_b="container", entity="box"),
+    ]
+    steps = [Step(skill="move_down", line=4), Step(skill="close_gripper", line=5, contacts=("apple",)), Step(skill="open_gripper", line=9, contacts=("table",))]
+    step = np.zeros(T, dtype=int)
+    step[20:30] = 1
+    step[30:] = 2
+    attached = [""] * 30 + ["apple"] * 10 + [""] * 10
+    prox = {0: np.full(T, 0.2), 1: np.full(T, 0.2), 2: np.full(T, 0.2)}
+    prox[0][20:40] = -0.002  # fingers on the apple while grasping (step 1) and holding it (attached)
+    prox[1][30:50] = 0.0  # gripper at the table while setting down (step 2)
+    traj = traj_with(pairs, prox, steps=steps, step=step, attached=attached)
+    v = run("collision", traj)
+    assert v.flag is Flag.OK, v.message
+    # the same apple contact outside its grasp and while not held is a collision
+    prox[0][10] = -0.002
+    v = run("collision", traj_with(pairs, prox, steps=steps, step=step, attached=attached))
+    assert v.flag is Flag.ERROR and v.evidence.worst_sample == 10 and v.evidence.samples_flagged == 1
+
+
+def test_arm_links_always_count_even_against_the_grasp_target():
+    pairs = [env_pair("wrist_3_link", "apple", group_a="arm", entity="apple")]
+    steps = [Step(skill="close_gripper", line=5, contacts=("apple",))]
+    v = run("collision", traj_with(pairs, {0: dip(-0.001)}, steps=steps, attached=["apple"] * T))
+    assert v.flag is Flag.ERROR
+
+
+def test_carried_object_hitting_a_container_errs():
+    pairs = [env_pair("apple", "box", group_a="attached", group_b="container", entity="box")]
+    v = run("collision", traj_with(pairs, {0: dip(-0.005)}, attached=["apple"] * T))
+    assert v.flag is Flag.ERROR and "carried apple" in v.message
+
+
+def test_self_pairs_are_not_collisions_and_ignored_pairs_do_not_count():
+    pairs = [self_pair("forearm_link", "wrist_3_link"), env_pair("forearm_link", "plate", group_a="arm")]
+    traj = traj_with(pairs, {0: dip(-0.01), 1: dip(0.0)})
+    assert run("collision", traj).flag is Flag.ERROR
+    v = run("collision", traj, ignore_pairs=("forearm_link|plate",))
+    assert v.flag is Flag.OK and v.value is None
+
+
+def test_counted_distances_masks_what_does_not_count():
+    pairs = [self_pair("a", "b"), env_pair("left_finger", "apple")]
+    steps = [Step(skill="close_gripper", line=2, contacts=("apple",))]
+    D = counted_distances(traj_with(pairs, {0: 0.01, 1: 0.01}, steps=steps))
+    assert np.isinf(D).all()
+
+
+@st.composite
+def params(draw):
+    return {"d_warn_m": draw(st.sampled_from([0.01, 0.05, 0.1])), "penetration_m": draw(st.sampled_from([0.0, -0.01]))}
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(traj=trajectories(), overrides=params())
+def test_agrees_with_the_per_sample_reference(traj, overrides):
+    c = critic("collision")
+    p = c.Params(**overrides)
+    v = c.check(traj, None, p)
+    assert_matches_reference(v, ref_collision(traj, p))
+    assert_well_formed(v, "collision")
