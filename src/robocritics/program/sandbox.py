@@ -836,6 +836,8 @@ class _Interpreter:
                 raise self._error(f"{what} is far too long (more than {self.b.max_len} elements)", node) from None
             if n > self.b.max_len:
                 raise self._error(f"{what} would have {n} elements; the limit is {self.b.max_len}", node)
+            if t is _DICT_VIEWS[2]:
+                self._alloc_n(2 * n, node)  # the (key, value) tuples the consumer will create
             return value
         if t in _ITERATORS:
             out = []
@@ -844,6 +846,8 @@ class _Interpreter:
                 out.append(x)
                 if len(out) > limit:
                     raise self._error(f"{what} has more than {limit} elements; the limit is {limit}", node)
+            if out and type(out[0]) is tuple:
+                self._alloc_n(2 * len(out), node)  # zip/enumerate/items made a new tuple per element
             return out
         raise TypeError(f"'{_tname(value)}' object is not iterable" + _iter_hint(value))
 
