@@ -34,7 +34,10 @@ has rotation ``R = [x_6 y_6 z_6]`` and position ``p``):
 3. Wrist 3 ``q6 = atan2(-(y_6 · z_1) / sin q5, (x_6 · z_1) / sin q5)``. When
    ``sin q5 ≈ 0`` (wrist singularity: axes 4 and 6 align) only ``q4 + q6`` or
    ``q4 - q6`` is determined; ``q6`` is then set to a caller-chosen value (the
-   seed's, in :func:`ur_ik`) and ``q4`` absorbs the rest.
+   seed's, in :func:`ur_ik`) and ``q4`` absorbs the rest. Since ``q6`` also
+   decides where the ``d5`` offset puts the wrist, a pose at the edge of the
+   workspace may be reachable only for some ``q6``: then the nearest such
+   value is taken (see :func:`_singular_q6`).
 4. Shoulder lift, elbow, wrist 1 (``q2, q3, q4``): a planar 3R arm. From the
    flange frame, ``x_5 = cos q6 x_6 - sin q6 y_6``, ``z_4 = -(sin q6 x_6 + cos q6 y_6)``,
    ``x_4 = cos q5 x_5 - sin q5 z_6``; the wrist-1 centre is
