@@ -6,7 +6,6 @@ Every test talks over real sockets on 127.0.0.1 to the loopback controller.
 from __future__ import annotations
 
 import json
-import math
 import socket
 import struct
 import subprocess

@@ -5,10 +5,7 @@ Real sockets on 127.0.0.1, ephemeral ports.
 
 from __future__ import annotations
 
-import math
-import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -22,6 +19,7 @@ from robocritics.robot.ur import (
     RTDEClient,
     URSim,
     parse_streaming_program,
+    program_status,
     send_program,
     streaming_program,
 )
@@ -126,6 +124,10 @@ def test_streaming_program_text_and_parameters_round_trip():
         streaming_program(lookahead_time_s=0.5)
     with pytest.raises(DeployError, match="gain must be in"):
         streaming_program(gain=50)
+    with pytest.raises(DeployError, match="is not a streaming-program state"):
+        program_status({"output_int_register_24": 1, "output_int_register_25": 17, "output_int_register_26": 1, "output_double_register_24": 0.0})
+    with pytest.raises(DeployError, match="lacks 'output_int_register_26'"):
+        program_status({"output_int_register_24": 1, "output_int_register_25": 1})
     with pytest.raises(DeployError, match="first line is not"):
         parse_streaming_program("def f():\n  movej([0,0,0,0,0,0])\nend\n")
 
@@ -158,8 +160,9 @@ def test_streamed_servo_sequence_reaches_its_target(sim):
         assert mid.runtime_state == 2 and mid.safety_mode == 1
         assert mid.applied_seq == st.seq or mid.applied_seq >= st.seq - 3
         end = st.finish()
-        assert end["output_int_register_25"] == ProgramState.DONE
-        assert end["output_int_register_24"] == st.seq
+        status = program_status(end)
+        assert status.state is ProgramState.DONE and status.applied_seq == st.seq and status.session == 7
+        assert status.gripper_opening_m == 0.01
         err = max(abs(a - b) for a, b in zip(end["actual_q"], target))
         assert err < 2e-3
         snap = sim.snapshot()

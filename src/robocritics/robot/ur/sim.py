@@ -54,7 +54,6 @@ Run it from a shell with ``python -m robocritics.robot.ur.sim`` (or the
 from __future__ import annotations
 
 import argparse
-import collections
 import logging
 import math
 import re
@@ -964,7 +963,9 @@ class URSim:
     def _tick(self) -> None:
         s = self._state
         s.tick += 1
-        if self._program is not None:
+        if self._program is not None and s.runtime_state == PAUSED:
+            self._decelerate(s, CONTROLLER_STOP_DECEL)
+        elif self._program is not None:
             self._program.step(s)
         elif self._stopping_decel is not None:
             if self._decelerate(s, self._stopping_decel):

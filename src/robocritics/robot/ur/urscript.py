@@ -51,7 +51,7 @@ import socket
 import time
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 from robocritics.errors import DeployError, RTDEError
 
@@ -72,6 +72,8 @@ __all__ = [
     "ProgramState",
     "Command",
     "StreamingProgramParams",
+    "ProgramStatus",
+    "program_status",
     "streaming_program",
     "parse_streaming_program",
     "setpoint",
@@ -354,6 +356,44 @@ def setpoint(
         values[field_name] = float(value)
     values[INPUT_FIELDS[9]] = float(gripper_opening_m)
     return values
+
+
+@dataclass(frozen=True)
+class ProgramStatus:
+    """The streaming program's progress as reported in its output registers."""
+
+    applied_seq: int
+    """Last sequence number the program applied (output_int_register_24)."""
+    state: ProgramState
+    """output_int_register_25."""
+    session: int
+    """Session id the program read at start (output_int_register_26)."""
+    gripper_opening_m: float
+    """Gripper opening last applied [m] (output_double_register_24)."""
+
+
+def program_status(values: Mapping[str, Any]) -> ProgramStatus:
+    """Decode :data:`OUTPUT_FIELDS` from an RTDE state dict (e.g. ``RTDEClient.latest()``).
+
+    Raises :class:`DeployError` if a field is missing or the state register holds
+    a value no streaming program writes (another program owns the registers?).
+    """
+    try:
+        raw_state = values[OUTPUT_FIELDS[1]]
+        status = ProgramStatus(
+            applied_seq=int(values[OUTPUT_FIELDS[0]]),
+            state=ProgramState(raw_state),
+            session=int(values[OUTPUT_FIELDS[2]]),
+            gripper_opening_m=float(values[OUTPUT_FIELDS[3]]),
+        )
+    except KeyError as exc:
+        raise DeployError(f"RTDE state lacks {exc.args[0]!r}; add urscript.OUTPUT_FIELDS to the output recipe") from None
+    except ValueError:
+        raise DeployError(
+            f"{OUTPUT_FIELDS[1]} = {values[OUTPUT_FIELDS[1]]!r} is not a streaming-program state "
+            f"({', '.join(f'{s.value} {s.name}' for s in ProgramState)}); is another program using registers 24-26?"
+        ) from None
+    return status
 
 
 def send_program(host: str, program: str, port: int = SECONDARY_PORT, timeout_s: float = 2.0) -> None:
