@@ -26,6 +26,7 @@ import argparse
 import json
 import math
 import multiprocessing as mp
+import os
 import platform
 import statistics
 import sys
@@ -87,58 +88,58 @@ def run(duration_s: float, rate_hz: float, spin_us: float, lookahead_s: float, g
 
 
 def _stream(rtde_port, secondary_port, duration_s, rate_hz, period, spin, lookahead_s, gain) -> dict:
-    if True:
-        with RTDEClient("127.0.0.1", rtde_port, timeout_s=1.0, buffer_size=100_000) as rtde:
-            rtde.setup_outputs(["timestamp", "actual_q", "target_q", "runtime_state", "safety_mode", *OUTPUT_FIELDS], 500.0)
-            rtde.setup_inputs(list(INPUT_FIELDS))
-            rtde.start()
-            q0 = list(rtde.wait_next(1.0)["actual_q"])
-            seq = 0
+    with RTDEClient("127.0.0.1", rtde_port, timeout_s=1.0, buffer_size=100_000) as rtde:
+        rtde.setup_outputs(["timestamp", "actual_q", "target_q", "runtime_state", "safety_mode", *OUTPUT_FIELDS], 500.0)
+        rtde.setup_inputs(list(INPUT_FIELDS))
+        rtde.start()
+        q0 = list(rtde.wait_next(1.0)["actual_q"])
+        seq = 0
 
-            def send(q, done=False):
-                nonlocal seq
-                if not done:
-                    seq += 1
-                rtde.send(setpoint(seq, q, 0.085, done=done, session=42))
+        def send(q, done=False):
+            nonlocal seq
+            if not done:
+                seq += 1
+            rtde.send(setpoint(seq, q, 0.085, done=done, session=42))
 
-            # hold while the program starts (the watchdog needs a live client before it is armed)
+        # hold while the program starts (the watchdog needs a live client before it is armed)
+        send(q0)
+        send_program("127.0.0.1", streaming_program(lookahead_time_s=lookahead_s, gain=gain), secondary_port)
+        t_next = time.perf_counter()
+        give_up = t_next + 2.0
+        while True:
             send(q0)
-            send_program("127.0.0.1", streaming_program(lookahead_time_s=lookahead_s, gain=gain), secondary_port)
-            t_next = time.perf_counter()
-            while True:
-                send(q0)
-                t_next += period
-                time.sleep(max(0.0, t_next - time.perf_counter()))
-                st = rtde.latest()
-                if st.get("output_int_register_25") == 1 and st.get("output_int_register_26") == 42:
-                    break
-                if time.perf_counter() - t_next > 2.0:
-                    raise SystemExit(f"program did not start: {st}")
-            rtde.drain()
+            t_next += period
+            time.sleep(max(0.0, t_next - time.perf_counter()))
+            st = rtde.latest()
+            if st.get("output_int_register_25") == 1 and st.get("output_int_register_26") == 42:
+                break
+            if time.perf_counter() > give_up:
+                raise SystemExit(f"program did not start: {st}")
+        rtde.drain()
 
-            n = round(duration_s * rate_hz)
-            target = [a + d for a, d in zip(q0, AMPLITUDE_RAD)]
-            deadlines, sent = [], []
-            t0 = time.perf_counter() + 0.01
-            for k in range(1, n + 1):
-                deadline = t0 + k * period
-                remaining = deadline - time.perf_counter()
-                if remaining > spin:
-                    time.sleep(remaining - spin)
-                while time.perf_counter() < deadline:
-                    pass
-                s = min_jerk(k / n)
-                send([a + s * (b - a) for a, b in zip(q0, target)])
-                sent.append(time.perf_counter())
-                deadlines.append(deadline)
-            motion = rtde.drain()
-            # hold the final setpoint, then ask the program to finish
-            for k in range(1, round(0.5 * rate_hz) + 1):
-                deadline = sent[-1] + k * period
-                time.sleep(max(0.0, deadline - time.perf_counter()))
-                send(target)
-            send(target, done=True)
-            final = rtde.wait_for(lambda st: st["runtime_state"] == 1, 2.0, "the program to end")
+        n = round(duration_s * rate_hz)
+        target = [a + d for a, d in zip(q0, AMPLITUDE_RAD)]
+        deadlines, sent = [], []
+        t0 = time.perf_counter() + 0.01
+        for k in range(1, n + 1):
+            deadline = t0 + k * period
+            remaining = deadline - time.perf_counter()
+            if remaining > spin:
+                time.sleep(remaining - spin)
+            while time.perf_counter() < deadline:
+                pass
+            s = min_jerk(k / n)
+            send([a + s * (b - a) for a, b in zip(q0, target)])
+            sent.append(time.perf_counter())
+            deadlines.append(deadline)
+        motion = rtde.drain()
+        # hold the final setpoint, then ask the program to finish
+        for k in range(1, round(0.5 * rate_hz) + 1):
+            deadline = sent[-1] + k * period
+            time.sleep(max(0.0, deadline - time.perf_counter()))
+            send(target)
+        send(target, done=True)
+        final = rtde.wait_for(lambda st: st["runtime_state"] == 1, 2.0, "the program to end")
 
     intervals = [b - a for a, b in zip(sent, sent[1:])]
     period_err_ms = [abs(dt - period) * 1e3 for dt in intervals]
@@ -187,7 +188,11 @@ def main(argv: list[str] | None = None) -> int:
         ("protective stops", str(len(r["protective_stops"]))),
     ]
     w = max(len(a) for a, _ in rows)
-    print(f"bench_stream — loopback URSim, Python {platform.python_version()}, {platform.machine()}")
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(
+        f"bench_stream — loopback URSim in its own process, Python {platform.python_version()}, "
+        f"{platform.machine()}, {os.cpu_count()} CPUs, load average {load}"
+    )
     print("-" * (w + 40))
     for a, b in rows:
         print(f"{a:<{w}}  {b}")
