@@ -28,7 +28,11 @@ through a guard" because
   carries the line and column of the offending expression.
 
 The price is speed (a few microseconds per node), irrelevant for robot
-programs of a few hundred steps.
+programs of a few hundred steps. The interpreter recurses in Python for nested
+calls and expressions; while a program runs, the recursion limit is raised (if
+lower) to the current depth + 4000 and restored afterwards, and a
+``RecursionError`` still becomes a :class:`ProgramError`. Runs are independent
+(each has its own interpreter and scopes) and may happen in several threads.
 
 What programs may use
 ---------------------
