@@ -28,9 +28,10 @@ The simulated streaming program follows :mod:`~robocritics.robot.ur.urscript`
 statement by statement, once per 2 ms control cycle:
 
 * ``servoj`` tracking: joint velocity = setpoint velocity (difference of the
-  last two setpoints over their sequence distance × 2 ms) + (target − q)/τ with
-  τ = lookahead_time × 300 / gain (at least 2 ms), clipped to the UR3e joint
-  speed limits (π rad/s joints 0-2, 2π rad/s joints 3-5).
+  last two setpoints over their sequence distance × 2 ms; applied in the cycle a
+  new setpoint arrives) + (target − q)/τ with τ = lookahead_time × 300 / gain
+  (at least 2 ms), clipped to the UR3e joint speed limits (π rad/s joints 0-2,
+  2π rad/s joints 3-5). No acceleration limit, no dynamics.
 * RTDE watchdog: no update of ``input_int_register_24`` for longer than
   ``1/min_hz`` s → the controller stops the program (``runtime_state`` STOPPED,
   joints decelerate at 4 rad/s²) and sends a text message.
@@ -79,7 +80,7 @@ from robocritics.robot.ur.rtde import (
     pack_package,
 )
 
-__all__ = ["URSim", "SimSnapshot", "SimEvent", "OUTPUT_FIELDS", "INPUT_FIELDS", "main"]
+__all__ = ["URSim", "SimSnapshot", "SimEvent", "KNOWN_OUTPUTS", "KNOWN_INPUTS", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -395,9 +396,9 @@ def _apply_pending(s: _State, p: dict) -> None:
         s.analog_out[1] = float(p["ao1"])
 
 
-OUTPUT_FIELDS: dict[str, tuple[str, _Getter]] = _build_outputs()
+KNOWN_OUTPUTS: dict[str, tuple[str, _Getter]] = _build_outputs()
 """Output fields the loopback controller knows: name → (RTDE type, getter)."""
-INPUT_FIELDS: dict[str, tuple[str, _Setter]] = _build_inputs()
+KNOWN_INPUTS: dict[str, tuple[str, _Setter]] = _build_inputs()
 """Input fields the loopback controller accepts: name → (RTDE type, setter)."""
 
 FIELDBUS_FIELDS = frozenset(
@@ -708,8 +709,8 @@ class URSim:
         self.speed_limits = tuple(float(v) for v in speed_limits)
         self._lock = threading.RLock()
         self._state = _State(initial_q, modes[robot_mode.upper()])
-        self._outputs = dict(OUTPUT_FIELDS)
-        self._inputs = dict(INPUT_FIELDS)
+        self._outputs = dict(KNOWN_OUTPUTS)
+        self._inputs = dict(KNOWN_INPUTS)
         for n, t in (extra_outputs or {}).items():
             self._outputs[n] = (t, lambda s, n=n, t=t: s.extras.get(n, _zero(t)))
         for n, t in (extra_inputs or {}).items():
