@@ -281,10 +281,27 @@ def _seg_cyl_sq(ax, ay, az, dx, dy, dz, R, H, tol=1e-12, max_iter=100):
         h = hr + np.where(ez != 0.0, dz * dz, 0.0)
         return g, h
 
+    # where the segment meets the cylinder: t in [0, 1], in the z slab and rho(t) <= R
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        ds = np.where(np.abs(dz) < _TINY_D, 1e-300, dz)
+        z0 = (-H - az) / ds
+        z1 = (H - az) / ds
+        lo = np.maximum(np.minimum(z0, z1), 0.0)
+        hi = np.minimum(np.maximum(z0, z1), 1.0)
+        disc = B * B - A * (C - R * R)
+        sq = np.sqrt(np.maximum(disc, 0.0))
+        q = -(B + np.where(B >= 0.0, sq, -sq))
+        r1 = q / A
+        r2 = (C - R * R) / q
+        flat = A <= 1e-300
+        lo = np.where(flat, np.where(C <= R * R, lo, np.inf), np.maximum(lo, np.minimum(r1, r2)))
+        hi = np.where(flat, hi, np.minimum(hi, np.maximum(r1, r2)))
+        lo = np.where(~flat & (disc < 0.0), np.inf, lo)
+    hit = lo <= hi
     g0, _ = grad(np.zeros_like(ax), ax, az, dz, A, B, C, R, H, hess=False)
     g1, _ = grad(np.ones_like(ax), ax, az, dz, A, B, C, R, H, hess=False)
     t = np.where(g0 >= 0.0, 0.0, 1.0)
-    idx = np.flatnonzero((g0 < 0.0) & (g1 > 0.0))
+    idx = np.flatnonzero((g0 < 0.0) & (g1 > 0.0) & ~hit)
     if idx.size:
         sub = [v[idx] for v in (ax, az, dz, A, B, C, R, H)]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -317,7 +334,7 @@ def _seg_cyl_sq(ax, ay, az, dx, dy, dz, R, H, tol=1e-12, max_iter=100):
     er = np.maximum(rho - R, 0.0)
     z = az + t * dz
     ez = np.maximum(np.abs(z) - H, 0.0)
-    return (er * er + ez * ez).reshape(shape)
+    return np.where(hit, 0.0, er * er + ez * ez).reshape(shape)
 
 
 def _dist_upper_half_ellipse(qx, qy, a, b):
