@@ -114,6 +114,24 @@ def test_controller_speaks_the_wire_format_byte_for_byte(sim):
         assert pkg == (ord("P"), b"\x01")
 
 
+def test_protocol_v1_layout_has_no_frequency_and_no_output_recipe_id(sim):
+    with socket.create_connection(("127.0.0.1", sim.rtde_port), timeout=2) as s:
+        s.sendall(b"\x00\x05V\x00\x01")
+        assert s.recv(4, socket.MSG_WAITALL) == b"\x00\x04V\x01"
+        names = b"timestamp,safety_mode"
+        s.sendall(struct.pack(">HB", 3 + len(names), ord("O")) + names)  # v1: names only
+        assert _recv_package(s) == (ord("O"), b"DOUBLE,INT32")  # v1: types only
+        s.sendall(b"\x00\x03S")
+        assert s.recv(4, socket.MSG_WAITALL) == b"\x00\x04S\x01"
+        cmd, payload = _recv_package(s)
+        assert cmd == ord("U") and len(payload) == 8 + 4  # no recipe id byte
+        assert struct.unpack(">di", payload)[1] == 1  # NORMAL
+        sim.broadcast_message("v1 text", MessageLevel.INFO)
+        while (pkg := _recv_package(s))[0] == ord("U"):
+            pass
+        assert pkg == (ord("M"), b"\x03v1 text")  # v1: level byte, then the text
+
+
 # ---------------------------------------------------------------------------- handshake
 
 
@@ -121,6 +139,8 @@ def test_handshake_negotiates_v2_and_reports_controller_version(sim):
     with RTDEClient("127.0.0.1", sim.rtde_port, timeout_s=1.0) as c:
         assert c.protocol_version == 2
         assert c.controller_version == (5, 15, 0, 0)
+        assert c._sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
+        assert c._sock.gettimeout() == 1.0
         recipe = c.setup_outputs(["timestamp", "actual_q"], frequency_hz=250)
         assert recipe.recipe_id == 1 and recipe.types == ("DOUBLE", "VECTOR6D")
         c.start()
