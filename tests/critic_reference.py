@@ -87,6 +87,8 @@ def ref_collision(traj, params) -> dict:
         for k, pair in enumerate(traj.pairs):
             if pair.kind != "environment" or pair.name in params.ignore_pairs:
                 continue
+            if pair.group_a == "attached" and pair.a != held:
+                continue  # that object is not being carried now
             if pair.group_a in ("gripper", "attached") and pair.b_entity != "":
                 if pair.b_entity in contacts or (held != "" and pair.b_entity == held):
                     continue  # intended contact

@@ -94,6 +94,19 @@ def test_carried_object_hitting_a_container_errs():
     assert v.flag is Flag.ERROR and "carried apple" in v.message
 
 
+def test_carried_object_pairs_count_only_while_it_is_held():
+    # the apple rests on the table (distance 0) before the grasp and after the release:
+    # not the robot's collision; the same contact while carried is
+    pairs = [env_pair("apple", "table", group_a="attached", group_b="table", entity="table")]
+    d = np.zeros(T)
+    held = [""] * 10 + ["apple"] * 30 + ["box"] * 10
+    d[10:40] = 0.1
+    assert run("collision", traj_with(pairs, {0: d}, attached=held)).flag is Flag.OK
+    d[25] = -0.003
+    v = run("collision", traj_with(pairs, {0: d}, attached=held))
+    assert v.flag is Flag.ERROR and v.evidence.worst_sample == 25 and v.evidence.samples_flagged == 1
+
+
 def test_self_pairs_are_not_collisions_and_ignored_pairs_do_not_count():
     pairs = [self_pair("forearm_link", "wrist_3_link"), env_pair("forearm_link", "plate", group_a="arm")]
     traj = traj_with(pairs, {0: dip(-0.01), 1: dip(0.0)})

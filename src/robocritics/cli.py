@@ -92,6 +92,9 @@ def _scene_for(program_path: str, scene_arg: str | None):
     from .scene import Scene
 
     if scene_arg:
+        looks_like_name = not scene_arg.endswith(".json") and "/" not in scene_arg and "\\" not in scene_arg
+        if looks_like_name and not Path(scene_arg).exists():
+            return Scene.builtin(scene_arg)  # unknown names get a did-you-mean
         return Scene.resolve(scene_arg)
     stem = Path(program_path).stem
     for name in Scene.builtin_names():

@@ -14,6 +14,11 @@ contacts are the task itself and are excluded, per sample:
 * the gripper (or the carried object) against the object attached at ``t``
   (``attached[t]``).
 
+A carried-object pair (``group_a == "attached"``, ``a`` = the object's id)
+only counts while that object is the one held (``attached[t] == a``): before
+the grasp and after the release the object rests in the scene, and its contact
+with what it rests on is not the robot's.
+
 Arm links against anything always count. With ``D_t = min_k d_{t,k}`` over the
 counted pairs:
 
@@ -65,10 +70,11 @@ class Counted:
     """Which proximity pairs count for the collision critic, per sample.
 
     ``columns (K,)`` selects the environment pairs (minus ignored ones);
-    ``gcols`` are those whose a-side is the gripper or the carried object, and
-    ``intended (T, len(gcols))`` marks, per sample, which of them are intended
-    contacts (None when none ever is). Built from per-step and per-attachment
-    tables indexed by sample: no loop over samples.
+    ``gcols`` are those whose a-side is the gripper or a carried object, and
+    ``intended (T, len(gcols))`` marks, per sample, which of them do not count
+    there: intended contacts, and carried-object pairs of an object that is not
+    held at that sample (None when that never happens). Built from per-step and
+    per-attachment tables indexed by sample: no loop over samples.
     """
 
     def __init__(self, trajectory, ignore_pairs=()):
@@ -81,19 +87,27 @@ class Counted:
         if self.gcols.size == 0:
             return
         entities = [pairs[k].b_entity for k in self.gcols]
-        intended = None
+        carriers = [pairs[k].a if pairs[k].group_a == "attached" else None for k in self.gcols]
+        excluded = None
         # contacts allowed by each program step: an (S, Kg) table, indexed by the step of each sample
         if trajectory.steps:
             table = np.array([[e != "" and e in s.contacts for e in entities] for s in trajectory.steps], dtype=bool)
             if table.any():
-                intended = table[trajectory.step]
-        # the object held at t: run-length code `attached` (it changes a few times per program)
+                excluded = table[trajectory.step]
+        # the object held at t: run-length code `attached` (it changes a few times per program), then per
+        # run: the gripper against the held object is intended, and a carried-object pair only exists
+        # while that object is the one held
         run, held = _run_ids(trajectory.attached)
-        if held.size > 1 or held[0] != "":
-            att_table = np.array([[h != "" and e == h for e in entities] for h in held.tolist()], dtype=bool)
-            if att_table.any():
-                intended = att_table[run] if intended is None else intended | att_table[run]
-        self.intended = intended
+        att_table = np.array(
+            [
+                [(h != "" and e == h) or (c is not None and c != h) for e, c in zip(entities, carriers)]
+                for h in held.tolist()
+            ],
+            dtype=bool,
+        )
+        if att_table.any():
+            excluded = att_table[run] if excluded is None else excluded | att_table[run]
+        self.intended = excluded
 
     def row_mask(self, rows) -> np.ndarray:
         """``(len(rows), K)`` (or ``(K,)`` for one row) mask of the pairs that count at ``rows``."""
@@ -189,8 +203,8 @@ class CollisionCritic:
             mask, links, objects = involved(params.penetration_m, strict=False)
             ev = make_evidence(trajectory, mask, worst=wt, links=links, objects=objects)
             depth = -worst
-            what = "penetrates" if worst < 0 else "touches"
-            extra = f" by {fmt_length(depth)}" if worst < 0 else ""
+            what = "penetrates" if depth >= 0.0005 else "touches"
+            extra = f" by {fmt_length(depth)}" if depth >= 0.0005 else ""
             others = [o for o in objects if o != _thing(wp)]
             also = f" It also hits {', '.join(others)}." if others else ""
             return Verdict(

@@ -1,0 +1,152 @@
+"""critique(): selection by name, parameter overrides and their errors, the Critic protocol."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydantic import BaseModel, Field
+
+from robocritics.critic import (
+    BUILTIN_CRITICS,
+    Critic,
+    CriticError,
+    CriticParams,
+    Flag,
+    Verdict,
+    critic_sources,
+    critique,
+    get_critics,
+    select_critics,
+)
+from robocritics.critics.joint_speed import Params as JointSpeedParams
+from robocritics.scene import Scene
+from synth import line_motion, make_trajectory, realistic_trajectory
+
+
+@pytest.fixture(scope="module")
+def traj():
+    time, pos = line_motion(1.2)
+    return make_trajectory(time, pos)
+
+
+def test_the_five_builtins_come_from_the_package_entry_points():
+    critics = get_critics()
+    assert list(critics)[:5] == list(BUILTIN_CRITICS)
+    sources = critic_sources()
+    for name in BUILTIN_CRITICS:
+        assert sources[name] == "robocritics"
+        assert isinstance(critics[name], Critic)
+
+
+@pytest.mark.parametrize("name", BUILTIN_CRITICS)
+def test_params_document_every_threshold(name):
+    c = get_critics()[name]
+    assert c.description and c.name == name
+    params = c.Params()  # every field has a default
+    for field, info in c.Params.model_fields.items():
+        assert info.description, f"{name}.{field} has no description"
+        if isinstance(getattr(params, field), float):
+            unit_said = any(u in field for u in ("_m", "_s", "fraction", "tolerance")) or " m" in info.description
+            assert unit_said, f"{name}.{field}: say the unit in the name or description"
+    # source of each number
+    text = " ".join((info.description or "") for info in c.Params.model_fields.values())
+    assert "source" in text or "CoFrame" in text or "paper" in text
+
+
+def test_select_by_name_in_order_and_comma_string(traj):
+    r = critique(traj, Scene(), critics=["pinch_point", "joint_speed"])
+    assert r.critics == ["pinch_point", "joint_speed"]
+    r = critique(traj, Scene(), critics="joint_speed, collision,joint_speed")
+    assert r.critics == ["joint_speed", "collision"]
+
+
+def test_unknown_critic_name_suggests_the_closest(traj):
+    with pytest.raises(CriticError, match=r"unknown critic 'joint_sped'; did you mean 'joint_speed'\?"):
+        critique(traj, Scene(), critics=["joint_sped"])
+    with pytest.raises(CriticError, match="no critics selected"):
+        critique(traj, Scene(), critics=[])
+
+
+def test_params_override_any_threshold(traj):
+    assert critique(traj, Scene(), critics=["joint_speed"]).flag_of("joint_speed") is Flag.WARNING
+    r = critique(traj, Scene(), critics=["joint_speed"], params={"joint_speed": {"warn_speed_m_s": 1.3}})
+    assert r.flag_of("joint_speed") is Flag.OK
+    assert r.params["joint_speed"]["warn_speed_m_s"] == 1.3
+    r = critique(traj, Scene(), critics=["joint_speed"], params={"joint_speed": JointSpeedParams(warn_speed_m_s=0.5, max_speed_m_s=1.0)})
+    assert r.flag_of("joint_speed") is Flag.ERROR
+
+
+@pytest.mark.parametrize(
+    "params, match",
+    [
+        ({"joint_speed": {"warn_speed_m_s": "fast"}}, r"critic 'joint_speed'.*warn_speed_m_s.*valid number"),
+        ({"joint_speed": {"warn_speed_m_s": -1}}, r"critic 'joint_speed'.*warn_speed_m_s.*greater than 0"),
+        ({"joint_speed": {"warn_speed": 1.0}}, r"unknown parameter 'warn_speed' \(did you mean 'warn_speed_m_s'\?\)"),
+        ({"joint_speed": {"warn_speed_m_s": 2.0}}, r"critic 'joint_speed'.*must not exceed max_speed_m_s"),
+        ({"joint_sped": {}}, r"params given for unknown critic 'joint_sped'; did you mean 'joint_speed'"),
+        ({"joint_speed": 3}, r"params for critic 'joint_speed' must be a mapping"),
+        ({"joint_speed": get_critics()["collision"].Params()}, r"must be a dict or Params of that critic"),
+    ],
+)
+def test_invalid_params_name_the_critic_and_field(traj, params, match):
+    with pytest.raises(CriticError, match=match):
+        critique(traj, Scene(), params=params)
+    with pytest.raises(CriticError, match=match):
+        select_critics(None, params)
+
+
+class Always:
+    """An ad-hoc critic object, passed to critique() without registering it."""
+
+    name = "always"
+    description = "always warns"
+
+    class Params(CriticParams):
+        level: str = Field("WARNING", description="flag to give")
+
+    def check(self, trajectory, scene, params):
+        return Verdict(critic=self.name, flag=Flag(params.level), message="as configured")
+
+
+def test_critic_objects_can_be_passed_directly(traj):
+    r = critique(traj, Scene(), critics=[Always(), "pinch_point"], params={"always": {"level": "ERROR"}})
+    assert r.flag_of("always") is Flag.ERROR
+    assert r.score == pytest.approx(5.0)  # 0 + 2 of 4, scaled
+
+
+def test_a_failing_critic_is_named(traj):
+    class Broken(Always):
+        name = "broken"
+
+        def check(self, trajectory, scene, params):
+            raise ZeroDivisionError("oops")
+
+    class Liar(Always):
+        name = "liar"
+
+        def check(self, trajectory, scene, params):
+            return {"flag": "OK"}
+
+    with pytest.raises(CriticError, match="critic 'broken' failed: ZeroDivisionError: oops"):
+        critique(traj, Scene(), critics=[Broken()])
+    with pytest.raises(CriticError, match="critic 'liar' returned dict"):
+        critique(traj, Scene(), critics=[Liar()])
+
+
+def test_checks_are_pure_and_deterministic():
+    traj = realistic_trajectory(duration_s=3.0, rate_hz=250.0, n_waypoints=3)
+    before = {k: getattr(traj, k).copy() for k in ("q", "time", "frames", "proximity", "step")}
+    a = critique(traj, Scene.builtin("sorting"))
+    b = critique(traj, Scene.builtin("sorting"))
+    assert a == b
+    for k, arr in before.items():
+        np.testing.assert_array_equal(getattr(traj, k), arr)
+
+
+def test_verdict_is_immutable_and_validated():
+    v = Verdict(critic="x", flag="WARNING", message="m")
+    assert v.flag is Flag.WARNING
+    with pytest.raises(Exception):
+        v.flag = Flag.OK
+    with pytest.raises(Exception):
+        Verdict(critic="x", flag="BAD", message="m")

@@ -1,0 +1,163 @@
+"""Report: score arithmetic, JSON round trip, feedback text, terminal text, notebook HTML."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from robocritics.critic import ALL_PASSED, BUILTIN_CRITICS, CriticError, Evidence, Flag, Report, Verdict, critique, make_signal
+from robocritics.scene import Scene
+from robocritics.trajectory import Step
+from synth import FRAME_NAMES, line_motion, make_trajectory, realistic_trajectory
+
+
+def verdict(name, flag, message="m", hint="", **kw):
+    return Verdict(critic=name, flag=flag, message=message, hint=hint, **kw)
+
+
+def report_of(flags, names=BUILTIN_CRITICS):
+    return Report(verdicts=[verdict(n, f) for n, f in zip(names, flags)], trajectory_hash="0" * 64)
+
+
+def test_flag_scores():
+    assert (Flag.OK.score, Flag.WARNING.score, Flag.ERROR.score) == (2, 1, 0)
+    assert Flag.worst([Flag.OK, Flag.ERROR, Flag.WARNING]) is Flag.ERROR
+
+
+@pytest.mark.parametrize(
+    "flags, score",
+    [
+        ([Flag.OK] * 5, 10),
+        ([Flag.ERROR] * 5, 0),
+        ([Flag.OK, Flag.WARNING, Flag.ERROR, Flag.OK, Flag.OK], 7),
+        ([Flag.WARNING] * 5, 5),
+    ],
+)
+def test_score_of_the_five_builtins_is_the_sum(flags, score):
+    r = report_of(flags)
+    assert r.score == score
+    assert r.has_errors == (Flag.ERROR in flags)
+
+
+def test_score_with_another_critic_set_is_scaled_to_ten():
+    r = report_of([Flag.OK, Flag.WARNING, Flag.ERROR], names=["a", "b", "c"])
+    assert r.score == pytest.approx(5.0)  # 3 of 6 points
+    r = report_of([Flag.OK, Flag.WARNING, Flag.OK, Flag.OK, Flag.OK, Flag.WARNING], names=list("abcdef"))
+    assert r.score == pytest.approx(10 * 10 / 12, abs=0.01)
+    assert report_of([Flag.WARNING], names=["a"]).score == 5.0
+
+
+def test_lists_and_lookup():
+    r = report_of([Flag.OK, Flag.WARNING, Flag.ERROR, Flag.OK, Flag.WARNING])
+    assert [v.critic for v in r.errors] == ["joint_speed"]
+    assert [v.critic for v in r.warnings] == ["collision", "pinch_point"]
+    assert r.flag_of("collision") is Flag.WARNING
+    assert r.flag is Flag.ERROR
+    with pytest.raises(CriticError, match="did you mean 'collision'"):
+        r.flag_of("colision")
+
+
+def sorting_like_report():
+    steps = [Step(skill="home", line=1), Step(skill="move_to", line=4), Step(skill="move_down", line=5), Step(skill="move_to", line=6)]
+    time, pos = line_motion(1.2, rate_hz=125)
+    T = len(time)
+    positions = np.tile(np.array([0.1, 0.0, 0.2]), (T, len(FRAME_NAMES), 1))
+    positions[:, FRAME_NAMES.index("wrist_3_link")] = pos[:, 0]
+    step = np.clip(np.arange(T) * 4 // T, 1, 3)
+    step[0] = 0
+    traj = make_trajectory(time, positions, steps=steps, step=step)
+    return traj, critique(traj, Scene())
+
+
+def test_report_binds_the_trajectory_and_records_params():
+    traj, r = sorting_like_report()
+    assert r.trajectory_hash == traj.content_hash()
+    assert r.samples == len(traj) and r.duration_s == pytest.approx(traj.duration_s)
+    assert r.critics == list(BUILTIN_CRITICS)
+    assert r.params["joint_speed"]["warn_speed_m_s"] == 1.0
+
+
+def test_feedback_in_the_papers_style_with_lines_and_skills():
+    traj, r = sorting_like_report()
+    assert r.flag_of("joint_speed") is Flag.WARNING
+    text = r.feedback()
+    line = next(l for l in text.splitlines() if "Joint speed" in l)
+    assert line.startswith("Warning: Joint speed is higher than the recommended value of 1 m/s (1.20 m/s at the wrist_3_link")
+    assert "during [move_to, move_down] actions on lines 4-6" in line
+    assert line.endswith("This potentially increases the cycle time of the program.")
+    assert r.feedback(["joint_speed"]) == line
+    assert r.feedback(["pinch_point"]) == ALL_PASSED
+    with pytest.raises(CriticError, match="did you mean 'joint_speed'"):
+        r.feedback(["joint_sped"])
+
+
+def test_feedback_lists_errors_first_and_only_non_ok():
+    r = Report(
+        verdicts=[
+            verdict("a", Flag.WARNING, "warned.", "fix a."),
+            verdict("b", Flag.OK, "fine."),
+            verdict("c", Flag.ERROR, "broken.", "fix c."),
+        ],
+        trajectory_hash="x",
+    )
+    assert r.feedback() == "Error: broken. fix c.\nWarning: warned. fix a."
+    assert report_of([Flag.OK] * 5).feedback() == ALL_PASSED
+
+
+def test_json_round_trip():
+    traj, r = sorting_like_report()
+    text = r.to_json()
+    data = json.loads(text)
+    assert data["score"] == r.score and data["trajectory_hash"] == traj.content_hash()
+    back = Report.from_json(text)
+    assert back == r
+    assert back.score == r.score and back.feedback() == r.feedback()
+    assert back.verdicts[0].signal == r.verdicts[0].signal
+    with pytest.raises(CriticError, match="not a robocritics report"):
+        Report.from_json("{}")
+
+
+def test_text_rendering_names_every_critic_and_the_score():
+    traj, r = sorting_like_report()
+    text = str(r)
+    assert text == r.to_text()
+    assert text.splitlines()[0].startswith(f"RoboCritics report: score {int(r.score)}/10")
+    for name in BUILTIN_CRITICS:
+        assert name in text
+    assert "Hint: To minimize joint speed" in text
+
+
+def test_html_has_a_table_and_an_svg_per_signal():
+    r = critique(realistic_trajectory(duration_s=4.0, rate_hz=250.0, n_waypoints=3), Scene.builtin("sorting"))
+    html = r._repr_html_()
+    assert "<table" in html and html.count("<svg") == sum(v.signal is not None for v in r.verdicts) >= 4
+    assert "<polyline" in html and "stroke-dasharray" in html
+    for v in r.verdicts:
+        assert v.critic in html
+
+
+def test_svg_escapes_text_and_handles_gaps():
+    sig = make_signal(np.arange(5.0), np.array([1.0, np.nan, 0.5, 0.2, np.inf]), label="<d>", unit="m", warning=0.3, worse="below")
+    assert sig.value[1] is None and sig.value[4] is None
+    r = Report(verdicts=[verdict("x", Flag.OK, signal=sig)], trajectory_hash="h")
+    html = r._repr_html_()
+    assert "&lt;d&gt;" in html and "<d>" not in html
+
+
+def test_signal_downsampling_keeps_extremes():
+    t = np.arange(10_000) / 500.0
+    v = np.sin(t)
+    v[1234] = 5.0
+    v[8765] = -5.0
+    hi = make_signal(t, v, label="s", unit="m/s")
+    lo = make_signal(t, v, label="d", unit="m", worse="below")
+    assert len(hi.value) <= 400 and len(lo.value) <= 400
+    assert max(hi.value) == 5.0 and t[1234] in hi.time_s
+    assert min(lo.value) == -5.0
+
+
+def test_evidence_defaults_are_empty():
+    e = Evidence()
+    assert e.lines == [] and e.worst_sample is None
