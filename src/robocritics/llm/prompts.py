@@ -1,16 +1,408 @@
 """Prompts for the language model, and reading its replies.
 
-``extract_code`` finds the Python program in a model's reply.
+What the model is told, turn by turn (the RoboCritics workflow, Fig. 2):
+
+* :func:`system_prompt` — the skill API (:func:`~robocritics.program.skills.api_reference`),
+  the scene (every object and container with id, shape, position, size, top and
+  attributes; the table; the allowed workspace; units), the rules of the
+  conversation, optionally the critics' rules (the paper's *embedded*
+  condition, thresholds read from each critic's ``Params``) and retrieved past
+  interactions from the interaction memory;
+* :func:`request_prompt` — the user's task;
+* :func:`fix_prompt` — the critics' structured feedback (:meth:`Report.feedback`)
+  plus the program with the lines the critics point at marked;
+* :func:`runtime_feedback` — a program the sandbox rejected, a motion that
+  could not be planned, or a reply without code, as a message the model can act on;
+* :data:`REVIEW_INSTRUCTION` — the embedded condition's self-review turn.
+
+Reading replies: :func:`extract_code` finds the program, :func:`says_complete`
+the model's "PROGRAM COMPLETE".
 """
 
 from __future__ import annotations
 
 import ast
+import math
 import re
 import textwrap
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["extract_code"]
+from ..errors import PlanningError, ProgramError, RoboCriticsError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..critic import Report
+    from ..scene import Scene
+
+__all__ = [
+    "COMPLETE_MARKER",
+    "REVIEW_INSTRUCTION",
+    "critic_rules",
+    "describe_scene",
+    "extract_code",
+    "fix_prompt",
+    "format_memory_examples",
+    "numbered_program",
+    "request_prompt",
+    "runtime_feedback",
+    "says_complete",
+    "system_prompt",
+]
+
+#: What the model says, with no code, when it is satisfied with its program.
+COMPLETE_MARKER = "PROGRAM COMPLETE"
+
+#: The embedded condition's self-review turn (paper, validation protocol).
+REVIEW_INSTRUCTION = "Review the program. If any part might violate these rules, revise the code to fix it."
+
+_COMPLETE = re.compile(r"\bPROGRAM[\s_-]*COMPLETE\b", re.IGNORECASE)
+
+# Retrieved memory examples are shown compactly: programs and feedback are cut at these sizes.
+_EXAMPLE_PROGRAM_LINES = 40
+_EXAMPLE_FEEDBACK_CHARS = 600
+_EXAMPLE_REQUEST_CHARS = 300
+# Programs longer than this are quoted only around the flagged lines in fix prompts.
+_FULL_LISTING_LINES = 80
+_REPLY_EXCERPT_CHARS = 200
+
+
+# --- system prompt --------------------------------------------------------------------------
+
+
+def _m(value: float) -> str:
+    """A length in metres: at least three decimals (mm), a fourth when it is not zero."""
+    text = f"{value:.4f}"
+    if text.endswith("0"):
+        text = text[:-1]
+    return text[1:] if text.startswith("-") and float(text) == 0 else text
+
+
+def _xyz(values: Iterable[float]) -> str:
+    return "(" + ", ".join(_m(v) for v in values) + ")"
+
+
+def _attributes(attributes: Mapping[str, Any]) -> str:
+    return ", ".join(f"{k}={v}" for k, v in attributes.items())
+
+
+def _shape_text(obj: Any) -> str:
+    size = obj.size
+    if obj.shape == "box":
+        return f"box {_m(size[0])} x {_m(size[1])} x {_m(size[2])} m (x, y, z)"
+    if obj.shape == "cylinder":
+        return f"upright cylinder, radius {_m(size[0])} m, height {_m(size[1])} m"
+    return f"sphere, radius {_m(size[0])} m"
+
+
+def describe_scene(scene: "Scene") -> str:
+    """The scene as the model sees it: every object and container, the table, the workspace, units."""
+    lines = [f"# Scene: {scene.name}", ""]
+    if scene.description:
+        lines += [scene.description.strip(), ""]
+    lines.append(
+        "Units: metres; coordinates in the robot base frame (x forward, y left, z up); "
+        "angles in radians. Positions below are centres; `top` is the z of the top surface."
+    )
+    table = scene.table
+    lines.append(
+        f"Table: top surface at z = {_m(table.top_z)} m, {_m(table.size[0])} x {_m(table.size[1])} m "
+        f"centred at (x, y) = ({_m(table.center_xy[0])}, {_m(table.center_xy[1])})."
+    )
+    ws = scene.workspace
+    lines.append(
+        f"Allowed workspace: a sphere of radius {_m(ws.radius_m)} m around {_xyz(ws.center)} "
+        f"(volume {ws.volume_m3:.3f} m^3); every part of the robot must stay inside it."
+    )
+    lines += ["", "Objects:"]
+    if not scene.objects:
+        lines.append("- (none)")
+    for o in scene.objects:
+        text = f"- {o.id}: {_shape_text(o)}; centre {_xyz(o.position)}; top z = {_m(o.top)}"
+        if any(abs(a) > 1e-9 for a in o.rpy):
+            text += f"; rotated rpy {_xyz(o.rpy)} rad"
+        text += "; graspable" if o.graspable else "; NOT graspable (fixed)"
+        if o.attributes:
+            text += f"; {_attributes(o.attributes)}"
+        lines.append(text)
+    lines += ["", "Containers (open-top boxes: lower objects in from above the rim; the walls are obstacles):"]
+    if not scene.containers:
+        lines.append("- (none)")
+    for c in scene.containers:
+        text = (
+            f"- {c.id}: box {_m(c.size[0])} x {_m(c.size[1])} x {_m(c.size[2])} m (outer, x, y, z); "
+            f"centre {_xyz(c.position)}; rim (top) z = {_m(c.top)}; inside floor z = {_m(c.floor_top)}; "
+            f"walls {_m(c.wall_m)} m"
+        )
+        if abs(c.yaw) > 1e-9:
+            text += f"; yaw {c.yaw:.3f} rad"
+        if c.attributes:
+            text += f"; {_attributes(c.attributes)}"
+        lines.append(text)
+    return "\n".join(lines)
+
+
+_RULES = f"""\
+# Rules
+1. Use only the skills and names of the API above: no other imports, libraries or robot commands.
+2. Positions are metres in the robot base frame (x forward, y left, z up; the table top is z = 0).
+   Prefer the scene variables (e.g. `green_apple.x`, `white_box.top`) to copied numbers.
+3. Answer with the complete program in exactly one ```python code block. Every revision is the
+   whole program again, not a fragment or a diff.
+4. The program is simulated before the robot moves. You will be told if it fails to run, if a
+   motion cannot be planned, or what expert critics found in the simulated motion; then revise it.
+5. When asked to revise and you are satisfied that the current program needs no change, answer
+   "{COMPLETE_MARKER}" with no code."""
+
+
+def _clean_description(text: str) -> str:
+    """A Params field description without its '(source: ...)' note."""
+    return re.sub(r"\s*\(source:[^)]*\)", "", text or "").strip()
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def critic_rules(critics: Iterable[str] | str | None = None, params: Mapping[str, Any] | None = None) -> str:
+    """The critics' rules for the *embedded* condition: each critic's description and thresholds.
+
+    Thresholds are the numeric fields of each critic's ``Params`` (its defaults,
+    or ``params`` overrides as in :func:`~robocritics.critic.critique`), with the
+    field's own description; numerical tolerances (fields named ``*tolerance*``)
+    are left out. Raises :class:`~robocritics.errors.CriticError`
+    for unknown critics or parameters.
+    """
+    from ..critic import select_critics
+
+    out = [
+        "# Safety and quality rules",
+        "Expert critics will check the simulated motion of the program against these rules. Each "
+        "critic rates it OK (2 points), Warning (1) or Error (0); the quality score is the sum, 0-10.",
+    ]
+    for critic, p in select_critics(critics, params):
+        out.append(f"- {critic.name}: {critic.description}")
+        fields = type(p).model_fields
+        for field_name, info in fields.items():
+            value = getattr(p, field_name)
+            if not _is_number(value) or "tolerance" in field_name:
+                continue  # thresholds only: numerical tolerances and frame lists say nothing to the model
+            description = _clean_description(info.description or "")
+            out.append(f"    - {field_name} = {value:g}" + (f": {description}" if description else ""))
+    out.append(REVIEW_INSTRUCTION)
+    return "\n".join(out)
+
+
+def _field(item: Any, name: str, default: Any = "") -> Any:
+    if isinstance(item, Mapping):
+        return item.get(name, default)
+    return getattr(item, name, default)
+
+
+def _cut_lines(text: str, max_lines: int) -> str:
+    lines = text.rstrip().splitlines()
+    if len(lines) <= max_lines:
+        return "\n".join(lines)
+    return "\n".join(lines[:max_lines] + [f"# ... ({len(lines) - max_lines} more lines)"])
+
+
+def _cut(text: str, max_chars: int) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= max_chars else text[: max_chars - 3].rstrip() + "..."
+
+
+def _score_text(score: Any) -> str:
+    if score is None:
+        return "not scored (it did not run)"
+    score = float(score)
+    return f"{int(score)}/10" if score.is_integer() else f"{score:.1f}/10"
+
+
+def format_memory_examples(examples: Iterable[Any]) -> str:
+    """Past interactions (``request``, ``program``, ``feedback``, ``score``), compactly, for the system prompt.
+
+    Items are :class:`~robocritics.llm.memory.Interaction` objects or mappings
+    with those keys. Programs are cut at 40 lines and feedback at 600 characters.
+    Returns "" for no examples.
+    """
+    parts = []
+    for i, item in enumerate(examples, 1):
+        program = str(_field(item, "program") or "").strip()
+        if not program:
+            continue
+        feedback = str(_field(item, "feedback") or "").strip()
+        parts.append(
+            f"## Past interaction {i}\n"
+            f"Request: {_cut(str(_field(item, 'request')), _EXAMPLE_REQUEST_CHARS)}\n"
+            f"Score: {_score_text(_field(item, 'score', None))}\n"
+            f"Program:\n```python\n{_cut_lines(program, _EXAMPLE_PROGRAM_LINES)}\n```\n"
+            f"Critic feedback: {_cut(feedback, _EXAMPLE_FEEDBACK_CHARS) if feedback else '(none)'}"
+        )
+    if not parts:
+        return ""
+    head = (
+        "# Relevant past interactions\n"
+        "From the interaction memory: earlier requests, the programs written for them and what the "
+        "critics said. Reuse what worked and avoid what was criticised; the current scene above is "
+        "authoritative."
+    )
+    return "\n\n".join([head, *parts])
+
+
+def system_prompt(
+    scene: "Scene",
+    *,
+    embedded_rules: bool = False,
+    memory_examples: Iterable[Any] = (),
+    critics: Iterable[str] | str | None = None,
+    params: Mapping[str, Any] | None = None,
+) -> str:
+    """The system message: role, skill API, scene, rules; optionally critic rules and memory examples.
+
+    ``embedded_rules=True`` pastes in :func:`critic_rules` for ``critics`` /
+    ``params`` (the paper's *embedded* condition). ``memory_examples`` are past
+    interactions (see :func:`format_memory_examples`).
+    """
+    from ..program.skills import api_reference
+
+    parts = [
+        "You write programs for a UR3e robot arm with a two-finger gripper, standing on a table. "
+        "Each program is simulated and checked for safety before the robot runs it.",
+        api_reference().strip(),
+        describe_scene(scene),
+        _RULES,
+    ]
+    if embedded_rules:
+        parts.append(critic_rules(critics, params))
+    examples = format_memory_examples(memory_examples)
+    if examples:
+        parts.append(examples)
+    return "\n\n".join(parts) + "\n"
+
+
+# --- user turns -------------------------------------------------------------------------------
+
+
+def request_prompt(text: str) -> str:
+    """The user's task as the first message of a request."""
+    return f"Task: {text.strip()}\n\nWrite the complete program."
+
+
+def numbered_program(program: str, marked: Iterable[int] = (), *, context: int | None = None) -> str:
+    """``program`` with right-aligned line numbers; lines in ``marked`` start with ``>>``.
+
+    With ``context`` (a number of lines), only the marked lines and that many
+    lines around each are shown; gaps are shown as ``...``.
+    """
+    lines = program.rstrip("\n").splitlines()
+    marked = {int(n) for n in marked}
+    width = len(str(max(len(lines), 1)))
+    show = set(range(1, len(lines) + 1))
+    if context is not None and marked:
+        show = {n for m in marked for n in range(m - context, m + context + 1) if 1 <= n <= len(lines)}
+    out, previous = [], 0
+    for n in sorted(show):
+        if previous and n != previous + 1:
+            out.append("    ...")
+        out.append(f"{'>>' if n in marked else '  '} {n:>{width}} | {lines[n - 1]}")
+        previous = n
+    return "\n".join(out)
+
+
+def _flagged_lines(report: "Report", critics: Iterable[str] | None) -> list[int]:
+    names = None if critics is None else ({critics} if isinstance(critics, str) else set(critics))
+    lines: set[int] = set()
+    for v in report.verdicts:
+        if v.ok or (names is not None and v.critic not in names):
+            continue
+        lines.update(v.evidence.lines)
+    return sorted(lines)
+
+
+def fix_prompt(report: "Report", critics: Iterable[str] | str | None = None, *, program: str | None = None) -> str:
+    """The structured critic feedback of ``report`` (``Report.feedback(critics)``) as a revision request.
+
+    With ``program`` (the source the report judged), the program is quoted
+    with line numbers and the lines the selected critics point at marked
+    ``>>`` (only those lines and their neighbours for long programs).
+    """
+    feedback = report.feedback(critics)
+    parts = [
+        f"The critics checked the simulated motion of your program (quality score "
+        f"{_score_text(report.score)}) and report:\n{feedback}"
+    ]
+    if program:
+        marked = [n for n in _flagged_lines(report, critics) if 1 <= n <= len(program.splitlines())]
+        long = len(program.splitlines()) > _FULL_LISTING_LINES
+        listing = numbered_program(program, marked, context=2 if long and marked else None)
+        note = " (lines the critics point at are marked >>)" if marked else ""
+        parts.append(f"Your program{note}:\n{listing}")
+    parts.append(
+        "Revise the program to fix these issues while still doing the task. Answer with the complete "
+        "revised program in one ```python block."
+    )
+    return "\n\n".join(parts)
+
+
+def _quote_line(program: str | None, line: int) -> str:
+    if not program or line <= 0:
+        return ""
+    lines = program.splitlines()
+    if line > len(lines):
+        return ""
+    return "\n" + numbered_program(program, [line], context=0)
+
+
+def runtime_feedback(
+    error: BaseException | None, *, program: str | None = None, reply: str | None = None
+) -> str:
+    """A message telling the model why its last reply produced no checked motion, and what to do.
+
+    ``error`` is a :class:`ProgramError` (the sandbox rejected or stopped the
+    program), a :class:`PlanningError` (a motion could not be planned, e.g. an
+    unreachable target), another robocritics error, or ``None`` for a reply
+    that contained no program (``reply`` is then quoted briefly). ``program``
+    (the source that failed) lets the offending line be quoted.
+    """
+    resend = "Send the complete corrected program in one ```python block."
+    if error is None:
+        said = ""
+        if reply is not None and reply.strip():
+            said = f' (your reply began: "{_cut(reply, _REPLY_EXCERPT_CHARS)}")'
+        return (
+            f"Your reply contained no Python program{said}. Answer with the complete program in one "
+            f"```python code block, using only the skills of the API. Say \"{COMPLETE_MARKER}\" (with no "
+            f"code) only when a program has run and you are satisfied with it."
+        )
+    if isinstance(error, ProgramError):
+        line = int(getattr(error, "line", 0) or 0)
+        col = int(getattr(error, "col", 0) or 0)
+        where = f" at line {line}" + (f", column {col}" if col else "") if line else ""
+        reason = getattr(error, "reason", None) or str(error)
+        return (
+            f"Your program did not run: the sandbox stopped it{where}, before the robot moved.\n"
+            f"Problem: {reason}{_quote_line(program, line)}\n"
+            f"Use only the skills and names of the API (no imports other than math, no files, no "
+            f"classes or try/except). {resend}"
+        )
+    if isinstance(error, PlanningError):
+        line = int(getattr(error, "line", 0) or 0)
+        reason = getattr(error, "reason", None) or str(error)
+        where = f" at line {line}" if line else ""
+        return (
+            f"Your program ran, but the motion{where} could not be planned, so nothing was checked or "
+            f"executed.\nProblem: {reason}{_quote_line(program, line)}\n"
+            f"Keep every target within the robot's reach and inside the allowed workspace (see the "
+            f"scene), above the table and clear of the objects. {resend}"
+        )
+    if isinstance(error, RoboCriticsError):
+        return f"Your program could not be checked: {error}\n{resend}"
+    return f"Your program could not be checked ({type(error).__name__}: {error}).\n{resend}"
+
+
+def says_complete(reply: str) -> bool:
+    """Whether the model's reply declares the program complete ("PROGRAM COMPLETE", any case)."""
+    return bool(isinstance(reply, str) and _COMPLETE.search(reply))
 
 #: Info-string words that mark a fenced block as Python (compared lower-case).
 PYTHON_TAGS = frozenset({"python", "py", "python3", "py3", "ipython", "ipython3"})
