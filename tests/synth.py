@@ -204,7 +204,7 @@ def ur3e_frames(q: np.ndarray) -> np.ndarray:
     return out
 
 
-def realistic_trajectory(duration_s: float = 60.0, rate_hz: float = 500.0, seed: int = 0, n_waypoints: int = 24) -> Trajectory:
+def realistic_trajectory(duration_s: float = 60.0, rate_hz: float = 500.0, seed: int = 0, n_waypoints: int = 16) -> Trajectory:
     """A pick-and-place-like UR3e motion: minimum-jerk moves between random joint waypoints,
     12 frames, 18 self pairs and 42 environment pairs (60), steps with lines, an attached object."""
     rng = np.random.default_rng(seed)
@@ -228,7 +228,7 @@ def realistic_trajectory(duration_s: float = 60.0, rate_hz: float = 500.0, seed:
         for b in arm[i + 2 :]:
             pairs.append(self_pair(a, b))
             cols.append(np.linalg.norm(pos[:, idx[a]] - pos[:, idx[b]], axis=1) - 0.05)
-    for a in ["upper_arm_link", "forearm_link", "wrist_1_link"]:
+    for a in ["upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link"]:
         for b in gripper:
             pairs.append(self_pair(a, b, group_b="gripper"))
             cols.append(np.linalg.norm(pos[:, idx[a]] - pos[:, idx[b]], axis=1) - 0.04)

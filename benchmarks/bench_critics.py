@@ -1,0 +1,106 @@
+"""Benchmark: the five vectorised critics against their per-sample reference implementations.
+
+A 60 s trajectory at 500 Hz (30,000 samples) of a synthetic UR3e pick-and-place
+motion (DH forward kinematics, 12 frames, 60 tagged proximity pairs, steps
+with source lines, a carried object) is judged by each critic's ``check`` and
+by the slow per-sample references in ``tests/critic_reference.py`` (the
+paper's loops, in plain Python). Both must agree on every flag; the table
+reports wall-clock medians (and CPU-time medians, which other processes on
+the machine disturb less).
+
+Targets: all five critics together (``critique``) in <= 50 ms median, and
+>= 20x faster than the references.
+
+Reproduce::
+
+    .venv/bin/python benchmarks/bench_critics.py            # default 15 repeats (3 for the references)
+    .venv/bin/python benchmarks/bench_critics.py --repeats 31 --ref-repeats 5 --assert-targets
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))  # synth.py and critic_reference.py live with the tests
+
+from critic_reference import REFERENCES  # noqa: E402
+from synth import realistic_trajectory  # noqa: E402
+
+from robocritics.critic import BUILTIN_CRITICS, critique, get_critics  # noqa: E402
+from robocritics.scene import Scene  # noqa: E402
+
+TARGET_MS = 50.0
+TARGET_SPEEDUP = 20.0
+
+
+def timed(fn, repeats: int) -> tuple[float, float]:
+    """Median wall-clock and CPU seconds of ``fn()`` over ``repeats`` runs (after one warm-up)."""
+    fn()
+    wall, cpu = [], []
+    for _ in range(repeats):
+        w0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        wall.append(time.perf_counter() - w0)
+        cpu.append(time.process_time() - c0)
+    return statistics.median(wall), statistics.median(cpu)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--duration", type=float, default=60.0, help="trajectory duration, s (default 60)")
+    ap.add_argument("--rate", type=float, default=500.0, help="sample rate, Hz (default 500)")
+    ap.add_argument("--repeats", type=int, default=15, help="timed runs of each vectorised critic (median)")
+    ap.add_argument("--ref-repeats", type=int, default=3, help="timed runs of each reference (median)")
+    ap.add_argument("--assert-targets", action="store_true", help="exit 1 if a target is missed")
+    args = ap.parse_args(argv)
+
+    traj = realistic_trajectory(duration_s=args.duration, rate_hz=args.rate)
+    scene = Scene.builtin("sorting")
+    critics = get_critics()
+    print(f"trajectory: {traj}")
+    print(f"scene: {scene.name}; repeats: {args.repeats} (references: {args.ref_repeats}); medians\n")
+
+    header = f"{'critic':<19} {'flag':<8} {'vectorised ms':>13} {'(cpu ms)':>9} {'reference ms':>13} {'speed-up':>9}"
+    print(header)
+    print("-" * len(header))
+    total_vec = total_ref = 0.0
+    agree = True
+    for name in BUILTIN_CRITICS:
+        c = critics[name]
+        p = c.Params()
+        verdict = c.check(traj, scene, p)
+        ref = REFERENCES[name](traj, scene, p)
+        if verdict.flag is not ref["flag"]:
+            agree = False
+        wall, cpu = timed(lambda: c.check(traj, scene, p), args.repeats)
+        ref_wall, _ = timed(lambda: REFERENCES[name](traj, scene, p), args.ref_repeats)
+        total_vec += wall
+        total_ref += ref_wall
+        mark = "" if verdict.flag is ref["flag"] else f"  MISMATCH (reference {ref['flag'].value})"
+        print(
+            f"{name:<19} {verdict.flag.value:<8} {wall * 1e3:>13.2f} {cpu * 1e3:>9.2f} {ref_wall * 1e3:>13.1f} "
+            f"{ref_wall / wall:>8.0f}x{mark}"
+        )
+    wall, cpu = timed(lambda: critique(traj, scene, critics=list(BUILTIN_CRITICS)), args.repeats)
+    print("-" * len(header))
+    print(f"{'sum of the five':<28} {total_vec * 1e3:>13.2f} {'':>9} {total_ref * 1e3:>13.1f} {total_ref / total_vec:>8.0f}x")
+    print(f"{'critique() all five':<28} {wall * 1e3:>13.2f} {cpu * 1e3:>9.2f} {total_ref * 1e3:>13.1f} {total_ref / wall:>8.0f}x")
+    print()
+    ok_time = wall * 1e3 <= TARGET_MS
+    ok_speed = total_ref / wall >= TARGET_SPEEDUP
+    print(f"target: critique() median <= {TARGET_MS:.0f} ms: {'met' if ok_time else 'MISSED'} ({wall * 1e3:.1f} ms)")
+    print(f"target: >= {TARGET_SPEEDUP:.0f}x faster than the references: {'met' if ok_speed else 'MISSED'} ({total_ref / wall:.0f}x)")
+    print(f"flags agree with the references: {'yes' if agree else 'NO'}")
+    print("\nreproduce: .venv/bin/python benchmarks/bench_critics.py --repeats 15 --ref-repeats 3")
+    if args.assert_targets and not (ok_time and ok_speed and agree):
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
