@@ -67,8 +67,12 @@ class PluginError:
         return f"{self.name} ({self.distribution or 'unknown package'}): {self.error}"
 
 
-#: Plugins and critics skipped so far, in the order they failed.
+#: Plugins and critics skipped, in the order they failed: entry points that failed to
+#: import or register (for the life of the process) and, from the latest
+#: :func:`get_critics`, plugins whose hook failed and critics that were rejected.
 plugin_errors: list[PluginError] = []
+_import_errors: list[PluginError] = []
+_warned: set[PluginError] = set()
 
 _plugin_dist: dict[str, tuple[str, str]] = {}  # plugin name -> (distribution name, version)
 _loaded = False
@@ -79,15 +83,23 @@ _sources: dict[str, tuple[str, str]] = {}
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_.\-]*$")
 
 
-def _report(err: PluginError) -> None:
-    if err in plugin_errors:
+def _warn(err: PluginError) -> None:
+    if err in _warned:
         return
-    plugin_errors.append(err)
+    _warned.add(err)
     message = f"robocritics plugin {err.name!r} skipped: {err.error}" + (
         f" (from {err.distribution})" if err.distribution else ""
     )
     log.warning(message)
-    warnings.warn(message, PluginWarning, stacklevel=3)
+    warnings.warn(message, PluginWarning, stacklevel=4)
+
+
+def _report(err: PluginError) -> None:
+    """An entry point that could not be imported or registered."""
+    if err not in _import_errors:
+        _import_errors.append(err)
+        plugin_errors.append(err)
+    _warn(err)
 
 
 def load_plugins() -> None:
@@ -155,6 +167,13 @@ def _collect() -> None:
         return
     critics: dict[str, Any] = {}
     sources: dict[str, tuple[str, str]] = {}
+    errors: list[PluginError] = []
+
+    def reject(err: PluginError) -> None:
+        if err not in errors:
+            errors.append(err)
+        _warn(err)
+
     # get_hookimpls() lists implementations in registration order.
     for impl in pm.hook.register_critics.get_hookimpls():
         plugin_name = pm.get_name(impl.plugin) or repr(impl.plugin)
@@ -164,11 +183,11 @@ def _collect() -> None:
         def register(critic: Any, _plugin: str = plugin_name, _dist: tuple[str, str] = dist, _label: str = dist_label) -> None:
             problem = _critic_problem(critic)
             if problem:
-                _report(PluginError(_plugin, _plugin, _label, f"CriticError: {problem}"))
+                reject(PluginError(_plugin, _plugin, _label, f"CriticError: {problem}"))
                 return
             if critic.name in critics:
                 other = " ".join(p for p in sources[critic.name] if p) or "another plugin"
-                _report(
+                reject(
                     PluginError(
                         critic.name, _plugin, _label, f"CriticError: a critic named {critic.name!r} is already provided by {other}"
                     )
@@ -180,8 +199,9 @@ def _collect() -> None:
         try:
             impl.function(**{arg: register for arg in impl.argnames})
         except Exception as exc:  # noqa: BLE001 - a plugin's hook failing skips only that plugin
-            _report(PluginError(plugin_name, plugin_name, dist_label, f"{type(exc).__name__}: {exc}"))
+            reject(PluginError(plugin_name, plugin_name, dist_label, f"{type(exc).__name__}: {exc}"))
     _critics, _sources, _cache_key = critics, sources, key
+    plugin_errors[:] = _import_errors + errors
 
 
 def get_critics() -> dict[str, Any]:
