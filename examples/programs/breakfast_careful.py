@@ -35,13 +35,13 @@ lib.rotate_gripper(0)
 # 2. the cupcake, lifted off the apple, to the plate's right half
 cupcake_half = cupcake.top - cupcake.z
 pick(cupcake, cupcake.z, 0.10)
-place(plate.x, plate.y - 0.05, plate.top + cupcake_half + 0.005)
+place(plate.x, plate.y - 0.065, plate.top + cupcake_half + 0.005)
 
 # 3. the apple, out of the box (clear the rim), to the plate's left half;
 #    fingers turned so that neither passes next to the cupcake
 apple_half = apple.top - apple.z
 pick(apple, apple.z, 0.14)
 lib.rotate_gripper(math.pi / 2)
-place(plate.x, plate.y + 0.05, plate.top + apple_half + 0.005)
+place(plate.x, plate.y + 0.065, plate.top + apple_half + 0.005)
 
 lib.home()

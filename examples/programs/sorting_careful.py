@@ -15,9 +15,10 @@ def pick(obj):
     lib.set_speed(0.3)
 
 
-def place_in(box, dy):
+def place_in(box, spot):
     # release low inside the box, each apple at its own spot
-    lib.move_to(box.x, box.y + dy, box.top + 0.12)
+    dx, dy = spot
+    lib.move_to(box.x + dx, box.y + dy, box.top + 0.12)
     lib.reduce_speed(15)
     lib.move_down(0.12)
     lib.open_gripper()
@@ -25,7 +26,7 @@ def place_in(box, dy):
     lib.set_speed(0.3)
 
 
-spots = {"brown_box": [-0.035, 0.035], "white_box": [0.0]}
+spots = {"brown_box": [(-0.05, -0.05), (0.05, 0.05)], "white_box": [(0.0, 0.0)]}
 for apple in objects:
     pick(apple)
     box = brown_box if apple.ripeness == "ripe" else white_box

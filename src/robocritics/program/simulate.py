@@ -79,10 +79,15 @@ class Execution:
     final_scene: Scene
     scene: Scene
     robot: Robot = field(repr=False)
+    resting_on: dict[str, str] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
         return self.trajectory.duration_s
+
+    def object_on(self, obj_id: str, support_id: str) -> bool:
+        """Whether object ``obj_id`` was last set down on ``support_id`` (an object, container or 'table')."""
+        return self.resting_on.get(obj_id) == support_id
 
     def object_inside(self, obj_id: str, container_id: str) -> bool:
         """Whether object ``obj_id`` ended inside container ``container_id``."""
@@ -107,6 +112,7 @@ class _Planner:
         self.grasp_offset = np.eye(4)  # object pose in the tcp frame while attached
         self.objects: dict[str, SceneObject] = {o.id: o for o in scene.objects}
         self.obstacles: list[str] = []
+        self.resting_on: dict[str, str] = {}
         # accumulated samples
         self.q_parts: list[np.ndarray] = []
         self.t_parts: list[np.ndarray] = []
@@ -213,16 +219,31 @@ class _Planner:
         return best_id, best_z
 
     def contacts_at(self, tcp: np.ndarray) -> set[str]:
+        """Entities the gripper or its load may touch at TCP pose ``tcp``.
+
+        The object between the fingers, and the surface under the object in (or
+        about to be in) the hand; a container floor lies on the table, so an
+        object on it is a few millimetres above the table too.
+        """
         out: set[str] = set()
+        supports: list[str] = []
         cand = self.grasp_candidate(tcp)
         if cand:
             out.add(cand)
             o = self.objects[cand]
-            out.add(self.support_below(cand, np.asarray(o.position), o.half_height, o.width / 2)[0])
+            supports.append(self.support_below(cand, np.asarray(o.position), o.half_height, o.width / 2)[0])
         if self.attached:
             o = self.objects[self.attached]
             pose = tcp @ self.grasp_offset
-            out.add(self.support_below(self.attached, pose[:3, 3], o.half_height, o.width / 2)[0])
+            supports.append(self.support_below(self.attached, pose[:3, 3], o.half_height, o.width / 2)[0])
+        out.update(supports)
+        # what a support itself stands on is millimetres under the load too (a plate on the table)
+        for s in supports:
+            if s in self.objects:
+                o = self.objects[s]
+                out.add(self.support_below(s, np.asarray(o.position), o.half_height, o.width / 2)[0])
+            elif s != "table":
+                out.add("table")
         return out
 
     # --- moves ----------------------------------------------------------------------------
@@ -419,7 +440,8 @@ class _Planner:
 
     def do_open_gripper(self, call: SkillCall) -> None:
         tcp = self.tcp()
-        step = self.add_step(call, self.contacts_at(tcp))
+        # the fingers open around the object they let go of
+        step = self.add_step(call, self.contacts_at(tcp) | ({self.attached} if self.attached else set()))
         released = self.attached
         release_sample = self.sample_count
         if released:
@@ -435,6 +457,7 @@ class _Planner:
             drop = pose[2, 3] - obj.half_height - z
             settled = (pose[0, 3], pose[1, 3], z + obj.half_height)
             self.objects[released] = obj.moved_to(settled)
+            self.resting_on[released] = support
             final_pose = np.eye(4)
             final_pose[:3, :3], final_pose[:3, 3] = rpy_matrix(obj.rpy), settled
             self.rest_changes.append((released, release_sample, final_pose))
@@ -523,5 +546,5 @@ def simulate(
         frames=frames,
     )
     final_scene = scene.model_copy(update={"objects": [planner.objects[o.id] for o in scene.objects]})
-    return Execution(trajectory, plan, planner.events, final_scene, scene, robot)
+    return Execution(trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.resting_on))
 
