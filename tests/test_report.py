@@ -156,6 +156,7 @@ def test_signal_downsampling_keeps_extremes():
     assert len(hi.value) <= 400 and len(lo.value) <= 400
     assert max(hi.value) == 5.0 and t[1234] in hi.time_s
     assert min(lo.value) == -5.0
+    assert hi.time_s[0] == t[0] and hi.time_s[-1] == t[-1]
 
 
 def test_evidence_defaults_are_empty():

@@ -217,14 +217,16 @@ def make_signal(
     values = np.asarray(values, dtype=float)
     n = values.shape[0]
     if n > max_points:
-        size = -(-n // max_points)
-        buckets = -(-n // size)
-        key = values if worse == "above" else -values
+        # worst sample of each bucket of the inner samples, plus the first and last sample
+        inner = n - 2
+        size = -(-inner // (max_points - 2))
+        buckets = -(-inner // size)
+        key = values[1:-1] if worse == "above" else -values[1:-1]
         key = np.where(np.isnan(key), -np.inf, key)
         padded = np.full(buckets * size, -np.inf)
-        padded[:n] = key
-        pick = np.argmax(padded.reshape(buckets, size), axis=1) + np.arange(buckets) * size
-        pick = np.minimum(pick, n - 1)
+        padded[:inner] = key
+        pick = np.argmax(padded.reshape(buckets, size), axis=1) + np.arange(buckets) * size + 1
+        pick = np.concatenate(([0], np.minimum(pick, n - 2), [n - 1]))
         time, values = time[pick], values[pick]
     return Signal(
         label=label,

@@ -113,7 +113,7 @@ class JointSpeedCritic:
             return Verdict(
                 critic=self.name,
                 flag=Flag.OK,
-                message="The trajectory has a single sample, so nothing moves.",
+                message="Nothing to check: the trajectory has a single sample or no frames.",
                 value=0.0,
                 threshold=params.warn_speed_m_s,
                 unit="m/s",

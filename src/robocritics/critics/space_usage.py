@@ -225,7 +225,9 @@ class SpaceUsageCritic:
         if volume > limit:
             samples = ti[vertices]
             links = [names[i] for i in np.unique(li[vertices])]
-            ev = make_evidence(trajectory, samples, worst=int(samples[0]) if len(samples) else None, links=links)
+            # the hull vertex nearest to leaving the workspace
+            far = int(np.argmax(outside[samples, li[vertices]])) if len(samples) else None
+            ev = make_evidence(trajectory, samples, worst=int(samples[far]) if far is not None else None, links=links)
             return Verdict(
                 critic=self.name,
                 flag=Flag.WARNING,
