@@ -304,7 +304,7 @@ def numbered_program(program: str, marked: Iterable[int] = (), *, context: int |
     for n in sorted(show):
         if previous and n != previous + 1:
             out.append("    ...")
-        out.append(f"{'>>' if n in marked else '  '} {n:>{width}} | {lines[n - 1]}")
+        out.append(f"{'>>' if n in marked else '  '} {n:>{width}} | {lines[n - 1]}".rstrip())
         previous = n
     return "\n".join(out)
 

@@ -1,0 +1,637 @@
+"""The RoboCritics loop: request → program → simulated trace → critics → feedback → revision.
+
+:class:`Loop` holds one conversation with a chat model about one scene::
+
+    loop = Loop(OpenAICompatible(), Scene.builtin("sorting"))
+    first = loop.request("put the green apple in the white box")
+    print(first.report)                 # what the critics found
+    better = loop.fix()                 # the paper's one-click Fix: critic feedback → revised program
+    best = loop.run("sort the apples by ripeness", max_attempts=5)   # iterate automatically
+
+Every model reply becomes an :class:`Attempt`: its program is extracted,
+simulated (:func:`~robocritics.program.simulate.simulate`) and critiqued
+(:func:`~robocritics.critic.critique`), and the attempt is stored in the
+interaction memory as ``(request, program, feedback, score)``.
+
+A reply without code, a program the sandbox rejects (:class:`ProgramError`)
+and a motion that cannot be planned (:class:`PlanningError`, e.g. an
+unreachable target) are not exceptions for the caller: the attempt carries the
+runtime feedback (:func:`~robocritics.llm.prompts.runtime_feedback`) and that
+text is sent to the model with the next turn. Only :class:`LLMError` (the
+endpoint failed after the client's retries) propagates; the conversation is
+then left as it was before the call, so the call can simply be repeated.
+
+Automation levels (``automation=``):
+
+* ``"manual"`` — critics only report. Critic feedback never reaches the model
+  unless the user writes it: :meth:`Loop.fix` is refused, :meth:`Loop.run`
+  makes a single request. Use :meth:`Loop.refine` with your own words.
+* ``"guided"`` (default) — the user decides: :meth:`Loop.fix` (the Fix button)
+  forwards the failing critics' feedback; :meth:`Loop.run` iterates when called.
+* ``"auto"`` — :meth:`Loop.request` already iterates like :meth:`Loop.run`.
+
+Approval: ``approve(program, diff) -> bool`` is called for every *revision*
+(a program that differs from the current one, with its unified diff) before it
+is simulated. A rejected revision is recorded (``approved=False``) but not
+simulated, the previous attempt stays current, and the model is told with its
+next turn that the revision was not accepted.
+
+History: the loop keeps the whole conversation (:attr:`Loop.history`) but
+sends the model only the system prompt plus the last ``max_history_messages``
+user/assistant messages (always starting at a user message); when the task
+message falls out of that window, the task is restated in the first message
+that is sent. Programs and feedback of older turns remain available to the
+model through the fix prompt (which quotes the current program) and the memory.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
+
+from ..errors import PlanningError, ProgramError, RoboCriticsError, TrajectoryError
+from .client import ChatModel
+from .memory import Interaction, InteractionMemory
+from .prompts import (
+    REVIEW_INSTRUCTION,
+    extract_code,
+    fix_prompt,
+    request_prompt,
+    runtime_feedback,
+    says_complete,
+    system_prompt,
+)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..critic import Report
+    from ..program.simulate import Execution
+    from ..robot.model import Robot
+    from ..scene import Scene
+
+__all__ = ["Attempt", "Loop", "NothingToFixError", "AUTOMATION_LEVELS"]
+
+AUTOMATION_LEVELS = ("manual", "guided", "auto")
+Automation = Literal["manual", "guided", "auto"]
+#: How the loop asks for the next revision in :meth:`Loop.run`.
+FeedbackMode = Literal["critics", "review"]
+
+Approve = Callable[[str, str], bool]
+
+
+class NothingToFixError(RoboCriticsError):
+    """:meth:`Loop.fix` was called with nothing to fix: no attempt yet, or every selected critic passed."""
+
+
+@dataclass(eq=False)
+class Attempt:
+    """One model turn and what came of it.
+
+    ``index`` counts attempts of the loop from 1. ``kind`` says what produced
+    it: ``"request"`` (a task), ``"fix"`` (critic or runtime feedback),
+    ``"refine"`` (the user's own words) or ``"review"`` (the embedded
+    condition's self-review). ``prompt`` is the user message sent (including
+    any runtime feedback or note carried over from the previous turn);
+    ``reply`` the model's raw answer.
+
+    ``program`` is the program this attempt stands for: the extracted code, or
+    — when the model said "PROGRAM COMPLETE" without code, or sent the same
+    program again — the unchanged current program (``changed`` is False then,
+    and ``execution``/``report`` are the current ones). ``None`` when the reply
+    had no code. ``execution``/``report`` are None when the program did not
+    run (see ``error``) or the revision was rejected (``approved`` False).
+
+    ``error`` is the runtime feedback text (sandbox rejection, planning
+    failure, no code) that is sent to the model with the next turn. ``diff``
+    is the unified diff from the previous current program ("" when unchanged
+    or first). ``score`` is the report's 0–10 quality index (None without a
+    report). ``complete`` is the paper's stop signal: the model said the
+    program is complete and changed nothing.
+    """
+
+    index: int
+    kind: str
+    request: str
+    prompt: str
+    reply: str
+    program: str | None = None
+    execution: Execution | None = field(default=None, repr=False)
+    report: Report | None = field(default=None, repr=False)
+    error: str | None = None
+    diff: str = ""
+    score: float | None = None
+    complete: bool = False
+    changed: bool = True
+    approved: bool | None = None
+    memory_id: int | None = None
+
+    @property
+    def feedback(self) -> str:
+        """What this attempt tells the model: the runtime error, or all critic feedback ("" if neither)."""
+        if self.error:
+            return self.error
+        if self.report is not None:
+            return self.report.feedback()
+        return ""
+
+    @property
+    def passed(self) -> bool:
+        """Whether the program ran and every critic was OK."""
+        return self.report is not None and all(v.ok for v in self.report.verdicts)
+
+    @property
+    def has_errors(self) -> bool:
+        """Whether the attempt failed: no report (it did not run, or was rejected), or an Error verdict."""
+        return self.report is None or self.report.has_errors
+
+    @property
+    def failing(self) -> list[str]:
+        """Names of the critics that did not give OK ([] without a report)."""
+        if self.report is None:
+            return []
+        return [v.critic for v in self.report.verdicts if not v.ok]
+
+    def summary(self) -> str:
+        """One line: index, kind, outcome."""
+        if self.approved is False:
+            outcome = "revision rejected"
+        elif self.error:
+            outcome = "did not run: " + self.error.splitlines()[0]
+        elif self.complete:
+            outcome = f"model says complete; score {_score_text(self.score)}"
+        elif self.report is not None:
+            flagged = ", ".join(f"{v.critic} {v.flag.label}" for v in self.report.verdicts if not v.ok)
+            outcome = f"score {_score_text(self.score)}" + (f" ({flagged})" if flagged else " (all critics OK)")
+            if not self.changed:
+                outcome += "; program unchanged"
+        else:
+            outcome = "no result"
+        return f"attempt {self.index} [{self.kind}]: {outcome}"
+
+
+def _score_text(score: float | None) -> str:
+    if score is None:
+        return "-"
+    return f"{int(score)}/10" if float(score).is_integer() else f"{score:.1f}/10"
+
+
+def _normalise(program: str) -> str:
+    lines = [line.rstrip() for line in program.strip("\n").splitlines()]
+    return "\n".join(lines).strip() + "\n"
+
+
+def unified_diff(old: str, new: str, old_name: str = "previous", new_name: str = "revised") -> str:
+    """The unified diff of two programs ("" when they are equal)."""
+    return "".join(
+        difflib.unified_diff(
+            old.splitlines(keepends=True) if old else [],
+            new.splitlines(keepends=True),
+            fromfile=old_name,
+            tofile=new_name,
+        )
+    )
+
+
+class Loop:
+    """A conversation with a chat model that writes, checks and revises robot programs for one scene.
+
+    Arguments:
+
+    * ``model`` — a :class:`~robocritics.llm.client.ChatModel` (e.g.
+      :class:`~robocritics.llm.client.OpenAICompatible`).
+    * ``scene`` — the :class:`~robocritics.scene.Scene`; ``robot`` defaults to the UR3e.
+    * ``critics`` / ``params`` — which critics run and their thresholds, as in
+      :func:`~robocritics.critic.critique` (default: every installed critic).
+      Checked here, so a typo fails before any model call.
+    * ``memory`` — an :class:`~robocritics.llm.memory.InteractionMemory`, or a
+      path to its SQLite file (the loop then owns and closes it). Each attempt
+      with a program is stored; each request retrieves the ``memory_k`` most
+      relevant past interactions (other than this loop's own) into the system prompt.
+    * ``automation`` — ``"manual"``, ``"guided"`` or ``"auto"`` (module docstring).
+    * ``approve`` — ``approve(program, diff) -> bool`` for revisions (module docstring).
+    * ``session`` — the memory session id (default: a fresh one).
+    * ``max_history_messages`` — user/assistant messages sent per call (>= 2).
+    * ``max_attempts`` — attempts per :meth:`run` (and per request in ``auto``).
+    * ``embedded_rules`` — paste the critics' rules into the system prompt
+      (the paper's *embedded* condition).
+    * ``on_attempt`` — called with each :class:`Attempt` as soon as it is made.
+    * ``model_options`` — keyword arguments for ``model.complete`` (temperature, seed ...).
+    * ``sample_rate_hz`` — trajectory sample rate for simulation.
+    """
+
+    def __init__(
+        self,
+        model: ChatModel,
+        scene: Scene,
+        robot: Robot | None = None,
+        critics: Iterable[str] | str | None = None,
+        params: Mapping[str, Any] | None = None,
+        memory: InteractionMemory | str | os.PathLike[str] | None = None,
+        automation: Automation = "guided",
+        approve: Approve | None = None,
+        session: str | None = None,
+        max_history_messages: int = 12,
+        *,
+        max_attempts: int = 5,
+        memory_k: int = 3,
+        embedded_rules: bool = False,
+        on_attempt: Callable[[Attempt], None] | None = None,
+        model_options: Mapping[str, Any] | None = None,
+        sample_rate_hz: float = 125.0,
+    ):
+        from ..critic import select_critics
+
+        if not callable(getattr(model, "complete", None)):
+            raise TypeError(f"model must be a ChatModel (with a complete(messages) method), got {type(model).__name__}")
+        if automation not in AUTOMATION_LEVELS:
+            raise ValueError(f"automation must be one of {', '.join(AUTOMATION_LEVELS)}, got {automation!r}")
+        if int(max_history_messages) < 2:
+            raise ValueError(f"max_history_messages must be at least 2, got {max_history_messages}")
+        if int(max_attempts) < 1:
+            raise ValueError(f"max_attempts must be at least 1, got {max_attempts}")
+        if int(memory_k) < 0:
+            raise ValueError(f"memory_k must be >= 0, got {memory_k}")
+        if approve is not None and not callable(approve):
+            raise TypeError("approve must be a callable approve(program, diff) -> bool")
+        if isinstance(critics, str):
+            critics = [c.strip() for c in critics.split(",") if c.strip()]
+        selected = select_critics(critics, params)  # fail fast on unknown critics / parameters
+        self.model = model
+        self.scene = scene
+        self._robot = robot
+        self.critics: list[str] = [critic.name for critic, _ in selected]
+        self.params = dict(params or {})
+        self._owns_memory = memory is not None and not isinstance(memory, InteractionMemory)
+        self.memory: InteractionMemory | None = (
+            InteractionMemory(memory) if self._owns_memory else memory  # type: ignore[arg-type]
+        )
+        self.session = session or InteractionMemory.new_session_id()
+        self.automation: Automation = automation
+        self.approve = approve
+        self.max_history_messages = int(max_history_messages)
+        self.max_attempts = int(max_attempts)
+        self.memory_k = int(memory_k)
+        self.embedded_rules = bool(embedded_rules)
+        self.on_attempt = on_attempt
+        self.model_options = dict(model_options or {})
+        self.sample_rate_hz = float(sample_rate_hz)
+
+        self.attempts: list[Attempt] = []
+        self.history: list[dict[str, str]] = []  # user/assistant turns, never trimmed
+        self.task: str | None = None
+        self.examples: list[Interaction] = []  # memory examples in the current system prompt
+        self.system: str = self._system_prompt()
+        self.current: Attempt | None = None  # the attempt whose program is in effect
+        self.last_run: list[Attempt] = []  # the attempts of the latest run()
+        self._task_index = 0  # index in history of the current task's first message
+        self._pending_error: str | None = None  # runtime feedback owed to the model
+        self._notes: list[str] = []  # other things to tell the model with the next turn
+        self._memory_ids: set[int] = set()
+
+    # --- public API ------------------------------------------------------------------------
+
+    @property
+    def robot(self) -> Robot:
+        if self._robot is None:
+            from ..robot.model import Robot
+
+            self._robot = Robot.ur3e()
+        return self._robot
+
+    @property
+    def last(self) -> Attempt | None:
+        """The latest attempt (also a rejected or failed one), or None."""
+        return self.attempts[-1] if self.attempts else None
+
+    def request(self, text: str) -> Attempt:
+        """Start a task: the model writes a program for ``text``; it is simulated, critiqued and stored.
+
+        Retrieves relevant past interactions from the memory into the system
+        prompt first. With ``automation="auto"`` this iterates like
+        :meth:`run` (``max_attempts`` of the loop) and returns what ``run`` returns.
+        """
+        if self.automation == "auto":
+            return self.run(text)
+        return self._request(text)
+
+    def fix(self, critics: Iterable[str] | str | None = None) -> Attempt:
+        """The one-click Fix: send the feedback of the FAILING critics of the current attempt; return the revision.
+
+        ``critics`` restricts the feedback to some critics (default: the
+        loop's critics); only those that gave a Warning or Error are sent.
+        If the last reply could not be run (sandbox, planning, no code), its
+        runtime feedback is what is sent. Raises :class:`NothingToFixError`
+        when there is no attempt yet or every selected critic passed, and
+        :class:`RoboCriticsError` in ``manual`` automation.
+        """
+        if self.automation == "manual":
+            raise RoboCriticsError(
+                "automation='manual': critic feedback is not sent to the model; use refine(text) with your "
+                "own words, or automation='guided' to fix on request"
+            )
+        message = self._fix_message(critics)
+        return self._turn("fix", message)
+
+    def refine(self, text: str) -> Attempt:
+        """Send the user's own words about the current program; return the revision.
+
+        With no attempt yet this is the same as :meth:`request`.
+        """
+        if not isinstance(text, str) or not text.strip():
+            raise ValueError("refine needs some text")
+        if self.task is None:
+            return self._request(text)
+        return self._turn("refine", text.strip())
+
+    def review(self) -> Attempt:
+        """The embedded condition's self-review turn: "Review the program. If any part might violate
+        these rules, revise the code to fix it." (with any runtime feedback owed)."""
+        if self.task is None:
+            raise NothingToFixError("nothing to review: no request yet; call request(text) first")
+        return self._turn("review", REVIEW_INSTRUCTION)
+
+    def run(self, text: str, max_attempts: int | None = None, *, feedback: FeedbackMode = "critics") -> Attempt:
+        """Request ``text`` and iterate until done; return the BEST attempt of this run.
+
+        Each round after the first sends, for ``feedback="critics"`` (the
+        paper's *external* condition), the feedback of the failing critics
+        (or the runtime feedback of a program that did not run); for
+        ``feedback="review"`` (the *embedded* condition) the self-review
+        instruction. It stops when
+
+        * every critic is OK (``"critics"`` only; the model is not asked again),
+        * the model says the program is complete and changes nothing (the
+          paper's stop rule; that reply counts as an attempt), or
+        * ``max_attempts`` model replies were made (default: the loop's).
+
+        In ``manual`` automation only the request is made. Returns the attempt
+        with the highest score (the latest of equal ones); when no attempt
+        produced a report, the last attempt. All of this run's attempts are in
+        :attr:`last_run`.
+        """
+        if feedback not in ("critics", "review"):
+            raise ValueError(f"feedback must be 'critics' or 'review', got {feedback!r}")
+        limit = self.max_attempts if max_attempts is None else int(max_attempts)
+        if limit < 1:
+            raise ValueError(f"max_attempts must be at least 1, got {max_attempts}")
+        start = len(self.attempts)
+        self.last_run = []
+        attempt = self._request(text)
+        self.last_run = self.attempts[start:]
+        while self.automation != "manual" and len(self.attempts) - start < limit:
+            if attempt.complete:
+                break
+            current = self.current
+            if feedback == "critics" and self._pending_error is None and current is not None and current.passed:
+                break
+            if feedback == "critics":
+                try:
+                    message = self._fix_message(None)
+                except NothingToFixError:
+                    break
+                attempt = self._turn("fix", message)
+            else:
+                attempt = self._turn("review", REVIEW_INSTRUCTION)
+            self.last_run = self.attempts[start:]
+        return self.best(self.last_run)
+
+    @staticmethod
+    def best(attempts: Iterable[Attempt]) -> Attempt:
+        """The attempt with the highest score (latest of equal ones); the last one if none has a report."""
+        attempts = list(attempts)
+        if not attempts:
+            raise ValueError("no attempts")
+        scored = [a for a in attempts if a.report is not None and a.approved is not False]
+        if not scored:
+            return attempts[-1]
+        return max(scored, key=lambda a: (a.score if a.score is not None else -1.0, a.index))
+
+    def messages(self) -> list[dict[str, str]]:
+        """The messages the next model call would send before its new user message: system + trimmed history."""
+        return [{"role": "system", "content": self.system}, *self._trimmed_history()]
+
+    def close(self) -> None:
+        """Close the memory if the loop opened it from a path."""
+        if self._owns_memory and self.memory is not None:
+            self.memory.close()
+
+    def __enter__(self) -> Loop:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return (
+            f"Loop(model={getattr(self.model, 'name', type(self.model).__name__)!r}, scene={self.scene.name!r}, "
+            f"automation={self.automation!r}, attempts={len(self.attempts)})"
+        )
+
+    # --- turns -----------------------------------------------------------------------------
+
+    def _request(self, text: str) -> Attempt:
+        if not isinstance(text, str) or not text.strip():
+            raise ValueError("request needs a task description")
+        text = text.strip()
+        examples = self._retrieve(text)
+        previous = (self.task, self.examples, self.system, self._task_index)
+        self.task = text
+        self.examples = examples
+        self.system = self._system_prompt()
+        self._task_index = len(self.history)
+        try:
+            return self._turn("request", request_prompt(text))
+        except BaseException:
+            self.task, self.examples, self.system, self._task_index = previous
+            raise
+
+    def _fix_message(self, critics: Iterable[str] | str | None) -> str:
+        """The next fix turn's message; raises NothingToFixError when there is nothing to fix."""
+        if not self.attempts:
+            raise NothingToFixError("nothing to fix: no attempt yet; call request(text) first")
+        if self._pending_error is not None:
+            return ""  # the runtime feedback owed to the model is the message
+        current = self.current
+        if current is None or current.report is None:
+            raise NothingToFixError("nothing to fix: no program has been checked yet")
+        report = current.report
+        names = self.critics if critics is None else ([critics] if isinstance(critics, str) else list(critics))
+        names = [n for n in names if n in report.critics] if critics is None else names
+        failing = [n for n in names if not report.verdict(n).ok]  # report.verdict raises for unknown names
+        if not failing:
+            raise NothingToFixError(
+                f"nothing to fix: {'every selected critic' if critics is not None else 'every critic'} passed "
+                f"on attempt {current.index} (score {_score_text(report.score)})"
+            )
+        return fix_prompt(report, failing, program=current.program)
+
+    def _turn(self, kind: str, message: str) -> Attempt:
+        """Send one user message (with what is owed to the model), interpret the reply, record the attempt."""
+        assert self.task is not None
+        parts = [*self._notes]
+        if self._pending_error is not None:
+            parts.append(self._pending_error)
+        if message:
+            parts.append(message)
+        content = "\n\n".join(parts)
+        messages = [*self.messages(), {"role": "user", "content": content}]
+        reply = self.model.complete(messages, **self.model_options)  # LLMError propagates; nothing changed yet
+        if not isinstance(reply, str):
+            reply = "" if reply is None else str(reply)
+        saved = (list(self._notes), self._pending_error, self.current)
+        self._notes = []
+        self._pending_error = None
+        self.history.append({"role": "user", "content": content})
+        self.history.append({"role": "assistant", "content": reply})
+        try:
+            attempt = self._interpret(kind, content, reply)
+        except BaseException:  # approve() or a critic raised: leave the conversation as it was
+            del self.history[-2:]
+            self._notes, self._pending_error, self.current = saved
+            raise
+        self.attempts.append(attempt)
+        if self.on_attempt is not None:
+            self.on_attempt(attempt)
+        return attempt
+
+    def _interpret(self, kind: str, prompt: str, reply: str) -> Attempt:
+        index = len(self.attempts) + 1
+        assert self.task is not None
+        attempt = Attempt(index=index, kind=kind, request=self.task, prompt=prompt, reply=reply)
+        code = extract_code(reply)
+        current = self.current
+        complete = says_complete(reply)
+
+        if code is None:
+            if complete and current is not None and current.report is not None:
+                self._adopt_current(attempt, current, complete=True)
+                return attempt
+            if complete and current is not None and current.error:
+                attempt.error = (
+                    "You said the program is complete, but it did not run:\n"
+                    + current.error.split("\n\n")[0]
+                    + "\nSend the complete corrected program in one ```python block."
+                )
+            else:
+                attempt.error = runtime_feedback(None, reply=reply)
+            self._pending_error = attempt.error
+            return attempt  # nothing to store: no program
+
+        code = _normalise(code)
+        if current is not None and current.program is not None and code == current.program:
+            # The same program again: nothing to approve or simulate (a failure is reported again).
+            self._adopt_current(attempt, current, complete=complete)
+            return attempt
+
+        attempt.program = code
+        old = current.program if current is not None and current.program else ""
+        attempt.diff = unified_diff(
+            old,
+            code,
+            f"attempt {current.index}" if current is not None and current.program else "empty",
+            f"attempt {index}",
+        )
+        if self.approve is not None and current is not None and current.program is not None:
+            if not self.approve(code, attempt.diff):
+                attempt.approved = False
+                self._notes.append(
+                    f"The user did not accept your revision (attempt {index}); it was not run. The current "
+                    f"program is still the one of attempt {current.index}."
+                )
+                return attempt
+            attempt.approved = True
+        self._check(attempt)
+        self.current = attempt
+        self._store(attempt)
+        return attempt
+
+    def _adopt_current(self, attempt: Attempt, current: Attempt, *, complete: bool) -> None:
+        """``attempt`` keeps the current program and its results (the model changed nothing)."""
+        attempt.program = current.program
+        attempt.execution = current.execution
+        attempt.report = current.report
+        attempt.score = current.score
+        attempt.error = current.error
+        attempt.changed = False
+        attempt.complete = bool(complete and current.report is not None)
+        if attempt.error is not None:
+            self._pending_error = attempt.error
+        self.current = attempt
+
+    def _check(self, attempt: Attempt) -> None:
+        """Simulate and critique ``attempt.program``; a failure becomes runtime feedback."""
+        from ..critic import critique
+        from ..program.simulate import simulate
+
+        assert attempt.program is not None
+        try:
+            execution = simulate(attempt.program, self.scene, self.robot, sample_rate_hz=self.sample_rate_hz)
+        except (ProgramError, PlanningError, TrajectoryError) as exc:
+            attempt.error = runtime_feedback(exc, program=attempt.program)
+            self._pending_error = attempt.error
+            return
+        attempt.execution = execution
+        attempt.report = critique(execution.trajectory, self.scene, self.critics, self.params or None)
+        attempt.score = attempt.report.score
+
+    # --- memory and prompts ----------------------------------------------------------------------
+
+    def _system_prompt(self) -> str:
+        return system_prompt(
+            self.scene,
+            embedded_rules=self.embedded_rules,
+            memory_examples=self.examples,
+            critics=self.critics,
+            params=self.params or None,
+        )
+
+    def _retrieve(self, text: str) -> list[Interaction]:
+        """The ``memory_k`` most relevant past interactions other than this loop's own, one per request text."""
+        if self.memory is None or self.memory_k == 0:
+            return []
+        hits = self.memory.search(text, k=self.memory_k * 4 + len(self._memory_ids))
+        by_request: dict[str, Interaction] = {}
+        for hit in hits:  # best similarity first
+            if hit.id in self._memory_ids or not hit.program.strip():
+                continue
+            key = " ".join(hit.request.split()).lower()
+            kept = by_request.get(key)
+            if kept is None or _better(hit, kept):
+                by_request[key] = hit
+        return list(by_request.values())[: self.memory_k]
+
+    def _store(self, attempt: Attempt) -> None:
+        if self.memory is None or attempt.program is None:
+            return
+        attempt.memory_id = self.memory.add(self.session, attempt.request, attempt.program, attempt.feedback, attempt.score)
+        self._memory_ids.add(attempt.memory_id)
+
+    # --- history --------------------------------------------------------------------------------
+
+    def _trimmed_history(self) -> list[dict[str, str]]:
+        """The last ``max_history_messages - 1`` messages (room for the new user message), starting at a user turn.
+
+        When the current task's first message is cut off, the task is restated
+        at the start of the first message kept.
+        """
+        keep = self.max_history_messages - 1
+        if len(self.history) <= keep:
+            return [dict(m) for m in self.history]
+        start = len(self.history) - keep
+        if self.history[start]["role"] != "user":
+            start += 1
+        tail = [dict(m) for m in self.history[start:]]
+        if start > self._task_index and self.task is not None and tail:
+            tail[0]["content"] = (
+                f"(Earlier messages were left out.) The task: {self.task}\n\n" + tail[0]["content"]
+            )
+        return tail
+
+
+def _better(a: Interaction, b: Interaction) -> bool:
+    """Whether interaction ``a`` is a better example than ``b`` of the same request: higher score, then newer."""
+    sa = -1.0 if a.score is None else a.score
+    sb = -1.0 if b.score is None else b.score
+    return (sa, a.id) > (sb, b.id)
