@@ -13,9 +13,10 @@ simulated (:func:`~robocritics.program.simulate.simulate`) and critiqued
 (:func:`~robocritics.critic.critique`), and the attempt is stored in the
 interaction memory as ``(request, program, feedback, score)``.
 
-A reply without code, a program the sandbox rejects (:class:`ProgramError`)
-and a motion that cannot be planned (:class:`PlanningError`, e.g. an
-unreachable target) are not exceptions for the caller: the attempt carries the
+A reply without code, a program the sandbox rejects (:class:`ProgramError`),
+a motion that cannot be planned (:class:`PlanningError`, e.g. an
+unreachable target) and a motion a critic cannot judge (:class:`CriticError`
+from a critic's ``check``) are not exceptions for the caller: the attempt carries the
 runtime feedback (:func:`~robocritics.llm.prompts.runtime_feedback`) and that
 text is sent to the model with the next turn. Only :class:`LLMError` (the
 endpoint failed after the client's retries) propagates; the conversation is
@@ -47,12 +48,13 @@ model through the fix prompt (which quotes the current program) and the memory.
 from __future__ import annotations
 
 import difflib
+import logging
 import os
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
-from ..errors import PlanningError, ProgramError, RoboCriticsError, TrajectoryError
+from ..errors import CriticError, PlanningError, ProgramError, RoboCriticsError, TrajectoryError
 from .client import ChatModel
 from .memory import Interaction, InteractionMemory
 from .prompts import (
@@ -79,6 +81,8 @@ Automation = Literal["manual", "guided", "auto"]
 FeedbackMode = Literal["critics", "review"]
 
 Approve = Callable[[str, str], bool]
+
+log = logging.getLogger("robocritics.llm")
 
 
 class NothingToFixError(RoboCriticsError):
@@ -261,7 +265,8 @@ class Loop:
         self.model = model
         self.scene = scene
         self._robot = robot
-        self.critics: list[str] = [critic.name for critic, _ in selected]
+        self._selection = [critic for critic, _ in selected]  # critic objects: unregistered ones work too
+        self.critics: list[str] = [critic.name for critic in self._selection]
         self.params = dict(params or {})
         self._owns_memory = memory is not None and not isinstance(memory, InteractionMemory)
         self.memory: InteractionMemory | None = (
@@ -526,13 +531,8 @@ class Loop:
             return attempt
 
         attempt.program = code
-        old = current.program if current is not None and current.program else ""
-        attempt.diff = unified_diff(
-            old,
-            code,
-            f"attempt {current.index}" if current is not None and current.program else "empty",
-            f"attempt {index}",
-        )
+        if current is not None and current.program is not None:
+            attempt.diff = unified_diff(current.program, code, f"attempt {current.index}", f"attempt {index}")
         if self.approve is not None and current is not None and current.program is not None:
             if not self.approve(code, attempt.diff):
                 attempt.approved = False
@@ -573,7 +573,13 @@ class Loop:
             self._pending_error = attempt.error
             return
         attempt.execution = execution
-        attempt.report = critique(execution.trajectory, self.scene, self.critics, self.params or None)
+        try:
+            attempt.report = critique(execution.trajectory, self.scene, self._selection, self.params or None)
+        except CriticError as exc:  # a critic could not judge this motion: report it, never crash the loop
+            log.warning("attempt %d: %s", attempt.index, exc)
+            attempt.error = runtime_feedback(exc, program=attempt.program)
+            self._pending_error = attempt.error
+            return
         attempt.score = attempt.report.score
 
     # --- memory and prompts ----------------------------------------------------------------------
@@ -583,7 +589,7 @@ class Loop:
             self.scene,
             embedded_rules=self.embedded_rules,
             memory_examples=self.examples,
-            critics=self.critics,
+            critics=self._selection,
             params=self.params or None,
         )
 

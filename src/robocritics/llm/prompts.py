@@ -29,7 +29,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from ..errors import PlanningError, ProgramError, RoboCriticsError
+from ..errors import CriticError, PlanningError, ProgramError, RoboCriticsError
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic import Report
@@ -164,7 +164,7 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def critic_rules(critics: Iterable[str] | str | None = None, params: Mapping[str, Any] | None = None) -> str:
+def critic_rules(critics: Iterable[Any] | str | None = None, params: Mapping[str, Any] | None = None) -> str:
     """The critics' rules for the *embedded* condition: each critic's description and thresholds.
 
     Thresholds are the numeric fields of each critic's ``Params`` (its defaults,
@@ -254,7 +254,7 @@ def system_prompt(
     *,
     embedded_rules: bool = False,
     memory_examples: Iterable[Any] = (),
-    critics: Iterable[str] | str | None = None,
+    critics: Iterable[Any] | str | None = None,
     params: Mapping[str, Any] | None = None,
 ) -> str:
     """The system message: role, skill API, scene, rules; optionally critic rules and memory examples.
@@ -394,6 +394,11 @@ def runtime_feedback(
             f"executed.\nProblem: {reason}{_quote_line(program, line)}\n"
             f"Keep every target within the robot's reach and inside the allowed workspace (see the "
             f"scene), above the table and clear of the objects. {resend}"
+        )
+    if isinstance(error, CriticError):
+        return (
+            f"Your program ran, but the critics could not check its motion: {error}\n"
+            f"Make sure the program moves the robot to do the task. {resend}"
         )
     if isinstance(error, RoboCriticsError):
         return f"Your program could not be checked: {error}\n{resend}"
