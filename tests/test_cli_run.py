@@ -1,0 +1,124 @@
+"""``robocritics run`` end to end against the loopback LLM server."""
+
+# ruff: noqa: F811  (pytest fixtures imported from llm_fixtures are parameters here)
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+from llm_fixtures import clean_llm_env, llm_server  # noqa: F401
+from llm_server import Fail
+
+from robocritics.llm.cli_run import add_run_parser, run_command
+from robocritics.llm.memory import InteractionMemory
+
+pytestmark = pytest.mark.usefixtures("clean_llm_env")
+
+PROGRAMS = Path(__file__).resolve().parent.parent / "examples" / "programs"
+NAIVE = (PROGRAMS / "sorting_naive.py").read_text()
+CAREFUL = (PROGRAMS / "sorting_careful.py").read_text()
+TASK = "sort the apples by ripeness"
+SPEED_CRITICS = "joint_speed,end_effector_pose"
+
+
+def parse(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="robocritics")
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_run_parser(sub)
+    return parser.parse_args(["run", *argv])
+
+
+def run(*argv: str) -> int:
+    args = parse(*argv)
+    assert args.func is run_command
+    return run_command(args)
+
+
+def fenced(program: str) -> str:
+    return f"```python\n{program}```"
+
+
+def test_auto_run_end_to_end(llm_server, capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("MY_LLM_KEY", "sk-cli-test-key")
+    llm_server.require_api_key = "sk-cli-test-key"
+    llm_server.reply(fenced(NAIVE), fenced(CAREFUL), "PROGRAM COMPLETE")
+    memory = tmp_path / "memory.sqlite"
+    code = run(
+        TASK,
+        "--scene", "sorting",
+        "--base-url", llm_server.url,
+        "--model", "cli-model",
+        "--api-key-env", "MY_LLM_KEY",
+        "--auto",
+        "--max-attempts", "4",
+        "--critics", SPEED_CRITICS,
+        "--memory", str(memory),
+    )  # fmt: skip
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "=== attempt 1 [request] ===" in out and "=== attempt 2 [fix] ===" in out
+    assert "=== attempt 3" not in out  # every critic OK after the fix: the model is not asked again
+    assert "move_down(0.2)" in out and "lib.set_speed(0.3)" in out  # both programs are printed
+    assert out.count("RoboCritics report: score") == 2  # str(report) of each attempt
+    assert "joint_speed" in out and "end_effector_pose" in out and "collision" not in out
+    assert "score: 10/10" in out
+    assert "final: attempt 2 of 2, score 10/10, no Error" in out
+    assert llm_server.pending == 1
+    requests = llm_server.chat_requests()
+    assert {r.json["model"] for r in requests} == {"cli-model"}
+    assert "Joint speed" in requests[1].text or "fingers point" in requests[1].text
+    with InteractionMemory(memory) as stored:
+        assert len(stored) == 2
+
+
+def test_single_request_with_an_error_exits_1(llm_server, capsys):
+    llm_server.reply(fenced(NAIVE), fenced(CAREFUL))
+    code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", SPEED_CRITICS)
+    out = capsys.readouterr().out
+    assert code == 1  # the naive program spears: an Error
+    assert len(llm_server.chat_requests()) == 1  # no --auto: one request
+    assert "ERROR" in out and "final: attempt 1, score" in out and "it still has an Error" in out
+
+
+def test_program_that_does_not_run_exits_1(llm_server, capsys):
+    llm_server.reply("```python\nimport os\n```")
+    code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m")
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "--- did not run ---" in out and "import" in out and "its program did not run" in out
+
+
+def test_configuration_from_the_environment(llm_server, capsys, monkeypatch):
+    monkeypatch.setenv("ROBOCRITICS_BASE_URL", llm_server.url)
+    monkeypatch.setenv("ROBOCRITICS_MODEL", "env-model")
+    llm_server.reply("```python\nmove_above(green_apple)\n```")
+    assert run(TASK, "--scene", "sorting", "--critics", "joint_speed") == 0
+    assert llm_server.chat_requests()[0].json["model"] == "env-model"
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--model", "m"], "no LLM endpoint configured"),
+        (["--base-url", "http://127.0.0.1:9/v1"], "no chat model configured"),
+        (["--base-url", "http://127.0.0.1:9/v1", "--model", "m", "--api-key-env", "NOT_SET_ANYWHERE"], "NOT_SET_ANYWHERE"),
+        (["--base-url", "http://127.0.0.1:9/v1", "--model", "m", "--critics", "joint_sped"], "did you mean 'joint_speed'"),
+        (["--base-url", "http://127.0.0.1:9/v1", "--model", "m", "--scene", "sortin"], "sortin"),
+    ],
+)
+def test_configuration_errors_exit_2(argv, message, capsys):
+    if "--scene" not in argv:
+        argv = [*argv, "--scene", "sorting"]
+    assert run(TASK, *argv) == 2
+    captured = capsys.readouterr()
+    assert message in captured.err and captured.err.startswith("robocritics run: error:")
+    assert captured.out == ""
+
+
+def test_endpoint_failure_exits_2(llm_server, capsys):
+    llm_server.script(Fail(404))
+    assert run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m") == 2
+    err = capsys.readouterr().err
+    assert "LLM endpoint failed" in err and "404" in err
