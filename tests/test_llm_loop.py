@@ -10,10 +10,11 @@ takes a few tenths of a second, so every test simulates only a few programs.
 from __future__ import annotations
 
 import sqlite3
+import sys
 from pathlib import Path
 
 import pytest
-from llm_fixtures import TEST_EMBEDDING_MODEL, clean_llm_env, llm_server, make_client  # noqa: F401
+from llm_fixtures import clean_llm_env, llm_server, make_client  # noqa: F401
 from llm_server import Fail, Reply
 
 from robocritics.critic import CriticParams
@@ -419,3 +420,27 @@ def test_constructor_checks(make_client, sorting):
     loop = Loop(client, sorting, critics="joint_speed, collision")
     assert loop.critics == ["joint_speed", "collision"]
     assert "Loop(model='test-chat'" in repr(loop)
+
+
+# --- the ablation harness (benchmarks/ablation.py) ----------------------------------------------
+
+
+def test_ablation_selftest_runs_offline(capsys):
+    import importlib.util
+
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / "ablation.py"
+    spec = importlib.util.spec_from_file_location("robocritics_ablation", path)
+    ablation = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = ablation  # its dataclasses look their module up
+    try:
+        spec.loader.exec_module(ablation)
+        assert ablation.main(["--selftest", "--tasks", "sorting"]) == 0
+    finally:
+        del sys.modules[spec.name]
+    out = capsys.readouterr().out
+    rows = {tuple(line.split()[:2]): line.split() for line in out.splitlines() if line.startswith(("sorting", "average"))}
+    embedded, external = rows[("sorting", "embedded")], rows[("sorting", "external")]
+    assert embedded[2] == "2.0" and embedded[-1] == "complete"  # naive program, then "PROGRAM COMPLETE"
+    assert float(external[3]) > float(embedded[3])  # critic feedback led to the careful program
+    assert ["paper", "embedded", "2.3", "6.3"] in [line.split() for line in out.splitlines()]
+    assert "Reproduce: python benchmarks/ablation.py --selftest --tasks sorting" in out

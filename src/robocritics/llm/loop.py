@@ -210,9 +210,13 @@ class Loop:
       :func:`~robocritics.critic.critique` (default: every installed critic).
       Checked here, so a typo fails before any model call.
     * ``memory`` — an :class:`~robocritics.llm.memory.InteractionMemory`, or a
-      path to its SQLite file (the loop then owns and closes it). Each attempt
-      with a program is stored; each request retrieves the ``memory_k`` most
-      relevant past interactions (other than this loop's own) into the system prompt.
+      path to its SQLite file (the loop then owns and closes it). Every
+      program that was run is stored as ``(task, program, feedback, score)``
+      (feedback: the critics' or the runtime error's; score None if it did not
+      run); replies without code, unchanged programs and rejected revisions
+      are not. Each request retrieves the ``memory_k`` most relevant past
+      interactions (other than this loop's own; the best-scored one per
+      request text) into the system prompt.
     * ``automation`` — ``"manual"``, ``"guided"`` or ``"auto"`` (module docstring).
     * ``approve`` — ``approve(program, diff) -> bool`` for revisions (module docstring).
     * ``session`` — the memory session id (default: a fresh one).

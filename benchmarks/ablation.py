@@ -1,0 +1,497 @@
+"""The RoboCritics validation protocol (paper, Table 1): embedded critic rules vs. external critic feedback.
+
+Three tasks (recycling — easy, sorting — medium, breakfast — hard), each run
+with up to ``--max-attempts`` LLM generation attempts (5 in the paper) under two
+conditions:
+
+* **embedded** — the critics' rules (each critic's description and thresholds,
+  read from its ``Params``) are pasted into the system prompt. The model never
+  sees trace feedback; after each program it is told "Review the program. If
+  any part might violate these rules, revise the code to fix it." and it
+  revises on its own until it says the program is complete (and changes
+  nothing) or the attempts run out.
+* **external** — no rules in the prompt; each round the critics check the
+  simulated trace and their structured feedback goes back to the model, until
+  every critic is OK, the model says the program is complete, or the attempts
+  run out.
+
+In both conditions every program is simulated and scored by the five critics
+(0–10 program quality index). A reply without code, a program the sandbox
+rejects or an unreachable target is fed back as runtime feedback in both
+conditions (it is not critic feedback) and counts as an attempt.
+
+Columns: ``attempts`` = model replies used; ``final`` = score of the last
+program that ran (0 if none ran); ``best`` = best score of the run; ``goal`` =
+whether the final program's simulated end state does the task (objects in the
+right containers / on the plate). Paper averages: embedded 2.3 attempts, score
+6.3; external 5.0 attempts, score 7.7.
+
+Usage::
+
+    python benchmarks/ablation.py --base-url https://api.openai.com/v1 --model gpt-4o-mini \\
+        --api-key-env OPENAI_API_KEY [--max-attempts 5] [--repeats 3] [--json results.json]
+    python benchmarks/ablation.py --selftest     # offline, against the scripted loopback server
+
+``--selftest`` starts ``tests/llm_server.LLMServer`` on 127.0.0.1 with a
+scripted model that answers the task with the naive example program, answers
+critic feedback with the careful example program, and says "PROGRAM COMPLETE"
+when asked to review its program or when it has nothing better — so the harness
+is demonstrably working end to end without any real LLM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import shlex
+import statistics
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+try:
+    import robocritics  # noqa: F401
+except ImportError:  # run from a checkout without installing
+    sys.path.insert(0, str(ROOT / "src"))
+
+from robocritics.errors import LLMError, RoboCriticsError  # noqa: E402
+from robocritics.llm.client import OpenAICompatible  # noqa: E402
+from robocritics.llm.loop import Attempt, Loop  # noqa: E402
+from robocritics.llm.prompts import REVIEW_INSTRUCTION  # noqa: E402
+from robocritics.scene import Scene  # noqa: E402
+
+#: The paper's three tasks, easiest first, with the request given to the model.
+TASKS: dict[str, str] = {
+    "recycling": "Discard the coffee cup, the food container and the water bottle into the trash bin, "
+    "avoiding collisions.",
+    "sorting": "Sort the apples by ripeness: put the ripe red apples into the brown box to make jam and "
+    "the unripe green apple into the white box.",
+    "breakfast": "Prepare breakfast: throw the fork away into the trash bin, then serve the apple and the "
+    "cupcake on the plate. The cupcake sits on top of the apple inside the brown box.",
+}
+CONDITIONS = ("embedded", "external")
+#: Paper, Table 1 averages: (attempts, final score).
+PAPER = {"embedded": (2.3, 6.3), "external": (5.0, 7.7)}
+
+
+# --- did the program do the task? ------------------------------------------------------------
+
+
+def _on_plate(execution: Any, obj_id: str) -> bool:
+    scene = execution.final_scene
+    plate = next(o for o in scene.objects if o.id == "plate")
+    obj = next(o for o in scene.objects if o.id == obj_id)
+    dx, dy = obj.position[0] - plate.position[0], obj.position[1] - plate.position[1]
+    return (
+        math.hypot(dx, dy) <= plate.size[0]
+        and obj.bottom >= plate.top - 0.01
+        and scene.container_holding(obj_id) is None
+    )
+
+
+def goal_reached(task: str, execution: Any) -> bool | None:
+    """Whether the simulated end state does ``task`` (None: no execution to judge)."""
+    if execution is None:
+        return None
+    scene = execution.scene
+    try:
+        if task == "recycling":
+            return all(execution.object_inside(o.id, "trash_bin") for o in scene.objects)
+        if task == "sorting":
+            return all(
+                execution.object_inside(o.id, "brown_box" if o.attributes.get("ripeness") == "ripe" else "white_box")
+                for o in scene.objects
+            )
+        if task == "breakfast":
+            return (
+                execution.object_inside("fork", "trash_bin")
+                and _on_plate(execution, "apple")
+                and _on_plate(execution, "cupcake")
+            )
+    except (StopIteration, RoboCriticsError):
+        return False
+    return None
+
+
+# --- one run -----------------------------------------------------------------------------------
+
+
+@dataclass
+class Result:
+    task: str
+    condition: str
+    repeat: int
+    attempts: int
+    final_score: float
+    best_score: float
+    final_has_error: bool
+    goal: bool | None
+    stopped: str  # "complete" | "all OK" | "max attempts"
+    seconds: float
+    runtime_errors: int
+    scores: list[float | None] = field(default_factory=list)
+
+
+def run_one(
+    model: Any,
+    task: str,
+    condition: str,
+    *,
+    max_attempts: int,
+    repeat: int = 0,
+    model_options: dict | None = None,
+    verbose: bool = False,
+) -> Result:
+    """Run one task under one condition with a fresh conversation (no memory) and summarise it."""
+    scene = Scene.builtin(task)
+
+    def show(attempt: Attempt) -> None:
+        if verbose:
+            print(f"  [{task}/{condition}] {attempt.summary()}", file=sys.stderr, flush=True)
+
+    loop = Loop(
+        model,
+        scene,
+        embedded_rules=condition == "embedded",
+        max_attempts=max_attempts,
+        on_attempt=show,
+        model_options=model_options,
+    )
+    started = time.monotonic()
+    best = loop.run(TASKS[task], feedback="review" if condition == "embedded" else "critics")
+    seconds = time.monotonic() - started
+    attempts = loop.last_run
+    ran = [a for a in attempts if a.report is not None and a.approved is not False]
+    final = ran[-1] if ran else None
+    last = attempts[-1]
+    if last.complete:
+        stopped = "complete"
+    elif condition == "external" and last.passed:
+        stopped = "all OK"
+    else:
+        stopped = "max attempts"
+    return Result(
+        task=task,
+        condition=condition,
+        repeat=repeat,
+        attempts=len(attempts),
+        final_score=final.score if final is not None else 0.0,
+        best_score=best.score if best.score is not None else 0.0,
+        final_has_error=final is None or final.report.has_errors,
+        goal=goal_reached(task, final.execution) if final is not None else None,
+        stopped=stopped,
+        seconds=seconds,
+        runtime_errors=sum(1 for a in attempts if a.error),
+        scores=[a.score for a in attempts],
+    )
+
+
+# --- the table ---------------------------------------------------------------------------------
+
+
+def _num(values: list[float], digits: int = 1) -> str:
+    if not values:
+        return "-"
+    mean = statistics.fmean(values)
+    text = f"{mean:.{digits}f}"
+    if len(values) > 1:
+        text += f" ±{statistics.pstdev(values):.{digits}f}"
+    return text
+
+
+def _goal(values: list[bool | None]) -> str:
+    known = [v for v in values if v is not None]
+    if not known:
+        return "-"
+    if len(values) == 1:
+        return "yes" if known[0] else "no"
+    return f"{sum(known)}/{len(values)}"
+
+
+def format_table(results: list[Result], tasks: list[str], conditions: list[str]) -> str:
+    """Task × condition rows (attempts, final score, best, goal), averages, and the paper's averages."""
+    header = ("task", "condition", "attempts", "final score", "best score", "goal", "stopped")
+    rows: list[tuple[str, ...]] = []
+    for task in tasks:
+        for condition in conditions:
+            cell = [r for r in results if r.task == task and r.condition == condition]
+            if not cell:
+                continue
+            stops = sorted({r.stopped for r in cell})
+            rows.append(
+                (
+                    task,
+                    condition,
+                    _num([r.attempts for r in cell]),
+                    _num([r.final_score for r in cell]),
+                    _num([r.best_score for r in cell]),
+                    _goal([r.goal for r in cell]),
+                    "/".join(stops),
+                )
+            )
+    rows.append(("",) * len(header))
+    for condition in conditions:
+        cell = [r for r in results if r.condition == condition]
+        if cell:
+            # average over tasks of the per-task means, as in the paper
+            per_task = [[r for r in cell if r.task == t] for t in tasks]
+            per_task = [c for c in per_task if c]
+            attempts = [statistics.fmean(r.attempts for r in c) for c in per_task]
+            scores = [statistics.fmean(r.final_score for r in c) for c in per_task]
+            best = [statistics.fmean(r.best_score for r in c) for c in per_task]
+            rows.append(
+                (
+                    "average",
+                    condition,
+                    f"{statistics.fmean(attempts):.1f}",
+                    f"{statistics.fmean(scores):.1f}",
+                    f"{statistics.fmean(best):.1f}",
+                    _goal([r.goal for r in cell]),
+                    "",
+                )
+            )
+    for condition in conditions:
+        if condition in PAPER:
+            attempts, score = PAPER[condition]
+            rows.append(("paper", condition, f"{attempts:.1f}", f"{score:.1f}", "", "", ""))
+    widths = [max(len(header[i]), *(len(row[i]) for row in rows)) for i in range(len(header))]
+    lines = [
+        "  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip(),
+        "  ".join("-" * w for w in widths),
+    ]
+    for row in rows:
+        lines.append("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
+    return "\n".join(lines)
+
+
+# --- the offline self-test: a scripted model on the loopback server ------------------------------
+
+_BREAKFAST_NAIVE = """\
+# Breakfast, first try: full speed, straight down onto each object.
+rotate_gripper(math.radians(90))
+move_to(fork.x, fork.y, fork.z + 0.2)
+move_down(0.2)
+close_gripper()
+move_up(0.2)
+move_to(trash_bin.x, trash_bin.y, 0.2)
+open_gripper()
+rotate_gripper(0)
+move_to(cupcake.x, cupcake.y, cupcake.z + 0.2)
+move_down(0.2)
+close_gripper()
+move_up(0.2)
+move_to(plate.x + 0.05, plate.y, 0.08)
+open_gripper()
+move_to(apple.x, apple.y, apple.z + 0.2)
+move_down(0.2)
+close_gripper()
+move_up(0.2)
+move_to(plate.x - 0.05, plate.y, 0.06)
+open_gripper()
+home()
+"""
+
+_BREAKFAST_CAREFUL = """\
+# Breakfast: throw the fork away, then serve the cupcake and the apple on the plate.
+# Careful: moderate speed in free space, slow straight approaches along the fingers,
+# lift clear of the box walls before moving sideways; the cupcake comes off the apple first.
+lib.set_speed(0.3)
+
+
+def pick(obj, depth):
+    lib.open_gripper()
+    lib.move_above(obj, 0.08)
+    lib.reduce_speed(15)
+    lib.move_linear(obj.x, obj.y, obj.top - depth)
+    lib.close_gripper()
+    lib.move_up(0.12)
+    lib.set_speed(0.3)
+
+
+def place(x, y, z):
+    lib.move_to(x, y, z + 0.1)
+    lib.reduce_speed(15)
+    lib.move_down(0.1)
+    lib.open_gripper()
+    lib.move_up(0.1)
+    lib.set_speed(0.3)
+
+
+lib.rotate_gripper(math.radians(90))
+pick(fork, 0.006)
+lib.move_above(trash_bin, 0.05)
+lib.open_gripper()
+lib.rotate_gripper(0)
+pick(cupcake, 0.02)
+place(plate.x + 0.04, plate.y, plate.top + 0.035)
+pick(apple, 0.035)
+place(plate.x - 0.04, plate.y, plate.top + 0.04)
+lib.home()
+"""
+
+
+def example_programs(task: str) -> tuple[str, str]:
+    """(naive, careful) programs for ``task``: ``examples/programs/<task>_*.py``, else the ones above."""
+    folder = ROOT / "examples" / "programs"
+    naive, careful = folder / f"{task}_naive.py", folder / f"{task}_careful.py"
+    if naive.exists() and careful.exists():
+        return naive.read_text(), careful.read_text()
+    if task == "breakfast":
+        return _BREAKFAST_NAIVE, _BREAKFAST_CAREFUL
+    raise FileNotFoundError(f"no example programs for task {task!r} in {folder}")
+
+
+def scripted_responder(request: dict) -> str:
+    """A stand-in model: naive program first, careful program after critic or runtime feedback,
+    "PROGRAM COMPLETE" when asked to review or when it has already given its careful program."""
+    messages = request.get("messages", [])
+    system = messages[0]["content"] if messages else ""
+    found = re.search(r"^# Scene: (\w+)", system, re.MULTILINE)
+    if not found:
+        return "I do not know this scene."
+    naive, careful = example_programs(found.group(1))
+    said = [m["content"] for m in messages if m.get("role") == "assistant"]
+    last = messages[-1]["content"] if messages else ""
+    if not said and last.startswith("Task:"):
+        return f"Here is a program for the task:\n\n```python\n{naive}```\n"
+    if REVIEW_INSTRUCTION in last:
+        return "I reviewed the program against the rules; it does the task. PROGRAM COMPLETE"
+    if any(careful.strip() in s for s in said):
+        return "I have no further changes. PROGRAM COMPLETE"
+    return f"I slowed the robot down and made the approaches straight:\n\n```python\n{careful}```\n"
+
+
+# --- command line ---------------------------------------------------------------------------------
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        description="RoboCritics validation protocol (paper Table 1): embedded critic rules vs. external "
+        "critic feedback, on the recycling, sorting and breakfast tasks.",
+    )
+    p.add_argument("--base-url", metavar="URL", help="OpenAI-compatible endpoint (default: $ROBOCRITICS_BASE_URL)")
+    p.add_argument("--model", metavar="NAME", help="chat model (default: $ROBOCRITICS_MODEL)")
+    p.add_argument("--api-key-env", metavar="VAR", help="environment variable holding the API key")
+    p.add_argument("--selftest", action="store_true", help="run offline against the scripted loopback server")
+    p.add_argument("--tasks", default=",".join(TASKS), help=f"comma-separated tasks (default: {','.join(TASKS)})")
+    p.add_argument("--conditions", default=",".join(CONDITIONS), help="comma-separated conditions (default: both)")
+    p.add_argument("--max-attempts", type=int, default=5, help="LLM generation attempts per run (paper: 5)")
+    p.add_argument("--repeats", type=int, default=1, help="runs per task and condition (LLMs are stochastic)")
+    p.add_argument("--temperature", type=float, default=None, help="sampling temperature (client default 0)")
+    p.add_argument("--seed", type=int, default=None, help="sampling seed, for servers that honour it")
+    p.add_argument("--timeout", type=float, default=300.0, help="seconds per HTTP phase (default 300)")
+    p.add_argument("--json", metavar="FILE", help="also write every run's results as JSON")
+    p.add_argument("-v", "--verbose", action="store_true", help="print each attempt as it happens (stderr)")
+    return p
+
+
+def _reproduce(args: argparse.Namespace, model_name: str, base_url: str) -> str:
+    if args.selftest:
+        parts = ["python", "benchmarks/ablation.py", "--selftest"]
+    else:
+        parts = ["python", "benchmarks/ablation.py", "--base-url", base_url, "--model", model_name]
+        if args.api_key_env:
+            parts += ["--api-key-env", args.api_key_env]
+    if args.tasks != ",".join(TASKS):
+        parts += ["--tasks", args.tasks]
+    if args.conditions != ",".join(CONDITIONS):
+        parts += ["--conditions", args.conditions]
+    parts += ["--max-attempts", str(args.max_attempts), "--repeats", str(args.repeats)]
+    if args.temperature is not None:
+        parts += ["--temperature", str(args.temperature)]
+    if args.seed is not None:
+        parts += ["--seed", str(args.seed)]
+    return " ".join(shlex.quote(p) for p in parts)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]
+    conditions = [c.strip() for c in args.conditions.split(",") if c.strip()]
+    bad = [t for t in tasks if t not in TASKS] + [c for c in conditions if c not in CONDITIONS]
+    if bad or not tasks or not conditions:
+        print(f"ablation: unknown or missing tasks/conditions: {', '.join(bad) or '(none given)'}", file=sys.stderr)
+        return 2
+    if args.max_attempts < 1 or args.repeats < 1:
+        print("ablation: --max-attempts and --repeats must be at least 1", file=sys.stderr)
+        return 2
+
+    server = None
+    if args.selftest:
+        sys.path.insert(0, str(ROOT / "tests"))
+        from llm_server import LLMServer  # the test suite's loopback server
+
+        server = LLMServer(responder=scripted_responder).start()
+        base_url, model_name, api_key = server.url, "scripted-naive-then-careful", None
+    else:
+        base_url = args.base_url or os.environ.get("ROBOCRITICS_BASE_URL")
+        model_name = args.model or os.environ.get("ROBOCRITICS_MODEL")
+        api_key = None
+        if args.api_key_env:
+            api_key = os.environ.get(args.api_key_env)
+            if not api_key:
+                print(f"ablation: the environment variable {args.api_key_env} is not set", file=sys.stderr)
+                return 2
+        if not base_url or not model_name:
+            print("ablation: give --base-url and --model (or set ROBOCRITICS_BASE_URL / ROBOCRITICS_MODEL), "
+                  "or use --selftest", file=sys.stderr)  # fmt: skip
+            return 2
+    options: dict[str, Any] = {}
+    if args.temperature is not None:
+        options["temperature"] = args.temperature
+    if args.seed is not None:
+        options["seed"] = args.seed
+
+    results: list[Result] = []
+    try:
+        with OpenAICompatible(base_url=base_url, model=model_name, api_key=api_key, timeout_s=args.timeout) as client:
+            for repeat in range(args.repeats):
+                for task in tasks:
+                    for condition in conditions:
+                        result = run_one(
+                            client,
+                            task,
+                            condition,
+                            max_attempts=args.max_attempts,
+                            repeat=repeat,
+                            model_options=options,
+                            verbose=args.verbose,
+                        )
+                        results.append(result)
+                        if args.verbose:
+                            print(
+                                f"  [{task}/{condition}] {result.attempts} attempts, final score "
+                                f"{result.final_score:g}, stopped: {result.stopped}",
+                                file=sys.stderr,
+                                flush=True,
+                            )
+    except LLMError as exc:
+        print(f"ablation: the LLM endpoint failed: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if server is not None:
+            server.stop()
+
+    what = "scripted loopback model (self-test)" if args.selftest else f"{model_name} at {base_url}"
+    print(
+        f"RoboCritics validation protocol (paper Table 1): {what}; up to {args.max_attempts} attempts, "
+        f"{args.repeats} run(s) per cell"
+    )
+    print()
+    print(format_table(results, tasks, conditions))
+    print()
+    print(f"Reproduce: {_reproduce(args, model_name, base_url)}")
+    if args.json:
+        Path(args.json).write_text(json.dumps([asdict(r) for r in results], indent=2))
+        print(f"Results written to {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
