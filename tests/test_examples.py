@@ -95,3 +95,11 @@ def test_reduce_speed_doubles_the_affected_moves():
     # set_speed(0.6) then reduce_speed(30): 0.6 -> 0.3, half the speed, twice the time
     for fast_line, slow_line in ((2, 3), (3, 4), (4, 5)):
         assert step_duration(slow, slow_line) == pytest.approx(2 * step_duration(fast, fast_line), rel=0.02)
+
+
+def test_a_program_that_does_not_move_is_judged_not_crashed():
+    # home() from the home pose is a one-sample trajectory: every critic must still judge it
+    execution = simulate("home()\n", Scene.builtin("sorting"))
+    assert len(execution.trajectory) == 1
+    report = critique(execution.trajectory, execution.scene)
+    assert report.score == 10 and len(report.verdicts) == 5

@@ -119,7 +119,7 @@ def test_attributes_loops_and_prints():
     )
     assert plan.output == [
         "2 ripe apples: red_apple_1, red_apple_2",
-        "green_apple: green at x=0.38, top=0.070",
+        "green_apple: green at x=0.40, top=0.070",
         "red_apple_1: red at x=0.30, top=0.070",  # the sort is stable: equal x keep their order
         "red_apple_2: red at x=0.30, top=0.070",
         "{'colour': 'green', 'ripeness': 'unripe'} container 0.005",
@@ -163,7 +163,7 @@ def test_skills_called_from_a_sort_key_keep_the_call_site():
 
 def test_scene_positions_are_initial_and_read_only():
     plan = run("p = green_apple.position\nmove_to(green_apple)\nprint(p == green_apple.position, p)\n")
-    assert plan.output == ["True (0.38, 0.0, 0.035)"]
+    assert plan.output == ["True (0.4, 0.0, 0.035)"]
     attrs = run("a = green_apple.attributes\na['colour'] = 'blue'\nprint(green_apple.colour)\n")
     assert attrs.output == ["green"]
 

@@ -47,7 +47,7 @@ NORMALISED = [
     ("move_to(0.3, 0.1, 0.2)", "move_to", {"target": (0.3, 0.1, 0.2)}),
     ("move_to(1, 0, 0)", "move_to", {"target": (1.0, 0.0, 0.0)}),
     ("move_to([0.3, -0.1, 0.25])", "move_to", {"target": (0.3, -0.1, 0.25)}),
-    ("move_to(green_apple.position)", "move_to", {"target": (0.38, 0.0, 0.035)}),
+    ("move_to(green_apple.position)", "move_to", {"target": (0.4, 0.0, 0.035)}),
     ("move_to(green_apple)", "move_to", {"object": "green_apple"}),
     ("move_to(white_box)", "move_to", {"object": "white_box"}),
     ("move_to(x=0.3, y=0.0, z=0.1)", "move_to", {"target": (0.3, 0.0, 0.1)}),
@@ -139,7 +139,7 @@ def test_object_view_fields():
     apple = views["green_apple"]
     assert apple.id == apple.name == "green_apple"
     assert apple.kind == "object" and apple.shape == "sphere" and apple.graspable is True
-    assert apple.position == (0.38, 0.0, 0.035)
+    assert apple.position == (0.4, 0.0, 0.035)
     assert (apple.x, apple.y, apple.z) == apple.position
     assert apple.size == (0.035,)
     assert apple.top == pytest.approx(0.07) and apple.bottom == pytest.approx(0.0)
@@ -149,7 +149,7 @@ def test_object_view_fields():
     box = views["white_box"]
     assert box.kind == "container" and box.graspable is False
     assert box.top == pytest.approx(0.08) and box.floor == pytest.approx(0.005)
-    assert box.width == pytest.approx(0.16) and box.colour == "white"
+    assert box.width == pytest.approx(0.2) and box.colour == "white"
     assert str(apple) == repr(apple) == "green_apple"
     assert f"{apple:>12}" == " green_apple"
     assert apple == views["green_apple"] and apple != box

@@ -205,11 +205,30 @@ def _cmd_critics(args: argparse.Namespace) -> int:
 
 
 # --- more subcommands ----------------------------------------------------------------
-# LEAD: register `run` (LLM loop: task -> program -> critics -> fix) and `ursim`
-# (deploy to the loopback UR simulator / a UR3e) here with @subcommand("run") and
-# @subcommand("ursim"), or from another module imported below, following the
-# pattern of `check` above. Handlers return the exit code; raise RoboCriticsError
-# (or UsageError) for bad input and main() turns it into exit status 2.
+
+
+@subcommand("run")
+def _build_run(sub: "argparse._SubParsersAction") -> None:
+    from .llm.cli_run import add_run_parser
+
+    add_run_parser(sub)
+
+
+@subcommand("ursim")
+def _build_ursim(sub: "argparse._SubParsersAction") -> None:
+    p = sub.add_parser(
+        "ursim",
+        help="run a loopback UR3e controller (RTDE, Dashboard, secondary interface) until Ctrl-C",
+        add_help=False,
+    )
+    # its options belong to the controller's own parser; main() hands them over untouched
+    p.set_defaults(func=lambda args: _cmd_ursim([]))
+
+
+def _cmd_ursim(argv: list[str]) -> int:
+    from .robot.ur.sim import main as ursim_main
+
+    return int(ursim_main(argv))
 
 
 # --- entry point -------------------------------------------------------------------
@@ -232,6 +251,9 @@ def _one_line(text: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status (never raises for bad input)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["ursim"]:
+        return _cmd_ursim(argv[1:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

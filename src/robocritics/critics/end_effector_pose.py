@@ -71,7 +71,7 @@ def spearing_speed(poses: np.ndarray, time: np.ndarray) -> tuple[np.ndarray, np.
     ``poses (T, 4, 4)`` are the TCP poses; component rows (3, T) keep every operation contiguous.
     """
     p = np.ascontiguousarray(poses[:, :3, 3].T)  # (3, T) m
-    f = np.ascontiguousarray(poses[:, :3, 2].T)  # (3, T) finger direction
+    f = np.array(poses[:, :3, 2].T, order="C")  # (3, T) finger direction, a copy we may normalise
     norm = np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
     if np.any(norm < 1e-9):
         i = int(np.argmax(norm < 1e-9))

@@ -1,0 +1,7 @@
+"""``python -m robocritics``: the same command line as ``robocritics``."""
+
+import sys
+
+from robocritics.cli import main
+
+sys.exit(main())
