@@ -6,9 +6,20 @@ streaming program, and a loopback controller for tests.
 * :func:`streaming_program`, :func:`send_program`, :func:`setpoint` — the servo
   streaming program, its register layout and the secondary-interface sender.
 * :class:`URSim` — a loopback UR3e controller (real TCP servers on 127.0.0.1).
+* :class:`URArm` — the deploy gate and the paced servo stream (:meth:`URArm.deploy`,
+  :meth:`URArm.approach`, :class:`DeployResult`, :class:`DeployRefused`, :class:`DeployFault`).
 """
 
 from robocritics.robot.ur.dashboard import DASHBOARD_PORT, DashboardClient
+from robocritics.robot.ur.deploy import (
+    Approach,
+    DeployFault,
+    DeployRefused,
+    DeployResult,
+    StreamPlan,
+    URArm,
+    resample,
+)
 from robocritics.robot.ur.rtde import (
     RTDE_PORT,
     InputRecipe,
@@ -55,4 +66,11 @@ __all__ = [
     "URSim",
     "SimSnapshot",
     "SimEvent",
+    "URArm",
+    "DeployResult",
+    "DeployRefused",
+    "DeployFault",
+    "Approach",
+    "StreamPlan",
+    "resample",
 ]
