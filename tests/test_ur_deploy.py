@@ -9,6 +9,7 @@ the tests fast; every deployment and every fault ends within a bounded time.
 from __future__ import annotations
 
 import json
+import socket
 import subprocess
 import sys
 import threading
@@ -87,9 +88,8 @@ def assert_nothing_sent(sim: URSim, q0) -> None:
 
 def assert_stopped(sim: URSim) -> None:
     """The program is gone and the arm stands still (bounded wait for the deceleration)."""
-    snap = sim.wait_for(lambda s: s.program is None and s.runtime_state == 1 and max(map(abs, s.qd)) == 0.0,
-                        2.0, "the arm to stop")
-    assert snap.program_state != 1 or snap.runtime_state == 1
+    sim.wait_for(lambda s: s.program is None and s.runtime_state == 1 and max(map(abs, s.qd)) == 0.0,
+                 2.0, "the arm to stop")
 
 
 def fault_during(sim: URSim, arm: URArm, execution, report, at_s: float, action, **deploy_kw) -> tuple[DeployFault, float]:
@@ -437,6 +437,43 @@ def test_program_stopped_by_someone_else_mid_stream(motion, home):
             exc, _ = fault_during(sim, arm, execution, report, 0.8, stop_from_pendant)
         check_fault(exc, execution, "program_stopped")
         assert_stopped(sim)
+
+
+def test_a_program_the_controller_ignores_times_out_and_stops(motion, home):
+    """A secondary interface that swallows the program (like a controller that ignores it)."""
+    execution, report = motion
+    with controller(home) as sim, socket.socket() as blackhole:
+        blackhole.bind(("127.0.0.1", 0))
+        blackhole.listen(1)
+        arm = URArm("127.0.0.1", rtde_port=sim.rtde_port, dashboard_port=sim.dashboard_port,
+                    secondary_port=blackhole.getsockname()[1], timeout_s=1.0)
+        with arm:
+            t0 = time.monotonic()
+            with pytest.raises(DeployFault) as info:
+                arm.deploy(execution, report, start_timeout_s=0.5)
+            assert time.monotonic() - t0 < 0.5 + 2.5
+        exc = info.value
+        assert exc.cause == "program_not_started" and exc.sample == 0 and exc.setpoint_index == -1
+        assert "start_timeout_s 0.5" in str(exc)
+        assert not sim.events("program_started") and max(abs(a - b) for a, b in zip(sim.q, home)) == 0.0
+
+
+def test_an_unreachable_secondary_interface_fails_fast(motion, home):
+    execution, report = motion
+    with controller(home) as sim:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            closed_port = s.getsockname()[1]  # nothing listens once closed
+        arm = URArm("127.0.0.1", rtde_port=sim.rtde_port, dashboard_port=sim.dashboard_port,
+                    secondary_port=closed_port, timeout_s=1.0)
+        with arm:
+            with pytest.raises(DeployRefused) as refused:
+                arm.deploy(execution, report, dry_run=True)  # the dry run notices it
+            assert refused.value.cause == "secondary_interface"
+            with pytest.raises(DeployFault) as info:
+                arm.deploy(execution, report)
+        assert info.value.cause == "program_not_started" and "sending the program failed" in str(info.value)
+        assert not sim.events("program_started") and max(abs(a - b) for a, b in zip(sim.q, home)) == 0.0
 
 
 def test_jumpy_setpoint_protective_stop(motion, home):

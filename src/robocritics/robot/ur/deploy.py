@@ -132,6 +132,8 @@ SAFETY_NORMAL = 1
 SAFETY_PROTECTIVE_STOP = 3
 RUNTIME_STOPPED = 1
 RUNTIME_PLAYING = 2
+UR3E_VELOCITY_LIMITS = (math.pi, math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 * math.pi)
+"""Joint speed limits used when a trajectory carries none [rad/s]."""
 STILL_RAD_S = 1e-3
 """Joint speeds below this count as standing still [rad/s]."""
 
@@ -612,7 +614,7 @@ class URArm:
             reasons.append(("no_report", "deploy needs the Report that robocritics.critique() made for this trajectory"))
         else:
             errors = list(getattr(report, "errors", []))
-            if errors and not allow_errors:
+            if errors and allow_errors is not True:
                 listed = "; ".join(f"{v.critic}: {v.message}" for v in errors)
                 reasons.append((
                     "report_errors",
@@ -632,7 +634,8 @@ class URArm:
         elif not (np.all(np.isfinite(q)) and np.all(np.isfinite(np.asarray(traj.time, float)))):
             reasons.append(("trajectory", "the trajectory has non-finite joint values or times"))
         elif plan is not None and len(plan) > 1:
-            vlim = np.asarray(traj.limits.velocity_rad_s, dtype=float)
+            limits = getattr(traj, "limits", None)
+            vlim = np.asarray(getattr(limits, "velocity_rad_s", UR3E_VELOCITY_LIMITS), dtype=float)
             speed = np.abs(np.diff(plan.q, axis=0)) * plan.rate_hz
             ratio = speed / vlim
             worst = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
@@ -641,7 +644,7 @@ class URArm:
                 reasons.append((
                     "setpoint_speed",
                     f"setpoint {k} (trajectory sample {int(plan.source_index[k])}, t = {plan.time[k]:.3f} s) moves joint "
-                    f"{j} ({traj.limits.joint_names[j] if hasattr(traj.limits, 'joint_names') else j}) at "
+                    f"{j} ({getattr(limits, 'joint_names', [''] * 6)[j]}) at "
                     f"{speed[worst]:.3f} rad/s > its limit {vlim[j]:.3f} rad/s; the controller would protective-stop",
                 ))
         return reasons
