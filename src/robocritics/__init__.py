@@ -29,6 +29,12 @@ _EXPORTS = {
     "Verdict": "robocritics.critic",
     "Report": "robocritics.critic",
     "Critic": "robocritics.critic",
+    "CriticParams": "robocritics.critic",
+    "Evidence": "robocritics.critic",
+    "get_critics": "robocritics.critic",
+    "critic_sources": "robocritics.critic",
+    "hookimpl": "robocritics.hookspecs",
+    "URArm": "robocritics.robot.ur.deploy",
     "Loop": "robocritics.llm.loop",
     "Attempt": "robocritics.llm.loop",
     "OpenAICompatible": "robocritics.llm.client",
@@ -76,7 +82,9 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .critic import Critic, Flag, Report, Verdict, critique
+    from .critic import Critic, CriticParams, Evidence, Flag, Report, Verdict, critic_sources, critique, get_critics
+    from .hookspecs import hookimpl
+    from .robot.ur.deploy import URArm
     from .llm.client import OpenAICompatible
     from .llm.loop import Attempt, Loop
     from .program.simulate import Execution, simulate
