@@ -476,6 +476,48 @@ def test_an_unreachable_secondary_interface_fails_fast(motion, home):
         assert not sim.events("program_started") and max(abs(a - b) for a, b in zip(sim.q, home)) == 0.0
 
 
+def _hiccup_on_call(monkeypatch, n: int, action) -> None:
+    """Run ``action`` once, in the client, just before its ``n``-th setpoint."""
+    original = URArm._send
+    calls = {"n": 0}
+
+    def send(self, *args, **kw):
+        calls["n"] += 1
+        if calls["n"] == n:
+            action()
+        return original(self, *args, **kw)
+
+    monkeypatch.setattr(URArm, "_send", send)
+
+
+def test_a_stalled_client_shifts_its_schedule_instead_of_jumping(motion, home, monkeypatch):
+    execution, report = motion
+    _hiccup_on_call(monkeypatch, 400, lambda: time.sleep(0.04))  # 20 missed periods, below the 100 ms watchdog
+    with controller(home) as sim:
+        with arm_for(sim) as arm:
+            result = arm.deploy(execution, report)
+        assert not sim.events("protective_stop") and not sim.events("watchdog")
+    assert result.resyncs >= 1 and result.period_error_max_ms > 30
+    assert result.duration_s > execution.trajectory.duration_s + 0.03  # the motion ran later, not faster
+    assert result.max_tracking_error_rad < 0.05 and result.final_error_rad < 1e-3
+
+
+def test_an_interrupt_mid_stream_stops_the_arm_and_propagates(motion, home, monkeypatch):
+    execution, report = motion
+
+    def interrupt():
+        raise KeyboardInterrupt
+
+    _hiccup_on_call(monkeypatch, 400, interrupt)
+    with controller(home) as sim:
+        with arm_for(sim) as arm:
+            with pytest.raises(KeyboardInterrupt):
+                arm.deploy(execution, report)
+        assert_stopped(sim)
+        assert sim.events("done")  # stopped through the program's done command
+        assert max(abs(a - b) for a, b in zip(sim.q, home)) > 0.05  # it was mid-motion
+
+
 def test_jumpy_setpoint_protective_stop(motion, home):
     """The controller's safety configuration allows 0.3 rad/s per joint, the trajectory (verified against the
     UR3e's π rad/s) moves faster: its setpoints jump for this controller, which protective-stops."""

@@ -47,7 +47,9 @@ client holds the first setpoint (sequence counter incrementing every period)
 *before* sending :func:`~robocritics.robot.ur.urscript.streaming_program` (from a
 helper thread, so holding never pauses), waits until the program reports
 STREAMING with this deploy's random session id, then streams with absolute
-deadlines ``t0 + k / rate_hz`` (sleep, then spin the last ``spin_s``). After the
+deadlines ``t0 + k / rate_hz`` (sleep, then spin the last ``spin_s``; a client
+more than 5 periods late shifts its schedule rather than bursting the missed
+setpoints, which the controller would see as a jump). After the
 last setpoint it holds the final one until the arm settles (or
 ``settle_timeout_s``), sends the done command and waits for the program to end.
 
@@ -230,6 +232,8 @@ class DeployResult:
     """max_j |final_q - last trajectory sample| [rad]."""
     settle_s: float
     """Time the final setpoint was held before the done command [s]."""
+    resyncs: int
+    """Times the client fell more than 5 periods behind and shifted its schedule (the motion ran that much later)."""
     data_packages: int
     """RTDE data packages checked during the deploy."""
     trajectory_hash: str
@@ -778,6 +782,7 @@ class URArm:
                 final_q=final_q,
                 final_error_rad=float(np.max(np.abs(np.asarray(final_q) - plan.q[-1]))),
                 settle_s=0.0,
+                resyncs=0,
                 data_packages=1,
                 trajectory_hash=trajectory_hash,
                 session=0,
@@ -937,6 +942,8 @@ class URArm:
         sent_times: list[float] = []
         deadlines: list[float] = []
         settle_s = 0.0
+        resyncs = 0
+        resync_after_s = 5 * period
 
         def check(now: float) -> None:
             self._check(run, monitor, now, rate, silence_timeout_s, min_data_rate_fraction)
@@ -1003,6 +1010,12 @@ class URArm:
                 remaining = deadline - time.perf_counter()
                 if remaining > spin_s:
                     time.sleep(remaining - spin_s)
+                elif remaining < -resync_after_s:
+                    # far behind (the host stalled): shift the schedule instead of bursting the missed
+                    # setpoints, which the controller would see as one jump of the target
+                    t0 -= remaining
+                    deadline -= remaining
+                    resyncs += 1
                 while time.perf_counter() < deadline:
                     pass
                 run.k = k
@@ -1035,7 +1048,7 @@ class URArm:
 
             # ---- done: the program stopj's and ends
             run.phase = "finishing"
-            monitor.stop()
+            monitor.stop(wait_s=0.0)
             end_by = time.perf_counter() + stop_timeout_s
             final = None
             while True:
@@ -1091,6 +1104,7 @@ class URArm:
             final_q=final_q,
             final_error_rad=float(np.max(np.abs(np.asarray(final_q) - plan.q[-1]))),
             settle_s=settle_s,
+            resyncs=resyncs,
             data_packages=run.packages,
             trajectory_hash=trajectory_hash,
             session=run.session,
