@@ -109,112 +109,214 @@ def _seg_seg_sq(ax, ay, az, ux, uy, uz, bx, by, bz, vx, vy, vz):
     """Squared distance (m^2) between segments ``a + s u`` and ``b + t v``, ``s, t`` in [0, 1].
 
     Closed form (Ericson, *Real-Time Collision Detection* 5.1.9): ``s`` from the
-    lines' closest points (0 when parallel), ``t`` optimal for ``s`` and clamped,
-    ``s`` optimal for that ``t`` and clamped, then ``t`` once more. Each step is an
-    exact one-variable minimisation, so the result is never worse than Ericson's,
-    which is exact; zero-length segments fall out of the guarded divisions.
+    lines' closest points, ``t`` optimal for ``s`` and clamped, ``s`` optimal for
+    that ``t`` and clamped, then ``t`` once more. Each step is an exact
+    one-variable minimisation, so the result is never worse than Ericson's, which
+    is exact. For (nearly) parallel segments the first ``s`` is arbitrary in
+    [0, 1] and the two clamped projections that follow still reach the minimum
+    (intervals on a common line: projecting any point of one onto the other and
+    back lands in their overlap, or on the facing ends); zero-length segments fall
+    out of the ``1e-300`` guards.
     """
-    rx, ry, rz = ax - bx, ay - by, az - bz
-    a = ux * ux + uy * uy + uz * uz
-    e = vx * vx + vy * vy + vz * vz
-    b = ux * vx + uy * vy + uz * vz
-    c = ux * rx + uy * ry + uz * rz
-    f = vx * rx + vy * ry + vz * rz
-    denom = a * e - b * b
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ok_a = a > 1e-300
-        ok_e = e > 1e-300
-        inv_a = np.where(ok_a, 1.0 / np.where(ok_a, a, 1.0), 0.0)
-        inv_e = np.where(ok_e, 1.0 / np.where(ok_e, e, 1.0), 0.0)
-        par = denom <= 1e-14 * a * e
-        s = np.where(par, 0.0, (b * f - c * e) / np.where(par, 1.0, denom))
-    s = np.clip(s, 0.0, 1.0)
-    t = (b * s + f) * inv_e
+    rx = ax - bx
+    ry = ay - by
+    rz = az - bz
+    a = ux * ux
+    a += uy * uy
+    a += uz * uz
+    e = vx * vx
+    e += vy * vy
+    e += vz * vz
+    b = ux * vx
+    b += uy * vy
+    b += uz * vz
+    c = ux * rx
+    c += uy * ry
+    c += uz * rz
+    f = vx * rx
+    f += vy * ry
+    f += vz * rz
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        inv_a = 1.0 / (a + 1e-300)
+        inv_e = 1.0 / (e + 1e-300)
+        den = a * e
+        den -= b * b
+        np.maximum(den, 1e-300, out=den)
+        s = b * f
+        s -= c * e
+        s /= den
+        s = np.clip(s, 0.0, 1.0)
+        t = b * s
+        t += f
+        t *= inv_e
+        t = np.clip(t, 0.0, 1.0)
+        s = b * t
+        s -= c
+        s *= inv_a
+        s = np.clip(s, 0.0, 1.0)
+        t = b * s
+        t += f
+        t *= inv_e
+        t = np.clip(t, 0.0, 1.0)
+    wx = s * ux
+    wx += rx
+    wx -= t * vx
+    wy = s * uy
+    wy += ry
+    wy -= t * vy
+    wz = s * uz
+    wz += rz
+    wz -= t * vz
+    wx *= wx
+    wy *= wy
+    wz *= wz
+    wx += wy
+    wx += wz
+    return wx
+
+
+def _point_seg_sq(px, py, pz, ax, ay, az, dx, dy, dz, inv_dd=None):
+    """Squared distance (m^2) from points ``p`` to segments ``a + t d``, ``t`` in [0, 1] (exact).
+
+    ``inv_dd`` may pass a precomputed ``1 / (|d|^2 + 1e-300)``.
+    """
+    if inv_dd is None:
+        inv_dd = 1.0 / (dx * dx + dy * dy + dz * dz + 1e-300)
+    wx = px - ax
+    wy = py - ay
+    wz = pz - az
+    t = wx * dx
+    t += wy * dy
+    t += wz * dz
+    t *= inv_dd
     t = np.clip(t, 0.0, 1.0)
-    s = (b * t - c) * inv_a
-    s = np.clip(s, 0.0, 1.0)
-    t = (b * s + f) * inv_e
-    t = np.clip(t, 0.0, 1.0)
-    wx = rx + s * ux - t * vx
-    wy = ry + s * uy - t * vy
-    wz = rz + s * uz - t * vz
-    return wx * wx + wy * wy + wz * wz
+    wx -= t * dx
+    wy -= t * dy
+    wz -= t * dz
+    wx *= wx
+    wy *= wy
+    wz *= wz
+    wx += wy
+    wx += wz
+    return wx
 
 
-def _point_seg_sq(px, py, pz, ax, ay, az, dx, dy, dz):
-    """Squared distance (m^2) from points ``p`` to segments ``a + t d``, ``t`` in [0, 1] (exact)."""
-    wx, wy, wz = px - ax, py - ay, pz - az
-    dd = dx * dx + dy * dy + dz * dz
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (wx * dx + wy * dy + wz * dz) / dd
-    t = np.where(dd > 1e-300, t, 0.0)
-    t = np.clip(t, 0.0, 1.0)
-    wx = wx - t * dx
-    wy = wy - t * dy
-    wz = wz - t * dz
-    return wx * wx + wy * wy + wz * wz
+def _box_prep(dx, dy, dz):
+    """Per-segment part of :func:`_box_sq`: ``(-1/d_i, |1/d_i|, d_i^2)`` per axis and ``1/sum d_i^2``.
+
+    A zero component is replaced by ``1e-300``: its weight underflows to 0 and its
+    slab covers every realistic ``t``, as for the whole line.
+    """
+    ninv, ainv, w = [], [], []
+    with np.errstate(divide="ignore", over="ignore", under="ignore"):
+        for d in (dx, dy, dz):
+            ds = np.copysign(1e-300, d)
+            ds += d
+            ni = np.divide(-1.0, ds)
+            ninv.append(ni)
+            ainv.append(np.abs(ni))
+            ds *= ds
+            w.append(ds)
+        W = w[0] + w[1]
+        W += w[2]
+        np.maximum(W, 1e-300, out=W)
+        invW = np.divide(1.0, W, out=W)
+    return ninv, ainv, w, invW
 
 
-def _seg_box_sq(ax, ay, az, dx, dy, dz, hx, hy, hz):
-    """Squared distance (m^2) from segments ``a + t d`` (box frame) to boxes ``|x_i| <= h_i``.
+def _box_sq(px, py, pz, dx, dy, dz, prep, cx, cy, cz, hx, hy, hz):
+    """Squared distance (m^2) from segments ``p + t d``, ``t`` in [0, 1], to the box ``|x_i - c_i| <= h_i``.
 
-    ``f(t) = sum_i max(|a_i + t d_i| - h_i, 0)^2`` is convex; with the slab
-    interval ``[l_i, u_i]`` of axis i (the ``t`` where ``|a_i + t d_i| <= h_i``,
+    In the box frame; ``prep = _box_prep(dx, dy, dz)``; box parameters are scalars
+    or arrays broadcasting with the segments.
+
+    ``f(t) = sum_i max(|a_i + t d_i| - h_i, 0)^2`` (``a = p - c``) is convex; with the
+    slab interval ``[l_i, u_i]`` of axis i (the ``t`` where ``|a_i + t d_i| <= h_i``,
     the whole line when ``d_i = 0``) and weight ``w_i = d_i^2``,
-    ``f'(t)/2 = sum_i w_i (t - clip(t, l_i, u_i))``. Let ``U = min u_i``,
-    ``L = max l_i``.
+    ``f'(t)/2 = sum_i w_i (t - clip(t, l_i, u_i))``. Let ``U = min u_i`` (axis j),
+    ``L = max l_i`` (axis k).
 
-    * ``L <= U``: the line crosses the box on ``[L, U]``; the minimiser over
-      [0, 1] is any point of ``[L, U] & [0, 1]`` (the midpoint, so that rounding
-      keeps it inside), or the nearer end when they do not overlap.
+    * ``L <= U`` and ``[L, U]`` meets [0, 1]: the segment meets the box, ``f = 0``.
     * ``L > U``: the line misses; ``f' <= 0`` up to ``U`` and ``>= 0`` from ``L``.
-      On ``[U, L]`` the axis j with ``u_j = U`` is above its slab, the axis k with
-      ``l_k = L`` below, and only the third axis m can change state. With
-      ``l'_i, u'_i`` the breakpoints clipped to ``[U, L]`` (equal for j and k),
+      On ``[U, L]`` axis j is above its slab, axis k below, and only the third
+      axis m can change state. With ``l'_i = max(l_i, U)``, ``u'_i = min(u_i, L)``
+      (the breakpoints clipped to ``[U, L]``),
       ``sum w_i (t - u'_i) <= f'/2 <= sum w_i (t - l'_i)``, so the root lies between
-      ``t_lo = sum w_i l'_i / W`` and ``t_hi = sum w_i u'_i / W``; it is ``t_lo`` if
-      m is below its slab there, ``t_hi`` if above, else the root ``t_mid`` of the
-      axes with ``l'_i = u'_i`` alone, and in all three cases
-      ``t* = clip(t_mid, t_lo, t_hi)``.
+      ``t_lo = sum w_i l'_i / W`` and ``t_hi = sum w_i u'_i / W``. It is ``t_lo`` if
+      m is below its slab there, ``t_hi`` if above, and otherwise the root
+      ``t_mid = (w_j U + w_k L) / (w_j + w_k)`` of the j and k terms alone; in all
+      three cases ``t* = clip(t_mid, t_lo, t_hi)`` (when m never switches inside
+      ``[U, L]``, ``t_lo = t_hi``, so ties between axes change nothing).
+    * ``L <= U`` with ``[L, U]`` outside [0, 1]: the same formula gives ``t = L``.
 
-    The root is clipped to [0, 1] (f is convex) and ``f`` evaluated there, so the
-    result is the exact squared distance up to rounding; it is exactly 0 when the
-    segment meets the box.
+    ``t*`` is clipped to [0, 1] (f is convex) and ``f`` evaluated there: the exact
+    squared distance up to rounding, no sorting, no iteration.
     """
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        ls, us, ws = [], [], []
-        for a, d, h in ((ax, dx, hx), (ay, dy, hy), (az, dz, hz)):
-            ds = np.where(np.abs(d) < _TINY_D, 1e-300, d)  # w underflows to 0; l, u stay finite
-            inv = 1.0 / ds
-            t0 = (-h - a) * inv
-            t1 = (h - a) * inv
-            ls.append(np.minimum(t0, t1))
-            us.append(np.maximum(t0, t1))
-            ws.append(ds * ds)
-        U = np.minimum(np.minimum(us[0], us[1]), us[2])
-        L = np.maximum(np.maximum(ls[0], ls[1]), ls[2])
-        W = ws[0] + ws[1] + ws[2]
-        n_lo = n_hi = n_mid = w_mid = 0.0
-        for l, u, w in zip(ls, us, ws):
-            lc = np.minimum(np.maximum(l, U), L)
-            uc = np.minimum(np.maximum(u, U), L)
-            wl = w * lc
-            n_lo = n_lo + wl
-            n_hi = n_hi + w * uc
-            eq = lc == uc
-            n_mid = n_mid + np.where(eq, wl, 0.0)
-            w_mid = w_mid + np.where(eq, w, 0.0)
-        Wp = np.maximum(W, 1e-300)
-        t = np.minimum(np.maximum(n_mid / np.maximum(w_mid, 1e-300), n_lo / Wp), n_hi / Wp)
-        hit = 0.5 * (np.maximum(L, 0.0) + np.minimum(U, 1.0))
-        t = np.where(L > U, t, hit)
-    t = np.clip(t, 0.0, 1.0)
-    sq = None
-    for a, d, h in ((ax, dx, hx), (ay, dy, hy), (az, dz, hz)):
-        e = np.maximum(np.abs(a + t * d) - h, 0.0)
-        e = e * e
-        sq = e if sq is None else sq + e
+    ninv, ainv, (w0, w1, w2), invW = prep
+    with np.errstate(invalid="ignore", over="ignore", under="ignore"):
+        a, ls, us = [], [], []
+        for p, c, h, ni, ai in ((px, cx, hx, ninv[0], ainv[0]), (py, cy, hy, ninv[1], ainv[1]), (pz, cz, hz, ninv[2], ainv[2])):
+            ak = p - c
+            s = ak * ni  # slab centre (c - p) / d
+            hw = ai * h  # slab half width h / |d|
+            ls.append(s - hw)
+            s += hw
+            us.append(s)
+            a.append(ak)
+        (l0, l1, l2), (u0, u1, u2) = ls, us
+        U = np.minimum(u0, u1)
+        wj = np.where(u0 <= u1, w0, w1)
+        wj = np.where(U <= u2, wj, w2)
+        np.minimum(U, u2, out=U)
+        L = np.maximum(l0, l1)
+        wk = np.where(l0 >= l1, w0, w1)
+        wk = np.where(L >= l2, wk, w2)
+        np.maximum(L, l2, out=L)
+        hit = L <= U
+        hit &= L <= 1.0
+        hit &= U >= 0.0
+        t_lo = np.maximum(l0, U)
+        t_lo *= w0
+        t_hi = np.minimum(u0, L)
+        t_hi *= w0
+        for l, u, w in ((l1, u1, w1), (l2, u2, w2)):
+            np.maximum(l, U, out=l)
+            l *= w
+            t_lo += l
+            np.minimum(u, L, out=u)
+            u *= w
+            t_hi += u
+        t_lo *= invW
+        t_hi *= invW
+        U *= wj
+        L *= wk
+        U += L
+        wj += wk
+        np.maximum(wj, 1e-300, out=wj)
+        U /= wj
+        np.maximum(U, t_lo, out=U)
+        np.minimum(U, t_hi, out=U)
+        t = np.clip(U, 0.0, 1.0, out=U)
+        sq = None
+        for ak, d, h in zip(a, (dx, dy, dz), (hx, hy, hz)):
+            e = t * d
+            e += ak
+            np.abs(e, out=e)
+            e -= h
+            np.clip(e, 0.0, None, out=e)
+            e *= e
+            if sq is None:
+                sq = e
+            else:
+                sq += e
+        if hit.any():
+            sq[hit] = 0.0
     return sq
+
+
+def _seg_box_sq(px, py, pz, dx, dy, dz, cx, cy, cz, hx, hy, hz):
+    """Squared distance (m^2) from segments ``p + t d`` to boxes ``|x_i - c_i| <= h_i`` (box frame); see :func:`_box_sq`."""
+    return _box_sq(px, py, pz, dx, dy, dz, _box_prep(dx, dy, dz), cx, cy, cz, hx, hy, hz)
 
 
 def _seg_box_depth(ax, ay, az, dx, dy, dz, hx, hy, hz):
@@ -245,96 +347,153 @@ def _seg_box_depth(ax, ay, az, dx, dy, dz, hx, hy, hz):
     return depth
 
 
-def _seg_cyl_sq(ax, ay, az, dx, dy, dz, R, H, tol=1e-12, max_iter=100):
-    """Squared distance (m^2) from segments ``a + t d`` (cylinder frame) to cylinders of radius R, half height H.
+def _cyl_sq(px, py, pz, dx, dy, dz, A, cx, cy, cz, R, H, tol=1e-12, max_iter=100, defer=False):
+    """Squared distance (m^2) from segments ``p + t d`` to the cylinder (centre c, radius R, half height H, axis z).
 
-    ``F(t) = max(rho - R, 0)^2 + max(|z| - H, 0)^2`` with ``rho(t)^2 = A t^2 + 2 B t + C``
-    is the squared distance of a convex set along a line: convex and C1 (the radial
-    term vanishes near the axis, where ``rho`` is not smooth). ``F' >= 0`` at ``t = 0``
-    puts the minimiser there, ``F' <= 0`` at ``t = 1`` puts it at 1; otherwise the
-    root of the non-decreasing ``F'`` is bracketed in (0, 1) and found by Newton
-    steps (``F''`` of the active terms) that fall back to bisection when they leave
-    the bracket, until the bracket or the step is below ``tol``. Because ``F'(t*) = 0``
-    the distance error is second order in the ``t`` error.
+    In the cylinder frame; ``A = dx^2 + dy^2`` (per segment). With ``a = p - c``,
+    ``F(t) = max(rho - R, 0)^2 + max(|a_z + t d_z| - H, 0)^2``, ``rho(t)^2 = A t^2 + 2 B t + C``,
+    is the squared distance of a convex set along a line: convex and C1 (the
+    radial term vanishes near the axis, where ``rho`` is not smooth). ``F' >= 0`` at
+    ``t = 0`` puts the minimiser there, ``F' <= 0`` at ``t = 1`` puts it at 1.
+    Otherwise (a few per cent of pairs) the segment is first tested exactly for
+    meeting the cylinder (the ``t`` interval inside the z slab and inside
+    ``rho <= R``, a quadratic; then ``F = 0``), and if not the root of the
+    non-decreasing ``F'`` in the bracket (0, 1) is found by Newton steps (``F''`` of
+    the active terms) that fall back to bisection when they leave the bracket,
+    until the bracket or the step is below ``tol``. ``F'(t*) = 0``, so the
+    distance error is second order in the ``t`` error.
+
+    With ``defer=True`` those interior pairs are left at ``inf`` and returned as
+    ``(sq, (index, args))`` for one batched :func:`_cyl_sq_inner` call later
+    (``(sq, None)`` when there are none).
     """
-    shape = np.broadcast(ax, ay, az, dx, dy, dz, R, H).shape
-    args = [np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=_FLOAT), shape)).ravel() for v in (ax, ay, az, dx, dy, dz, R, H)]
-    ax, ay, az, dx, dy, dz, R, H = args
-    A = dx * dx + dy * dy
-    B = ax * dx + ay * dy
-    C = ax * ax + ay * ay
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        ax = px - cx
+        ay = py - cy
+        az = pz - cz
+        B = ax * dx
+        B += ay * dy
+        C = ax * ax
+        C += ay * ay
+        shape = B.shape
+        # t = 0
+        rho0 = np.sqrt(C)
+        g0 = B / np.maximum(rho0, 1e-300)
+        rho0 -= R
+        er0 = np.clip(rho0, 0.0, None, out=rho0)
+        g0 *= er0
+        ez0 = np.clip(az, -H, H)
+        np.subtract(az, ez0, out=ez0)
+        g0 += ez0 * dz
+        # t = 1
+        rho1 = A + C
+        rho1 += B
+        rho1 += B
+        np.clip(rho1, 0.0, None, out=rho1)
+        np.sqrt(rho1, out=rho1)
+        g1 = A + B
+        g1 /= np.maximum(rho1, 1e-300)
+        rho1 -= R
+        er1 = np.clip(rho1, 0.0, None, out=rho1)
+        g1 *= er1
+        z1 = az + dz
+        ez1 = np.clip(z1, -H, H)
+        np.subtract(z1, ez1, out=ez1)
+        g1 += ez1 * dz
+        er0 *= er0
+        ez0 *= ez0
+        er0 += ez0
+        er1 *= er1
+        ez1 *= ez1
+        er1 += ez1
+        sq = np.where(g0 >= 0.0, er0, er1)
+        inner = g0 < 0.0
+        inner &= g1 > 0.0
+    pending = None
+    if inner.any():
+        idx = np.nonzero(inner)
+        sub = [np.broadcast_to(v, shape)[idx] for v in (ax, ay, az, dx, dy, dz, A, B, C, R, H)]
+        if defer:
+            sq[idx] = np.inf
+            pending = (idx, sub)
+        else:
+            sq[idx] = _cyl_sq_inner(*sub, tol=tol, max_iter=max_iter)
+    return (sq, pending) if defer else sq
 
-    def grad(t, ax, az, dz, A, B, C, R, H, hess=True):
-        rho2 = (A * t + 2.0 * B) * t + C
-        rho = np.sqrt(np.maximum(rho2, 0.0))
-        er = np.maximum(rho - R, 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rp = (A * t + B) / np.maximum(rho, 1e-300)
-        z = az + t * dz
-        ez = z - np.clip(z, -H, H)
-        g = er * rp + ez * dz
-        if not hess:
-            return g, None
-        act_r = er > 0.0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            hr = np.where(act_r, rp * rp + er * (A - rp * rp) / np.maximum(rho, 1e-300), 0.0)
-        h = hr + np.where(ez != 0.0, dz * dz, 0.0)
-        return g, h
 
-    # where the segment meets the cylinder: t in [0, 1], in the z slab and rho(t) <= R
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        ds = np.where(np.abs(dz) < _TINY_D, 1e-300, dz)
+def _seg_cyl_sq(px, py, pz, dx, dy, dz, cx, cy, cz, R, H, tol=1e-12, max_iter=100, defer=False):
+    """Squared distance (m^2) from segments ``p + t d`` to cylinders (cylinder frame); see :func:`_cyl_sq`."""
+    return _cyl_sq(px, py, pz, dx, dy, dz, dx * dx + dy * dy, cx, cy, cz, R, H, tol=tol, max_iter=max_iter, defer=defer)
+
+
+def _cyl_sq_inner(ax, ay, az, dx, dy, dz, A, B, C, R, H, tol, max_iter):
+    """:func:`_cyl_sq` for flat arrays whose minimiser is interior: meet test, then safeguarded Newton."""
+    n = ax.size
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        ds = dz + np.copysign(1e-300, dz)
         z0 = (-H - az) / ds
         z1 = (H - az) / ds
         lo = np.maximum(np.minimum(z0, z1), 0.0)
         hi = np.minimum(np.maximum(z0, z1), 1.0)
-        disc = B * B - A * (C - R * R)
-        sq = np.sqrt(np.maximum(disc, 0.0))
-        q = -(B + np.where(B >= 0.0, sq, -sq))
+        C2 = C - R * R
+        disc = B * B - A * C2
+        root = np.sqrt(np.maximum(disc, 0.0))
+        q = -(B + np.where(B >= 0.0, root, -root))
         r1 = q / A
-        r2 = (C - R * R) / q
+        r2 = C2 / q
         flat = A <= 1e-300
-        lo = np.where(flat, np.where(C <= R * R, lo, np.inf), np.maximum(lo, np.minimum(r1, r2)))
+        lo = np.where(flat, np.where(C2 <= 0.0, lo, np.inf), np.maximum(lo, np.minimum(r1, r2)))
         hi = np.where(flat, hi, np.minimum(hi, np.maximum(r1, r2)))
         lo = np.where(~flat & (disc < 0.0), np.inf, lo)
-    hit = lo <= hi
-    g0, _ = grad(np.zeros_like(ax), ax, az, dz, A, B, C, R, H, hess=False)
-    g1, _ = grad(np.ones_like(ax), ax, az, dz, A, B, C, R, H, hess=False)
-    t = np.where(g0 >= 0.0, 0.0, 1.0)
-    idx = np.flatnonzero((g0 < 0.0) & (g1 > 0.0) & ~hit)
-    if idx.size:
-        sub = [v[idx] for v in (ax, az, dz, A, B, C, R, H)]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t0 = np.clip(-sub[4] / sub[3], 0.0, 1.0)
+    out = np.zeros(n)
+    todo = np.flatnonzero(~(lo <= hi))  # segments that do not meet the cylinder
+    if not todo.size:
+        return out
+    ax, az, dz, A, B, C, R, H = (v[todo] for v in (ax, az, dz, A, B, C, R, H))
+
+    def grad(t, az, dz, A, B, C, R, H):
+        rho = np.sqrt(np.maximum((A * t + 2.0 * B) * t + C, 0.0))
+        er = np.maximum(rho - R, 0.0)
+        rp = (A * t + B) / np.maximum(rho, 1e-300)
+        z = az + t * dz
+        ez = z - np.clip(z, -H, H)
+        g = er * rp + ez * dz
+        h = np.where(er > 0.0, rp * rp + er * (A - rp * rp) / np.maximum(rho, 1e-300), 0.0)
+        h += np.where(ez != 0.0, dz * dz, 0.0)
+        return g, h
+
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        t0 = np.clip(-B / A, 0.0, 1.0)
         t0 = np.where(np.isfinite(t0), t0, 0.5)
-        lo = np.zeros(idx.size)
-        hi = np.ones(idx.size)
+        t = np.empty(todo.size)
+        pos = np.arange(todo.size)
+        sub = [az, dz, A, B, C, R, H]
+        lo = np.zeros(todo.size)
+        hi = np.ones(todo.size)
         ti = t0
         for _ in range(max_iter):
             g, h = grad(ti, *sub)
             neg = g <= 0.0
             lo = np.where(neg, np.maximum(lo, ti), lo)
             hi = np.where(neg, hi, np.minimum(hi, ti))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                tn = ti - g / h
-            bad = ~((tn >= lo) & (tn <= hi))  # also NaN (h = 0)
-            tn = np.where(bad, 0.5 * (lo + hi), tn)
+            tn = ti - g / h
+            tn = np.where((tn > lo) & (tn < hi), tn, 0.5 * (lo + hi))  # NaN (h = 0) bisects too
             done = (np.abs(tn - ti) <= tol) | (hi - lo <= tol) | (g == 0.0)
-            ti = tn
+            ti = np.where(g == 0.0, ti, tn)
             if done.all():
                 break
             if done.any():
-                t[idx[done]] = ti[done]
+                t[pos[done]] = ti[done]
                 keep = ~done
-                idx = idx[keep]
+                pos = pos[keep]
                 sub = [v[keep] for v in sub]
                 lo, hi, ti = lo[keep], hi[keep], ti[keep]
-        t[idx] = ti
+        t[pos] = ti
     rho = np.sqrt(np.maximum((A * t + 2.0 * B) * t + C, 0.0))
     er = np.maximum(rho - R, 0.0)
-    z = az + t * dz
-    ez = np.maximum(np.abs(z) - H, 0.0)
-    return np.where(hit, 0.0, er * er + ez * ez).reshape(shape)
+    ez = np.maximum(np.abs(az + t * dz) - H, 0.0)
+    out[todo] = er * er + ez * ez
+    return out
 
 
 def _dist_upper_half_ellipse(qx, qy, a, b):
@@ -342,53 +501,27 @@ def _dist_upper_half_ellipse(qx, qy, a, b):
 
     The nearest point is an arc end or a stationary point of
     ``g(p) = (a cos p - qx)^2 + (b sin p - qy)^2``, i.e. ``sin p (A cos p + a qx) = b qy cos p``
-    with ``A = b^2 - a^2``; squaring gives a quartic in ``c = cos p`` whose roots (companion
-    matrix eigenvalues) and a few seeds are polished by damped Newton steps on g' that only
-    accept decreases. Every candidate is a point of the arc, so the minimum over them is
-    never below the true distance, and it contains the true minimiser.
+    with ``A = b^2 - a^2``; squaring gives a quartic in ``c = cos p`` whose four roots
+    (companion-matrix eigenvalues) contain every stationary point. Each root is polished
+    by Newton steps on ``g'`` that are only accepted when they decrease ``g``. When the
+    quartic degenerates (``b`` within about 1e-3.5 of ``a``: a near circle) the radial
+    direction, the projection on the major axis and the top of the arc are polished
+    instead. Every candidate is a point of the arc, so the minimum over them is never
+    below the true distance, and it contains the true minimiser.
     """
     qx = np.asarray(qx, dtype=_FLOAT) / a
     qy = np.asarray(qy, dtype=_FLOAT) / a
     m = np.asarray(b, dtype=_FLOAT) / a
     n = qx.size
     A = m * m - 1.0  # <= 0
-    Bq = qx
-    Cq = m * qy
-    seeds = [
-        np.zeros(n),
-        np.full(n, np.pi),
-        np.full(n, 0.5 * np.pi),
-        np.clip(np.arctan2(qy, np.where(m > 0, qx * m, qx)), 0.0, np.pi),
-        np.arccos(np.clip(qx, -1.0, 1.0)),
-    ]
-    lead = A * A
-    scale = np.maximum(np.maximum(lead, Bq * Bq + Cq * Cq), 1e-300)
-    good = lead > 1e-14 * scale
-    if good.any():
-        i = np.flatnonzero(good)
-        Ai, Bi, Ci = A[i], Bq[i], Cq[i]
-        # -A^2 c^4 - 2AB c^3 + (A^2 - B^2 - C^2) c^2 + 2AB c + B^2 = 0, made monic
-        c3 = 2.0 * Bi / Ai
-        c2 = -(Ai * Ai - Bi * Bi - Ci * Ci) / (Ai * Ai)
-        c1 = -2.0 * Bi / Ai
-        c0 = -(Bi * Bi) / (Ai * Ai)
-        M = np.zeros((i.size, 4, 4))
-        M[:, 0, :] = -np.stack([c3, c2, c1, c0], axis=1)
-        M[:, 1, 0] = M[:, 2, 1] = M[:, 3, 2] = 1.0
-        roots = np.linalg.eigvals(M).real
-        for k in range(4):
-            s = seeds[2].copy()
-            s[i] = np.arccos(np.clip(roots[:, k], -1.0, 1.0))
-            seeds.append(s)
 
-    def g_of(p):
+    def g_of(p, qx, qy, m):
         return (np.cos(p) - qx) ** 2 + (m * np.sin(p) - qy) ** 2
 
-    best = None
-    for p in seeds:
-        g = g_of(p)
-        lam = np.ones(n)
-        for _ in range(12):
+    def polish(p, qx, qy, m, A, iters):
+        g = g_of(p, qx, qy, m)
+        lam = np.ones_like(p)
+        for _ in range(iters):
             c, s = np.cos(p), np.sin(p)
             d1 = A * s * c + qx * s - m * qy * c
             d2 = A * (c * c - s * s) + qx * c + m * qy * s
@@ -396,12 +529,43 @@ def _dist_upper_half_ellipse(qx, qy, a, b):
                 step = np.where(d2 > 0.0, -d1 / d2, -np.sign(d1) * 0.1)
             step = np.where(np.isfinite(step), step, 0.0)
             pn = np.clip(p + lam * step, 0.0, np.pi)
-            gn = g_of(pn)
+            gn = g_of(pn, qx, qy, m)
             acc = gn < g
             p = np.where(acc, pn, p)
             g = np.where(acc, gn, g)
             lam = np.where(acc, 1.0, 0.5 * lam)
-        best = g if best is None else np.minimum(best, g)
+        return g
+
+    best = np.minimum(g_of(np.zeros(n), qx, qy, m), g_of(np.full(n, np.pi), qx, qy, m))
+    Cq = m * qy
+    lead = A * A
+    good = lead > 1e-14 * np.maximum(np.maximum(lead, qx * qx + Cq * Cq), 1e-300)
+    i = np.flatnonzero(good)
+    if i.size:
+        Ai, Bi, Ci = A[i], qx[i], Cq[i]
+        # -A^2 c^4 - 2AB c^3 + (A^2 - B^2 - C^2) c^2 + 2AB c + B^2 = 0, made monic
+        M = np.zeros((i.size, 4, 4))
+        M[:, 0, 0] = -2.0 * Bi / Ai
+        M[:, 0, 1] = (Ai * Ai - Bi * Bi - Ci * Ci) / (Ai * Ai)
+        M[:, 0, 2] = 2.0 * Bi / Ai
+        M[:, 0, 3] = (Bi * Bi) / (Ai * Ai)
+        M[:, 1, 0] = M[:, 2, 1] = M[:, 3, 2] = 1.0
+        roots = np.linalg.eigvals(M).real
+        p = np.arccos(np.clip(roots, -1.0, 1.0)).T.ravel()  # (4 * len(i),), root-major
+        gi = polish(p, *(np.tile(v[i], 4) for v in (qx, qy, m, A)), iters=4).reshape(4, -1).min(axis=0)
+        best[i] = np.minimum(best[i], gi)
+    j = np.flatnonzero(~good)
+    if j.size:
+        qxj, qyj, mj, Aj = qx[j], qy[j], m[j], A[j]
+        seeds = np.concatenate(
+            [
+                np.full(j.size, 0.5 * np.pi),
+                np.clip(np.arctan2(qyj, qxj * mj), 0.0, np.pi),
+                np.arccos(np.clip(qxj, -1.0, 1.0)),
+            ]
+        )
+        gj = polish(seeds, *(np.tile(v, 3) for v in (qxj, qyj, mj, Aj)), iters=12).reshape(3, -1).min(axis=0)
+        best[j] = np.minimum(best[j], gj)
     return np.sqrt(best) * a
 
 
@@ -433,7 +597,7 @@ def _seg_cyl_depth(ax, ay, az, dx, dy, dz, R, H):
         depth = np.minimum(depth, R - np.minimum(nx * ax + ny * ay, nx * bx + ny * by))
     dxy = np.hypot(dx, dy)
     dn = np.sqrt(dxy * dxy + dz * dz)
-    ok = np.flatnonzero(dxy > 1e-12 * np.maximum(dn, 1e-300))
+    ok = np.flatnonzero((dn > 1e-150) & (dxy > 1e-12 * dn))  # a shorter segment is a point
     if ok.size:
         ax_, ay_, az_, dx_, dy_, dz_, R_, H_ = (v[ok] for v in (ax, ay, az, dx, dy, dz, R, H))
         dxy_, dn_ = dxy[ok], dn[ok]
@@ -499,21 +663,40 @@ def _to_local(px, py, pz, R, c, translate=True):
 
 
 def _local_segment(p0, p1, pose):
+    """Segment start (relative to the shape centre) and direction in the shape frame, as >= 1-D arrays."""
     R, c = _pose_parts(pose)
-    x0, y0, z0 = _xyz(p0)
-    x1, y1, z1 = _xyz(p1)
+    x0, y0, z0 = (np.atleast_1d(v) for v in _xyz(p0))
+    x1, y1, z1 = (np.atleast_1d(v) for v in _xyz(p1))
     a = _to_local(x0, y0, z0, R, c)
     d = _to_local(x1 - x0, y1 - y0, z1 - z0, R, c, translate=False)
+    shape = np.broadcast_shapes(*(v.shape for v in (*a, *d)))
+    a = tuple(np.ascontiguousarray(np.broadcast_to(v, shape)) for v in a)
+    d = tuple(np.ascontiguousarray(np.broadcast_to(v, shape)) for v in d)
     return a, d
+
+
+def _result_shape(*points: Any, pose: Any = None) -> tuple[int, ...]:
+    shapes = [np.shape(p)[:-1] for p in points]
+    if pose is not None:
+        shapes.append(np.shape(pose)[:-2])
+    return np.broadcast_shapes(*shapes)
+
+
+def _components(*points: Any) -> list[np.ndarray]:
+    """x, y, z of each point array ``(..., 3)``, broadcast together, at least 1-D, float64."""
+    arrs = [np.asarray(p, dtype=_FLOAT) for p in points]
+    for p in arrs:
+        if p.shape[-1:] != (3,):
+            raise ValueError(f"points must have 3 coordinates in the last axis, got shape {p.shape}")
+    shape = np.broadcast_shapes(*(p.shape[:-1] for p in arrs)) or (1,)
+    return [np.ascontiguousarray(np.broadcast_to(p[..., i], shape)) for p in arrs for i in range(3)]
 
 
 def segment_distance(a0: Any, a1: Any, b0: Any, b1: Any) -> np.ndarray:
     """Distance (m) between segments ``a0-a1`` and ``b0-b1``; arrays ``(..., 3)`` broadcast, result ``(...)``."""
-    ax, ay, az = _xyz(a0)
-    bx, by, bz = _xyz(b0)
-    x1, y1, z1 = _xyz(a1)
-    x2, y2, z2 = _xyz(b1)
-    return np.sqrt(_seg_seg_sq(ax, ay, az, x1 - ax, y1 - ay, z1 - az, bx, by, bz, x2 - bx, y2 - by, z2 - bz))
+    ax, ay, az, x1, y1, z1, bx, by, bz, x2, y2, z2 = _components(a0, a1, b0, b1)
+    sq = _seg_seg_sq(ax, ay, az, x1 - ax, y1 - ay, z1 - az, bx, by, bz, x2 - bx, y2 - by, z2 - bz)
+    return np.sqrt(sq).reshape(_result_shape(a0, a1, b0, b1))
 
 
 def capsule_capsule(a0: Any, a1: Any, ra: Any, b0: Any, b1: Any, rb: Any) -> np.ndarray:
@@ -531,20 +714,29 @@ def capsule_sphere(p0: Any, p1: Any, r: Any, center: Any, radius: Any) -> np.nda
 
     ``|c - closest point of the segment| - r - radius``, exact everywhere.
     """
-    x0, y0, z0 = _xyz(p0)
-    x1, y1, z1 = _xyz(p1)
-    cx, cy, cz = _xyz(center)
-    return np.sqrt(_point_seg_sq(cx, cy, cz, x0, y0, z0, x1 - x0, y1 - y0, z1 - z0)) - r - radius
+    x0, y0, z0, x1, y1, z1, cx, cy, cz = _components(p0, p1, center)
+    sq = _point_seg_sq(cx, cy, cz, x0, y0, z0, x1 - x0, y1 - y0, z1 - z0)
+    return (np.sqrt(sq) - r - radius).reshape(_result_shape(p0, p1, center))
 
 
-def _signed_from_sq(sq, depth_fn, args, r):
+def _signed(sq, depth_fn, p, d, c, extra, r):
+    """``sqrt(sq) - r``, with ``-(depth + r)`` where ``sq == 0`` (the segment meets the shape).
+
+    ``p``, ``d``: segment start and direction components; ``c``: shape centres;
+    ``extra``: the shape's size parameters for ``depth_fn``; all broadcast to ``sq``.
+    """
     out = np.sqrt(sq)
-    hit = np.flatnonzero(sq.ravel() == 0.0)
-    if hit.size:
-        flat = out.reshape(-1)
-        sub = [np.broadcast_to(np.asarray(v, dtype=_FLOAT), sq.shape).reshape(-1)[hit] for v in args]
-        flat[hit] = -depth_fn(*sub)
-    return out - r
+    idx = np.nonzero(sq == 0.0)
+    if idx[0].size:
+        shape = sq.shape
+
+        def g(v):
+            return np.broadcast_to(np.asarray(v, dtype=_FLOAT), shape)[idx]
+
+        a = [g(pi) - g(ci) for pi, ci in zip(p, c)]
+        out[idx] = -depth_fn(*a, *(g(v) for v in d), *(g(v) for v in extra))
+    out -= r
+    return out
 
 
 def capsule_box(p0: Any, p1: Any, r: Any, size: Any, pose: Any) -> np.ndarray:
@@ -555,10 +747,11 @@ def capsule_box(p0: Any, p1: Any, r: Any, size: Any, pose: Any) -> np.ndarray:
     piecewise-quadratic root of :func:`_seg_box_sq`; exact depth (closed form,
     :func:`_seg_box_depth`) where the segment meets the box.
     """
-    (ax, ay, az), (dx, dy, dz) = _local_segment(p0, p1, pose)
-    h = np.asarray(size, dtype=_FLOAT) * 0.5
-    args = (ax, ay, az, dx, dy, dz, h[..., 0], h[..., 1], h[..., 2])
-    return _signed_from_sq(_seg_box_sq(*args), _seg_box_depth, args, r)
+    a, d = _local_segment(p0, p1, pose)
+    h = tuple(np.asarray(size, dtype=_FLOAT)[..., i] * 0.5 for i in range(3))
+    zero = (0.0, 0.0, 0.0)
+    sq = _seg_box_sq(*a, *d, *zero, *h)
+    return _signed(sq, _seg_box_depth, a, d, zero, h, r).reshape(_result_shape(p0, p1, pose=pose))
 
 
 def capsule_cylinder(p0: Any, p1: Any, r: Any, radius: Any, height: Any, pose: Any) -> np.ndarray:
@@ -569,11 +762,11 @@ def capsule_cylinder(p0: Any, p1: Any, r: Any, radius: Any, height: Any, pose: A
     (:func:`_seg_cyl_sq`), depth exact where the segment meets the cylinder
     (:func:`_seg_cyl_depth`).
     """
-    (ax, ay, az), (dx, dy, dz) = _local_segment(p0, p1, pose)
-    R = np.asarray(radius, dtype=_FLOAT)
-    H = np.asarray(height, dtype=_FLOAT) * 0.5
-    args = (ax, ay, az, dx, dy, dz, R, H)
-    return _signed_from_sq(_seg_cyl_sq(*args), _seg_cyl_depth, args, r)
+    a, d = _local_segment(p0, p1, pose)
+    extra = (np.asarray(radius, dtype=_FLOAT), np.asarray(height, dtype=_FLOAT) * 0.5)
+    zero = (0.0, 0.0, 0.0)
+    sq = _seg_cyl_sq(*a, *d, *zero, *extra)
+    return _signed(sq, _seg_cyl_depth, a, d, zero, extra, r).reshape(_result_shape(p0, p1, pose=pose))
 
 
 def capsule_shape(p0: Any, p1: Any, r: Any, shape: Shape, pose: Any = None) -> np.ndarray:
@@ -710,13 +903,31 @@ class CapsuleSpec:
     radius: float
 
 
-@dataclass(frozen=True)
+@dataclass
 class _Group:
-    kind: str  # "box", "cyl", "sphere", "cap", "box@", "cyl@", "sphere@" (against the carried pose), "carried"
-    cols: np.ndarray  # output columns
-    ia: np.ndarray  # capsule index (a side)
-    ib: np.ndarray  # capsule index (b side, kind "cap") or shape index
-    consts: dict[str, np.ndarray] = field(default_factory=dict)
+    """Pairs evaluated together.
+
+    ``product`` groups (static box / cylinder / sphere): capsules ``caps`` (Cg) against
+    shapes (Sg) that share one rotation ``rot`` (None = identity), evaluated shape by
+    shape over all the group's capsules; ``rows[s]`` are the output rows of shape s
+    for each capsule (-1: pair not requested) and ``views[s]`` the same as a slice
+    when they form one (results are then written in place). Other groups (self
+    pairs, pairs with the carried object) are evaluated pair by pair, ``ia`` /
+    ``ib`` being the two sides and ``cols`` the output rows.
+    """
+
+    kind: str
+    cols: np.ndarray
+    product: bool = False
+    caps: np.ndarray | None = None
+    rows: list[np.ndarray] = field(default_factory=list)
+    views: list[slice | None] = field(default_factory=list)
+    rot: np.ndarray | None = None
+    centre: tuple[list[float], ...] = ()
+    size: tuple[list[float], ...] = ()
+    r: np.ndarray | None = None
+    ia: np.ndarray | None = None
+    ib: np.ndarray | None = None
 
 
 def reduce_min(distances: np.ndarray, groups: Sequence[Sequence[int]] | Mapping[Any, Sequence[int]]) -> np.ndarray:
@@ -741,6 +952,9 @@ def reduce_min(distances: np.ndarray, groups: Sequence[Sequence[int]] | Mapping[
     return out
 
 
+_DEPTH = {"box": _seg_box_depth, "cylinder": _seg_cyl_depth}
+
+
 class ProximityKernel:
     """Signed distances (m) of many capsule/shape pairs over a whole trajectory, exact and vectorised.
 
@@ -757,6 +971,16 @@ class ProximityKernel:
     and shapes. Column k of the result is ``pairs[k]``; ``owners[k]`` is the entity
     (``Shape.owner``, or the capsule name) of its b side, and :meth:`groups` gives
     the columns per ``(a, owner)`` for :func:`reduce_min`.
+
+    How it is fast: capsule/static-shape pairs are grouped by shape kind and
+    rotation (a container's five boxes share one; upright objects and the table
+    share the identity). Per group and chunk of samples, the capsules' segments are
+    rotated into the shared frame and their per-segment terms (``1/d``, ``|d|^2``)
+    computed once; then each shape is evaluated against all the group's capsules
+    with its parameters as scalars on contiguous ``(Cg, n)`` arrays (``n`` about
+    ``chunk / Cg`` samples, which keeps the temporaries in cache), writing straight
+    into the output. Penetrating samples (the segment meets the shape) are
+    collected and their depths computed in one batch per kind at the end.
     """
 
     def __init__(
@@ -765,7 +989,7 @@ class ProximityKernel:
         shapes: Sequence[Shape],
         pairs: Sequence[tuple[str, str]],
         carried: Shape | None = None,
-        chunk: int = 8192,
+        chunk: int = 16384,
     ):
         self.capsules = tuple(c if isinstance(c, CapsuleSpec) else CapsuleSpec(str(c[0]), float(c[1])) for c in capsules)
         self.shapes = tuple(shapes)
@@ -786,14 +1010,15 @@ class ProximityKernel:
         self.radii = np.array([c.radius for c in self.capsules], dtype=_FLOAT)
         self.pairs = tuple((str(a), str(b)) for a, b in pairs)
         owners: list[str] = []
-        buckets: dict[str, list[tuple[int, int, int]]] = {}
+        static: dict[tuple[str, bytes], list[tuple[int, int, int]]] = {}
+        other: dict[str, list[tuple[int, int, int]]] = {}
         for k, (a, b) in enumerate(self.pairs):
             if a == CARRIED:
                 if carried is None:
                     raise ValueError(f"pair {k} {(a, b)}: no carried object was given")
                 if b not in shape_index:
                     raise ValueError(f"pair {k} {(a, b)}: the carried object pairs only with a scene shape")
-                buckets.setdefault("carried", []).append((k, -1, shape_index[b]))
+                other.setdefault("carried", []).append((k, -1, shape_index[b]))
                 owners.append(self.shapes[shape_index[b]].owner)
                 continue
             if a not in cap_index:
@@ -802,47 +1027,79 @@ class ProximityKernel:
             if b == CARRIED:
                 if carried is None:
                     raise ValueError(f"pair {k} {(a, b)}: no carried object was given")
-                kind = {"box": "box@", "cylinder": "cyl@", "sphere": "sphere@"}[carried.kind]
-                buckets.setdefault(kind, []).append((k, ia, -1))
+                other.setdefault(carried.kind + "@", []).append((k, ia, -1))
                 owners.append(carried.owner)
             elif b in cap_index:
-                buckets.setdefault("cap", []).append((k, ia, cap_index[b]))
+                other.setdefault("capsule", []).append((k, ia, cap_index[b]))
                 owners.append(b)
             elif b in shape_index:
                 s = self.shapes[shape_index[b]]
-                if s.kind == "box":
-                    rot = not np.allclose(np.asarray(s.pose)[:3, :3], np.eye(3), rtol=0.0, atol=0.0)
-                    kind = "box" if rot else "box_aa"
-                else:
-                    kind = {"cylinder": "cyl", "sphere": "sphere"}[s.kind]
-                buckets.setdefault(kind, []).append((k, ia, shape_index[b]))
+                rot = np.asarray(s.pose, dtype=_FLOAT)[:3, :3]
+                key = b"" if s.kind == "sphere" or np.array_equal(rot, np.eye(3)) else rot.tobytes()
+                static.setdefault((s.kind, key), []).append((k, ia, shape_index[b]))
                 owners.append(s.owner)
             else:
                 raise ValueError(f"pair {k} {(a, b)}: {b!r} is neither a capsule nor a scene shape")
         self.owners = tuple(owners)
         self._groups: list[_Group] = []
-        for kind, rows in buckets.items():
-            cols = np.array([r[0] for r in rows])
-            ia = np.array([r[1] for r in rows])
-            ib = np.array([r[2] for r in rows])
-            consts: dict[str, np.ndarray] = {}
-            if kind in ("box", "box_aa", "cyl", "sphere"):
-                poses = np.array([np.asarray(self.shapes[j].pose, dtype=_FLOAT) for j in ib])
-                consts["R"] = poses[:, :3, :3].copy()
-                consts["c"] = poses[:, :3, 3].copy()
-                consts["r"] = self.radii[ia]
-                if kind in ("box", "box_aa"):
-                    consts["h"] = np.array([self.shapes[j].size for j in ib], dtype=_FLOAT) * 0.5
-                elif kind == "cyl":
-                    consts["R_cyl"] = np.array([self.shapes[j].size[0] for j in ib], dtype=_FLOAT)
-                    consts["H"] = np.array([self.shapes[j].size[1] for j in ib], dtype=_FLOAT) * 0.5
-                else:
-                    consts["rad"] = np.array([self.shapes[j].size[0] for j in ib], dtype=_FLOAT)
-            elif kind == "cap":
-                consts["r"] = self.radii[ia] + self.radii[ib]
-            elif kind in ("box@", "cyl@", "sphere@"):
-                consts["r"] = self.radii[ia]
-            self._groups.append(_Group(kind, cols, ia, ib, consts))
+        for (kind, _), rows in static.items():
+            caps = {r[1] for r in rows}
+            shp = sorted({r[2] for r in rows})
+            if len(rows) * 2 >= len(caps) * len(shp):
+                self._groups.append(self._product_group(kind, rows))
+            else:
+                for j in shp:
+                    self._groups.append(self._product_group(kind, [r for r in rows if r[2] == j]))
+        for kind, rows in other.items():
+            r = None
+            if kind != "carried":
+                r = self.radii[[x[1] for x in rows]]
+                if kind == "capsule":
+                    r = r + self.radii[[x[2] for x in rows]]
+                r = r[:, None]
+            self._groups.append(
+                _Group(kind, np.array([x[0] for x in rows]), ia=np.array([x[1] for x in rows]), ib=np.array([x[2] for x in rows]), r=r)
+            )
+
+    def _product_group(self, kind: str, rows: list[tuple[int, int, int]]) -> _Group:
+        caps = sorted({r[1] for r in rows})
+        shp = sorted({r[2] for r in rows})
+        ci = {c: i for i, c in enumerate(caps)}
+        out_rows = [np.full(len(caps), -1) for _ in shp]
+        for k, c, j in rows:
+            out_rows[shp.index(j)][ci[c]] = k
+        views: list[slice | None] = []
+        for rr in out_rows:
+            view = None
+            if (rr >= 0).all():
+                step = int(rr[1] - rr[0]) if len(rr) > 1 else 1
+                if step > 0 and np.array_equal(rr, rr[0] + step * np.arange(len(rr))):
+                    view = slice(int(rr[0]), int(rr[-1]) + 1, step)
+            views.append(view)
+        shapes = [self.shapes[j] for j in shp]
+        rot = np.asarray(shapes[0].pose, dtype=_FLOAT)[:3, :3]
+        rot = None if kind == "sphere" or np.array_equal(rot, np.eye(3)) else rot.copy()
+        centres = np.array([np.asarray(s.pose, dtype=_FLOAT)[:3, 3] for s in shapes])  # (Sg, 3)
+        if rot is not None:
+            centres = centres @ rot  # R^T c, row by row
+        if kind == "box":
+            size = tuple([0.5 * float(s.size[i]) for s in shapes] for i in range(3))
+        elif kind == "cylinder":
+            size = ([float(s.size[0]) for s in shapes], [0.5 * float(s.size[1]) for s in shapes])
+        else:
+            size = ([float(s.size[0]) for s in shapes],)
+        return _Group(
+            kind,
+            np.array([r[0] for r in rows]),
+            product=True,
+            caps=np.array(caps),
+            rows=out_rows,
+            views=views,
+            rot=rot,
+            centre=tuple(centres[:, i].tolist() for i in range(3)),
+            size=size,
+            r=self.radii[caps][:, None].copy(),
+        )
 
     @property
     def names(self) -> list[str]:
@@ -868,7 +1125,8 @@ class ProximityKernel:
         ``carried_pose`` ``(T, 4, 4)`` is needed when a pair involves :data:`CARRIED`.
         ``far_m`` only affects carried-object/shape pairs that go through coal (box or
         cylinder against box or cylinder): see :func:`shape_shape`. Every other value
-        is exact.
+        is exact. The result is column-major (Fortran-ordered): each pair's column is
+        contiguous.
         """
         p0 = np.asarray(p0, dtype=_FLOAT)
         p1 = np.asarray(p1, dtype=_FLOAT)
@@ -876,70 +1134,163 @@ class ProximityKernel:
         if p0.ndim != 3 or p0.shape[1:] != (C, 3) or p1.shape != p0.shape:
             raise ValueError(f"p0 and p1 must both be (T, {C}, 3) (one segment per capsule), got {p0.shape} and {p1.shape}")
         T = p0.shape[0]
-        K = len(self.pairs)
-        out = np.empty((T, K))
+        buf = np.empty((len(self.pairs), T))
         if carried_pose is not None:
             carried_pose = np.asarray(carried_pose, dtype=_FLOAT)
             if carried_pose.shape != (T, 4, 4):
                 raise ValueError(f"carried_pose must be (T, 4, 4) = ({T}, 4, 4), got {carried_pose.shape}")
-        # structure of arrays: (3, T, C), contiguous per coordinate
-        P0 = np.ascontiguousarray(p0.transpose(2, 0, 1))
-        D = np.ascontiguousarray((p1 - p0).transpose(2, 0, 1))
+        elif any(g.kind == "carried" or g.kind.endswith("@") for g in self._groups):
+            raise ValueError("carried_pose (T, 4, 4) is needed: the kernel has pairs with the carried object")
+        # structure of arrays (3, C, T): one contiguous time series per capsule and coordinate
+        P0 = np.ascontiguousarray(p0.transpose(2, 1, 0))
+        D = np.ascontiguousarray((p1 - p0).transpose(2, 1, 0))
+        hits: dict[str, list[tuple[np.ndarray, list[np.ndarray], np.ndarray]]] = {}
         for g in self._groups:
             if g.kind == "carried":
                 for col, j in zip(g.cols, g.ib):
-                    if carried_pose is None:
-                        raise ValueError("carried_pose is needed: the kernel has pairs with the carried object")
-                    out[:, col] = shape_shape(self.carried, self.shapes[j], carried_pose, None, far_m=far_m)
+                    buf[col] = shape_shape(self.carried, self.shapes[j], carried_pose, None, far_m=far_m)
                 continue
-            if g.kind.endswith("@") and carried_pose is None:
-                raise ValueError("carried_pose is needed: the kernel has pairs with the carried object")
-            Kg = len(g.cols)
-            step = max(1, self.chunk // Kg)
-            res = np.empty((T, Kg))
+            width = len(g.caps) if g.product else len(g.cols)
+            step = max(64, self.chunk // width)
             for t0 in range(0, T, step):
                 t1 = min(T, t0 + step)
-                res[t0:t1] = self._eval(g, P0[:, t0:t1][:, :, g.ia], D[:, t0:t1][:, :, g.ia], P0[:, t0:t1], D[:, t0:t1], carried_pose[t0:t1] if carried_pose is not None else None)
-            out[:, g.cols] = res
-        return out
+                if g.product:
+                    self._product(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], buf, t0, hits)
+                else:
+                    cp = carried_pose[t0:t1] if carried_pose is not None else None
+                    self._pairwise(g, P0[:, :, t0:t1], D[:, :, t0:t1], cp, buf, t0, hits)
+        flat = buf.reshape(-1)
+        pending = hits.pop("cylinder-inner", None)
+        if pending:
+            where = np.concatenate([e[0] for e in pending])
+            args = [np.concatenate([e[1][i] for e in pending]) for i in range(11)]
+            r = np.concatenate([e[2] for e in pending])
+            sq = _cyl_sq_inner(*args, tol=1e-12, max_iter=100)
+            flat[where] = np.sqrt(sq) - r
+            z = sq == 0.0
+            if z.any():
+                hits.setdefault("cylinder", []).append((where[z], [args[i][z] for i in (0, 1, 2, 3, 4, 5, 9, 10)], r[z]))
+        for kind, entries in hits.items():
+            where = np.concatenate([e[0] for e in entries])
+            args = [np.concatenate([e[1][i] for e in entries]) for i in range(len(entries[0][1]))]
+            r = np.concatenate([e[2] for e in entries])
+            flat[where] = -_DEPTH[kind](*args) - r
+        return buf.T
 
-    def _eval(self, g: _Group, a: np.ndarray, d: np.ndarray, P0c: np.ndarray, Dc: np.ndarray, cpose: np.ndarray | None) -> np.ndarray:
-        """One chunk of one group: ``a``, ``d`` are ``(3, n, Kg)`` segment starts and directions."""
-        cs = g.consts
-        kind = g.kind
-        if kind == "cap":
-            b = P0c[:, :, g.ib]
-            e = Dc[:, :, g.ib]
-            return np.sqrt(_seg_seg_sq(a[0], a[1], a[2], d[0], d[1], d[2], b[0], b[1], b[2], e[0], e[1], e[2])) - cs["r"]
-        if kind == "sphere":
-            c = cs["c"]
-            return np.sqrt(_point_seg_sq(c[:, 0], c[:, 1], c[:, 2], a[0], a[1], a[2], d[0], d[1], d[2])) - cs["r"] - cs["rad"]
-        if kind.endswith("@"):
-            R = cpose[:, None, :3, :3]
-            c = cpose[:, None, :3, 3]
-            r = cs["r"]
-            sh = self.carried
-            if kind == "sphere@":
-                return np.sqrt(_point_seg_sq(c[..., 0], c[..., 1], c[..., 2], a[0], a[1], a[2], d[0], d[1], d[2])) - r - sh.size[0]
+    @staticmethod
+    def _collect(hits, kind, sq, rows, t0, T, a, d, c, size, r):
+        """Record the samples where a segment meets a shape (``sq == 0``) for the batched depth pass."""
+        ci, ti = np.nonzero(sq == 0.0)
+        if rows is not None:
+            keep = rows[ci] >= 0
+            ci, ti = ci[keep], ti[keep]
+            where = rows[ci] * T + (t0 + ti)
         else:
-            R = cs["R"]
-            c = cs["c"]
-            r = cs["r"]
-        if kind == "box_aa":
-            la = (a[0] - c[:, 0], a[1] - c[:, 1], a[2] - c[:, 2])
-            ld = (d[0], d[1], d[2])
+            where = ci * T + (t0 + ti)
+        if not ci.size:
+            return
+        args = [np.broadcast_to(a[i], sq.shape)[ci, ti] - c[i] for i in range(3)]
+        args += [np.broadcast_to(d[i], sq.shape)[ci, ti] for i in range(3)]
+        args += [np.broadcast_to(np.asarray(v, dtype=_FLOAT), sq.shape)[ci, ti] for v in size]
+        hits.setdefault(kind, []).append((where, args, np.broadcast_to(r, sq.shape)[ci, ti]))
+
+    @staticmethod
+    def _defer_inner(hits, pending, rows, t0, T, r, shape):
+        """Record the cylinder pairs whose minimiser is interior for the batched Newton pass."""
+        (ci, ti), sub = pending
+        if rows is not None:
+            keep = rows[ci] >= 0
+            if not keep.all():
+                ci, ti, sub = ci[keep], ti[keep], [v[keep] for v in sub]
+            where = rows[ci] * T + (t0 + ti)
         else:
-            la = _to_local(a[0], a[1], a[2], R, c)
-            ld = _to_local(d[0], d[1], d[2], R, c, translate=False)
-        if kind in ("box", "box_aa", "box@"):
-            h = cs["h"] if kind != "box@" else 0.5 * np.asarray(self.carried.size, dtype=_FLOAT)[None, :]
-            args = (*la, *ld, h[..., 0], h[..., 1], h[..., 2])
-            return _signed_from_sq(_seg_box_sq(*args), _seg_box_depth, args, r)
-        if kind in ("cyl", "cyl@"):
-            if kind == "cyl":
-                Rc, H = cs["R_cyl"], cs["H"]
+            where = ci * T + (t0 + ti)
+        hits.setdefault("cylinder-inner", []).append((where, sub, np.broadcast_to(r, shape)[ci, ti]))
+
+    def _product(self, g: _Group, a: np.ndarray, d: np.ndarray, buf: np.ndarray, t0: int, hits: dict) -> None:
+        """Evaluate one product group for the samples ``t0 ..``; ``a``, ``d``: ``(3, Cg, n)`` segment starts, directions."""
+        T = buf.shape[1]
+        n = a.shape[2]
+        if g.rot is not None:
+            a = np.tensordot(g.rot.T, a, axes=1)  # R^T p: into the shapes' frame
+            d = np.tensordot(g.rot.T, d, axes=1)
+        ax, ay, az = a
+        dx, dy, dz = d
+        cx, cy, cz = g.centre
+        r = g.r
+        if g.kind == "box":
+            prep = _box_prep(dx, dy, dz)
+        elif g.kind == "cylinder":
+            A = dx * dx
+            A += dy * dy
+        else:
+            inv_dd = dx * dx
+            inv_dd += dy * dy
+            inv_dd += dz * dz
+            inv_dd += 1e-300
+            np.divide(1.0, inv_dd, out=inv_dd)
+        for s in range(len(cx)):
+            c = (cx[s], cy[s], cz[s])
+            if g.kind == "box":
+                size = (g.size[0][s], g.size[1][s], g.size[2][s])
+                sq = _box_sq(ax, ay, az, dx, dy, dz, prep, *c, *size)
+            elif g.kind == "cylinder":
+                size = (g.size[0][s], g.size[1][s])
+                sq, pending = _cyl_sq(ax, ay, az, dx, dy, dz, A, *c, *size, defer=True)
+                if pending is not None:
+                    self._defer_inner(hits, pending, g.rows[s], t0, T, r, sq.shape)
             else:
-                Rc, H = _FLOAT(self.carried.size[0]), _FLOAT(0.5 * self.carried.size[1])
-            args = (*la, *ld, Rc, H)
-            return _signed_from_sq(_seg_cyl_sq(*args), _seg_cyl_depth, args, r)
-        raise AssertionError(kind)
+                sq = _point_seg_sq(*c, ax, ay, az, dx, dy, dz, inv_dd)
+            view = g.views[s]
+            o = buf[view, t0 : t0 + n] if view is not None else np.empty_like(sq)
+            np.sqrt(sq, out=o)
+            if g.kind == "sphere":
+                o -= g.size[0][s]
+            elif sq.min() == 0.0:
+                self._collect(hits, g.kind, sq, g.rows[s], t0, T, a, d, c, size, r)
+            o -= r
+            if view is None:
+                rows = g.rows[s]
+                keep = rows >= 0
+                buf[rows[keep], t0 : t0 + n] = o[keep]
+
+    def _pairwise(self, g: _Group, P0: np.ndarray, D: np.ndarray, cpose: np.ndarray | None, buf: np.ndarray, t0: int, hits: dict) -> None:
+        """Evaluate a pairwise group (self pairs, capsules against the carried object) for the samples ``t0 ..``."""
+        n = P0.shape[2]
+        a = P0[:, g.ia]
+        d = D[:, g.ia]
+        if g.kind == "capsule":
+            b = P0[:, g.ib]
+            e = D[:, g.ib]
+            out = np.sqrt(_seg_seg_sq(*a, *d, *b, *e))
+            out -= g.r
+            buf[g.cols, t0 : t0 + n] = out
+            return
+        sh = self.carried
+        # per-sample pose of the carried object, broadcast over the pairs: (1, n)
+        R = cpose[None, :, :3, :3]
+        c = cpose[None, :, :3, 3]
+        if g.kind == "sphere@":
+            out = np.sqrt(_point_seg_sq(c[..., 0], c[..., 1], c[..., 2], *a, *d))
+            out -= sh.size[0]
+            out -= g.r
+            buf[g.cols, t0 : t0 + n] = out
+            return
+        p = _to_local(a[0], a[1], a[2], R, c)
+        v = _to_local(d[0], d[1], d[2], R, c, translate=False)
+        zero = (0.0, 0.0, 0.0)
+        if g.kind == "box@":
+            size = tuple(0.5 * float(sh.size[i]) for i in range(3))
+            sq = _seg_box_sq(*p, *v, *zero, *size)
+            kind = "box"
+        else:
+            size = (float(sh.size[0]), 0.5 * float(sh.size[1]))
+            sq, pending = _seg_cyl_sq(*p, *v, *zero, *size, defer=True)
+            if pending is not None:
+                self._defer_inner(hits, pending, g.cols, t0, buf.shape[1], g.r, sq.shape)
+            kind = "cylinder"
+        out = np.sqrt(sq)
+        if sq.min() == 0.0:
+            self._collect(hits, kind, sq, g.cols, t0, buf.shape[1], p, v, zero, size, g.r)
+        out -= g.r
+        buf[g.cols, t0 : t0 + n] = out

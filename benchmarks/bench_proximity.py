@@ -1,0 +1,99 @@
+"""Timing of the exact capsule distance kernels (robocritics.robot.proximity) on trajectory-sized arrays.
+
+Run: ``python benchmarks/bench_proximity.py`` (single thread is what counts; set
+OMP_NUM_THREADS=1 to be sure numpy's linear algebra does not spread).
+Cases: 10 capsules moving smoothly over T = 10,000 samples through the built-in
+scenes (every capsule against every scene shape, plus 20 self pairs), and the
+pure kernels on flat arrays.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from robocritics.robot.proximity import ProximityKernel, _seg_box_sq, _seg_cyl_sq, _seg_seg_sq, _point_seg_sq
+from robocritics.scene import Scene
+
+
+def capsule_trajectory(T: int, C: int = 10, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Capsule endpoints (T, C, 3) m: a chain of C links wandering smoothly above the table."""
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0.0, 1.0, T)[:, None]
+    # smooth random joint-like angles
+    freqs = rng.uniform(0.5, 3.0, (1, C))
+    phase = rng.uniform(0, 2 * np.pi, (1, C))
+    yaw = np.sin(2 * np.pi * freqs * s + phase) * 2.0
+    pitch = np.cos(2 * np.pi * freqs * 0.7 * s + phase) * 1.2
+    lengths = rng.uniform(0.05, 0.25, C)
+    dirs = np.stack([np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)], axis=-1)
+    seg = dirs * lengths[None, :, None]
+    p1 = np.cumsum(seg, axis=1) + np.array([0.0, 0.0, 0.15])
+    p0 = p1 - seg
+    return p0, p1
+
+
+def timeit(fn, repeat: int = 5) -> float:
+    best = np.inf
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("-T", type=int, default=10_000)
+    ap.add_argument("--repeat", type=int, default=5)
+    args = ap.parse_args()
+    T = args.T
+    p0, p1 = capsule_trajectory(T)
+    C = p0.shape[1]
+    caps = [(f"c{i}", 0.04) for i in range(C)]
+    self_pairs = [(f"c{i}", f"c{j}") for i in range(C) for j in range(i + 2, C)][:20]
+    for name in Scene.builtin_names():
+        shapes = Scene.builtin(name).shapes()
+        pairs = [(c, s.name) for c, _ in caps for s in shapes]
+        kinds = {k: sum(s.kind == k for s in shapes) for k in ("box", "cylinder", "sphere")}
+        kern = ProximityKernel(caps, shapes, pairs + self_pairs)
+        dt = timeit(lambda: kern.distances(p0, p1), args.repeat)
+        n = T * len(kern.pairs)
+        print(f"{name:10s} shapes {kinds}: {len(kern.pairs)} pairs x {T} samples = {n/1e6:.2f}M distances: {dt*1e3:7.1f} ms ({dt/n*1e9:.0f} ns each)")
+    # the brief's mix: 10 capsules x 7 shapes (3 box, 2 cylinder, 2 sphere)
+    from robocritics.scene import Shape, rpy_matrix
+
+    rng = np.random.default_rng(1)
+    shapes = []
+    for i, kind in enumerate(["box", "box", "box", "cylinder", "cylinder", "sphere", "sphere"]):
+        pose = np.eye(4)
+        pose[:3, :3] = rpy_matrix(tuple(rng.uniform(-0.3, 0.3, 3)))
+        pose[:3, 3] = rng.uniform([-0.4, -0.4, 0.0], [0.4, 0.4, 0.2])
+        size = {"box": (0.1, 0.08, 0.12), "cylinder": (0.04, 0.12), "sphere": (0.04,)}[kind]
+        shapes.append(Shape(f"s{i}", f"s{i}", kind, size, pose))
+    pairs = [(c, s.name) for c, _ in caps for s in shapes]
+    kern = ProximityKernel(caps, shapes, pairs)
+    dt = timeit(lambda: kern.distances(p0, p1), args.repeat)
+    n = T * len(pairs)
+    print(f"mix 10x7 (3 box, 2 cyl, 2 sphere): {n/1e6:.2f}M distances: {dt*1e3:7.1f} ms ({dt/n*1e9:.0f} ns each)")
+    kern = ProximityKernel(caps, [], self_pairs)
+    dt = timeit(lambda: kern.distances(p0, p1), args.repeat)
+    print(f"self pairs: {len(self_pairs)} x {T}: {dt*1e3:7.1f} ms")
+    # flat kernels
+    N = 700_000
+    a = rng.uniform(-0.4, 0.4, (3, N))
+    d = rng.normal(size=(3, N)) * 0.15
+    for label, fn in [
+        ("_seg_box_sq", lambda: _seg_box_sq(*a, *d, 0.0, 0.0, 0.0, 0.05, 0.04, 0.06)),
+        ("_seg_cyl_sq", lambda: _seg_cyl_sq(*a, *d, 0.0, 0.0, 0.0, 0.04, 0.06)),
+        ("_point_seg_sq", lambda: _point_seg_sq(0.1, 0.0, 0.1, *a, *d)),
+        ("_seg_seg_sq", lambda: _seg_seg_sq(*a, *d, *(a[::-1] * 0.9), *(d[::-1]))),
+    ]:
+        dt = timeit(fn, args.repeat)
+        print(f"flat {label:14s} N={N}: {dt*1e3:7.1f} ms ({dt/N*1e9:.0f} ns each)")
+
+
+if __name__ == "__main__":
+    main()
