@@ -38,7 +38,12 @@ cause                rule
 ``start_mismatch``   the first sample is farther than ``start_tolerance_rad``
                      from ``actual_q`` on some joint; the message offers
                      ``arm.approach(...)``
+``secondary_         (dry run only) the secondary interface does not accept
+interface``          connections
 ===================  ===========================================================
+
+Offline rules (the first five) are checked before the robot is asked anything;
+if one fails, the robot rules are not evaluated.
 
 **Streaming.** The trajectory (physical time axis) is resampled to ``rate_hz``
 (500 Hz: one setpoint per 2 ms control cycle; linear interpolation of q and the
@@ -80,6 +85,7 @@ the arm stops even if both channels fail. Every wait has a deadline.
 
 from __future__ import annotations
 
+import collections
 import math
 import random
 import statistics
@@ -473,7 +479,7 @@ class URArm:
         self._inputs: InputRecipe | None = None
         self._seq = 0
         self._out_freq = self.frequency_hz
-        self._messages: list[TextMessage] = []
+        self._messages: collections.deque[TextMessage] = collections.deque(maxlen=256)
 
     # ------------------------------------------------------------------ connection
 
@@ -485,9 +491,14 @@ class URArm:
         self.close()
 
     def connect(self) -> None:
-        """Connect RTDE and the dashboard, set up the recipes, start synchronisation, read one package."""
+        """Connect RTDE and the dashboard, set up the recipes, start synchronisation, read one package.
+
+        After a dropped connection (``DeployFault.cause == "connection_drop"``) call it again to reconnect.
+        """
         if self._rtde is not None:
-            raise DeployError(f"URArm {self.host} is already connected")
+            if self._rtde.connected:
+                raise DeployError(f"URArm {self.host} is already connected")
+            self.close()
         rtde = RTDEClient(self.host, self.rtde_port, timeout_s=self.timeout_s, buffer_size=4096)
         rtde.connect()
         try:
