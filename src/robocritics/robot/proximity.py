@@ -69,7 +69,7 @@ chunks.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -78,7 +78,6 @@ import numpy as np
 from ..scene import Shape
 
 __all__ = [
-    "CARRIED",
     "CapsuleSpec",
     "ProximityKernel",
     "segment_distance",
@@ -92,9 +91,6 @@ __all__ = [
     "shape_shape",
     "reduce_min",
 ]
-
-CARRIED = "@carried"
-"""Name of the carried object in :class:`ProximityKernel` pairs (not a valid scene id, so it cannot clash)."""
 
 _TINY_D = 1e-150  # |direction component| below this (m) counts as zero
 _FLOAT = np.float64
@@ -222,6 +218,12 @@ def _box_prep(dx, dy, dz):
         np.maximum(W, 1e-300, out=W)
         invW = np.divide(1.0, W, out=W)
     return ninv, ainv, w, invW
+
+
+def _take_prep(prep, rows):
+    """The rows ``rows`` of a :func:`_box_prep` result."""
+    ninv, ainv, w, invW = prep
+    return [v[rows] for v in ninv], [v[rows] for v in ainv], [v[rows] for v in w], invW[rows]
 
 
 def _box_sq(px, py, pz, dx, dy, dz, prep, cx, cy, cz, hx, hy, hz):
@@ -839,14 +841,17 @@ def shape_shape(a: Shape, b: Shape, pose_a: Any = None, pose_b: Any = None, far_
     """Signed distance (m) between two scene shapes whose poses may vary per sample (``(T, 4, 4)``).
 
     Exact in closed form when either is a sphere (point-shape distance minus the
-    radius). Box/cylinder against box/cylinder: ``coal.distance`` per sample (GJK when
-    apart, EPA when overlapping; about 1-3 us per sample). With ``far_m`` set,
-    samples whose bounding spheres are more than ``far_m`` apart are not sent to coal
-    and get that bounding-sphere gap instead: an exact *lower bound* (> ``far_m``), not
-    the distance. Result shape ``(T,)`` (``(1,)`` for two static poses).
+    radius). Box/cylinder against box/cylinder: ``coal.distance`` (GJK with a 1e-10
+    tolerance when apart: exact to ~1e-10 m; EPA when overlapping: boxes exact to
+    rounding, cylinders to about 1e-5 m), once per run of samples in which neither
+    pose changes (an object at rest, or carried at a fixed grip while the other rests
+    costs one call per sample), about 1-3 us per call. With ``far_m`` set, samples
+    whose bounding spheres are more than ``far_m`` apart are not sent to coal and get
+    that bounding-sphere gap instead: a *lower bound* (> ``far_m``), not the
+    distance. Result shape ``(T,)`` (``(1,)`` for two static poses).
     """
-    pose_a = a.pose if pose_a is None else np.asarray(pose_a, dtype=_FLOAT)
-    pose_b = b.pose if pose_b is None else np.asarray(pose_b, dtype=_FLOAT)
+    pose_a = np.asarray(a.pose if pose_a is None else pose_a, dtype=_FLOAT)
+    pose_b = np.asarray(b.pose if pose_b is None else pose_b, dtype=_FLOAT)
     if a.kind == "sphere" or b.kind == "sphere":
         if a.kind != "sphere":
             a, b, pose_a, pose_b = b, a, pose_b, pose_a
@@ -859,35 +864,37 @@ def shape_shape(a: Shape, b: Shape, pose_a: Any = None, pose_b: Any = None, far_
     T = max(len(Pa), len(Pb))
     Pa = np.broadcast_to(Pa, (T, 4, 4))
     Pb = np.broadcast_to(Pb, (T, 4, 4))
-    out = np.empty(T)
-    todo = np.arange(T)
+    changed = np.ones(T, dtype=bool)
+    if T > 1:
+        changed[1:] = (Pa[1:] != Pa[:-1]).any(axis=(1, 2)) | (Pb[1:] != Pb[:-1]).any(axis=(1, 2))
+    first = np.flatnonzero(changed)
+    inverse = np.cumsum(changed) - 1
+    vals = np.empty(len(first))
+    todo = np.arange(len(first))
     if far_m is not None:
-        gap = np.linalg.norm(Pa[:, :3, 3] - Pb[:, :3, 3], axis=1) - _bounding_radius(a.kind, a.size) - _bounding_radius(b.kind, b.size)
+        gap = np.linalg.norm(Pa[first, :3, 3] - Pb[first, :3, 3], axis=1)
+        gap -= _bounding_radius(a.kind, a.size) + _bounding_radius(b.kind, b.size)
         far = gap > far_m
-        out[far] = gap[far]
+        vals[far] = gap[far]
         todo = np.flatnonzero(~far)
     ga, gb = _coal_geometry(a.kind, a.size), _coal_geometry(b.kind, b.size)
-    solver = coal.ComputeDistance(ga, gb)
+    solver = coal.ComputeDistance(ga, gb)  # keeps no reference: ga and gb must outlive it
     req = coal.DistanceRequest()
+    req.gjk_tolerance = 1e-10
+    req.gjk_max_iterations = 1000
+    req.epa_max_iterations = 256
     res = coal.DistanceResult()
     ta, tb = coal.Transform3s(), coal.Transform3s()
-    static_a, static_b = pose_a.ndim == 2, pose_b.ndim == 2
-    if static_a:
-        ta.setRotation(Pa[0, :3, :3].copy())
-        ta.setTranslation(Pa[0, :3, 3].copy())
-    if static_b:
-        tb.setRotation(Pb[0, :3, :3].copy())
-        tb.setTranslation(Pb[0, :3, 3].copy())
-    for i in todo:
-        if not static_a:
-            ta.setRotation(Pa[i, :3, :3].copy())
-            ta.setTranslation(Pa[i, :3, 3].copy())
-        if not static_b:
-            tb.setRotation(Pb[i, :3, :3].copy())
-            tb.setTranslation(Pb[i, :3, 3].copy())
+    for k in todo:
+        i = first[k]
+        ta.setRotation(np.ascontiguousarray(Pa[i, :3, :3]))
+        ta.setTranslation(np.ascontiguousarray(Pa[i, :3, 3]))
+        tb.setRotation(np.ascontiguousarray(Pb[i, :3, :3]))
+        tb.setTranslation(np.ascontiguousarray(Pb[i, :3, 3]))
         res.clear()
-        out[i] = solver(ta, tb, req, res)
-    return out
+        vals[k] = solver(ta, tb, req, res)
+    del solver
+    return vals[inverse]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -907,13 +914,15 @@ class CapsuleSpec:
 class _Group:
     """Pairs evaluated together.
 
-    ``product`` groups (static box / cylinder / sphere): capsules ``caps`` (Cg) against
-    shapes (Sg) that share one rotation ``rot`` (None = identity), evaluated shape by
-    shape over all the group's capsules; ``rows[s]`` are the output rows of shape s
-    for each capsule (-1: pair not requested) and ``views[s]`` the same as a slice
-    when they form one (results are then written in place). Other groups (self
-    pairs, pairs with the carried object) are evaluated pair by pair, ``ia`` /
-    ``ib`` being the two sides and ``cols`` the output rows.
+    ``product`` groups (capsules against box / cylinder / sphere shapes): capsules
+    ``caps`` (Cg) against shapes that share one rotation ``rot`` (None = identity),
+    evaluated shape by shape over all the group's capsules; ``rows[s]`` are the
+    output rows of shape s for each capsule (-1: pair not requested) and ``views[s]``
+    the same as a slice when they form one (results are then written in place). A
+    product group of a ``moving`` shape has one shape whose pose comes per sample
+    (``pose_key``). ``capsule`` groups are self pairs (``ia``, ``ib``), ``shape``
+    groups shape-shape pairs (shape indices ``ia``, ``ib``); ``cols`` are the output
+    rows of the pairs.
     """
 
     kind: str
@@ -928,6 +937,7 @@ class _Group:
     r: np.ndarray | None = None
     ia: np.ndarray | None = None
     ib: np.ndarray | None = None
+    pose_key: str | None = None
 
 
 def reduce_min(distances: np.ndarray, groups: Sequence[Sequence[int]] | Mapping[Any, Sequence[int]]) -> np.ndarray:
@@ -956,21 +966,23 @@ _DEPTH = {"box": _seg_box_depth, "cylinder": _seg_cyl_depth}
 
 
 class ProximityKernel:
-    """Signed distances (m) of many capsule/shape pairs over a whole trajectory, exact and vectorised.
+    """Signed distances (m) of many capsule and shape pairs over a whole trajectory, exact and vectorised.
 
     Built once from the capsules (``CapsuleSpec`` or ``(name, radius)``), the scene
     shapes and ``pairs`` of names ``(a, b)``:
 
-    * ``(capsule, shape)``: a capsule against a static scene shape;
+    * ``(capsule, shape)``: a robot capsule against a scene shape;
     * ``(capsule, capsule)``: a self pair;
-    * ``(capsule, CARRIED)``: a capsule against the carried object (pose per sample);
-    * ``(CARRIED, shape)``: the carried object against a static shape.
+    * ``(shape, shape)``: two scene shapes (an object the gripper carries against
+      the others): :func:`shape_shape`.
 
-    ``carried`` is the carried object's :class:`Shape` (its pose is ignored; the pose
-    per sample is passed to :meth:`distances`). Names must be unique across capsules
-    and shapes. Column k of the result is ``pairs[k]``; ``owners[k]`` is the entity
-    (``Shape.owner``, or the capsule name) of its b side, and :meth:`groups` gives
-    the columns per ``(a, owner)`` for :func:`reduce_min`.
+    ``moving`` names the shapes (by shape name or by owner, i.e. entity id) whose
+    pose is given per sample at each :meth:`distances` call (objects the program
+    moves); the others keep ``Shape.pose``. Names must be unique across capsules and
+    shapes. Column k of the result is ``pairs[k]``; ``owners[k]`` is the entity of
+    its b side (``Shape.owner``, or the capsule name) and :meth:`groups` gives the
+    columns per ``(a, owner)`` for :func:`reduce_min` (a container's floor and
+    walls are one entity).
 
     How it is fast: capsule/static-shape pairs are grouped by shape kind and
     rotation (a container's five boxes share one; upright objects and the table
@@ -979,8 +991,10 @@ class ProximityKernel:
     computed once; then each shape is evaluated against all the group's capsules
     with its parameters as scalars on contiguous ``(Cg, n)`` arrays (``n`` about
     ``chunk / Cg`` samples, which keeps the temporaries in cache), writing straight
-    into the output. Penetrating samples (the segment meets the shape) are
-    collected and their depths computed in one batch per kind at the end.
+    into the output. A moving shape is one such group whose frame changes per
+    sample. Penetrating samples (the segment meets the shape) and cylinder pairs
+    whose closest point needs Newton steps are collected and solved in one batch
+    each at the end.
     """
 
     def __init__(
@@ -988,12 +1002,11 @@ class ProximityKernel:
         capsules: Sequence[CapsuleSpec | tuple[str, float]],
         shapes: Sequence[Shape],
         pairs: Sequence[tuple[str, str]],
-        carried: Shape | None = None,
+        moving: Collection[str] = (),
         chunk: int = 16384,
     ):
         self.capsules = tuple(c if isinstance(c, CapsuleSpec) else CapsuleSpec(str(c[0]), float(c[1])) for c in capsules)
         self.shapes = tuple(shapes)
-        self.carried = carried
         self.chunk = int(chunk)
         cap_index = {c.name: i for i, c in enumerate(self.capsules)}
         shape_index = {s.name: i for i, s in enumerate(self.shapes)}
@@ -1004,40 +1017,50 @@ class ProximityKernel:
         clash = set(cap_index) & set(shape_index)
         if clash:
             raise ValueError(f"names used by both a capsule and a shape: {sorted(clash)}")
-        for s in (*self.shapes, *([carried] if carried is not None else [])):
+        for s in self.shapes:
             if s.kind not in ("box", "cylinder", "sphere"):
                 raise ValueError(f"shape {s.name!r}: unknown kind {s.kind!r}; use box, cylinder or sphere")
+        moving = set(moving)
+        unknown = moving - set(shape_index) - {s.owner for s in self.shapes}
+        if unknown:
+            raise ValueError(f"moving: no shape or owner named {sorted(unknown)}")
+        for name in moving - set(shape_index):
+            parts = [s.name for s in self.shapes if s.owner == name]
+            if len(parts) > 1:
+                raise ValueError(f"moving: {name!r} is {len(parts)} shapes ({', '.join(parts)}); name the shapes, each with its own pose")
+        # the key of the per-sample pose of each moving shape: its name if listed, else its owner
+        self._pose_key = {
+            s.name: (s.name if s.name in moving else s.owner) for s in self.shapes if s.name in moving or s.owner in moving
+        }
+        self.moving = frozenset(self._pose_key.values())
         self.radii = np.array([c.radius for c in self.capsules], dtype=_FLOAT)
         self.pairs = tuple((str(a), str(b)) for a, b in pairs)
         owners: list[str] = []
         static: dict[tuple[str, bytes], list[tuple[int, int, int]]] = {}
-        other: dict[str, list[tuple[int, int, int]]] = {}
+        movers: dict[int, list[tuple[int, int, int]]] = {}
+        selfs: list[tuple[int, int, int]] = []
+        shape_pairs: list[tuple[int, int, int]] = []
         for k, (a, b) in enumerate(self.pairs):
-            if a == CARRIED:
-                if carried is None:
-                    raise ValueError(f"pair {k} {(a, b)}: no carried object was given")
-                if b not in shape_index:
-                    raise ValueError(f"pair {k} {(a, b)}: the carried object pairs only with a scene shape")
-                other.setdefault("carried", []).append((k, -1, shape_index[b]))
+            if a in shape_index and b in shape_index:
+                shape_pairs.append((k, shape_index[a], shape_index[b]))
                 owners.append(self.shapes[shape_index[b]].owner)
                 continue
             if a not in cap_index:
                 raise ValueError(f"pair {k} {(a, b)}: {a!r} is not a capsule (have {', '.join(cap_index)})")
             ia = cap_index[a]
-            if b == CARRIED:
-                if carried is None:
-                    raise ValueError(f"pair {k} {(a, b)}: no carried object was given")
-                other.setdefault(carried.kind + "@", []).append((k, ia, -1))
-                owners.append(carried.owner)
-            elif b in cap_index:
-                other.setdefault("capsule", []).append((k, ia, cap_index[b]))
+            if b in cap_index:
+                selfs.append((k, ia, cap_index[b]))
                 owners.append(b)
             elif b in shape_index:
-                s = self.shapes[shape_index[b]]
+                j = shape_index[b]
+                s = self.shapes[j]
+                owners.append(s.owner)
+                if s.name in self._pose_key:
+                    movers.setdefault(j, []).append((k, ia, j))
+                    continue
                 rot = np.asarray(s.pose, dtype=_FLOAT)[:3, :3]
                 key = b"" if s.kind == "sphere" or np.array_equal(rot, np.eye(3)) else rot.tobytes()
-                static.setdefault((s.kind, key), []).append((k, ia, shape_index[b]))
-                owners.append(s.owner)
+                static.setdefault((s.kind, key), []).append((k, ia, j))
             else:
                 raise ValueError(f"pair {k} {(a, b)}: {b!r} is neither a capsule nor a scene shape")
         self.owners = tuple(owners)
@@ -1050,15 +1073,17 @@ class ProximityKernel:
             else:
                 for j in shp:
                     self._groups.append(self._product_group(kind, [r for r in rows if r[2] == j]))
-        for kind, rows in other.items():
-            r = None
-            if kind != "carried":
-                r = self.radii[[x[1] for x in rows]]
-                if kind == "capsule":
-                    r = r + self.radii[[x[2] for x in rows]]
-                r = r[:, None]
+        for j, rows in movers.items():
+            g = self._product_group(self.shapes[j].kind, rows)
+            g.rot, g.centre, g.pose_key = None, ([0.0], [0.0], [0.0]), self._pose_key[self.shapes[j].name]
+            self._groups.append(g)
+        if selfs:
+            ia = np.array([x[1] for x in selfs])
+            ib = np.array([x[2] for x in selfs])
+            self._groups.append(_Group("capsule", np.array([x[0] for x in selfs]), ia=ia, ib=ib, r=(self.radii[ia] + self.radii[ib])[:, None]))
+        if shape_pairs:
             self._groups.append(
-                _Group(kind, np.array([x[0] for x in rows]), ia=np.array([x[1] for x in rows]), ib=np.array([x[2] for x in rows]), r=r)
+                _Group("shape", np.array([x[0] for x in shape_pairs]), ia=np.array([x[1] for x in shape_pairs]), ib=np.array([x[2] for x in shape_pairs]))
             )
 
     def _product_group(self, kind: str, rows: list[tuple[int, int, int]]) -> _Group:
@@ -1117,16 +1142,22 @@ class ProximityKernel:
         self,
         p0: Any,
         p1: Any,
-        carried_pose: Any = None,
+        poses: Mapping[str, Any] | None = None,
         far_m: float | None = None,
     ) -> np.ndarray:
         """Signed distances ``(T, K)`` in m for capsule endpoints ``p0``, ``p1`` ``(T, C, 3)`` (base frame).
 
-        ``carried_pose`` ``(T, 4, 4)`` is needed when a pair involves :data:`CARRIED`.
-        ``far_m`` only affects carried-object/shape pairs that go through coal (box or
-        cylinder against box or cylinder): see :func:`shape_shape`. Every other value
-        is exact. The result is column-major (Fortran-ordered): each pair's column is
-        contiguous.
+        ``poses`` gives the per-sample pose ``(T, 4, 4)`` of every ``moving`` name. The
+        result is column-major (Fortran-ordered): each pair's column is contiguous.
+
+        ``far_m=None`` (the default): every value is exact. With ``far_m`` set (m),
+        values above ``far_m`` may instead be a *lower bound* that is itself above
+        ``far_m``; every value at or below ``far_m`` stays exact, so any threshold test
+        at or below ``far_m`` gives the same answer. Capsule/box and capsule/cylinder
+        pairs use the bound ``dist(segment midpoint, shape) - |d|/2 - r`` to skip the
+        exact evaluation for a capsule over a whole chunk of samples when it is far;
+        box/cylinder shape pairs skip coal where bounding spheres are far apart
+        (:func:`shape_shape`). Capsule-capsule and sphere pairs are always exact.
         """
         p0 = np.asarray(p0, dtype=_FLOAT)
         p1 = np.asarray(p1, dtype=_FLOAT)
@@ -1134,31 +1165,37 @@ class ProximityKernel:
         if p0.ndim != 3 or p0.shape[1:] != (C, 3) or p1.shape != p0.shape:
             raise ValueError(f"p0 and p1 must both be (T, {C}, 3) (one segment per capsule), got {p0.shape} and {p1.shape}")
         T = p0.shape[0]
+        poses = dict(poses or {})
+        for key in self.moving:
+            if key not in poses:
+                raise ValueError(f"poses[{key!r}] (T, 4, 4) is needed: {key!r} was declared moving")
+            pose = poses[key] = np.asarray(poses[key], dtype=_FLOAT)
+            if pose.shape != (T, 4, 4):
+                raise ValueError(f"poses[{key!r}] must be (T, 4, 4) = ({T}, 4, 4), got {pose.shape}")
         buf = np.empty((len(self.pairs), T))
-        if carried_pose is not None:
-            carried_pose = np.asarray(carried_pose, dtype=_FLOAT)
-            if carried_pose.shape != (T, 4, 4):
-                raise ValueError(f"carried_pose must be (T, 4, 4) = ({T}, 4, 4), got {carried_pose.shape}")
-        elif any(g.kind == "carried" or g.kind.endswith("@") for g in self._groups):
-            raise ValueError("carried_pose (T, 4, 4) is needed: the kernel has pairs with the carried object")
         # structure of arrays (3, C, T): one contiguous time series per capsule and coordinate
         P0 = np.ascontiguousarray(p0.transpose(2, 1, 0))
         D = np.ascontiguousarray((p1 - p0).transpose(2, 1, 0))
         hits: dict[str, list[tuple[np.ndarray, list[np.ndarray], np.ndarray]]] = {}
         for g in self._groups:
-            if g.kind == "carried":
-                for col, j in zip(g.cols, g.ib):
-                    buf[col] = shape_shape(self.carried, self.shapes[j], carried_pose, None, far_m=far_m)
+            if g.kind == "shape":
+                for col, i, j in zip(g.cols, g.ia, g.ib):
+                    a, b = self.shapes[i], self.shapes[j]
+                    pa = poses.get(self._pose_key.get(a.name, ""), a.pose)
+                    pb = poses.get(self._pose_key.get(b.name, ""), b.pose)
+                    buf[col] = np.broadcast_to(shape_shape(a, b, pa, pb, far_m=far_m), (T,))
                 continue
             width = len(g.caps) if g.product else len(g.cols)
             step = max(64, self.chunk // width)
             for t0 in range(0, T, step):
                 t1 = min(T, t0 + step)
                 if g.product:
-                    self._product(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], buf, t0, hits)
+                    pose = poses[g.pose_key][t0:t1] if g.pose_key is not None else None
+                    self._product(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], buf, t0, hits, far_m, pose)
                 else:
-                    cp = carried_pose[t0:t1] if carried_pose is not None else None
-                    self._pairwise(g, P0[:, :, t0:t1], D[:, :, t0:t1], cp, buf, t0, hits)
+                    a, d = P0[:, g.ia, t0:t1], D[:, g.ia, t0:t1]
+                    b, e = P0[:, g.ib, t0:t1], D[:, g.ib, t0:t1]
+                    buf[g.cols, t0:t1] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r
         flat = buf.reshape(-1)
         pending = hits.pop("cylinder-inner", None)
         if pending:
@@ -1181,14 +1218,12 @@ class ProximityKernel:
     def _collect(hits, kind, sq, rows, t0, T, a, d, c, size, r):
         """Record the samples where a segment meets a shape (``sq == 0``) for the batched depth pass."""
         ci, ti = np.nonzero(sq == 0.0)
-        if rows is not None:
-            keep = rows[ci] >= 0
+        keep = rows[ci] >= 0
+        if not keep.all():
             ci, ti = ci[keep], ti[keep]
-            where = rows[ci] * T + (t0 + ti)
-        else:
-            where = ci * T + (t0 + ti)
         if not ci.size:
             return
+        where = rows[ci] * T + (t0 + ti)
         args = [np.broadcast_to(a[i], sq.shape)[ci, ti] - c[i] for i in range(3)]
         args += [np.broadcast_to(d[i], sq.shape)[ci, ti] for i in range(3)]
         args += [np.broadcast_to(np.asarray(v, dtype=_FLOAT), sq.shape)[ci, ti] for v in size]
@@ -1198,20 +1233,34 @@ class ProximityKernel:
     def _defer_inner(hits, pending, rows, t0, T, r, shape):
         """Record the cylinder pairs whose minimiser is interior for the batched Newton pass."""
         (ci, ti), sub = pending
-        if rows is not None:
-            keep = rows[ci] >= 0
-            if not keep.all():
-                ci, ti, sub = ci[keep], ti[keep], [v[keep] for v in sub]
-            where = rows[ci] * T + (t0 + ti)
-        else:
-            where = ci * T + (t0 + ti)
+        keep = rows[ci] >= 0
+        if not keep.all():
+            ci, ti, sub = ci[keep], ti[keep], [v[keep] for v in sub]
+        where = rows[ci] * T + (t0 + ti)
         hits.setdefault("cylinder-inner", []).append((where, sub, np.broadcast_to(r, shape)[ci, ti]))
 
-    def _product(self, g: _Group, a: np.ndarray, d: np.ndarray, buf: np.ndarray, t0: int, hits: dict) -> None:
-        """Evaluate one product group for the samples ``t0 ..``; ``a``, ``d``: ``(3, Cg, n)`` segment starts, directions."""
+    def _product(
+        self,
+        g: _Group,
+        a: np.ndarray,
+        d: np.ndarray,
+        buf: np.ndarray,
+        t0: int,
+        hits: dict,
+        far_m: float | None,
+        pose: np.ndarray | None,
+    ) -> None:
+        """Evaluate one product group for the samples ``t0 ..``; ``a``, ``d``: ``(3, Cg, n)`` segment starts, directions.
+
+        ``pose (n, 4, 4)``: the per-sample pose of a moving group's shape.
+        """
         T = buf.shape[1]
         n = a.shape[2]
-        if g.rot is not None:
+        if pose is not None:  # R^T (p - c) per sample, broadcast over the capsules
+            R, c = pose[:, :3, :3], pose[:, :3, 3]
+            a = np.stack(_to_local(a[0], a[1], a[2], R, c))
+            d = np.stack(_to_local(d[0], d[1], d[2], R, c, translate=False))
+        elif g.rot is not None:
             a = np.tensordot(g.rot.T, a, axes=1)  # R^T p: into the shapes' frame
             d = np.tensordot(g.rot.T, d, axes=1)
         ax, ay, az = a
@@ -1219,78 +1268,73 @@ class ProximityKernel:
         cx, cy, cz = g.centre
         r = g.r
         if g.kind == "box":
-            prep = _box_prep(dx, dy, dz)
+            aux = _box_prep(dx, dy, dz)
         elif g.kind == "cylinder":
-            A = dx * dx
-            A += dy * dy
+            aux = dx * dx
+            aux += dy * dy
         else:
-            inv_dd = dx * dx
-            inv_dd += dy * dy
-            inv_dd += dz * dz
-            inv_dd += 1e-300
-            np.divide(1.0, inv_dd, out=inv_dd)
+            aux = dx * dx
+            aux += dy * dy
+            aux += dz * dz
+            aux += 1e-300
+            np.divide(1.0, aux, out=aux)
+        cull = far_m is not None and g.kind != "sphere"
+        if cull:
+            # bounding balls: every point of a capsule is within |d|/2 + r of its segment's midpoint
+            mid = (ax + 0.5 * dx, ay + 0.5 * dy, az + 0.5 * dz)
+            reach = np.sqrt(dx * dx + dy * dy + dz * dz)
+            reach *= 0.5
+            reach += r
         for s in range(len(cx)):
             c = (cx[s], cy[s], cz[s])
-            if g.kind == "box":
-                size = (g.size[0][s], g.size[1][s], g.size[2][s])
-                sq = _box_sq(ax, ay, az, dx, dy, dz, prep, *c, *size)
-            elif g.kind == "cylinder":
-                size = (g.size[0][s], g.size[1][s])
-                sq, pending = _cyl_sq(ax, ay, az, dx, dy, dz, A, *c, *size, defer=True)
-                if pending is not None:
-                    self._defer_inner(hits, pending, g.rows[s], t0, T, r, sq.shape)
-            else:
-                sq = _point_seg_sq(*c, ax, ay, az, dx, dy, dz, inv_dd)
+            size = tuple(v[s] for v in g.size)
             view = g.views[s]
-            o = buf[view, t0 : t0 + n] if view is not None else np.empty_like(sq)
-            np.sqrt(sq, out=o)
-            if g.kind == "sphere":
-                o -= g.size[0][s]
-            elif sq.min() == 0.0:
-                self._collect(hits, g.kind, sq, g.rows[s], t0, T, a, d, c, size, r)
-            o -= r
-            if view is None:
-                rows = g.rows[s]
-                keep = rows >= 0
-                buf[rows[keep], t0 : t0 + n] = o[keep]
+            rows = g.rows[s]
+            sub = None
+            if cull:
+                ex = [np.abs(m - ci) for m, ci in zip(mid, c)]
+                if g.kind == "box":
+                    lb = sum(np.maximum(e - h, 0.0) ** 2 for e, h in zip(ex, size))
+                else:
+                    rad = np.maximum(np.sqrt(ex[0] ** 2 + ex[1] ** 2) - size[0], 0.0)
+                    lb = rad * rad + np.maximum(ex[2] - size[1], 0.0) ** 2
+                lb = np.sqrt(lb)
+                lb -= reach  # <= the signed distance of every sample
+                near = (lb <= far_m).any(axis=1)
+                if not near.all():
+                    keep = rows >= 0
+                    buf[rows[keep], t0 : t0 + n] = lb[keep]
+                    if not near.any():
+                        continue
+                    sub = np.flatnonzero(near)
+            if sub is None:
+                o = buf[view, t0 : t0 + n] if view is not None else np.empty((len(rows), n))
+                self._shape_eval(g.kind, a, d, aux, c, size, r, rows, t0, T, hits, o)
+                if view is None:
+                    keep = rows >= 0
+                    buf[rows[keep], t0 : t0 + n] = o[keep]
+            else:
+                aux_s = _take_prep(aux, sub) if g.kind == "box" else aux[sub]
+                o = np.empty((len(sub), n))
+                self._shape_eval(g.kind, a[:, sub], d[:, sub], aux_s, c, size, r[sub], rows[sub], t0, T, hits, o)
+                keep = rows[sub] >= 0
+                buf[rows[sub][keep], t0 : t0 + n] = o[keep]
 
-    def _pairwise(self, g: _Group, P0: np.ndarray, D: np.ndarray, cpose: np.ndarray | None, buf: np.ndarray, t0: int, hits: dict) -> None:
-        """Evaluate a pairwise group (self pairs, capsules against the carried object) for the samples ``t0 ..``."""
-        n = P0.shape[2]
-        a = P0[:, g.ia]
-        d = D[:, g.ia]
-        if g.kind == "capsule":
-            b = P0[:, g.ib]
-            e = D[:, g.ib]
-            out = np.sqrt(_seg_seg_sq(*a, *d, *b, *e))
-            out -= g.r
-            buf[g.cols, t0 : t0 + n] = out
-            return
-        sh = self.carried
-        # per-sample pose of the carried object, broadcast over the pairs: (1, n)
-        R = cpose[None, :, :3, :3]
-        c = cpose[None, :, :3, 3]
-        if g.kind == "sphere@":
-            out = np.sqrt(_point_seg_sq(c[..., 0], c[..., 1], c[..., 2], *a, *d))
-            out -= sh.size[0]
-            out -= g.r
-            buf[g.cols, t0 : t0 + n] = out
-            return
-        p = _to_local(a[0], a[1], a[2], R, c)
-        v = _to_local(d[0], d[1], d[2], R, c, translate=False)
-        zero = (0.0, 0.0, 0.0)
-        if g.kind == "box@":
-            size = tuple(0.5 * float(sh.size[i]) for i in range(3))
-            sq = _seg_box_sq(*p, *v, *zero, *size)
-            kind = "box"
-        else:
-            size = (float(sh.size[0]), 0.5 * float(sh.size[1]))
-            sq, pending = _seg_cyl_sq(*p, *v, *zero, *size, defer=True)
+    def _shape_eval(self, kind, a, d, aux, c, size, r, rows, t0, T, hits, o) -> None:
+        """Signed distances ``o (k, n)`` of segments ``a + t d`` ``(3, k, n)`` (shape frame) to one shape."""
+        ax, ay, az = a
+        dx, dy, dz = d
+        if kind == "box":
+            sq = _box_sq(ax, ay, az, dx, dy, dz, aux, *c, *size)
+        elif kind == "cylinder":
+            sq, pending = _cyl_sq(ax, ay, az, dx, dy, dz, aux, *c, *size, defer=True)
             if pending is not None:
-                self._defer_inner(hits, pending, g.cols, t0, buf.shape[1], g.r, sq.shape)
-            kind = "cylinder"
-        out = np.sqrt(sq)
-        if sq.min() == 0.0:
-            self._collect(hits, kind, sq, g.cols, t0, buf.shape[1], p, v, zero, size, g.r)
-        out -= g.r
-        buf[g.cols, t0 : t0 + n] = out
+                self._defer_inner(hits, pending, rows, t0, T, r, sq.shape)
+        else:
+            sq = _point_seg_sq(*c, ax, ay, az, dx, dy, dz, aux)
+        np.sqrt(sq, out=o)
+        if kind == "sphere":
+            o -= size[0]
+        elif sq.min() == 0.0:
+            self._collect(hits, kind, sq, rows, t0, T, a, d, c, size, r)
+        o -= r
