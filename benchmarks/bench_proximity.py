@@ -2,9 +2,11 @@
 
 Run: ``python benchmarks/bench_proximity.py`` (single thread is what counts; set
 OMP_NUM_THREADS=1 to be sure numpy's linear algebra does not spread).
-Cases: 10 capsules moving smoothly over T = 10,000 samples through the built-in
-scenes (every capsule against every scene shape, plus 20 self pairs), and the
-pure kernels on flat arrays.
+Cases: the UR3e (10 capsules) on a pick-and-place-like joint trajectory of
+T = 10,000 samples through each built-in scene (every capsule against every
+scene shape, plus the robot's self pairs), with the FK time for scale; a
+synthetic chain of 10 capsules wandering through the scenes (many more
+contacts, so more depth computations); and the pure kernels on flat arrays.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     args = ap.parse_args()
     T = args.T
+    bench_ur3e(T, args.repeat)
     p0, p1 = capsule_trajectory(T)
     C = p0.shape[1]
     caps = [(f"c{i}", 0.04) for i in range(C)]
@@ -93,6 +96,62 @@ def main() -> None:
     ]:
         dt = timeit(fn, args.repeat)
         print(f"flat {label:14s} N={N}: {dt*1e3:7.1f} ms ({dt/N*1e9:.0f} ns each)")
+
+
+
+def ur3e_case(T: int = 10_000, scene_name: str = "breakfast"):
+    """A pick-and-place-like UR3e joint trajectory (T samples) through a built-in scene.
+
+    Joint-space straight lines between IK solutions above and at every object, the
+    way a program visits them; returns (robot, scene, q).
+    """
+    from robocritics.robot.model import Robot
+
+    robot = Robot.ur3e()
+    scene = Scene.builtin(scene_name)
+    targets = [robot.home_q]
+    seed = robot.home_q
+    for o in scene.objects:
+        for z in (o.top + 0.12, o.top - 0.01, o.top + 0.12):
+            try:
+                q = robot.ik((o.position[0], o.position[1], z), seed=seed)
+            except Exception:
+                continue
+            targets.append(q)
+            seed = q
+    targets.append(robot.home_q)
+    targets = np.array(targets)
+    s = np.linspace(0, len(targets) - 1, T)
+    i = np.minimum(s.astype(int), len(targets) - 2)
+    f = (s - i)[:, None]
+    f = f * f * (3 - 2 * f)  # smoothstep between waypoints
+    q = targets[i] * (1 - f) + targets[i + 1] * f
+    return robot, scene, q
+
+
+def bench_ur3e(T: int, repeat: int) -> None:
+    for scene_name in Scene.builtin_names():
+        robot, scene, q = ur3e_case(T, scene_name)
+        shapes = scene.shapes()
+        caps = list(zip(robot.capsule_names, robot.capsule_radii))
+        env = [(c, s.name) for c in robot.capsule_names for s in shapes]
+        pairs = list(robot.self_pairs) + env
+        kern = ProximityKernel(caps, shapes, pairs)
+
+        def fk():
+            return robot.capsule_segments(robot.forward(q))
+
+        p0, p1 = fk()
+        t_fk = timeit(fk, repeat)
+        t_exact = timeit(lambda: kern.distances(p0, p1), repeat)
+        t_far = timeit(lambda: kern.distances(p0, p1, far_m=0.1), repeat)
+        D = kern.distances(p0, p1)
+        print(
+            f"UR3e {scene_name:9s} T={T}: {len(robot.capsule_names)} capsules, {len(shapes)} shapes, "
+            f"{len(robot.self_pairs)} self + {len(env)} env pairs; FK+segments {t_fk*1e3:5.1f} ms, "
+            f"proximity exact {t_exact*1e3:5.1f} ms, far_m=0.1 {t_far*1e3:5.1f} ms; "
+            f"min distance {D.min():+.3f} m"
+        )
 
 
 if __name__ == "__main__":
