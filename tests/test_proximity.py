@@ -498,6 +498,28 @@ def test_kernel_matches_per_pair_functions():
     np.testing.assert_array_equal(D2, D[:, [col[p] for p in pairs2]])
 
 
+def test_kernel_static_capsules_are_evaluated_once_and_exactly():
+    T, C = 400, 4
+    p0, p1 = _trajectory(T, C, seed=9)
+    # capsules 0 and 2 do not move (a robot's base); capsule 0 sinks into the table
+    p0[:, 0], p1[:, 0] = (0.0, 0.0, -0.05), (0.0, 0.0, 0.05)
+    p0[:, 2], p1[:, 2] = (0.1, -0.2, 0.05), (0.12, -0.2, 0.15)
+    caps = [(f"k{i}", 0.03) for i in range(C)]
+    shapes = _scene_shapes(4)
+    pairs = [(c, s.name) for c, _ in caps for s in shapes] + [("k0", "k2"), ("k1", "k3"), ("k0", "k3")]
+    D = P.ProximityKernel(caps, shapes, pairs).distances(p0, p1)
+    by_name = {s.name: s for s in shapes}
+    for k, (a, b) in enumerate(pairs):
+        ia = int(a[1:])
+        if b in dict(caps):
+            ib = int(b[1:])
+            ref = P.capsule_capsule(p0[:, ia], p1[:, ia], 0.03, p0[:, ib], p1[:, ib], 0.03)
+        else:
+            ref = P.capsule_shape(p0[:, ia], p1[:, ia], 0.03, by_name[b])
+        np.testing.assert_allclose(D[:, k], ref, atol=1e-12, err_msg=f"{a}|{b}")
+    assert D[0, pairs.index(("k0", "table"))] == pytest.approx(-0.08)  # 5 cm into the table, plus the radius
+
+
 def test_kernel_sparse_pairs_and_groups():
     T, C = 300, 4
     p0, p1 = _trajectory(T, C, seed=3)

@@ -100,7 +100,6 @@ __all__ = [
     "reduce_min",
 ]
 
-_TINY_D = 1e-150  # |direction component| below this (m) counts as zero
 _FLOAT = np.float64
 
 
