@@ -92,3 +92,12 @@ def test_robot_from_urdf_uses_numeric_ik(tmp_path):
     other = Robot.from_urdf(ur.urdf_path)  # same arm, but without the DH shortcut
     q = other.ik([0.25, 0.1, 0.15], seed=ur.home_q)
     np.testing.assert_allclose(other.tcp_pose(q)[:3, 3], [0.25, 0.1, 0.15], atol=1e-6)
+
+
+def test_ruckig_edge_case_is_timed():
+    # this exact input makes ruckig's profile search fail; the planner must still time it
+    from robocritics.robot.motion import time_path_1d
+
+    s, times, duration = time_path_1d(0.08000000000000007, 0.6755520111743515, 4.0, 40.0, 125.0)
+    assert duration == pytest.approx(0.4, rel=1e-5)
+    assert s[0] == 0 and np.all(np.diff(s) >= 0) and s[-1] < 0.08000000000000007

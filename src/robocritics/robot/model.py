@@ -114,6 +114,7 @@ class Robot:
                 + ", ".join(f.name for f in self.model.frames if f.type == pin.FrameType.BODY)
             )
         self.tcp_frame = tcp_frame
+        self._tcp_frame_id = self.model.getFrameId(tcp_frame)
         self._parse_urdf_extras()
         self.fixed_links = tuple(fixed_links)
         self._build_fk_tables()
@@ -264,6 +265,11 @@ class Robot:
 
     def tcp_pose(self, q: np.ndarray) -> np.ndarray:
         """TCP pose(s) ``(4, 4)`` or ``(T, 4, 4)`` for ``q``."""
+        q = np.asarray(q, dtype=float)
+        if q.shape == (self.n,):
+            # one configuration: Pinocchio directly, far cheaper than the batched path
+            pin.forwardKinematics(self.model, self.data, q)
+            return pin.updateFramePlacement(self.model, self.data, self._tcp_frame_id).homogeneous.copy()
         frames = self.forward(q)
         return frames[..., self.tcp_index, :, :]
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from ruckig import InputParameter, Result, Ruckig, Trajectory as RuckigTrajectory
+from ruckig import InputParameter, Result, Ruckig, RuckigError, Trajectory as RuckigTrajectory
 
 from ..errors import PlanningError
 
@@ -70,10 +70,21 @@ def _ruckig(start: np.ndarray, goal: np.ndarray, limits: Limits) -> RuckigTrajec
     inp.max_acceleration = limits.acceleration.tolist()
     inp.max_jerk = limits.jerk.tolist()
     traj = RuckigTrajectory(dofs)
-    result = otg.calculate(inp, traj)
-    if result not in (Result.Working, Result.Finished):
-        raise PlanningError(f"ruckig could not time the move ({result.name})")
-    return traj
+    # ruckig's profile search can fail on rare numerical edge cases (a limit exactly at a
+    # profile boundary); a relative nudge far below any physical significance gets past them
+    for nudge in (0.0, 1e-9, 1e-6):
+        if nudge:
+            inp.max_velocity = (limits.velocity * (1 - nudge)).tolist()
+            inp.max_acceleration = (limits.acceleration * (1 - nudge)).tolist()
+        try:
+            result = otg.calculate(inp, traj)
+        except RuckigError:
+            continue
+        if result in (Result.Working, Result.Finished):
+            return traj
+    raise PlanningError(
+        f"ruckig could not time the move from {np.round(start, 4).tolist()} to {np.round(goal, 4).tolist()}"
+    )
 
 
 def sample_times(duration_s: float, sample_rate_hz: float) -> np.ndarray:

@@ -9,6 +9,9 @@ distance (m, <= 0 on penetration) of every proximity pair:
   object, a container - the minimum over its floor and walls -, the table), and
   every object the gripper carries at some point against every other entity.
 
+Robot distances are exact at any range; a carried object's distances are exact up
+to :data:`CARRIED_EXACT_M` (beyond it, a lower bound that is itself larger).
+
 Objects that the program moves have a pose per sample (``object_poses``):
 at rest, carried with the TCP, at rest again where they were released, so
 distances always use where the object really is.
@@ -24,7 +27,12 @@ from ..scene import Scene, Shape
 from ..trajectory import Pair, Step, Trajectory
 from . import proximity as prox
 
-__all__ = ["build_trajectory"]
+__all__ = ["build_trajectory", "CARRIED_EXACT_M"]
+
+#: Distances between a carried object and the scene are exact up to this many metres
+#: (twice the collision critic's warning distance); larger ones are reported as a lower
+#: bound that is itself larger. Robot capsule distances are exact at every distance.
+CARRIED_EXACT_M = 0.10
 
 
 def _entity_groups(scene: Scene) -> list[tuple[str, str, list[Shape]]]:
@@ -70,84 +78,60 @@ def build_trajectory(
         frames = robot.forward(q, opening)
     object_poses = dict(object_poses or {})
     p0, p1 = robot.capsule_segments(frames)
-    radii = robot.capsule_radii
-    cidx = {name: i for i, name in enumerate(robot.capsule_names)}
-
-    pairs: list[Pair] = []
-    columns: list[np.ndarray] = []
-
-    for a, b in robot.self_pairs:
-        i, j = cidx[a], cidx[b]
-        pairs.append(
-            Pair(
-                name=f"{a}|{b}",
-                kind="self",
-                a=a,
-                b=b,
-                group_a=robot.capsule_groups[i],
-                group_b=robot.capsule_groups[j],
-            )
-        )
-        columns.append(prox.capsule_capsule(p0[:, i], p1[:, i], radii[i], p0[:, j], p1[:, j], radii[j]))
-
+    capsule_group = dict(zip(robot.capsule_names, robot.capsule_groups))
+    fixed_capsules = {c.name for c in robot.capsules if c.frame in robot.fixed_links}
     entities = _entity_groups(scene)
-    for ci, cname in enumerate(robot.capsule_names):
+    carried = [oid for oid in dict.fromkeys(a for a in attached_arr if a)]
+
+    # one row per reported pair: its metadata and the (a, shape) kernel pairs whose minimum it is
+    pairs: list[Pair] = []
+    members: list[list[tuple[str, str]]] = []
+    for a, b in robot.self_pairs:
+        pairs.append(Pair(name=f"{a}|{b}", kind="self", a=a, b=b, group_a=capsule_group[a], group_b=capsule_group[b]))
+        members.append([(a, b)])
+    for cname in robot.capsule_names:
         for eid, group, shapes in entities:
-            if group == "table" and robot.capsules[ci].frame in robot.fixed_links:
+            if group == "table" and cname in fixed_capsules:
                 continue  # the base stands on the table
-            d = None
-            for shape in shapes:
-                pose = object_poses.get(shape.owner, shape.pose)
-                ds = prox.capsule_shape(p0[:, ci], p1[:, ci], radii[ci], shape, pose)
-                d = ds if d is None else np.minimum(d, ds)
             pairs.append(
                 Pair(
                     name=f"{cname}|{eid}",
                     kind="environment",
                     a=cname,
                     b=eid,
-                    group_a=robot.capsule_groups[ci],
+                    group_a=capsule_group[cname],
                     group_b=group,
                     b_entity=eid,
                 )
             )
-            columns.append(d)
-
-    carried = [oid for oid in dict.fromkeys(a for a in attached_arr if a)]
+            members.append([(cname, shape.name) for shape in shapes])
     for oid in carried:
-        obj = scene.entity(oid)
-        (own,) = obj.shapes()
-        own_pose = np.broadcast_to(np.asarray(object_poses.get(oid, own.pose), float), (T, 4, 4))
-        # the pose is piecewise constant while the object rests: evaluate each run of equal poses once
-        flat = own_pose.reshape(T, 16)
-        changed = np.empty(T, dtype=bool)
-        changed[0] = True
-        np.any(flat[1:] != flat[:-1], axis=1, out=changed[1:])
-        inverse = np.cumsum(changed) - 1
-        unique_poses = flat[changed]
         for eid, group, shapes in entities:
             if eid == oid:
                 continue
-            d = None
-            for shape in shapes:
-                other = object_poses.get(shape.owner)
-                if other is None:
-                    ds = prox.shape_shape(own, shape, unique_poses.reshape(-1, 4, 4), shape.pose)[inverse]
-                else:
-                    ds = prox.shape_shape(own, shape, own_pose, other)
-                d = ds if d is None else np.minimum(d, ds)
             pairs.append(
-                Pair(
-                    name=f"{oid}|{eid}",
-                    kind="environment",
-                    a=oid,
-                    b=eid,
-                    group_a="attached",
-                    group_b=group,
-                    b_entity=eid,
-                )
+                Pair(name=f"{oid}|{eid}", kind="environment", a=oid, b=eid, group_a="attached", group_b=group, b_entity=eid)
             )
-            columns.append(d)
+            members.append([(oid, shape.name) for shape in shapes])
+
+    # robot pairs are exact at every distance; carried-object pairs (box and cylinder pairs
+    # go through coal sample by sample) are exact up to CARRIED_EXACT_M and a lower bound
+    # above it, far beyond every critic threshold
+    split = len(members) - sum(1 for p in pairs if p.group_a == "attached")
+    capsules = [(name, float(r)) for name, r in zip(robot.capsule_names, robot.capsule_radii)]
+    poses = {oid: np.asarray(pose, float) for oid, pose in object_poses.items()}
+    blocks = []
+    for part, far in ((members[:split], None), (members[split:], CARRIED_EXACT_M)):
+        flat = [pair for group in part for pair in group]
+        if flat:
+            kernel = prox.ProximityKernel(capsules, scene.shapes(), flat, moving=list(object_poses))
+            blocks.append(kernel.distances(p0, p1, poses=poses, far_m=far))
+    distances = np.concatenate(blocks, axis=1) if blocks else np.zeros((T, 0))
+    bounds = np.cumsum([0] + [len(g) for g in members])
+    columns = [
+        distances[:, bounds[k]] if bounds[k + 1] - bounds[k] == 1 else distances[:, bounds[k] : bounds[k + 1]].min(axis=1)
+        for k in range(len(members))
+    ]
 
     proximity = np.stack(columns, axis=1) if columns else np.zeros((T, 0))
     return Trajectory(

@@ -1,0 +1,105 @@
+"""Trajectory proximities agree with coal.distance on the same shapes (random configurations)."""
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from robocritics import Robot, Scene
+from robocritics.robot.trace import CARRIED_EXACT_M
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return Robot.ur3e()
+
+
+def coal_shape(shape):
+    if shape.kind == "box":
+        return coal.Box(*shape.size)
+    if shape.kind == "cylinder":
+        return coal.Cylinder(shape.size[0], shape.size[1])
+    return coal.Sphere(shape.size[0])
+
+
+def tf(M):
+    t = coal.Transform3s()
+    t.setRotation(np.ascontiguousarray(M[:3, :3]))
+    t.setTranslation(np.ascontiguousarray(M[:3, 3]))
+    return t
+
+
+def capsule_geometry(robot, name, frames):
+    c = robot.capsules[robot.capsule_names.index(name)]
+    F = frames[robot.frame_names.index(c.frame)]
+    p0 = F[:3, :3] @ np.array(c.p0) + F[:3, 3]
+    p1 = F[:3, :3] @ np.array(c.p1) + F[:3, 3]
+    axis = p1 - p0
+    z = axis / np.linalg.norm(axis)
+    x = np.cross(z, [1.0, 0, 0]) if abs(z[0]) < 0.9 else np.cross(z, [0, 1.0, 0])
+    x /= np.linalg.norm(x)
+    M = np.eye(4)
+    M[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    M[:3, 3] = (p0 + p1) / 2
+    return coal.Capsule(c.radius_m, float(np.linalg.norm(axis))), tf(M)
+
+
+def coal_distance(ga, ta, gb, tb):
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    req.gjk_tolerance = 1e-10
+    return coal.distance(ga, ta, gb, tb, req, res)
+
+
+@settings(max_examples=25, deadline=None)
+@given(q=arrays(np.float64, (3, 6), elements=st.floats(-3.2, 3.2, allow_nan=False)), scene_name=st.sampled_from(["sorting", "breakfast", "recycling"]))
+def test_every_pair_matches_coal(robot, q, scene_name):
+    scene = Scene.builtin(scene_name)
+    q = robot.home_q + 0.6 * q / 3.2  # around the working posture, where objects are near
+    traj = robot.trajectory(q, np.arange(3) * 0.008, scene)
+    shapes = scene.shapes()
+    for t in range(3):
+        for k, pair in enumerate(traj.pairs):
+            ga, ta = capsule_geometry(robot, pair.a, traj.frames[t])
+            if pair.kind == "self":
+                gb, tb = capsule_geometry(robot, pair.b, traj.frames[t])
+                ref = coal_distance(ga, ta, gb, tb)
+            else:
+                ref = min(coal_distance(ga, ta, coal_shape(s), tf(s.pose)) for s in shapes if s.owner == pair.b_entity)
+            ours = traj.proximity[t, k]
+            if ref > 1e-9:
+                assert ours == pytest.approx(ref, abs=1e-6), (pair.name, t)
+            else:
+                assert ours <= 1e-9, (pair.name, t, ours, ref)  # touching or penetrating: never positive
+
+
+def test_carried_object_pairs_are_exact_near_and_bounded_far(robot):
+    from robocritics import simulate
+
+    execution = simulate(
+        "move_above(coffee_cup, 0.05)\nmove_linear(coffee_cup.x, coffee_cup.y, coffee_cup.top - 0.03)\n"
+        "close_gripper()\nmove_up(0.12)\n",
+        Scene.builtin("recycling"),
+    )
+    traj = execution.trajectory
+    cols = [k for k, p in enumerate(traj.pairs) if p.group_a == "attached"]
+    assert cols, "carrying the cup adds cup-vs-scene pairs"
+    cup = next(s for s in execution.scene.shapes() if s.owner == "coffee_cup")
+    tcp = traj.tcp
+    held = np.flatnonzero(traj.attached == "coffee_cup")
+    offset = np.linalg.inv(tcp[held[0]]) @ cup.pose
+    for k in cols:
+        pair = traj.pairs[k]
+        for t in held[:: max(1, len(held) // 6)]:
+            pose = tcp[t] @ offset
+            ref = min(
+                coal_distance(coal_shape(cup), tf(pose), coal_shape(s), tf(s.pose))
+                for s in execution.scene.shapes()
+                if s.owner == pair.b_entity
+            )
+            if ref <= CARRIED_EXACT_M:
+                assert traj.proximity[t, k] == pytest.approx(ref, abs=1e-6)
+            else:
+                assert CARRIED_EXACT_M < traj.proximity[t, k] <= ref + 1e-9
