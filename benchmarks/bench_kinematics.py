@@ -79,6 +79,7 @@ def reference(robot: Robot, scene: Scene, q: np.ndarray, pairs) -> np.ndarray:
     shapes = {s.name: (coal_geometry(s.kind, s.size), transform(s.pose[:3, :3], s.pose[:3, 3])) for s in scene.shapes()}
     index = {name: i for i, name in enumerate(robot.capsule_names)}
     req, res = coal.DistanceRequest(), coal.DistanceResult()
+    req.gjk_tolerance = 1e-10  # coal's default (1e-6) would blur the comparison
     out = np.empty((len(q), len(pairs)))
     for t in range(len(q)):
         pin.framesForwardKinematics(robot.model, data, q[t])
