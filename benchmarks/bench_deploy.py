@@ -27,10 +27,10 @@ import argparse
 import json
 import multiprocessing as mp
 import os
-import platform
-import sys
 import time
 from pathlib import Path
+
+from _table import print_table
 
 ROOT = Path(__file__).resolve().parent.parent
 SHORT = """
@@ -138,18 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         ("controller loop overruns", str(r["controller_loop_overruns"])),
         ("protective stops", str(len(r["protective_stops"]))),
     ]
-    w = max(len(a) for a, _ in rows)
-    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    print(
-        f"bench_deploy — URArm.deploy() to the loopback URSim in its own process, Python {platform.python_version()}, "
-        f"{platform.machine()}, {os.cpu_count()} CPUs, load average {load}"
-    )
-    print("-" * (w + 50))
-    for a, b in rows:
-        print(f"{a:<{w}}  {b}")
-    print("-" * (w + 50))
-    cmd = " ".join(["benchmarks/bench_deploy.py", *(sys.argv[1:] if argv is None else argv)])
-    print(f"reproduce: .venv/bin/python {cmd}")
+    print_table("bench_deploy", "URArm.deploy() to the loopback URSim in its own process", rows, argv, rule=50)
     return 0
 
 

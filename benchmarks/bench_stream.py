@@ -26,12 +26,10 @@ import argparse
 import json
 import math
 import multiprocessing as mp
-import os
-import platform
 import statistics
-import sys
 import time
 
+from _table import print_table
 from robocritics.robot.ur import (
     INPUT_FIELDS,
     OUTPUT_FIELDS,
@@ -187,18 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         ("controller loop overruns", str(r["controller_loop_overruns"])),
         ("protective stops", str(len(r["protective_stops"]))),
     ]
-    w = max(len(a) for a, _ in rows)
-    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    print(
-        f"bench_stream — loopback URSim in its own process, Python {platform.python_version()}, "
-        f"{platform.machine()}, {os.cpu_count()} CPUs, load average {load}"
-    )
-    print("-" * (w + 40))
-    for a, b in rows:
-        print(f"{a:<{w}}  {b}")
-    print("-" * (w + 40))
-    cmd = " ".join(["benchmarks/bench_stream.py", *(sys.argv[1:] if argv is None else argv)])
-    print(f"reproduce: .venv/bin/python {cmd}")
+    print_table("bench_stream", "loopback URSim in its own process", rows, argv)
     return 0
 
 

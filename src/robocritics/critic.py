@@ -58,6 +58,7 @@ from .verdict import (
     make_evidence,
     make_signal,
     runs,
+    threshold_verdict,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -86,6 +87,7 @@ __all__ = [
     "MAX_SIGNAL_POINTS",
     "make_evidence",
     "make_signal",
+    "threshold_verdict",
     "format_lines",
     "format_skills",
     "during",

@@ -24,6 +24,7 @@ __all__ = [
     "Verdict",
     "make_evidence",
     "make_signal",
+    "threshold_verdict",
     "format_lines",
     "format_skills",
     "during",
@@ -236,6 +237,57 @@ def make_signal(
         warning=warning,
         error=error,
         worse=worse,
+    )
+
+
+def threshold_verdict(
+    critic: str,
+    trajectory: "Trajectory | None",
+    flag: Flag,
+    samples: np.ndarray | None = None,
+    *,
+    message: str,
+    hint: str = "",
+    value: float | None = None,
+    threshold: float | None = None,
+    unit: str = "",
+    worst: int | None = None,
+    links: Sequence[str] = (),
+    objects: Sequence[str] = (),
+    evidence: Evidence | None = None,
+    signal: Signal | None = None,
+    details: dict[str, Any] | None = None,
+) -> Verdict:
+    """A critic's :class:`Verdict` of ``value`` judged against ``threshold``, its evidence built in the same call.
+
+    The evidence is ``evidence`` if given, else ``make_evidence(trajectory, samples, worst=worst,
+    links=links, objects=objects)`` (``samples``: the mask or indices of the samples where the
+    threshold is crossed; None for an OK verdict, which reports the ``worst`` sample only), else
+    empty when ``trajectory`` is None. ``{during}`` in ``hint`` is replaced by :func:`during` of
+    that evidence (the skills and program lines involved). A critic whose branches share the
+    signal, details and unit can bind them once::
+
+        verdict = functools.partial(threshold_verdict, self.name, trajectory, unit="m", signal=signal, details=details)
+        if worst < params.d_min_m:
+            return verdict(Flag.ERROR, per_sample < params.d_min_m, worst=wt, value=worst, threshold=params.d_min_m,
+                           message=f"...", hint="To avoid it, you can consider ...{during}.")
+        return verdict(Flag.OK, worst=wt, value=worst, threshold=params.d_max_m, message=f"...")
+    """
+    if evidence is None:
+        evidence = (
+            Evidence() if trajectory is None else make_evidence(trajectory, samples, worst=worst, links=links, objects=objects)
+        )
+    return Verdict(
+        critic=critic,
+        flag=flag,
+        message=message,
+        hint=hint.replace("{during}", during(evidence)),
+        value=value,
+        threshold=threshold,
+        unit=unit,
+        evidence=evidence,
+        signal=signal,
+        details={} if details is None else details,
     )
 
 

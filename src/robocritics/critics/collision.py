@@ -32,10 +32,12 @@ line; the hint proposes ``avoid_collision(<object>)`` from the paper's skill API
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..critic import CriticParams, Flag, Verdict, during, fmt_length, fmt_value, hookimpl, make_evidence, make_signal
+from ..critic import CriticParams, Flag, Verdict, fmt_length, fmt_value, hookimpl, make_signal, threshold_verdict
 from ._fast import take_columns
 
 __all__ = ["CollisionCritic", "register_critics", "Counted", "counted_distances"]
@@ -155,9 +157,10 @@ class CollisionCritic:
         P = trajectory.proximity
         counted = Counted(trajectory, params.ignore_pairs)
         if not counted.columns.any():
-            return Verdict(
-                critic=self.name,
-                flag=Flag.OK,
+            return threshold_verdict(
+                self.name,
+                None,
+                Flag.OK,
                 message="The trajectory has no robot-environment proximity pairs to check.",
                 threshold=params.d_warn_m,
                 unit="m",
@@ -176,9 +179,10 @@ class CollisionCritic:
             worse="below",
         )
         if not np.isfinite(worst):
-            return Verdict(
-                critic=self.name,
-                flag=Flag.OK,
+            return threshold_verdict(
+                self.name,
+                None,
+                Flag.OK,
                 message="Every robot-environment contact in this trajectory is intended (grasps and set-downs).",
                 threshold=params.d_warn_m,
                 unit="m",
@@ -188,6 +192,13 @@ class CollisionCritic:
         wk = int(np.argmin(np.where(counted.row_mask(wt), P[wt], np.inf)))
         wp = pairs[wk]
         details = {"closest_pair": wp.name, "closest_distance_m": worst}
+        verdict = partial(
+            threshold_verdict, self.name, trajectory, worst=wt, value=worst, unit="m", signal=signal, details=details
+        )
+        hint = (
+            f"you can consider using avoid_collision({_thing(wp)}) or moving through a higher or farther waypoint"
+            "{during}."
+        )
 
         def involved(threshold: float, strict: bool) -> tuple[np.ndarray, list[str], list[str]]:
             mask = per_sample < threshold if strict else per_sample <= threshold
@@ -201,54 +212,40 @@ class CollisionCritic:
 
         if worst <= params.penetration_m:
             mask, links, objects = involved(params.penetration_m, strict=False)
-            ev = make_evidence(trajectory, mask, worst=wt, links=links, objects=objects)
             depth = -worst
             what = "penetrates" if depth >= 0.0005 else "touches"
             extra = f" by {fmt_length(depth)}" if depth >= 0.0005 else ""
             others = [o for o in objects if o != _thing(wp)]
             also = f" It also hits {', '.join(others)}." if others else ""
-            return Verdict(
-                critic=self.name,
-                flag=Flag.ERROR,
+            return verdict(
+                Flag.ERROR,
+                mask,
+                links=links,
+                objects=objects,
+                threshold=params.penetration_m,
                 message=f"Collision: {_part(wp)} {what} the {_thing(wp)}{extra} at {time[wt]:.2f} s "
                 f"(sample {wt}).{also}",
-                hint=f"To avoid the collision, you can consider using avoid_collision({_thing(wp)}) or moving through "
-                f"a higher or farther waypoint{during(ev)}.",
-                value=worst,
-                threshold=params.penetration_m,
-                unit="m",
-                evidence=ev,
-                signal=signal,
-                details=details,
+                hint=f"To avoid the collision, {hint}",
             )
         if worst < params.d_warn_m:
             mask, links, objects = involved(params.d_warn_m, strict=True)
-            ev = make_evidence(trajectory, mask, worst=wt, links=links, objects=objects)
-            return Verdict(
-                critic=self.name,
-                flag=Flag.WARNING,
+            return verdict(
+                Flag.WARNING,
+                mask,
+                links=links,
+                objects=objects,
+                threshold=params.d_warn_m,
                 message=f"{_part(wp).capitalize()} comes within {fmt_length(worst)} of the {_thing(wp)} at {time[wt]:.2f} s, "
                 f"closer than the {fmt_length(params.d_warn_m)} safety margin.",
-                hint=f"To keep a safe distance, you can consider using avoid_collision({_thing(wp)}) or moving through "
-                f"a higher or farther waypoint{during(ev)}.",
-                value=worst,
-                threshold=params.d_warn_m,
-                unit="m",
-                evidence=ev,
-                signal=signal,
-                details=details,
+                hint=f"To keep a safe distance, {hint}",
             )
-        return Verdict(
-            critic=self.name,
-            flag=Flag.OK,
+        return verdict(
+            Flag.OK,
+            links=[wp.a],
+            objects=[_thing(wp)],
+            threshold=params.d_warn_m,
             message=f"The robot keeps at least {fmt_length(worst)} from the scene outside intended contacts "
             f"(margin {fmt_value(params.d_warn_m)} m).",
-            value=worst,
-            threshold=params.d_warn_m,
-            unit="m",
-            evidence=make_evidence(trajectory, None, worst=wt, links=[wp.a], objects=[_thing(wp)]),
-            signal=signal,
-            details=details,
         )
 
 

@@ -32,10 +32,12 @@ with a :class:`~robocritics.errors.CriticError` rather than judged.
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..critic import CriticParams, Flag, Verdict, during, fmt_value, hookimpl, make_evidence, make_signal
+from ..critic import CriticParams, Flag, Verdict, fmt_value, hookimpl, make_signal, threshold_verdict
 from ..errors import CriticError
 from ._fast import time_derivative
 
@@ -113,53 +115,32 @@ class EndEffectorPoseCritic:
         )
         angle = float(np.degrees(np.arccos(np.clip(worst / speed, -1, 1)))) if speed > 0 else 90.0
         how = f"{worst:.2f} m/s ({speed:.2f} m/s at {angle:.0f}° from the finger direction) at {time[wt]:.2f} s"
-        hint_tail = (
-            ", or approaching so that the fingers do not point along the motion. "
-            "This potentially increases the cycle time of the program."
+        verdict = partial(
+            threshold_verdict, self.name, trajectory, worst=wt, value=worst, unit="m/s", signal=signal, details=details
         )
-        if worst > params.max_speed_m_s:
-            ev = make_evidence(trajectory, s > params.max_speed_m_s, worst=wt, links=[params.frame])
-            return Verdict(
-                critic=self.name,
-                flag=Flag.ERROR,
-                message=f"The gripper moves in the direction its fingers point faster than the "
-                f"{fmt_value(params.max_speed_m_s)} m/s limit for pointed tools: {how}.",
-                hint=f"To reduce the risk of spearing, you can consider reducing the speed of the robot{during(ev)}"
-                + hint_tail,
-                value=worst,
-                threshold=params.max_speed_m_s,
-                unit="m/s",
-                evidence=ev,
-                signal=signal,
-                details=details,
-            )
-        if worst > params.warn_speed_m_s:
-            ev = make_evidence(trajectory, s > params.warn_speed_m_s, worst=wt, links=[params.frame])
-            return Verdict(
-                critic=self.name,
-                flag=Flag.WARNING,
-                message=f"The gripper moves in the direction its fingers point faster than the recommended "
-                f"{fmt_value(params.warn_speed_m_s)} m/s: {how}.",
-                hint=f"To reduce the risk of spearing, you can consider reducing the speed of the robot{during(ev)}"
-                + hint_tail,
-                value=worst,
-                threshold=params.warn_speed_m_s,
-                unit="m/s",
-                evidence=ev,
-                signal=signal,
-                details=details,
-            )
-        return Verdict(
-            critic=self.name,
-            flag=Flag.OK,
+        levels = (
+            (Flag.ERROR, params.max_speed_m_s, "the {} m/s limit for pointed tools"),
+            (Flag.WARNING, params.warn_speed_m_s, "the recommended {} m/s"),
+        )
+        for flag, threshold, limit in levels:
+            if worst > threshold:
+                return verdict(
+                    flag,
+                    s > threshold,
+                    links=[params.frame],
+                    threshold=threshold,
+                    message="The gripper moves in the direction its fingers point faster than "
+                    f"{limit.format(fmt_value(threshold))}: {how}.",
+                    hint="To reduce the risk of spearing, you can consider reducing the speed of the robot{during}, "
+                    "or approaching so that the fingers do not point along the motion. "
+                    "This potentially increases the cycle time of the program.",
+                )
+        return verdict(
+            Flag.OK,
+            links=[params.frame],
+            threshold=params.warn_speed_m_s,
             message=f"The gripper never moves toward where its fingers point faster than "
             f"{fmt_value(params.warn_speed_m_s)} m/s (at most {worst:.2f} m/s).",
-            value=worst,
-            threshold=params.warn_speed_m_s,
-            unit="m/s",
-            evidence=make_evidence(trajectory, None, worst=wt, links=[params.frame]),
-            signal=signal,
-            details=details,
         )
 
 

@@ -34,10 +34,12 @@ same speeds up to discretisation of its peaks).
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..critic import CriticParams, Flag, Verdict, during, fmt_value, hookimpl, make_evidence, make_signal
+from ..critic import CriticParams, Flag, Verdict, fmt_value, hookimpl, make_signal, threshold_verdict
 from ._fast import row_max, sq_norm3
 
 __all__ = ["JointSpeedCritic", "register_critics", "link_speeds"]
@@ -110,14 +112,15 @@ class JointSpeedCritic:
         time = trajectory.time
         limits = np.asarray(trajectory.limits.velocity_rad_s, dtype=float)
         if T < 2 or positions.shape[1] == 0:
-            return Verdict(
-                critic=self.name,
-                flag=Flag.OK,
+            return threshold_verdict(
+                self.name,
+                trajectory,
+                Flag.OK,
+                worst=0,
                 message="Nothing to check: the trajectory has a single sample or no frames.",
                 value=0.0,
                 threshold=params.warn_speed_m_s,
                 unit="m/s",
-                evidence=make_evidence(trajectory, worst=0),
             )
 
         # --- measure: all samples at once --------------------------------------
@@ -160,6 +163,8 @@ class JointSpeedCritic:
             "fastest_joint": trajectory.limits.joint_names[jj] if w.shape[1] else "",
         }
 
+        verdict = partial(threshold_verdict, self.name, trajectory, unit="m/s", signal=signal, details=details)
+
         def sample_mask(rows: np.ndarray) -> np.ndarray:
             mask = np.zeros(T, dtype=bool)
             mask[1:] = rows
@@ -176,8 +181,6 @@ class JointSpeedCritic:
             if err_joint:
                 jover = (ratio > 1.0 + params.joint_limit_tolerance).any(axis=0)
                 joints_over = [trajectory.limits.joint_names[i] for i in np.flatnonzero(jover)]
-            worst_sample = (wi if err_lin else ji) + 1
-            ev = make_evidence(trajectory, sample_mask(rows), worst=worst_sample, links=links)
             details["joints_over_limit"] = joints_over
             sentences = []
             if err_lin:
@@ -195,45 +198,37 @@ class JointSpeedCritic:
                 value, threshold, unit = worst_v, params.max_speed_m_s, "m/s"
             else:
                 value, threshold, unit = float(w[ji, jj]), float(limits[jj]), "rad/s"
-            return Verdict(
-                critic=self.name,
-                flag=Flag.ERROR,
-                message=" ".join(sentences),
-                hint=HINT.format(during=during(ev)),
+            return verdict(
+                Flag.ERROR,
+                sample_mask(rows),
+                worst=(wi if err_lin else ji) + 1,
+                links=links,
                 value=value,
                 threshold=threshold,
                 unit=unit,
-                evidence=ev,
-                signal=signal,
-                details=details,
+                message=" ".join(sentences),
+                hint=HINT,
             )
         if warn:
-            ev = make_evidence(trajectory, sample_mask(over_warn), worst=wi + 1, links=links_over(params.warn_speed_m_s))
-            return Verdict(
-                critic=self.name,
-                flag=Flag.WARNING,
-                message=f"Joint speed is higher than the recommended value of {fmt_value(params.warn_speed_m_s)} m/s "
-                f"({worst_v:.2f} m/s at the {names[wl]} at {time[wi + 1]:.2f} s).",
-                hint=HINT.format(during=during(ev)),
+            return verdict(
+                Flag.WARNING,
+                sample_mask(over_warn),
+                worst=wi + 1,
+                links=links_over(params.warn_speed_m_s),
                 value=worst_v,
                 threshold=params.warn_speed_m_s,
-                unit="m/s",
-                evidence=ev,
-                signal=signal,
-                details=details,
+                message=f"Joint speed is higher than the recommended value of {fmt_value(params.warn_speed_m_s)} m/s "
+                f"({worst_v:.2f} m/s at the {names[wl]} at {time[wi + 1]:.2f} s).",
+                hint=HINT,
             )
-        ev = make_evidence(trajectory, None, worst=wi + 1, links=[names[wl]])
-        return Verdict(
-            critic=self.name,
-            flag=Flag.OK,
-            message=f"Joint speed stays below the recommended value of {fmt_value(params.warn_speed_m_s)} m/s "
-            f"(at most {worst_v:.2f} m/s, at the {names[wl]}).",
+        return verdict(
+            Flag.OK,
+            worst=wi + 1,
+            links=[names[wl]],
             value=worst_v,
             threshold=params.warn_speed_m_s,
-            unit="m/s",
-            evidence=ev,
-            signal=signal,
-            details=details,
+            message=f"Joint speed stays below the recommended value of {fmt_value(params.warn_speed_m_s)} m/s "
+            f"(at most {worst_v:.2f} m/s, at the {names[wl]}).",
         )
 
 

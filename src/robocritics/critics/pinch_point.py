@@ -18,10 +18,12 @@ the distance (m) of self pair ``k`` at sample ``t`` and
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..critic import CriticParams, Flag, Verdict, during, fmt_length, hookimpl, make_evidence, make_signal
+from ..critic import CriticParams, Flag, Verdict, fmt_length, hookimpl, make_signal, threshold_verdict
 
 __all__ = ["PinchPointCritic", "register_critics"]
 
@@ -47,9 +49,10 @@ class PinchPointCritic:
         pairs = trajectory.pairs
         columns = trajectory.pair_mask(kind="self")  # (K,) only self pairs ever count
         if not columns.any():
-            return Verdict(
-                critic=self.name,
-                flag=Flag.OK,
+            return threshold_verdict(
+                self.name,
+                None,
+                Flag.OK,
                 message="The trajectory has no robot self-proximity pairs to check.",
                 threshold=params.d_max_m,
                 unit="m",
@@ -70,6 +73,9 @@ class PinchPointCritic:
             worse="below",
         )
         details = {"closest_pair": wp.name, "closest_distance_m": worst}
+        verdict = partial(
+            threshold_verdict, self.name, trajectory, worst=wt, value=worst, unit="m", signal=signal, details=details
+        )
 
         def involved(threshold: float):
             mask = per_sample < threshold
@@ -83,37 +89,24 @@ class PinchPointCritic:
             where = f"the {wp.a} and the {wp.b} touch (overlap {fmt_length(-worst)}) at {time[wt]:.2f} s"
         else:
             where = f"the {wp.a} and the {wp.b} come within {fmt_length(worst)} of each other at {time[wt]:.2f} s"
-        hint = (
-            "To avoid pinch points, you can consider keeping the arm more open, for example by moving through a "
-            "higher or farther waypoint{during}."
-        )
         for flag, threshold in ((Flag.ERROR, params.d_min_m), (Flag.WARNING, params.d_max_m)):
             if worst < threshold:
                 mask, links = involved(threshold)
-                ev = make_evidence(trajectory, mask, worst=wt, links=links)
-                return Verdict(
-                    critic=self.name,
-                    flag=flag,
-                    message=f"Pinch point: {where}, closer than {fmt_length(threshold)}.",
-                    hint=hint.format(during=during(ev)),
-                    value=worst,
+                return verdict(
+                    flag,
+                    mask,
+                    links=links,
                     threshold=threshold,
-                    unit="m",
-                    evidence=ev,
-                    signal=signal,
-                    details=details,
+                    message=f"Pinch point: {where}, closer than {fmt_length(threshold)}.",
+                    hint="To avoid pinch points, you can consider keeping the arm more open, for example by moving "
+                    "through a higher or farther waypoint{during}.",
                 )
-        return Verdict(
-            critic=self.name,
-            flag=Flag.OK,
+        return verdict(
+            Flag.OK,
+            links=[wp.a, wp.b],
+            threshold=params.d_max_m,
             message=f"No pinch points: robot parts stay at least {fmt_length(worst)} apart "
             f"(closest: the {wp.a} and the {wp.b}).",
-            value=worst,
-            threshold=params.d_max_m,
-            unit="m",
-            evidence=make_evidence(trajectory, None, worst=wt, links=[wp.a, wp.b]),
-            signal=signal,
-            details=details,
         )
 
 

@@ -36,12 +36,14 @@ collinear) have volume 0.
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 from pydantic import Field
 from scipy.spatial import ConvexHull, QhullError
 
 from ..scene import Workspace
-from ..critic import CriticParams, Flag, Verdict, during, fmt_length, hookimpl, make_evidence, make_signal
+from ..critic import CriticParams, Flag, Verdict, fmt_length, hookimpl, make_signal, threshold_verdict
 from ._fast import positions as frame_positions
 from ._fast import row_max, sq_norm3
 
@@ -203,55 +205,48 @@ class SpaceUsageCritic:
             "max_outside_distance_m": worst_out,
         }
 
+        verdict = partial(threshold_verdict, self.name, trajectory, signal=signal, details=details)
         if worst_out > params.outside_tolerance_m:
             mask_tl = outside > params.outside_tolerance_m
-            links = [names[i] for i in np.flatnonzero(mask_tl.any(axis=0))]
-            ev = make_evidence(trajectory, mask_tl.any(axis=1), worst=oi, links=links)
-            return Verdict(
-                critic=self.name,
-                flag=Flag.ERROR,
-                message=f"The robot leaves the allowed workspace: the {names[ol]} is {fmt_length(worst_out)} outside it "
-                f"at {time[oi]:.2f} s (sample {oi}).",
-                hint="To keep the robot inside the allowed workspace, you can consider moving to positions closer to "
-                f"the robot{during(ev)}.",
+            return verdict(
+                Flag.ERROR,
+                mask_tl.any(axis=1),
+                worst=oi,
+                links=[names[i] for i in np.flatnonzero(mask_tl.any(axis=0))],
                 value=worst_out,
                 threshold=params.outside_tolerance_m,
                 unit="m",
-                evidence=ev,
-                signal=signal,
-                details=details,
+                message=f"The robot leaves the allowed workspace: the {names[ol]} is {fmt_length(worst_out)} outside it "
+                f"at {time[oi]:.2f} s (sample {oi}).",
+                hint="To keep the robot inside the allowed workspace, you can consider moving to positions closer to "
+                "the robot{during}.",
             )
         limit = params.warn_fraction * w_volume
         if volume > limit:
             samples = ti[vertices]
-            links = [names[i] for i in np.unique(li[vertices])]
             # the hull vertex nearest to leaving the workspace
             far = int(np.argmax(outside[samples, li[vertices]])) if len(samples) else None
-            ev = make_evidence(trajectory, samples, worst=int(samples[far]) if far is not None else None, links=links)
-            return Verdict(
-                critic=self.name,
-                flag=Flag.WARNING,
-                message=f"The motion sweeps {volume:.3f} m³, {fraction * 100:.0f} % of the allowed workspace "
-                f"(more than the recommended {params.warn_fraction * 100:.0f} %).",
-                hint="To use less space, you can consider moving through fewer or closer waypoints, or lower approach "
-                f"heights{during(ev)}.",
+            return verdict(
+                Flag.WARNING,
+                samples,
+                worst=int(samples[far]) if far is not None else None,
+                links=[names[i] for i in np.unique(li[vertices])],
                 value=volume,
                 threshold=limit,
                 unit="m³",
-                evidence=ev,
-                signal=signal,
-                details=details,
+                message=f"The motion sweeps {volume:.3f} m³, {fraction * 100:.0f} % of the allowed workspace "
+                f"(more than the recommended {params.warn_fraction * 100:.0f} %).",
+                hint="To use less space, you can consider moving through fewer or closer waypoints, or lower approach "
+                "heights{during}.",
             )
-        return Verdict(
-            critic=self.name,
-            flag=Flag.OK,
-            message=f"The motion sweeps {volume:.3f} m³, {fraction * 100:.0f} % of the allowed workspace, and stays inside it.",
+        return verdict(
+            Flag.OK,
+            worst=oi,
+            links=[names[ol]],
             value=volume,
             threshold=limit,
             unit="m³",
-            evidence=make_evidence(trajectory, None, worst=oi, links=[names[ol]]),
-            signal=signal,
-            details=details,
+            message=f"The motion sweeps {volume:.3f} m³, {fraction * 100:.0f} % of the allowed workspace, and stays inside it.",
         )
 
 

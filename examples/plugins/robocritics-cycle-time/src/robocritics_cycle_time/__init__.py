@@ -12,7 +12,16 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field, model_validator
 
-from robocritics.critic import CriticParams, Flag, Verdict, format_lines, hookimpl, make_evidence, make_signal
+from robocritics.critic import (
+    CriticParams,
+    Flag,
+    Verdict,
+    format_lines,
+    hookimpl,
+    make_evidence,
+    make_signal,
+    threshold_verdict,
+)
 
 __all__ = ["CycleTimeCritic", "register_critics"]
 __version__ = "0.1.0"
@@ -84,27 +93,29 @@ class CycleTimeCritic:
             ]
             longest = f" The longest steps are {', '.join(parts)}." if parts else ""
             word = "maximum" if flag is Flag.ERROR else "target"
-            return Verdict(
-                critic=self.name,
-                flag=flag,
+            return threshold_verdict(
+                self.name,
+                trajectory,
+                flag,
+                evidence=ev,
                 message=f"The program takes {duration:.1f} s, longer than the {word} cycle time of {threshold:g} s.",
                 hint="To shorten the cycle time, you can consider removing redundant moves, moving through fewer "
                 f"waypoints or raising the speed where it is safe.{longest}",
                 value=duration,
                 threshold=threshold,
                 unit="s",
-                evidence=ev,
                 signal=signal,
                 details=details,
             )
-        return Verdict(
-            critic=self.name,
-            flag=Flag.OK,
+        return threshold_verdict(
+            self.name,
+            trajectory,
+            Flag.OK,
+            worst=len(time) - 1,
             message=f"The program takes {duration:.1f} s, within the target cycle time of {params.target_cycle_time_s:g} s.",
             value=duration,
             threshold=params.target_cycle_time_s,
             unit="s",
-            evidence=make_evidence(trajectory, None, worst=len(time) - 1),
             signal=signal,
             details=details,
         )
