@@ -66,7 +66,6 @@ imports, names or attributes starting with ``_``, ``class``, ``try``,
 from __future__ import annotations
 
 import ast
-import difflib
 import inspect
 import math
 import operator
@@ -74,13 +73,13 @@ import re
 import sys
 import time
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 from ..errors import ProgramError
 from ..scene import Scene
 from . import skills as _skills
 from .plan import Plan
-from .skills import SKILLS, Namespace, ObjectView, Recorder, _CURRENT
+from .skills import SKILLS, Namespace, ObjectView, Recorder, _CURRENT, _suggest
 
 __all__ = ["Budget", "run_program", "check_program"]
 
@@ -255,13 +254,6 @@ _ITERATORS = frozenset(
 _ITERABLE = _SIZED | _ITERATORS
 _DEEP = frozenset({list, tuple, dict, set, frozenset, str, *_DICT_VIEWS})
 _HASH_DEEP = (tuple, frozenset)
-
-
-def _suggest(name: str, candidates: Any, n: int = 3) -> str:
-    close = difflib.get_close_matches(name, list(candidates), n=n, cutoff=0.6)
-    if not close:
-        return ""
-    return "; did you mean " + " or ".join(repr(c) for c in close) + "?"
 
 
 # --------------------------------------------------------------------------------------
@@ -548,7 +540,7 @@ class _SandboxFunction:
 class _Builtin:
     """A builtin, skill or math function as the program sees it."""
 
-    __slots__ = ("name", "fn", "kind", "sig", "interp", "usage")
+    __slots__ = ("name", "fn", "kind", "sig", "interp")
 
     def __init__(self, name: str, fn: Callable, kind: str, interp: "_Interpreter", bind: bool = True):
         self.name = name
@@ -556,12 +548,15 @@ class _Builtin:
         self.kind = kind
         self.interp = interp
         self.sig = _signature(fn) if bind else None
-        if kind == "skill" or name == "print":
-            self.usage = _skills.usage(name)
-        elif self.sig is not None:
-            self.usage = f"{name}{self.sig}".replace("=<no value>", "")
-        else:
-            self.usage = ""
+
+    @property
+    def usage(self) -> str:
+        """How to call it, for error messages."""
+        if self.kind == "skill" or self.name == "print":
+            return _skills.usage(self.name)
+        if self.sig is not None:
+            return f"{self.name}{self.sig}".replace("=<no value>", "")
+        return ""
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         return self.interp._call_builtin(self, args, kwargs)
@@ -593,14 +588,16 @@ class _NoValue:
 _NOVALUE = _NoValue()
 _MISSING = object()
 
-_TYPE_NAMES = {
+_TYPE_NAMES: dict[type, str] = {
     ObjectView: "scene object",
     _SandboxFunction: "function",
     _Builtin: "builtin function",
     _Method: "method",
     Namespace: "module",
 }
-_INTERNAL_NAMES = re.compile(r"\b(ObjectView|_SandboxFunction|_Builtin|_Method|Namespace|_NoValue)\b")
+"""What a program is told the sandbox's own types are called."""
+_CLEAN_NAMES = {t.__name__: name for t, name in (*_TYPE_NAMES.items(), (_NoValue, "value"))}
+_INTERNAL_NAMES = re.compile(r"\b(" + "|".join(_CLEAN_NAMES) + r")\b")
 
 
 def _tname(value: Any) -> str:
@@ -608,17 +605,7 @@ def _tname(value: Any) -> str:
 
 
 def _clean(message: str) -> str:
-    return _INTERNAL_NAMES.sub(
-        lambda m: {
-            "ObjectView": "scene object",
-            "_SandboxFunction": "function",
-            "_Builtin": "builtin function",
-            "_Method": "method",
-            "Namespace": "module",
-            "_NoValue": "value",
-        }[m.group(1)],
-        message,
-    )
+    return _INTERNAL_NAMES.sub(lambda m: _CLEAN_NAMES[m.group(1)], message)
 
 
 # --------------------------------------------------------------------------------------
@@ -744,9 +731,7 @@ class _Interpreter:
             )
 
     def _check_len(self, n: int, node: Any, what: str = "a list") -> None:
-        if n > self.b.max_len:
-            raise self._error(f"{what} would have {n} elements; the limit is {self.b.max_len}", node)
-        self._alloc_n(n, node)
+        self._grow(0, n, node, what)
 
     def _grow(self, current: int, add: int, node: Any, what: str = "a list") -> None:
         if current + add > self.b.max_len:
@@ -836,7 +821,6 @@ class _Interpreter:
             try:
                 n = len(value)
             except OverflowError:
-                n = self.b.max_len + 1
                 raise self._error(f"{what} is far too long (more than {self.b.max_len} elements)", node) from None
             if n > self.b.max_len:
                 raise self._error(f"{what} would have {n} elements; the limit is {self.b.max_len}", node)
@@ -853,12 +837,12 @@ class _Interpreter:
             if out and type(out[0]) is tuple:
                 self._alloc_n(2 * len(out), node)  # zip/enumerate/items made a new tuple per element
             return out
-        raise TypeError(f"'{_tname(value)}' object is not iterable" + _iter_hint(value))
+        raise _not_iterable(value)
 
     def _iter(self, value: Any, node: Any) -> Any:
         if type(value) in _ITERABLE:
             return iter(value)
-        raise TypeError(f"'{_tname(value)}' object is not iterable" + _iter_hint(value))
+        raise _not_iterable(value)
 
     # ---- statements -------------------------------------------------------------------
 
@@ -920,22 +904,14 @@ class _Interpreter:
             self._exec_block(node.orelse, scope)
 
     def _exec_While(self, node: ast.While, scope: _Scope) -> None:
-        self.loops.append(node)
-        try:
+        def iterations() -> Iterator[None]:
             while True:
                 self._tick(node)
                 if not self._eval(node.test, scope):
-                    break
-                try:
-                    self._exec_block(node.body, scope)
-                except _Break:
                     return
-                except _Continue:
-                    pass
-        finally:
-            self.loops.pop()
-        if node.orelse:
-            self._exec_block(node.orelse, scope)
+                yield
+
+        self._loop(node, scope, iterations())
 
     def _exec_For(self, node: ast.For, scope: _Scope) -> None:
         iterable = self._eval(node.iter, scope)
@@ -943,11 +919,21 @@ class _Interpreter:
             it = self._iter(iterable, node.iter)
         except TypeError as exc:
             raise self._convert(exc, node.iter) from None
-        self.loops.append(node)
-        try:
+
+        def iterations() -> Iterator[None]:
             for item in it:
                 self._tick(node)
                 self._assign(node.target, item, scope)
+                yield
+
+        self._loop(node, scope, iterations())
+
+    def _loop(self, node: ast.While | ast.For, scope: _Scope, iterations: Iterator[None]) -> None:
+        """Run ``node.body`` once per step of ``iterations`` (which ticks, tests or binds the target),
+        then ``node.orelse`` unless the body broke out."""
+        self.loops.append(node)
+        try:
+            for _ in iterations:
                 try:
                     self._exec_block(node.body, scope)
                 except _Break:
@@ -1469,16 +1455,12 @@ class _Interpreter:
         ta, tb = type(a), type(b)
         if op is ast.Add:
             if ta in _SEQS and ta is tb:
-                n = len(a) + len(b)
                 if inplace and ta is list:
                     self._grow(len(a), len(b), node)
-                    n = -1
-                if n < 0:
-                    pass
                 elif ta is str:
-                    self._check_str(n, node)
+                    self._check_str(len(a) + len(b), node)
                 else:
-                    self._check_len(n, node)
+                    self._check_len(len(a) + len(b), node)
             elif inplace and ta is list:
                 b = self._items(b, node, "the extension")
                 self._grow(len(a), len(b), node)
@@ -1955,12 +1937,13 @@ def _short_repr(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _iter_hint(value: Any) -> str:
+def _not_iterable(value: Any) -> TypeError:
+    hint = ""
     if type(value) is ObjectView:
-        return f"; to loop over scene objects use 'for obj in objects', for coordinates use {value._id}.position"
-    if type(value) is int:
-        return "; to count use range(n)"
-    return ""
+        hint = f"; to loop over scene objects use 'for obj in objects', for coordinates use {value._id}.position"
+    elif type(value) is int:
+        hint = "; to count use range(n)"
+    return TypeError(f"'{_tname(value)}' object is not iterable{hint}")
 
 
 def _attr_message(obj: Any, name: str) -> str:
@@ -2010,4 +1993,3 @@ for _fn in SKILLS.values():
 for _name in dir(_Interpreter):
     if _name.startswith(("_b_", "_m_")):
         _signature(getattr(_Interpreter, _name), method=True)
-_signature(_skills.print)

@@ -177,9 +177,6 @@ class ObjectView:
     def __eq__(self, other: object) -> bool:
         return isinstance(other, ObjectView) and other._id == self._id
 
-    def __ne__(self, other: object) -> bool:
-        return not self.__eq__(other)
-
     def __hash__(self) -> int:
         return hash(("ObjectView", self._id))
 
