@@ -356,25 +356,12 @@ def _branches(
     xx, yx, zx, px, xy, yy, zy, py, xz, yz, zz, pz = t
     cos, sin, atan2, acos, sqrt = math.cos, math.sin, math.atan2, math.acos, math.sqrt
 
-    # 1. shoulder pan from the wrist-2 centre p5 = p - d6 z6
-    p5x = px - d6 * zx
-    p5y = py - d6 * zy
-    r = sqrt(p5x * p5x + p5y * p5y)
-    if r == 0.0:
+    shoulder = _shoulder_pans(k, t)
+    if shoulder is None:
         return []
-    ratio = d4 / r
-    if ratio > 1.0:
-        if ratio > 1.0 + _CLIP_TOL:
-            return []
-        ratio = 1.0
-    elif ratio < -1.0:
-        if ratio < -1.0 - _CLIP_TOL:
-            return []
-        ratio = -1.0
-    phi = atan2(p5y, p5x) + _HALF_PI
-    dphi = acos(ratio)
+    p5x, p5y, pans = shoulder
     out: list[list[float]] = []
-    for q1 in (phi + dphi, phi - dphi):
+    for q1 in pans:
         s1 = sin(q1)
         c1 = cos(q1)
         # z1 = (s1, -c1, 0) in the base frame
@@ -423,6 +410,25 @@ def _branches(
     return out
 
 
+def _shoulder_pans(k: tuple[float, ...], t: Sequence[float]) -> tuple[float, float, tuple[float, float]] | None:
+    """Step 1 of the closed form: the base-frame (x, y) of the wrist-2 centre
+    ``p5 = p - d6 z6`` and the two shoulder pans ``q1 = phi + pi/2 ± acos(d4 / r)``;
+    None when the wrist is inside the cylinder of radius ``d4`` around the base axis."""
+    d4, d6 = k[3], k[5]
+    p5x = t[3] - d6 * t[2]
+    p5y = t[7] - d6 * t[6]
+    r = math.sqrt(p5x * p5x + p5y * p5y)
+    if r == 0.0:
+        return None
+    ratio = d4 / r
+    if not -1.0 - _CLIP_TOL <= ratio <= 1.0 + _CLIP_TOL:
+        return None
+    ratio = 1.0 if ratio > 1.0 else (-1.0 if ratio < -1.0 else ratio)
+    phi = math.atan2(p5y, p5x) + _HALF_PI
+    dphi = math.acos(ratio)
+    return p5x, p5y, (phi + dphi, phi - dphi)
+
+
 def _singular_q6(
     k: tuple[float, ...],
     t: Sequence[float],
@@ -467,6 +473,9 @@ def _singular_q6(
     return math.atan2(-(ux * x6p[0] + uy * x6p[1]), -(ux * y6p[0] + uy * y6p[1]))
 
 
+_REACH_CACHE: dict[DH, float] = {}
+
+
 def ur_reach(dh: DH) -> float:
     """Largest distance (m) the flange can be from the shoulder (frame-1 origin).
 
@@ -474,13 +483,6 @@ def ur_reach(dh: DH) -> float:
     in the arm plane and ``d4 + d6 cos q5`` along its normal, so the maximum of
     ``(|a2| + |a3| + sqrt(d5² + d6² sin² q5))² + (d4 + d6 cos q5)²`` over ``q5``.
     """
-    return _ur_reach_cached(dh)
-
-
-_REACH_CACHE: dict[DH, float] = {}
-
-
-def _ur_reach_cached(dh: DH) -> float:
     v = _REACH_CACHE.get(dh)
     if v is None:
         _, a2, a3, d4, d5, d6, _, _ = dh._ur
@@ -615,20 +617,12 @@ def _nearest_branch(
     pi2 = _TWO_PI
     near = _nearest_equivalent
 
-    p5x = px - d6 * zx
-    p5y = py - d6 * zy
-    r = sqrt(p5x * p5x + p5y * p5y)
-    if r == 0.0:
+    shoulder = _shoulder_pans(k, t)
+    if shoulder is None:
         return None
-    ratio = d4 / r
-    if not -1.0 - _CLIP_TOL <= ratio <= 1.0 + _CLIP_TOL:
-        return None
-    ratio = 1.0 if ratio > 1.0 else (-1.0 if ratio < -1.0 else ratio)
-    phi = atan2(p5y, p5x) + _HALF_PI
-    dphi = acos(ratio)
-
+    p5x, p5y, pans = shoulder
     shoulders = []
-    for q1 in (phi + dphi, phi - dphi):
+    for q1 in pans:
         v1 = q1 + round((s0 - q1) / pi2) * pi2
         if not l0 <= v1 <= h0:
             v1 = near(q1, s0, l0, h0)
