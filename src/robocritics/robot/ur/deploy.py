@@ -98,7 +98,16 @@ import numpy as np
 
 from robocritics.errors import DeployError, RTDEError
 from robocritics.robot.ur.dashboard import DASHBOARD_PORT, DashboardClient
-from robocritics.robot.ur.rtde import RTDE_PORT, InputRecipe, MessageLevel, RTDEClient, TextMessage
+from robocritics.robot.ur.rtde import (
+    ROBOT_MODES,
+    RTDE_PORT,
+    RUNTIME_STATES,
+    SAFETY_MODES,
+    InputRecipe,
+    MessageLevel,
+    RTDEClient,
+    TextMessage,
+)
 from robocritics.robot.ur.urscript import (
     INPUT_FIELDS,
     OUTPUT_FIELDS,
@@ -145,13 +154,7 @@ UR3E_VELOCITY_LIMITS = (math.pi, math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 *
 STILL_RAD_S = 1e-3
 """Joint speeds below this count as standing still [rad/s]."""
 
-_ROBOT_MODES = {-1: "NO_CONTROLLER", 0: "DISCONNECTED", 1: "CONFIRM_SAFETY", 2: "BOOTING", 3: "POWER_OFF",
-                4: "POWER_ON", 5: "IDLE", 6: "BACKDRIVE", 7: "RUNNING", 8: "UPDATING_FIRMWARE"}
-_SAFETY_MODES = {1: "NORMAL", 2: "REDUCED", 3: "PROTECTIVE_STOP", 4: "RECOVERY", 5: "SAFEGUARD_STOP",
-                 6: "SYSTEM_EMERGENCY_STOP", 7: "ROBOT_EMERGENCY_STOP", 8: "VIOLATION", 9: "FAULT",
-                 10: "VALIDATE_JOINT_ID", 11: "UNDEFINED_SAFETY_MODE", 12: "AUTOMATIC_MODE_SAFEGUARD_STOP",
-                 13: "SYSTEM_THREE_POSITION_ENABLING_STOP"}
-_RUNTIME_STATES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED", 5: "RESUMING"}
+_PROGRAM_STATES = {s.value: s.name for s in ProgramState}
 
 
 def _name(table: dict[int, str], value: Any) -> str:
@@ -373,6 +376,12 @@ class _Fault(Exception):
         self.cause = cause
         self.detail = detail
         super().__init__(detail)
+
+
+def _safety_fault(safety_mode: Any, when: str = "") -> _Fault:
+    """The fault for a safety mode other than NORMAL; ``when`` ends the message."""
+    cause = "protective_stop" if safety_mode == SAFETY_PROTECTIVE_STOP else "safety_mode"
+    return _Fault(cause, f"the controller's safety mode became {_name(SAFETY_MODES, safety_mode)}{when}")
 
 
 class _DashboardMonitor:
@@ -670,12 +679,12 @@ class URArm:
         if rm != ROBOT_MODE_RUNNING:
             reasons.append((
                 "robot_mode",
-                f"robot mode is {_name(_ROBOT_MODES, rm)}, not RUNNING (7); power on and release the brakes "
+                f"robot mode is {_name(ROBOT_MODES, rm)}, not RUNNING (7); power on and release the brakes "
                 "(arm.dashboard.power_on(), arm.dashboard.brake_release())",
             ))
         if sm != SAFETY_NORMAL:
             hint = "; inspect the cause, then arm.dashboard.unlock_protective_stop()" if sm == SAFETY_PROTECTIVE_STOP else ""
-            reasons.append(("safety_mode", f"safety mode is {_name(_SAFETY_MODES, sm)}, not NORMAL (1){hint}"))
+            reasons.append(("safety_mode", f"safety mode is {_name(SAFETY_MODES, sm)}, not NORMAL (1){hint}"))
         with self._dash_lock:
             try:
                 remote = self._healthy_dashboard().is_in_remote_control()
@@ -690,7 +699,7 @@ class URArm:
         if rs != RUNTIME_STOPPED:
             reasons.append((
                 "program_running",
-                f"runtime state is {_name(_RUNTIME_STATES, rs)}, not STOPPED: another program is running; stop it first",
+                f"runtime state is {_name(RUNTIME_STATES, rs)}, not STOPPED: another program is running; stop it first",
             ))
         actual = np.asarray(state.get("actual_q", ()), dtype=float)
         if actual.shape != (6,):
@@ -874,12 +883,10 @@ class URArm:
         for st in packages:
             run.packages += 1
             run.last_state = st
-            sm = st["safety_mode"]
-            if sm != SAFETY_NORMAL:
-                cause = "protective_stop" if sm == SAFETY_PROTECTIVE_STOP else "safety_mode"
-                raise _Fault(cause, f"the controller's safety mode became {_name(_SAFETY_MODES, sm)}")
+            if st["safety_mode"] != SAFETY_NORMAL:
+                raise _safety_fault(st["safety_mode"])
             if st["robot_mode"] != ROBOT_MODE_RUNNING:
-                raise _Fault("robot_mode", f"the robot mode became {_name(_ROBOT_MODES, st['robot_mode'])}")
+                raise _Fault("robot_mode", f"the robot mode became {_name(ROBOT_MODES, st['robot_mode'])}")
             if run.phase in ("streaming", "settling"):
                 pstate = st[OUTPUT_FIELDS[1]]
                 if pstate == ProgramState.STALLED:
@@ -889,11 +896,11 @@ class URArm:
                 if st["runtime_state"] != RUNTIME_PLAYING:
                     raise _Fault(
                         "program_stopped",
-                        f"the program stopped: runtime state {_name(_RUNTIME_STATES, st['runtime_state'])}, program state "
-                        f"{_name({s.value: s.name for s in ProgramState}, pstate)} (controller watchdog, a dashboard stop, or a crash)",
+                        f"the program stopped: runtime state {_name(RUNTIME_STATES, st['runtime_state'])}, program state "
+                        f"{_name(_PROGRAM_STATES, pstate)} (controller watchdog, a dashboard stop, or a crash)",
                     )
                 if pstate != ProgramState.STREAMING:
-                    raise _Fault("program_stopped", f"the program left the STREAMING state: {_name({s.value: s.name for s in ProgramState}, pstate)}")
+                    raise _Fault("program_stopped", f"the program left the STREAMING state: {_name(_PROGRAM_STATES, pstate)}")
             # tracking: distance to the nearest setpoint of the lookahead window
             actual = np.asarray(st["actual_q"], dtype=float)
             k = run.k
@@ -1072,8 +1079,7 @@ class URArm:
                 run.packages += len(packages)
                 for st in packages:
                     if st["safety_mode"] != SAFETY_NORMAL:
-                        cause = "protective_stop" if st["safety_mode"] == SAFETY_PROTECTIVE_STOP else "safety_mode"
-                        raise _Fault(cause, f"the controller's safety mode became {_name(_SAFETY_MODES, st['safety_mode'])} while finishing")
+                        raise _safety_fault(st["safety_mode"], " while finishing")
                     if st["runtime_state"] == RUNTIME_STOPPED and max(abs(v) for v in st["actual_qd"]) < STILL_RAD_S:
                         final = st
                         break

@@ -77,6 +77,40 @@ V1_FREQUENCY_HZ = 125.0
 
 _HEADER = struct.Struct(">HB")
 
+ROBOT_MODES = {
+    -1: "NO_CONTROLLER",
+    0: "DISCONNECTED",
+    1: "CONFIRM_SAFETY",
+    2: "BOOTING",
+    3: "POWER_OFF",
+    4: "POWER_ON",
+    5: "IDLE",
+    6: "BACKDRIVE",
+    7: "RUNNING",
+    8: "UPDATING_FIRMWARE",
+}
+"""Values of the ``robot_mode`` output → name."""
+
+SAFETY_MODES = {
+    1: "NORMAL",
+    2: "REDUCED",
+    3: "PROTECTIVE_STOP",
+    4: "RECOVERY",
+    5: "SAFEGUARD_STOP",
+    6: "SYSTEM_EMERGENCY_STOP",
+    7: "ROBOT_EMERGENCY_STOP",
+    8: "VIOLATION",
+    9: "FAULT",
+    10: "VALIDATE_JOINT_ID",
+    11: "UNDEFINED_SAFETY_MODE",
+    12: "AUTOMATIC_MODE_SAFEGUARD_STOP",
+    13: "SYSTEM_THREE_POSITION_ENABLING_STOP",
+}
+"""Values of the ``safety_mode`` output → name."""
+
+RUNTIME_STATES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED", 5: "RESUMING"}
+"""Values of the ``runtime_state`` output → name."""
+
 
 class Command:
     """RTDE package types (ASCII codes)."""
@@ -295,7 +329,7 @@ class InputRecipe(Recipe):
 
 def _names_arg(names: Iterable[str] | str) -> list[str]:
     if isinstance(names, str):
-        names = [n for n in names.split(",")]
+        names = names.split(",")
     out = [n.strip() for n in names]
     if not out or any(not n for n in out):
         raise RTDEError(f"RTDE recipe needs non-empty field names, got {list(out)}")

@@ -62,14 +62,18 @@ import socket
 import struct
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 from robocritics.errors import DeployError
 from robocritics.robot.ur import urscript
 from robocritics.robot.ur.rtde import (
     DATA_TYPES,
     MAX_FREQUENCY_HZ,
+    ROBOT_MODES,
+    RUNTIME_STATES,
+    SAFETY_MODES,
     V1_FREQUENCY_HZ,
     Command,
     MessageLevel,
@@ -102,33 +106,12 @@ CONTROLLER_STOP_DECEL = 4.0
 PROTECTIVE_STOP_DECEL = 10.0
 """Deceleration of a protective stop [rad/s²]."""
 
-ROBOT_MODES = {
-    -1: "NO_CONTROLLER",
-    0: "DISCONNECTED",
-    1: "CONFIRM_SAFETY",
-    2: "BOOTING",
-    3: "POWER_OFF",
-    4: "POWER_ON",
-    5: "IDLE",
-    6: "BACKDRIVE",
-    7: "RUNNING",
-}
-SAFETY_MODES = {
-    1: "NORMAL",
-    2: "REDUCED",
-    3: "PROTECTIVE_STOP",
-    4: "RECOVERY",
-    5: "SAFEGUARD_STOP",
-    6: "SYSTEM_EMERGENCY_STOP",
-    7: "ROBOT_EMERGENCY_STOP",
-    8: "VIOLATION",
-    9: "FAULT",
-}
-RUNTIME_STATES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED", 5: "RESUMING"}
 POWER_OFF, IDLE, RUNNING = 3, 5, 7
 NORMAL, PROTECTIVE_STOP = 1, 3
 STOPPED, PLAYING, PAUSED = 1, 2, 4
 _JOINT_MODE = {POWER_OFF: 239, IDLE: 255, RUNNING: 253}
+_SAFETY_STATUS_BIT = {1: 0, 2: 1, 3: 2, 4: 3, 5: 4, 6: 5, 7: 6, 8: 8, 9: 9}
+"""safety_mode → its bit in ``safety_status_bits``."""
 
 LOCAL_CONTROL_REPLY = "Command is not allowed due to safety reasons: the robot is in local control"
 UNLOCK_TOO_EARLY_REPLY = (
@@ -246,8 +229,7 @@ class _State:
         return (1 if self.powered else 0) | (2 if self.runtime_state == PLAYING else 0)
 
     def safety_status_bits(self) -> int:
-        bit = {1: 0, 2: 1, 3: 2, 4: 3, 5: 4, 6: 5, 7: 6, 8: 8, 9: 9}.get(self.safety_mode, 0)
-        bits = 1 << bit
+        bits = 1 << _SAFETY_STATUS_BIT.get(self.safety_mode, 0)
         if self.safety_mode in (6, 7):
             bits |= 1 << 7
         if self.safety_mode != NORMAL and self.safety_mode != 2:
@@ -712,10 +694,10 @@ class URSim:
         self._outputs = dict(KNOWN_OUTPUTS)
         self._inputs = dict(KNOWN_INPUTS)
         for n, t in (extra_outputs or {}).items():
-            self._outputs[n] = (t, lambda s, n=n, t=t: s.extras.get(n, _zero(t)))
+            self._outputs[n] = (t, _extra_getter(n, t))
         for n, t in (extra_inputs or {}).items():
             self._inputs[n] = (t, lambda s, v, p, n=n: s.extras.__setitem__(n, v))
-            self._outputs.setdefault(n, (t, lambda s, n=n, t=t: s.extras.get(n, _zero(t))))
+            self._outputs.setdefault(n, (t, _extra_getter(n, t)))
         self._program: _StreamProgram | _HoldProgram | None = None
         self._stopping_decel: float | None = None
         self._loaded_program: str | None = None
@@ -820,6 +802,21 @@ class URSim:
             sock.settimeout(None)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._spawn(handler, sock, f"{addr[0]}:{addr[1]}", name=f"ursim-conn-{addr[1]}")
+
+    @contextmanager
+    def _aux_connection(self, sock: socket.socket) -> Iterator[None]:
+        """While a dashboard or secondary-interface connection is served: tracked (so :meth:`stop` closes it),
+        an OSError ends it quietly; afterwards it is shut down."""
+        with self._lock:
+            self._aux_socks.add(sock)
+        try:
+            yield
+        except OSError:
+            pass
+        finally:
+            with self._lock:
+                self._aux_socks.discard(sock)
+            _shutdown(sock)
 
     # ------------------------------------------------------------------ inspection
 
@@ -1139,8 +1136,7 @@ class URSim:
             text = payload[8:]
         else:
             freq, text = V1_FREQUENCY_HZ, payload
-        names = [n for n in text.decode("ascii", "replace").split(",") if n.strip()]
-        names = [n.strip() for n in names]
+        names = _field_names(text)
         types = [self._outputs[n][0] if n in self._outputs else "NOT_FOUND" for n in names]
         ok = bool(names) and "NOT_FOUND" not in types
         if not (0 < freq <= MAX_FREQUENCY_HZ) or math.isnan(freq):
@@ -1162,7 +1158,7 @@ class URSim:
         self._reply(conn, Command.CONTROL_PACKAGE_SETUP_OUTPUTS, (bytes([rid]) + body) if conn.protocol >= 2 else body)
 
     def _setup_inputs(self, conn: _RTDEConn, payload: bytes) -> None:
-        names = [n.strip() for n in payload.decode("ascii", "replace").split(",") if n.strip()]
+        names = _field_names(payload)
         with self._lock:
             types = []
             for n in names:
@@ -1288,9 +1284,7 @@ class URSim:
     # ------------------------------------------------------------------ dashboard server
 
     def _serve_dashboard(self, sock: socket.socket, peer: str) -> None:
-        with self._lock:
-            self._aux_socks.add(sock)
-        try:
+        with self._aux_connection(sock):
             sock.sendall(b"Connected: Universal Robots Dashboard Server\n")
             f = sock.makefile("rb")
             for raw in f:
@@ -1306,12 +1300,6 @@ class URSim:
                 sock.sendall(reply.encode("utf-8") + b"\n")
                 if close:
                     break
-        except OSError:
-            pass
-        finally:
-            with self._lock:
-                self._aux_socks.discard(sock)
-            _shutdown(sock)
 
     def _dashboard_command(self, line: str) -> tuple[str, bool]:
         low = re.sub(r"\s+", " ", line.strip()).lower()
@@ -1396,10 +1384,8 @@ class URSim:
     # ------------------------------------------------------------------ secondary interface
 
     def _serve_secondary(self, sock: socket.socket, peer: str) -> None:
-        with self._lock:
-            self._aux_socks.add(sock)
         text = ""
-        try:
+        with self._aux_connection(sock):
             while self._running.is_set():
                 chunk = sock.recv(65536)
                 if not chunk:
@@ -1407,12 +1393,6 @@ class URSim:
                 text += chunk.decode("utf-8", "replace")
                 text = self._take_programs(text, peer, final=False)
             self._take_programs(text, peer, final=True)
-        except OSError:
-            pass
-        finally:
-            with self._lock:
-                self._aux_socks.discard(sock)
-            _shutdown(sock)
 
     def _take_programs(self, text: str, peer: str, final: bool) -> str:
         while True:
@@ -1452,10 +1432,19 @@ class URSim:
             self._start_program(_StreamProgram(self, params))
 
 
+def _extra_getter(name: str, t: str) -> _Getter:
+    return lambda s: s.extras.get(name, _zero(t))
+
+
 def _zero(t: str) -> Any:
     code, count = DATA_TYPES[t]
     one: Any = False if code == "?" else 0.0 if code == "d" else 0
     return (one,) * count if count > 1 else one
+
+
+def _field_names(text: bytes) -> list[str]:
+    """The field names of a recipe setup request (comma-separated ASCII)."""
+    return [n.strip() for n in text.decode("ascii", "replace").split(",") if n.strip()]
 
 
 def _shutdown(sock: socket.socket) -> None:
