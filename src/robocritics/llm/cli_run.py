@@ -36,7 +36,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-from ..cli import _positive_float
+from ..cli import _one_line, _positive_float
 from ..errors import LLMError, RoboCriticsError
 
 __all__ = ["add_run_parser", "run_command"]
@@ -108,7 +108,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
 
 
 def _error(message: str, stream: TextIO) -> int:
-    print(f"robocritics run: error: {' '.join(str(message).split())}", file=stream)
+    print(f"robocritics run: error: {_one_line(message)}", file=stream)
     return 2
 
 

@@ -314,9 +314,9 @@ class OpenAICompatible:
 
     def _parse_choice(self, body: dict) -> tuple[str, str | None]:
         if "choices" not in body:
-            server_message = _error_message(body)
-            detail = f"the server's error: {server_message}" if server_message else f"received {self._excerpt(body)}"
-            raise LLMError(f"chat reply from {self._url('/chat/completions')} has no 'choices'; {detail}")
+            raise LLMError(
+                f"chat reply from {self._url('/chat/completions')} has no 'choices'; {self._what_arrived(body)}"
+            )
         choices = body["choices"]
         if not isinstance(choices, list) or not choices:
             raise LLMError(
@@ -371,9 +371,9 @@ class OpenAICompatible:
     def _parse_embeddings(self, body: dict, expected: int) -> list[np.ndarray]:
         data = body.get("data")
         if not isinstance(data, list):
-            server_message = _error_message(body)
-            detail = f"the server's error: {server_message}" if server_message else f"received {self._excerpt(body)}"
-            raise LLMError(f"embeddings reply from {self._url('/embeddings')} has no 'data' list; {detail}")
+            raise LLMError(
+                f"embeddings reply from {self._url('/embeddings')} has no 'data' list; {self._what_arrived(body)}"
+            )
         if len(data) != expected:
             raise LLMError(
                 f"embeddings reply has {len(data)} vectors for {expected} texts; received {self._excerpt(body)}"
@@ -488,6 +488,11 @@ class OpenAICompatible:
         if not isinstance(body, dict):
             raise LLMError(f"{what} at {response.request.url}: expected a JSON object, received {self._excerpt(body)}")
         return body
+
+    def _what_arrived(self, body: dict) -> str:
+        """The server's error message in ``body`` if it has one, else an excerpt of ``body``."""
+        server_message = _error_message(body)
+        return f"the server's error: {server_message}" if server_message else f"received {self._excerpt(body)}"
 
     def _excerpt(self, value: Any) -> str:
         try:

@@ -290,11 +290,9 @@ class InteractionMemory:
         return int(self._read("SELECT COUNT(*) FROM interactions")[0][0])
 
     def _candidates(self, session: str | None) -> list[Interaction]:
-        if session is None:
-            rows = self._read(f"SELECT {_COLUMNS} FROM interactions ORDER BY id")
-        else:
-            rows = self._read(f"SELECT {_COLUMNS} FROM interactions WHERE session_id = ? ORDER BY id", (session,))
-        return [_interaction(r) for r in rows]
+        if session is not None:
+            return self.history(session)
+        return [_interaction(r) for r in self._read(f"SELECT {_COLUMNS} FROM interactions ORDER BY id")]
 
     # -- retrieval -------------------------------------------------------------
 
