@@ -244,8 +244,26 @@ class Workspace(_Model):
         return 4.0 / 3.0 * math.pi * self.radius_m**3
 
     def outside_distance(self, points: np.ndarray) -> np.ndarray:
-        """How far each point ``(..., 3)`` lies outside the sphere, m (<= 0 inside)."""
-        return np.linalg.norm(np.asarray(points) - np.asarray(self.center), axis=-1) - self.radius_m
+        """How far each point ``(..., 3)`` lies outside the sphere, m (<= 0 inside): ``|p - c| - r``.
+
+        Evaluated component-wise: a norm over a length-3 axis is several times slower in
+        numpy, and critics call this on every link of every sample.
+        """
+        points = np.asarray(points, dtype=float)
+        c = self.center
+        dx = points[..., 0] - c[0]
+        dy = points[..., 1] - c[1]
+        dz = points[..., 2] - c[2]
+        dx *= dx
+        dy *= dy
+        dz *= dz
+        dx += dy
+        dx += dz
+        if isinstance(dx, np.ndarray):
+            np.sqrt(dx, out=dx)
+        else:  # a single point
+            dx = np.sqrt(dx)
+        return dx - self.radius_m
 
 
 class Scene(_Model):

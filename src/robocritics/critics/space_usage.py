@@ -42,7 +42,6 @@ import numpy as np
 from pydantic import Field
 from scipy.spatial import ConvexHull, QhullError
 
-from ..scene import Workspace
 from ..critic import CriticParams, Flag, Verdict, fmt_length, hookimpl, make_signal, threshold_verdict
 from ._fast import positions as frame_positions
 from ._fast import row_max, sq_norm3
@@ -50,7 +49,6 @@ from ._fast import row_max, sq_norm3
 __all__ = ["SpaceUsageCritic", "register_critics", "hull_points", "hull_volume", "volume_error_bound", "outside_distance"]
 
 BLOCK = 64
-_STOCK_OUTSIDE = Workspace.outside_distance
 
 
 class Params(CriticParams):
@@ -119,23 +117,7 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
 
 
 def outside_distance(workspace, X: np.ndarray) -> np.ndarray:
-    """``workspace.outside_distance(X)`` for ``X (T, L, 3)``, m (> 0 outside).
-
-    For the stock spherical :class:`~robocritics.scene.Workspace` the same formula,
-    ``|p - c| - r``, is evaluated component-wise (a reduction over a length-3 axis
-    is slow in numpy); any other workspace's own method is used as is.
-    """
-    if type(workspace) is Workspace and type(workspace).outside_distance is _STOCK_OUTSIDE:
-        c = workspace.center
-        dx = X[..., 0] - c[0]
-        dy = X[..., 1] - c[1]
-        dz = X[..., 2] - c[2]
-        dx *= dx
-        dy *= dy
-        dz *= dz
-        dx += dy
-        dx += dz
-        return np.sqrt(dx, out=dx) - workspace.radius_m
+    """``workspace.outside_distance(X)`` for ``X (T, L, 3)``, m (> 0 outside), as a float array."""
     return np.asarray(workspace.outside_distance(X), dtype=float)
 
 
