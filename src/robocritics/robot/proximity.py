@@ -108,6 +108,14 @@ _FLOAT = np.float64
 # ----------------------------------------------------------------------------------------------
 
 
+def _dot3(ax, ay, az, bx, by, bz):
+    """Component-wise dot product ``a . b`` of vectors given as x, y, z arrays (one fresh array)."""
+    out = ax * bx
+    out += ay * by
+    out += az * bz
+    return out
+
+
 def _seg_seg_sq(ax, ay, az, ux, uy, uz, bx, by, bz, vx, vy, vz):
     """Squared distance (m^2) between segments ``a + s u`` and ``b + t v``, ``s, t`` in [0, 1].
 
@@ -124,21 +132,11 @@ def _seg_seg_sq(ax, ay, az, ux, uy, uz, bx, by, bz, vx, vy, vz):
     rx = ax - bx
     ry = ay - by
     rz = az - bz
-    a = ux * ux
-    a += uy * uy
-    a += uz * uz
-    e = vx * vx
-    e += vy * vy
-    e += vz * vz
-    b = ux * vx
-    b += uy * vy
-    b += uz * vz
-    c = ux * rx
-    c += uy * ry
-    c += uz * rz
-    f = vx * rx
-    f += vy * ry
-    f += vz * rz
+    a = _dot3(ux, uy, uz, ux, uy, uz)
+    e = _dot3(vx, vy, vz, vx, vy, vz)
+    b = _dot3(ux, uy, uz, vx, vy, vz)
+    c = _dot3(ux, uy, uz, rx, ry, rz)
+    f = _dot3(vx, vy, vz, rx, ry, rz)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
         inv_a = 1.0 / (a + 1e-300)
         inv_e = 1.0 / (e + 1e-300)
@@ -184,9 +182,7 @@ def _point_seg_sq(px, py, pz, ax, ay, az, dx, dy, dz, inv_dd=None):
     wx = px - ax
     wy = py - ay
     wz = pz - az
-    t = wx * dx
-    t += wy * dy
-    t += wz * dz
+    t = _dot3(wx, wy, wz, dx, dy, dz)
     t *= inv_dd
     t = np.clip(t, 0.0, 1.0)
     wx -= t * dx
