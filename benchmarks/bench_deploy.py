@@ -9,10 +9,10 @@ Reproduce with::
 The whole chain runs: ``simulate`` → ``critique`` → the deploy gate → resampling
 to 500 Hz → the streaming program started over the secondary interface →
 setpoints paced with absolute deadlines over RTDE → done → program ended. The
-controller (:class:`robocritics.robot.ur.URSim`) runs in its own process, as a
+controller (:class:`robocritics.deploy.URSim`) runs in its own process, as a
 real controller runs on its own machine; everything is on 127.0.0.1.
 
-Reported (from :class:`robocritics.robot.ur.DeployResult`):
+Reported (from :class:`robocritics.deploy.DeployResult`):
 
 * period error — |send interval − 2 ms| [ms], median / p99 / max
 * lateness p99 — send time − its deadline [ms]
@@ -42,7 +42,7 @@ move_above(green_apple, 0.12)
 
 def _controller(conn, initial_q) -> None:
     """Child process: the loopback controller."""
-    from robocritics.robot.ur import URSim
+    from robocritics.testing.ursim import URSim
 
     with URSim(rtde_port=0, dashboard_port=0, secondary_port=0, robot_mode="RUNNING", initial_q=initial_q) as sim:
         conn.send((sim.rtde_port, sim.dashboard_port, sim.secondary_port))
@@ -52,7 +52,7 @@ def _controller(conn, initial_q) -> None:
 
 def run(program: str, scene_name: str, spin_us: float, lookahead_s: float, gain: float) -> dict:
     import robocritics as rc
-    from robocritics.robot.ur import URArm
+    from robocritics.deploy import URArm
 
     scene = rc.Scene.builtin(scene_name)
     source = SHORT if program == "short" else Path(program).read_text()

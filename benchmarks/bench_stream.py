@@ -9,7 +9,7 @@ The client paces setpoints with absolute deadlines (``t0 + k * period`` on
 ``time.perf_counter``): it sleeps until shortly before each deadline and spins
 the last ``--spin-us`` microseconds. A late setpoint does not shift the ones
 after it. Everything runs on 127.0.0.1 (controller, RTDE client, URScript
-program simulated by :class:`robocritics.robot.ur.URSim`).
+program simulated by :class:`robocritics.deploy.URSim`).
 
 Reported:
 * period error — |actual send interval − period| [ms], median / p99 / max
@@ -30,11 +30,11 @@ import statistics
 import time
 
 from _table import print_table
-from robocritics.robot.ur import (
+from robocritics.testing.ursim import URSim
+from robocritics.deploy import (
     INPUT_FIELDS,
     OUTPUT_FIELDS,
     RTDEClient,
-    URSim,
     send_program,
     setpoint,
     streaming_program,

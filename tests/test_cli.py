@@ -111,13 +111,13 @@ def test_subcommand_registry_accepts_new_commands(capsys):
 
 def _simulate_available() -> bool:
     try:
-        from robocritics.program.simulate import simulate  # noqa: F401
+        from robocritics.simulate import simulate  # noqa: F401
     except ImportError:
         return False
     return True
 
 
-needs_simulator = pytest.mark.skipif(not _simulate_available(), reason="robocritics.program.simulate not available")
+needs_simulator = pytest.mark.skipif(not _simulate_available(), reason="robocritics.simulate not available")
 
 
 @needs_simulator

@@ -5,7 +5,7 @@ import pytest
 
 from robocritics import Robot, Scene, simulate
 from robocritics.cli import main
-from robocritics.robot.ur.sim import URSim
+from robocritics.testing.ursim import URSim
 
 PROGRAM = "set_speed(0.5)\nmove_to(0.28, 0.05, 0.22)\nmove_down(0.04)\n"
 

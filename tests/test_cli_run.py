@@ -11,7 +11,7 @@ import pytest
 from llm_fixtures import clean_llm_env, llm_server  # noqa: F401
 from llm_server import Fail
 
-from robocritics.llm.cli_run import add_run_parser, run_command
+from robocritics.cli.run import add_run_parser, run_command
 from robocritics.llm.memory import InteractionMemory
 
 pytestmark = pytest.mark.usefixtures("clean_llm_env")

@@ -24,7 +24,7 @@ from robocritics.llm.prompts import (
     system_prompt,
 )
 from robocritics.program.sandbox import run_program
-from robocritics.program.simulate import simulate
+from robocritics.simulate import simulate
 from robocritics.program.skills import SKILLS, api_reference
 from robocritics.scene import Scene
 

@@ -23,13 +23,13 @@ import pytest
 
 import robocritics as rc
 from robocritics.errors import DeployError, RTDEError
-from robocritics.robot.ur import (
+from robocritics.testing.ursim import URSim
+from robocritics.deploy import (
     DashboardClient,
     DeployFault,
     DeployRefused,
     RTDEClient,
     URArm,
-    URSim,
     resample,
 )
 from ur_support import sim_kwargs

@@ -15,8 +15,9 @@ import time
 import pytest
 
 from robocritics.errors import DeployError, RTDEError
-from robocritics.robot.ur import MessageLevel, RTDEClient, URSim
-from robocritics.robot.ur.rtde import (
+from robocritics.deploy import MessageLevel, RTDEClient
+from robocritics.testing.ursim import URSim
+from robocritics.deploy.rtde import (
     Command,
     Recipe,
     TextMessage,
@@ -469,7 +470,7 @@ def test_conformance_with_the_ur_rtde_client():
     assert max(abs(a - b) for a, b in zip(out["q"], q0)) < 1e-6
     assert out["connected"] and out["t"] > 0
     assert (out["mode"], out["safety"], out["runtime"]) == (7, 1, 1)
-    from robocritics.robot.ur.sim import ur3e_fk
+    from robocritics.testing.ursim.controller import ur3e_fk
 
     assert out["pose"] == pytest.approx(ur3e_fk(q0)[0], abs=1e-9)
     if check_dashboard:

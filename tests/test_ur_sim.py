@@ -13,17 +13,17 @@ import time
 import pytest
 
 from robocritics.errors import DeployError, RTDEError
-from robocritics.robot.ur import (
+from robocritics.testing.ursim import URSim
+from robocritics.deploy import (
     DashboardClient,
     ProgramState,
     RTDEClient,
-    URSim,
     parse_streaming_program,
     program_status,
     send_program,
     streaming_program,
 )
-from robocritics.robot.ur.sim import UR3E_SPEED_LIMITS
+from robocritics.testing.ursim.controller import UR3E_SPEED_LIMITS
 from ur_support import Streamer, powered_dashboard, sim_kwargs
 
 
@@ -266,7 +266,7 @@ def test_injected_protective_stop_and_drop_during_streaming(sim):
 
 def test_cli_runs_until_interrupted():
     proc = subprocess.Popen(
-        [sys.executable, "-m", "robocritics.robot.ur.sim", "--rtde-port", "0", "--dashboard-port", "0", "--secondary-port", "0"],
+        [sys.executable, "-m", "robocritics.testing.ursim", "--rtde-port", "0", "--dashboard-port", "0", "--secondary-port", "0"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -6,12 +6,12 @@ import math
 import time
 from typing import Sequence
 
-from robocritics.robot.ur import (
+from robocritics.testing.ursim import URSim
+from robocritics.deploy import (
     INPUT_FIELDS,
     OUTPUT_FIELDS,
     DashboardClient,
     RTDEClient,
-    URSim,
     send_program,
     setpoint,
     streaming_program,

@@ -5,7 +5,7 @@ turns it into a physically timed motion trace (:class:`Trajectory`); expert-info
 critics (:func:`critique`) flag joint speed, space usage, collision, spearing
 and pinch-point problems with explanations and fix hints (:class:`Report`);
 :class:`Loop` sends that feedback back to the model; only a verified trace is
-deployed to a UR3e (:mod:`robocritics.robot.ur`).
+deployed to a UR3e (:mod:`robocritics.deploy`).
 """
 
 from __future__ import annotations
@@ -23,8 +23,6 @@ _EXPORTS = {
     "Scene": "robocritics.scene",
     "Trajectory": "robocritics.trajectory",
     "State": "robocritics.trajectory",
-    "simulate": "robocritics.program.simulate",
-    "Execution": "robocritics.program.simulate",
     "critique": "robocritics.critic",
     "Flag": "robocritics.critic",
     "Verdict": "robocritics.critic",
@@ -35,7 +33,7 @@ _EXPORTS = {
     "get_critics": "robocritics.critic",
     "critic_sources": "robocritics.critic",
     "hookimpl": "robocritics.hookspecs",
-    "URArm": "robocritics.robot.ur.deploy",
+    "URArm": "robocritics.deploy.stream",
     "Loop": "robocritics.llm.loop",
     "Attempt": "robocritics.llm.loop",
     "OpenAICompatible": "robocritics.llm.client",
@@ -53,6 +51,9 @@ _ERRORS = (
     "RTDEError",
 )
 
+# Eager, and cheap (its heavy imports are inside the function): the submodule
+# `robocritics.simulate` would otherwise shadow the function of the same name.
+from .simulate import Execution, simulate  # noqa: E402
 from .errors import (  # noqa: E402
     CriticError,
     DeployError,
@@ -66,7 +67,7 @@ from .errors import (  # noqa: E402
     TrajectoryError,
 )
 
-__all__ = [*_EXPORTS, *_ERRORS]
+__all__ = [*_EXPORTS, "simulate", "Execution", *_ERRORS]
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
@@ -75,10 +76,9 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 if TYPE_CHECKING:  # pragma: no cover
     from .critic import Critic, CriticParams, Evidence, Flag, Report, Verdict, critic_sources, critique, get_critics
     from .hookspecs import hookimpl
-    from .robot.ur.deploy import URArm
+    from ..deploy.stream import URArm
     from .llm.client import OpenAICompatible
     from .llm.loop import Attempt, Loop
-    from .program.simulate import Execution, simulate
     from .robot.model import Robot
     from .scene import Scene
     from .trajectory import State, Trajectory

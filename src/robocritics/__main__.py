@@ -2,6 +2,6 @@
 
 import sys
 
-from robocritics.cli import main
+from robocritics.cli.main import main
 
 sys.exit(main())

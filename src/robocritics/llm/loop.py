@@ -9,7 +9,7 @@
     best = loop.run("sort the apples by ripeness", max_attempts=5)   # iterate automatically
 
 Every model reply becomes an :class:`Attempt`: its program is extracted,
-simulated (:func:`~robocritics.program.simulate.simulate`) and critiqued
+simulated (:func:`~robocritics.simulate.simulate`) and critiqued
 (:func:`~robocritics.critic.critique`), and the attempt is stored in the
 interaction memory as ``(request, program, feedback, score)``.
 
@@ -69,7 +69,7 @@ from .prompts import (
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic import Report
-    from ..program.simulate import Execution
+    from ..simulate import Execution
     from ..robot.model import Robot
     from ..scene import Scene
 
@@ -567,7 +567,7 @@ class Loop:
     def _check(self, attempt: Attempt) -> None:
         """Simulate and critique ``attempt.program``; a failure becomes runtime feedback."""
         from ..critic import critique
-        from ..program.simulate import simulate
+        from ..simulate import simulate
 
         assert attempt.program is not None
         try:

@@ -300,7 +300,7 @@ def dh_urdf(dh: DH, name: str | None = None, base: str = "base_link", tip: str =
         '<inertial><origin xyz="0 0 0" rpy="0 0 0"/><mass value="0.5"/>'
         '<inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial>'
     )
-    out = [f'<?xml version="1.0"?>', f'<robot name="{name}">']
+    out = ['<?xml version="1.0"?>', f'<robot name="{name}">']
     for link in links:
         out.append(f'  <link name="{link}">{inertial}</link>')
     prev_a, prev_d, prev_alpha = 0.0, 0.0, 0.0

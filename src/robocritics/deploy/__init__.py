@@ -1,17 +1,19 @@
-"""Universal Robots deployment layer: RTDE and Dashboard clients, the URScript
-streaming program, and a loopback controller for tests.
+"""Deployment to a Universal Robots arm: RTDE and Dashboard clients, the URScript
+streaming program, the gate and the paced servo stream.
+
+The loopback controller used by tests and demos is :mod:`robocritics.testing.ursim`;
+this package never imports it.
 
 * :class:`RTDEClient` — RTDE protocol v2/v1 client with a background reader.
 * :class:`DashboardClient` — Dashboard Server (port 29999) commands.
 * :func:`streaming_program`, :func:`send_program`, :func:`setpoint` — the servo
   streaming program, its register layout and the secondary-interface sender.
-* :class:`URSim` — a loopback UR3e controller (real TCP servers on 127.0.0.1).
 * :class:`URArm` — the deploy gate and the paced servo stream (:meth:`URArm.deploy`,
   :meth:`URArm.approach`, :class:`DeployResult`, :class:`DeployRefused`, :class:`DeployFault`).
 """
 
-from robocritics.robot.ur.dashboard import DASHBOARD_PORT, DashboardClient
-from robocritics.robot.ur.deploy import (
+from robocritics.deploy.dashboard import DASHBOARD_PORT, DashboardClient
+from robocritics.deploy.stream import (
     Approach,
     DeployFault,
     DeployRefused,
@@ -20,7 +22,7 @@ from robocritics.robot.ur.deploy import (
     URArm,
     resample,
 )
-from robocritics.robot.ur.rtde import (
+from robocritics.deploy.rtde import (
     RTDE_PORT,
     InputRecipe,
     MessageLevel,
@@ -28,8 +30,7 @@ from robocritics.robot.ur.rtde import (
     RTDEClient,
     TextMessage,
 )
-from robocritics.robot.ur.sim import SimEvent, SimSnapshot, URSim
-from robocritics.robot.ur.urscript import (
+from robocritics.deploy.urscript import (
     INPUT_FIELDS,
     OUTPUT_FIELDS,
     SECONDARY_PORT,
@@ -63,9 +64,6 @@ __all__ = [
     "OUTPUT_FIELDS",
     "setpoint",
     "send_program",
-    "URSim",
-    "SimSnapshot",
-    "SimEvent",
     "URArm",
     "DeployResult",
     "DeployRefused",

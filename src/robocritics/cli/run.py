@@ -20,36 +20,19 @@ Exit status: 0 the final attempt has no Error verdict; 1 it has one (or its
 program did not run); 2 configuration errors (no base URL or model, unknown
 scene or critic, unset key variable) and failures of the LLM endpoint.
 
-Wire it into the ``robocritics`` command with::
-
-    @subcommand("run")
-    def _build_run(sub):
-        add_run_parser(sub)
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
-from pathlib import Path
 from typing import TextIO
 
-from ..cli import _one_line, _positive_float
+from ._common import load_params, one_line, positive_float, positive_int, subcommand
 from ..errors import LLMError, RoboCriticsError
 
 __all__ = ["add_run_parser", "run_command"]
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
-    return value
 
 
 def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -85,7 +68,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     p.add_argument(
         "--max-attempts",
         metavar="N",
-        type=_positive_int,
+        type=positive_int,
         default=5,
         help="most model replies with --auto (default 5, as in the paper)",
     )
@@ -102,30 +85,14 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         help="also paste the critics' rules into the system prompt (the paper's embedded condition)",
     )
     p.add_argument("--temperature", metavar="T", type=float, default=None, help="sampling temperature (default 0)")
-    p.add_argument("--timeout", metavar="S", type=_positive_float, default=120.0, help="seconds per HTTP phase (default 120)")
+    p.add_argument("--timeout", metavar="S", type=positive_float, default=120.0, help="seconds per HTTP phase (default 120)")
     p.set_defaults(func=run_command)
     return p
 
 
 def _error(message: str, stream: TextIO) -> int:
-    print(f"robocritics run: error: {_one_line(message)}", file=stream)
+    print(f"robocritics run: error: {one_line(message)}", file=stream)
     return 2
-
-
-def _load_params(path: str | None) -> dict | None:
-    if not path:
-        return None
-    try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise RoboCriticsError(f"no such params file {path!r}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RoboCriticsError(f"cannot read params file {path!r}: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise RoboCriticsError(f"params file {path!r} is not valid JSON: {exc.msg} at line {exc.lineno}") from None
-    if not isinstance(data, dict):
-        raise RoboCriticsError(f"params file {path!r} must hold a JSON object of critic names to objects")
-    return data
 
 
 def _print_attempt(attempt, out: TextIO) -> None:
@@ -154,9 +121,9 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     """Handle ``robocritics run`` (see the module docstring); returns the exit status."""
     from ..critic import select_critics
     from ..scene import Scene
-    from .client import OpenAICompatible
-    from .loop import Loop
-    from .memory import InteractionMemory
+    from ..llm.client import OpenAICompatible
+    from ..llm.loop import Loop
+    from ..llm.memory import InteractionMemory
 
     out = stdout or sys.stdout
     err = stderr or sys.stderr
@@ -169,7 +136,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
             return _error(f"the environment variable {args.api_key_env} (from --api-key-env) is not set", err)
     try:
         scene = Scene.resolve(args.scene)
-        params = _load_params(getattr(args, "params", None))
+        params = load_params(getattr(args, "params", None)) or None
         critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
         select_critics(critics, params)
     except RoboCriticsError as exc:
@@ -229,3 +196,8 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         if memory is not None:
             memory.close()
         client.close()
+
+
+@subcommand("run")
+def _build_run(sub: "argparse._SubParsersAction") -> None:
+    add_run_parser(sub)

@@ -20,11 +20,11 @@ an e-series controller (UR3e joint limits) that runs *our* streaming program:
   ``unlock_delay_s`` after the stop, 5 s like the real controller),
   is in remote control, programState, running, quit.
 * **Secondary interface** (default 30002): accepts program text. Programs made
-  by :func:`~robocritics.robot.ur.urscript.streaming_program` (recognised by their
+  by :func:`~robocritics.deploy.urscript.streaming_program` (recognised by their
   marker line, parameters parsed from the text) are simulated; anything else is
   rejected with an RTDE text message (level ERROR) and an event.
 
-The simulated streaming program follows :mod:`~robocritics.robot.ur.urscript`
+The simulated streaming program follows :mod:`~robocritics.deploy.urscript`
 statement by statement, once per 2 ms control cycle:
 
 * ``servoj`` tracking: joint velocity = setpoint velocity (difference of the
@@ -48,7 +48,7 @@ Fault injection: :meth:`URSim.inject_drop`, :meth:`URSim.trigger_protective_stop
 :meth:`URSim.set_slow`, :meth:`URSim.set_silent`, :meth:`URSim.set_remote_control`,
 and the constructor's ``fieldbus_registers``.
 
-Run it from a shell with ``python -m robocritics.robot.ur.sim`` (or the
+Run it from a shell with ``python -m robocritics.testing.ursim.controller`` (or the
 ``robocritics ursim`` command); Ctrl-C stops it.
 """
 
@@ -67,8 +67,8 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
 from robocritics.errors import DeployError
-from robocritics.robot.ur import urscript
-from robocritics.robot.ur.rtde import (
+from robocritics.deploy import urscript
+from robocritics.deploy.rtde import (
     DATA_TYPES,
     MAX_FREQUENCY_HZ,
     ROBOT_MODES,

@@ -1,7 +1,7 @@
-"""``simulate()``: a robot program to a physically timed, critic-ready trajectory.
+"""The motion planner: a :class:`~robocritics.program.plan.Plan` (skill calls with
+source lines) to timed joint samples, with grasp and release bookkeeping.
 
-The program runs in the sandbox to a :class:`~robocritics.program.plan.Plan`
-(skill calls with source lines). The planner below turns each call into motion:
+Each call becomes motion:
 
 * joint-space moves (``move_to``, ``move_above``, ``rotate_gripper``, ``home``)
   solve IK at the target (fingers down, current yaw, nearest the current joints)
@@ -25,20 +25,19 @@ does not count as collisions.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ..errors import PlanningError, ProgramError
-from ..robot.model import Robot, fingers_down
-from ..robot.motion import JOINT_SPEED_MARGIN, Limits, Segment, sample_times, time_joint_move, time_path_1d
+from ..errors import PlanningError
+from ..program.plan import Plan, SkillCall
 from ..scene import Container, Scene, SceneObject, rpy_matrix
-from ..trajectory import Step, Trajectory
-from .plan import Plan, SkillCall
-from .sandbox import run_program
+from ..trajectory import Step
+from .model import Robot, fingers_down
+from .motion import JOINT_SPEED_MARGIN, Limits, Segment, sample_times, time_joint_move, time_path_1d
 
-__all__ = ["simulate", "Execution", "Event", "PlannerSettings"]
+__all__ = ["Planner", "PlannerSettings", "Event"]
 
 
 @dataclass(frozen=True)
@@ -64,38 +63,7 @@ class Event:
     line: int
     detail: str
 
-
-@dataclass
-class Execution:
-    """The result of :func:`simulate`.
-
-    ``trajectory`` is what the critics read and what is deployed; ``final_scene``
-    says where every object ended up.
-    """
-
-    trajectory: Trajectory
-    plan: Plan
-    events: list[Event]
-    final_scene: Scene
-    scene: Scene
-    robot: Robot = field(repr=False)
-    resting_on: dict[str, str] = field(default_factory=dict)
-
-    @property
-    def duration_s(self) -> float:
-        return self.trajectory.duration_s
-
-    def object_on(self, obj_id: str, support_id: str) -> bool:
-        """Whether object ``obj_id`` was last set down on ``support_id`` (an object, container or 'table')."""
-        return self.resting_on.get(obj_id) == support_id
-
-    def object_inside(self, obj_id: str, container_id: str) -> bool:
-        """Whether object ``obj_id`` ended inside container ``container_id``."""
-        holder = self.final_scene.container_holding(obj_id)
-        return holder is not None and holder.id == container_id
-
-
-class _Planner:
+class Planner:
     def __init__(self, scene: Scene, robot: Robot, sample_rate_hz: float, settings: PlannerSettings):
         self.scene = scene
         self.robot = robot
@@ -508,43 +476,4 @@ class _Planner:
                         poses[last:] = tcp[last - 1] @ data
             out[oid] = poses
         return out
-
-
-def simulate(
-    program: str | Plan,
-    scene: Scene,
-    robot: Robot | None = None,
-    sample_rate_hz: float = 125.0,
-    settings: PlannerSettings | None = None,
-) -> Execution:
-    """Run ``program`` (source text or a Plan) in ``scene`` and build its timed :class:`Trajectory`.
-
-    Raises :class:`ProgramError` for a program the sandbox rejects and
-    :class:`PlanningError` (with the program line) for a motion that cannot be
-    planned, such as an unreachable target.
-    """
-    if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-        raise PlanningError(f"sample_rate_hz must be a positive number, got {sample_rate_hz}")
-    robot = robot or Robot.ur3e()
-    plan = program if isinstance(program, Plan) else run_program(program, scene)
-    planner = _Planner(scene, robot, sample_rate_hz, settings or PlannerSettings())
-    planner.run(plan)
-    if not planner.steps:
-        raise ProgramError("the program made no skill calls, so there is no motion to check", line=1)
-    q, t, opening, attached, step = planner.finish()
-    frames = robot.forward(q, opening)
-    object_poses = planner.object_poses(frames[:, robot.tcp_index])
-    trajectory = robot.trajectory(
-        q=q,
-        time=t,
-        scene=scene,
-        gripper_opening_m=opening,
-        attached=attached,
-        step=step,
-        steps=planner.steps,
-        object_poses=object_poses,
-        frames=frames,
-    )
-    final_scene = scene.model_copy(update={"objects": [planner.objects[o.id] for o in scene.objects]})
-    return Execution(trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.resting_on))
 

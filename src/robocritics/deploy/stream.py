@@ -49,7 +49,7 @@ if one fails, the robot rules are not evaluated.
 (500 Hz: one setpoint per 2 ms control cycle; linear interpolation of q and the
 gripper opening for sources at >= 125 Hz, monotone cubic (PCHIP) below). The
 client holds the first setpoint (sequence counter incrementing every period)
-*before* sending :func:`~robocritics.robot.ur.urscript.streaming_program` (from a
+*before* sending :func:`~robocritics.deploy.urscript.streaming_program` (from a
 helper thread, so holding never pauses), waits until the program reports
 STREAMING with this deploy's random session id, then streams with absolute
 deadlines ``t0 + k / rate_hz`` (sleep, then spin the last ``spin_s``; a client
@@ -97,8 +97,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from robocritics.errors import DeployError, RTDEError
-from robocritics.robot.ur.dashboard import DASHBOARD_PORT, DashboardClient
-from robocritics.robot.ur.rtde import (
+from robocritics.deploy.dashboard import DASHBOARD_PORT, DashboardClient
+from robocritics.deploy.rtde import (
     ROBOT_MODES,
     RTDE_PORT,
     RUNTIME_STATES,
@@ -108,7 +108,7 @@ from robocritics.robot.ur.rtde import (
     RTDEClient,
     TextMessage,
 )
-from robocritics.robot.ur.urscript import (
+from robocritics.deploy.urscript import (
     INPUT_FIELDS,
     OUTPUT_FIELDS,
     SECONDARY_PORT,
@@ -457,7 +457,7 @@ class URArm:
     """A UR arm reached over RTDE (30004), the Dashboard Server (29999) and the secondary interface (30002).
 
     ``with URArm(host) as arm:`` connects RTDE (output recipe :data:`STATE_FIELDS`
-    at 500 Hz, input recipe :data:`~robocritics.robot.ur.urscript.INPUT_FIELDS`,
+    at 500 Hz, input recipe :data:`~robocritics.deploy.urscript.INPUT_FIELDS`,
     synchronisation started) and the dashboard; leaving the block closes both.
     ``timeout_s`` bounds connecting and every request/reply [s]. Connection
     problems raise :class:`~robocritics.errors.RTDEError` (a DeployError).
@@ -743,7 +743,7 @@ class URArm:
     ) -> DeployResult:
         """Check ``execution`` against ``report`` and the arm (the gate), then stream it.
 
-        ``execution``: an :class:`~robocritics.program.simulate.Execution`, an
+        ``execution``: an :class:`~robocritics.simulate.Execution`, an
         :class:`Approach` or a Trajectory; ``report``: the
         :class:`~robocritics.report.Report` of exactly that trajectory.
         ``allow_errors`` must be passed explicitly to deploy a report with Errors.

@@ -1,0 +1,24 @@
+"""``robocritics ursim``: a loopback UR controller until Ctrl-C (its options are the controller's own)."""
+
+from __future__ import annotations
+
+import argparse
+
+from ._common import subcommand
+
+
+@subcommand("ursim")
+def _build_ursim(sub: "argparse._SubParsersAction") -> None:
+    p = sub.add_parser(
+        "ursim",
+        help="run a loopback UR3e controller (RTDE, Dashboard, secondary interface) until Ctrl-C",
+        add_help=False,
+    )
+    # its options belong to the controller's own parser; main() hands them over untouched
+    p.set_defaults(func=lambda args: ursim_command([]))
+
+
+def ursim_command(argv: list[str]) -> int:
+    from ..testing.ursim import main as ursim_main
+
+    return int(ursim_main(argv))

@@ -1,0 +1,113 @@
+"""``simulate()``: a robot program to a physically timed, critic-ready trajectory.
+
+The pipeline, one stage after another (each a plain function of its inputs):
+
+1. the program runs in the sandbox (:func:`robocritics.program.run_program`) to a
+   :class:`~robocritics.program.plan.Plan`: skill calls with their source lines;
+2. the planner (:class:`robocritics.robot.planner.Planner`) turns each call into
+   timed joint samples (IK, obstacle routing, jerk-limited timing, grasps);
+3. the robot model (:meth:`robocritics.Robot.trajectory`) adds link frames and
+   proximities, giving the :class:`~robocritics.trajectory.Trajectory` the critics
+   read and the deploy gate streams.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from .errors import PlanningError, ProgramError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .program.plan import Plan
+    from .robot.model import Robot
+    from .robot.planner import Event, PlannerSettings
+    from .scene import Scene
+    from .trajectory import Trajectory
+
+__all__ = ["simulate", "Execution", "Event", "PlannerSettings"]
+
+
+def __getattr__(name: str) -> Any:
+    # The planner's types, re-exported without importing the planner (and Pinocchio)
+    # when only `robocritics` is imported: `robocritics.simulate` is imported eagerly.
+    if name in ("Event", "PlannerSettings"):
+        from .robot import planner
+
+        return getattr(planner, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+@dataclass
+class Execution:
+    """The result of :func:`simulate`.
+
+    ``trajectory`` is what the critics read and what is deployed; ``final_scene``
+    says where every object ended up.
+    """
+
+    trajectory: Trajectory
+    plan: Plan
+    events: list[Event]
+    final_scene: Scene
+    scene: Scene
+    robot: Robot = field(repr=False)
+    resting_on: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> float:
+        return self.trajectory.duration_s
+
+    def object_on(self, obj_id: str, support_id: str) -> bool:
+        """Whether object ``obj_id`` was last set down on ``support_id`` (an object, container or 'table')."""
+        return self.resting_on.get(obj_id) == support_id
+
+    def object_inside(self, obj_id: str, container_id: str) -> bool:
+        """Whether object ``obj_id`` ended inside container ``container_id``."""
+        holder = self.final_scene.container_holding(obj_id)
+        return holder is not None and holder.id == container_id
+
+def simulate(
+    program: str | Plan,
+    scene: Scene,
+    robot: Robot | None = None,
+    sample_rate_hz: float = 125.0,
+    settings: PlannerSettings | None = None,
+) -> Execution:
+    """Run ``program`` (source text or a Plan) in ``scene`` and build its timed :class:`Trajectory`.
+
+    Raises :class:`ProgramError` for a program the sandbox rejects and
+    :class:`PlanningError` (with the program line) for a motion that cannot be
+    planned, such as an unreachable target.
+    """
+    from .program.plan import Plan
+    from .program.sandbox import run_program
+    from .robot.model import Robot
+    from .robot.planner import Planner, PlannerSettings
+
+    if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
+        raise PlanningError(f"sample_rate_hz must be a positive number, got {sample_rate_hz}")
+    robot = robot or Robot.ur3e()
+    plan = program if isinstance(program, Plan) else run_program(program, scene)
+    planner = Planner(scene, robot, sample_rate_hz, settings or PlannerSettings())
+    planner.run(plan)
+    if not planner.steps:
+        raise ProgramError("the program made no skill calls, so there is no motion to check", line=1)
+    q, t, opening, attached, step = planner.finish()
+    frames = robot.forward(q, opening)
+    object_poses = planner.object_poses(frames[:, robot.tcp_index])
+    trajectory = robot.trajectory(
+        q=q,
+        time=t,
+        scene=scene,
+        gripper_opening_m=opening,
+        attached=attached,
+        step=step,
+        steps=planner.steps,
+        object_poses=object_poses,
+        frames=frames,
+    )
+    final_scene = scene.model_copy(update={"objects": [planner.objects[o.id] for o in scene.objects]})
+    return Execution(trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.resting_on))
+

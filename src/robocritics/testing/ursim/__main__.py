@@ -1,0 +1,3 @@
+from .controller import main
+
+raise SystemExit(main())
