@@ -13,19 +13,31 @@ Robotiq 2F-85 gripper on a short coupling (TCP 0.15 m from the flange).
 Run: python tools/make_ur3e_urdf.py
 """
 import math
+import sys
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+from robocritics.robot.arms import UR3E  # noqa: E402  (the one source of the arm's numbers)
+
 PI = math.pi
-d1, a2, a3, d4, d5, d6 = 0.15185, -0.24355, -0.2132, 0.13105, 0.08535, 0.0921
-masses = [1.98, 3.4445, 1.437, 0.871, 0.805, 0.261]
-# (name, origin xyz, origin rpy, lower, upper, velocity rad/s, effort N m)
+d1, d4, d5, d6 = (UR3E.dh.d[i] for i in (0, 3, 4, 5))
+a2, a3 = UR3E.dh.a[1], UR3E.dh.a[2]
+masses = list(UR3E.link_masses_kg)
+# (parent, child, origin xyz, origin rpy) per joint; limits, speeds and torques from UR3E
+_chain = [
+    ("base_link", "shoulder_link", (0, 0, 0), (0, 0, 0)),
+    ("shoulder_link", "upper_arm_link", (0, 0, d1), (PI / 2, 0, 0)),
+    ("upper_arm_link", "forearm_link", (a2, 0, 0), (0, 0, 0)),
+    ("forearm_link", "wrist_1_link", (a3, 0, 0), (0, 0, 0)),
+    ("wrist_1_link", "wrist_2_link", (0, 0, d4), (PI / 2, 0, 0)),
+    ("wrist_2_link", "wrist_3_link", (0, 0, d5), (-PI / 2, 0, 0)),
+]
+# (name, parent, child, origin xyz, origin rpy, lower, upper, velocity rad/s, effort N m)
 joints = [
-    ("shoulder_pan_joint", "base_link", "shoulder_link", (0, 0, 0), (0, 0, 0), -2 * PI, 2 * PI, PI, 56),
-    ("shoulder_lift_joint", "shoulder_link", "upper_arm_link", (0, 0, d1), (PI / 2, 0, 0), -2 * PI, 2 * PI, PI, 56),
-    ("elbow_joint", "upper_arm_link", "forearm_link", (a2, 0, 0), (0, 0, 0), -PI, PI, PI, 28),
-    ("wrist_1_joint", "forearm_link", "wrist_1_link", (a3, 0, 0), (0, 0, 0), -2 * PI, 2 * PI, 2 * PI, 12),
-    ("wrist_2_joint", "wrist_1_link", "wrist_2_link", (0, 0, d4), (PI / 2, 0, 0), -2 * PI, 2 * PI, 2 * PI, 12),
-    ("wrist_3_joint", "wrist_2_link", "wrist_3_link", (0, 0, d5), (-PI / 2, 0, 0), -2 * PI, 2 * PI, 2 * PI, 12),
+    (name, parent, child, xyz, rpy, lo, hi, vel, eff)
+    for name, (parent, child, xyz, rpy), lo, hi, vel, eff in zip(
+        UR3E.joint_names, _chain, UR3E.lower_rad, UR3E.upper_rad, UR3E.velocity_rad_s, UR3E.effort_nm
+    )
 ]
 SHOULDER_OFFSET, ELBOW_OFFSET = 0.1198, 0.0925
 # capsule segments (p0, p1) in the link frame and radius, m
@@ -91,7 +103,7 @@ for name, parent, child, xyz, rpy, lo, hi, vel, eff in joints:
     out.append(
         f'  <joint name="{name}" type="revolute">\n    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
         f'    <origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>\n    <axis xyz="0 0 1"/>\n'
-        f'    <limit lower="{lo:.17g}" upper="{hi:.17g}" velocity="{vel:.17g}" effort="{eff}"/>\n  </joint>\n'
+        f'    <limit lower="{lo:.17g}" upper="{hi:.17g}" velocity="{vel:.17g}" effort="{eff:g}"/>\n  </joint>\n'
     )
 fixed = [
     ("flange_joint", "wrist_3_link", "tool0", (0, 0, d6)),

@@ -33,6 +33,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .errors import SceneError
+from .robot.arms import UR3E
 
 __all__ = ["SceneObject", "Container", "Table", "Workspace", "Scene", "Shape", "rpy_matrix"]
 
@@ -235,7 +236,7 @@ class Table(_Model):
 class Workspace(_Model):
     """The allowed workspace W_allowed: a sphere (m) above the plane ``min_z``."""
 
-    center: Vec3 = Field((0.0, 0.0, 0.15185), description="sphere centre, m (default: UR3e shoulder)")
+    center: Vec3 = Field((0.0, 0.0, UR3E.dh.d1), description="sphere centre, m (default: UR3e shoulder)")
     radius_m: float = Field(0.5, gt=0, description="sphere radius, m (default: UR3e reach)")
 
     @property

@@ -74,8 +74,13 @@ def simulate(
     robot: Robot | None = None,
     sample_rate_hz: float = 125.0,
     settings: PlannerSettings | None = None,
+    start_q=None,
 ) -> Execution:
     """Run ``program`` (source text or a Plan) in ``scene`` and build its timed :class:`Trajectory`.
+
+    The motion starts at ``start_q`` (joint angles, rad; e.g. where a real arm is
+    now, ``URArm.actual_q()``) or, by default, at the robot's home pose
+    ``robot.home_q``. ``sample_rate_hz`` is the trajectory's sample rate [Hz].
 
     Raises :class:`ProgramError` for a program the sandbox rejects and
     :class:`PlanningError` (with the program line) for a motion that cannot be
@@ -90,7 +95,7 @@ def simulate(
         raise PlanningError(f"sample_rate_hz must be a positive number, got {sample_rate_hz}")
     robot = robot or Robot.ur3e()
     plan = program if isinstance(program, Plan) else run_program(program, scene)
-    planner = Planner(scene, robot, sample_rate_hz, settings or PlannerSettings())
+    planner = Planner(scene, robot, sample_rate_hz, settings or PlannerSettings(), start_q=start_q)
     planner.run(plan)
     if not planner.steps:
         raise ProgramError("the program made no skill calls, so there is no motion to check", line=1)

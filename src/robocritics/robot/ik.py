@@ -61,8 +61,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -111,7 +109,6 @@ _JOINT_NAMES = (
     "joint 5 (wrist 2)",
     "joint 6 (wrist 3)",
 )
-_UR_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
 
 
 # --------------------------------------------------------------------------- #
@@ -119,91 +116,10 @@ _UR_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
 # --------------------------------------------------------------------------- #
 
 
-@dataclass(frozen=True)
-class DH:
-    """Standard Denavit-Hartenberg parameters of a 6-joint serial arm.
+from .arms import DH, UR3E
 
-    ``A_i = Rz(theta_i) Tz(d[i]) Tx(a[i]) Rx(alpha[i])``; ``d`` and ``a`` in
-    metres, ``alpha`` in radians, all three tuples of six floats (joint 1 first).
-    ``theta_i`` is the joint angle ``q_i`` (UR arms have no angle offsets).
-    Use :meth:`ur` to build a UR-like set from its six non-zero lengths.
-    """
-
-    d: tuple[float, ...]
-    a: tuple[float, ...]
-    alpha: tuple[float, ...]
-    name: str = "arm"
-
-    def __post_init__(self) -> None:
-        for field_name in ("d", "a", "alpha"):
-            raw = getattr(self, field_name)
-            try:
-                values = tuple(float(v) for v in raw)
-            except (TypeError, ValueError) as exc:
-                raise RobotModelError(f"DH {field_name}: expected 6 numbers, got {raw!r}") from exc
-            if len(values) != 6:
-                raise RobotModelError(f"DH {field_name}: expected 6 values, got {len(values)}")
-            if not all(math.isfinite(v) for v in values):
-                raise RobotModelError(f"DH {field_name}: values must be finite, got {values}")
-            object.__setattr__(self, field_name, values)
-
-    @classmethod
-    def ur(
-        cls, d1: float, a2: float, a3: float, d4: float, d5: float, d6: float, name: str = "ur"
-    ) -> DH:
-        """A UR-family parameter set: ``d = (d1, 0, 0, d4, d5, d6)``,
-        ``a = (0, a2, a3, 0, 0, 0)``, ``alpha = (pi/2, 0, 0, pi/2, -pi/2, 0)`` (m, rad)."""
-        return cls(
-            d=(d1, 0.0, 0.0, d4, d5, d6),
-            a=(0.0, a2, a3, 0.0, 0.0, 0.0),
-            alpha=_UR_ALPHA,
-            name=name,
-        )
-
-    # Named accessors for the UR lengths (m).
-    d1 = property(lambda self: self.d[0], doc="Base to shoulder height d1 (m).")
-    a2 = property(lambda self: self.a[1], doc="Upper-arm length a2 (m, negative for UR).")
-    a3 = property(lambda self: self.a[2], doc="Forearm length a3 (m, negative for UR).")
-    d4 = property(lambda self: self.d[3], doc="Shoulder-to-wrist lateral offset d4 (m).")
-    d5 = property(lambda self: self.d[4], doc="Wrist 1 to wrist 2 offset d5 (m).")
-    d6 = property(lambda self: self.d[5], doc="Wrist 2 to flange offset d6 (m).")
-
-    @property
-    def is_ur_like(self) -> bool:
-        """True when the closed form of :func:`ur_ik_all` applies: UR twist
-        angles, ``a1 = a4 = a5 = a6 = 0`` (``d2``, ``d3`` may be non-zero)."""
-        return (
-            all(abs(x - y) < 1e-12 for x, y in zip(self.alpha, _UR_ALPHA))
-            and self.a[0] == 0.0
-            and self.a[3] == 0.0
-            and self.a[4] == 0.0
-            and self.a[5] == 0.0
-            and self.a[1] != 0.0
-            and self.a[2] != 0.0
-        )
-
-    @cached_property
-    def _links(self) -> tuple[tuple[float, float, float, float], ...]:
-        """Per joint ``(a, d, cos alpha, sin alpha)`` for the scalar FK."""
-        return tuple(
-            (a, d, math.cos(al), math.sin(al)) for a, d, al in zip(self.a, self.d, self.alpha)
-        )
-
-    @cached_property
-    def _ur(self) -> tuple[float, ...]:
-        """Constants of the closed form: d1, a2, a3, d2+d3+d4, d5, d6, a2²+a3², 2 a2 a3."""
-        if not self.is_ur_like:
-            raise RobotModelError(
-                f"DH {self.name!r} is not UR-like (need alpha = (pi/2, 0, 0, pi/2, -pi/2, 0), "
-                f"a1 = a4 = a5 = a6 = 0, a2, a3 != 0): use numeric_ik instead"
-            )
-        d1, d2, d3, d4, d5, d6 = self.d
-        a2, a3 = self.a[1], self.a[2]
-        return (d1, a2, a3, d2 + d3 + d4, d5, d6, a2 * a2 + a3 * a3, 2.0 * a2 * a3)
-
-
-#: UR3e (e-series) nominal DH parameters, m / rad.
-UR3E_DH = DH.ur(d1=0.15185, a2=-0.24355, a3=-0.2132, d4=0.13105, d5=0.08535, d6=0.0921, name="ur3e")
+#: UR3e (e-series) nominal DH parameters, m / rad (from :data:`robocritics.robot.arms.UR3E`).
+UR3E_DH = UR3E.dh
 
 
 # --------------------------------------------------------------------------- #

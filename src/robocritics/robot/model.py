@@ -378,16 +378,16 @@ _UR3E: Robot | None = None
 def _ur3e_cached() -> Robot:
     global _UR3E
     if _UR3E is None:
-        from .ik import UR3E_DH
+        from .arms import UR3E
 
         path = resources.files("robocritics.robot") / "models" / "ur3e.urdf"
         robot = Robot(
             str(path),
             tcp_frame="tcp",
-            name="ur3e",
-            dh=UR3E_DH,
-            acceleration_limits=np.array([10.0, 10.0, 10.0, 20.0, 20.0, 20.0]),
-            jerk_limits=np.array([100.0, 100.0, 100.0, 200.0, 200.0, 200.0]),
+            name=UR3E.name,
+            dh=UR3E.dh,
+            acceleration_limits=np.array(UR3E.acceleration_rad_s2),
+            jerk_limits=np.array(UR3E.jerk_rad_s3),
         )
         # home: TCP 0.25 m in front of the base and 0.25 m above the table, fingers down, elbow up
         upright = np.array([math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0])

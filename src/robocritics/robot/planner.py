@@ -37,7 +37,57 @@ from ..trajectory import Step
 from .model import Robot, fingers_down
 from .motion import JOINT_SPEED_MARGIN, Limits, Segment, sample_times, time_joint_move, time_path_1d
 
-__all__ = ["Planner", "PlannerSettings", "Event"]
+__all__ = ["Planner", "PlannerSettings", "Event", "plan_approach", "checked_start_q"]
+
+
+def checked_start_q(robot: Robot, start_q) -> np.ndarray:
+    """``start_q`` as a float array of the robot's joint count, finite and inside its limits [rad].
+
+    Raises :class:`PlanningError` naming the joint that is wrong.
+    """
+    try:
+        q = np.array(start_q, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise PlanningError(f"start_q must be {robot.n} joint angles in rad, got {start_q!r}") from None
+    if q.shape != (robot.n,):
+        raise PlanningError(f"start_q must be {robot.n} joint angles in rad, got {q.size}")
+    for j, (v, lo, hi) in enumerate(zip(q, robot.lower, robot.upper)):
+        if not (math.isfinite(v) and lo - 1e-9 <= v <= hi + 1e-9):
+            raise PlanningError(
+                f"start_q joint {j} ({robot.joint_names[j]}) = {v:.4f} rad is outside its limits [{lo:.4f}, {hi:.4f}] rad"
+            )
+    return q
+
+
+def plan_approach(
+    robot: Robot,
+    start_q,
+    goal_q,
+    *,
+    speed_fraction: float = 0.1,
+    sample_rate_hz: float = 125.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A slow, jerk-limited joint move from ``start_q`` to ``goal_q`` (rest to rest).
+
+    Returns ``(q (T, n) rad, time (T,) s)`` starting at 0 and ending exactly at
+    ``goal_q``; the caller builds the trajectory (``robot.trajectory(...)``) and
+    critiques it like any other motion. ``speed_fraction`` scales the robot's
+    limits as in ``set_speed`` (velocity by f, acceleration by f², jerk by f³).
+    """
+    if not (0 < speed_fraction <= 1):
+        raise PlanningError(f"speed_fraction must be in (0, 1], got {speed_fraction}")
+    if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
+        raise PlanningError(f"sample_rate_hz must be a positive number, got {sample_rate_hz}")
+    start, goal = checked_start_q(robot, start_q), checked_start_q(robot, goal_q)
+    limits = Limits(robot.velocity_limits, robot.acceleration_limits, robot.jerk_limits)
+    seg = time_joint_move(start, goal, limits, speed_fraction, sample_rate_hz)
+    # ruckig samples up to, not always at, the end: close the move on the goal itself
+    if seg.duration_s > 0 and seg.duration_s - float(seg.time[-1]) < 1e-6:
+        q, t = np.vstack([seg.q[:-1], goal]), np.append(seg.time[:-1], seg.duration_s)
+    else:
+        end_t = max(seg.duration_s, float(seg.time[-1]) + (1.0 / sample_rate_hz if seg.duration_s == 0 else 1e-6))
+        q, t = np.vstack([seg.q, goal]), np.append(seg.time, end_t)
+    return q, t
 
 
 @dataclass(frozen=True)
@@ -64,13 +114,20 @@ class Event:
     detail: str
 
 class Planner:
-    def __init__(self, scene: Scene, robot: Robot, sample_rate_hz: float, settings: PlannerSettings):
+    def __init__(
+        self,
+        scene: Scene,
+        robot: Robot,
+        sample_rate_hz: float,
+        settings: PlannerSettings,
+        start_q: np.ndarray | None = None,
+    ):
         self.scene = scene
         self.robot = robot
         self.rate = float(sample_rate_hz)
         self.settings = settings
         self.limits = Limits(robot.velocity_limits, robot.acceleration_limits, robot.jerk_limits)
-        self.q = robot.home_q.copy()
+        self.q = robot.home_q.copy() if start_q is None else checked_start_q(robot, start_q)
         home_tcp = robot.tcp_pose(robot.home_q)[:3, 3]
         self.home_heading = math.atan2(home_tcp[1], home_tcp[0])
         self.yaw = 0.0

@@ -1,0 +1,188 @@
+"""Arm facts, in one place: DH tables, joint limits with their sources, the control period.
+
+Everything else reads these: the URDF generator (``tools/make_ur3e_urdf.py``), the
+robot model's acceleration and jerk limits, closed-form IK, the loopback
+controller (:mod:`robocritics.testing.ursim`), the deploy gate and the scene's
+default workspace centre. Units: m, rad, s, kg, N·m.
+
+Kinematic convention (standard Denavit-Hartenberg, as Universal Robots publish it)::
+
+    A_i(theta_i) = Rz(theta_i) · Tz(d_i) · Tx(a_i) · Rx(alpha_i)
+    T_06(q)      = A_1(q_1) · A_2(q_2) · ... · A_6(q_6)     (flange pose in the base frame)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from types import MappingProxyType
+from typing import Mapping
+
+from ..errors import RobotModelError
+
+__all__ = ["DH", "ArmSpec", "UR3E", "ARMS"]
+
+_HALF_PI = 0.5 * math.pi
+_UR_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
+
+
+@dataclass(frozen=True)
+class DH:
+    """Standard Denavit-Hartenberg parameters of a 6-joint serial arm.
+
+    ``A_i = Rz(theta_i) Tz(d[i]) Tx(a[i]) Rx(alpha[i])``; ``d`` and ``a`` in
+    metres, ``alpha`` in radians, all three tuples of six floats (joint 1 first).
+    ``theta_i`` is the joint angle ``q_i`` (UR arms have no angle offsets).
+    Use :meth:`ur` to build a UR-like set from its six non-zero lengths.
+    """
+
+    d: tuple[float, ...]
+    a: tuple[float, ...]
+    alpha: tuple[float, ...]
+    name: str = "arm"
+
+    def __post_init__(self) -> None:
+        for field_name in ("d", "a", "alpha"):
+            raw = getattr(self, field_name)
+            try:
+                values = tuple(float(v) for v in raw)
+            except (TypeError, ValueError) as exc:
+                raise RobotModelError(f"DH {field_name}: expected 6 numbers, got {raw!r}") from exc
+            if len(values) != 6:
+                raise RobotModelError(f"DH {field_name}: expected 6 values, got {len(values)}")
+            if not all(math.isfinite(v) for v in values):
+                raise RobotModelError(f"DH {field_name}: values must be finite, got {values}")
+            object.__setattr__(self, field_name, values)
+
+    @classmethod
+    def ur(
+        cls, d1: float, a2: float, a3: float, d4: float, d5: float, d6: float, name: str = "ur"
+    ) -> DH:
+        """A UR-family parameter set: ``d = (d1, 0, 0, d4, d5, d6)``,
+        ``a = (0, a2, a3, 0, 0, 0)``, ``alpha = (pi/2, 0, 0, pi/2, -pi/2, 0)`` (m, rad)."""
+        return cls(
+            d=(d1, 0.0, 0.0, d4, d5, d6),
+            a=(0.0, a2, a3, 0.0, 0.0, 0.0),
+            alpha=_UR_ALPHA,
+            name=name,
+        )
+
+    # Named accessors for the UR lengths (m).
+    d1 = property(lambda self: self.d[0], doc="Base to shoulder height d1 (m).")
+    a2 = property(lambda self: self.a[1], doc="Upper-arm length a2 (m, negative for UR).")
+    a3 = property(lambda self: self.a[2], doc="Forearm length a3 (m, negative for UR).")
+    d4 = property(lambda self: self.d[3], doc="Shoulder-to-wrist lateral offset d4 (m).")
+    d5 = property(lambda self: self.d[4], doc="Wrist 1 to wrist 2 offset d5 (m).")
+    d6 = property(lambda self: self.d[5], doc="Wrist 2 to flange offset d6 (m).")
+
+    @property
+    def is_ur_like(self) -> bool:
+        """True when the closed form of :func:`ur_ik_all` applies: UR twist
+        angles, ``a1 = a4 = a5 = a6 = 0`` (``d2``, ``d3`` may be non-zero)."""
+        return (
+            all(abs(x - y) < 1e-12 for x, y in zip(self.alpha, _UR_ALPHA))
+            and self.a[0] == 0.0
+            and self.a[3] == 0.0
+            and self.a[4] == 0.0
+            and self.a[5] == 0.0
+            and self.a[1] != 0.0
+            and self.a[2] != 0.0
+        )
+
+    @cached_property
+    def _links(self) -> tuple[tuple[float, float, float, float], ...]:
+        """Per joint ``(a, d, cos alpha, sin alpha)`` for the scalar FK."""
+        return tuple(
+            (a, d, math.cos(al), math.sin(al)) for a, d, al in zip(self.a, self.d, self.alpha)
+        )
+
+    @cached_property
+    def _ur(self) -> tuple[float, ...]:
+        """Constants of the closed form: d1, a2, a3, d2+d3+d4, d5, d6, a2²+a3², 2 a2 a3."""
+        if not self.is_ur_like:
+            raise RobotModelError(
+                f"DH {self.name!r} is not UR-like (need alpha = (pi/2, 0, 0, pi/2, -pi/2, 0), "
+                f"a1 = a4 = a5 = a6 = 0, a2, a3 != 0): use numeric_ik instead"
+            )
+        d1, d2, d3, d4, d5, d6 = self.d
+        a2, a3 = self.a[1], self.a[2]
+        return (d1, a2, a3, d2 + d3 + d4, d5, d6, a2 * a2 + a3 * a3, 2.0 * a2 * a3)
+
+
+def _six(name: str, values) -> tuple[float, ...]:
+    out = tuple(float(v) for v in values)
+    if len(out) != 6 or not all(math.isfinite(v) for v in out):
+        raise RobotModelError(f"arm spec {name}: expected 6 finite numbers, got {values!r}")
+    return out
+
+
+@dataclass(frozen=True)
+class ArmSpec:
+    """Published facts of one arm (per joint, base first). Immutable: share it freely."""
+
+    name: str
+    dh: DH
+    joint_names: tuple[str, ...]
+    lower_rad: tuple[float, ...]
+    upper_rad: tuple[float, ...]
+    velocity_rad_s: tuple[float, ...]
+    acceleration_rad_s2: tuple[float, ...]
+    jerk_rad_s3: tuple[float, ...]
+    effort_nm: tuple[float, ...]
+    link_masses_kg: tuple[float, ...]
+    """Masses of the six moving links (shoulder ... wrist 3) [kg]."""
+    control_period_s: float
+    """Controller cycle: one servo setpoint per period [s]."""
+    sources: Mapping[str, str] = field(default_factory=dict)
+    """Where each group of numbers comes from (field name -> citation or reason)."""
+
+    def __post_init__(self) -> None:
+        for f in ("lower_rad", "upper_rad", "velocity_rad_s", "acceleration_rad_s2", "jerk_rad_s3", "effort_nm",
+                  "link_masses_kg"):
+            object.__setattr__(self, f, _six(f, getattr(self, f)))
+        object.__setattr__(self, "sources", MappingProxyType(dict(self.sources)))
+
+    @property
+    def control_rate_hz(self) -> float:
+        """Controller cycles per second [Hz]."""
+        return 1.0 / self.control_period_s
+
+
+_UR_E_SERIES_SOURCES = {
+    "dh": "Universal Robots, 'DH parameters for calculations of kinematics and dynamics' (e-series table)",
+    "lower_rad": "UR e-series user manual: every joint +-360 deg; the elbow is limited to +-180 deg by its cable",
+    "velocity_rad_s": "UR3e technical specification: base, shoulder, elbow 180 deg/s; wrists 360 deg/s",
+    "acceleration_rad_s2": "not published by UR; chosen below movej's practical maxima so a jerk-limited profile "
+    "stays inside what the controller accepts without a protective stop",
+    "jerk_rad_s3": "not published by UR; 10x the acceleration limit (a ramp of 0.1 s)",
+    "effort_nm": "UR3e technical specification: joint torques 56/56/28/12/12/12 N m",
+    "link_masses_kg": "Universal Robots, 'DH parameters for calculations of kinematics and dynamics' (masses)",
+    "control_period_s": "UR e-series: 500 Hz controller cycle (RTDE up to 500 Hz, servoj t = 0.002 s)",
+}
+
+UR3E = ArmSpec(
+    name="ur3e",
+    dh=DH.ur(d1=0.15185, a2=-0.24355, a3=-0.2132, d4=0.13105, d5=0.08535, d6=0.0921, name="ur3e"),
+    joint_names=(
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "elbow_joint",
+        "wrist_1_joint",
+        "wrist_2_joint",
+        "wrist_3_joint",
+    ),
+    lower_rad=(-2 * math.pi, -2 * math.pi, -math.pi, -2 * math.pi, -2 * math.pi, -2 * math.pi),
+    upper_rad=(2 * math.pi, 2 * math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 * math.pi),
+    velocity_rad_s=(math.pi, math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 * math.pi),
+    acceleration_rad_s2=(10.0, 10.0, 10.0, 20.0, 20.0, 20.0),
+    jerk_rad_s3=(100.0, 100.0, 100.0, 200.0, 200.0, 200.0),
+    effort_nm=(56.0, 56.0, 28.0, 12.0, 12.0, 12.0),
+    link_masses_kg=(1.98, 3.4445, 1.437, 0.871, 0.805, 0.261),
+    control_period_s=0.002,
+    sources=_UR_E_SERIES_SOURCES,
+)
+"""The UR3e (e-series)."""
+
+ARMS: Mapping[str, ArmSpec] = MappingProxyType({UR3E.name: UR3E})
+"""Every arm this module knows, by name."""
