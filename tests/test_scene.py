@@ -2,6 +2,7 @@
 
 import json
 import math
+from importlib import resources
 
 import pytest
 
@@ -18,9 +19,13 @@ def test_builtin_scenes_are_within_reach(name):
         assert scene.workspace.outside_distance([item.position[0], item.position[1], item.top]) < 0, item.id
 
 
-def test_scene_files_match_builtins():
+def test_builtin_scene_files_load_by_path():
+    # the package's JSON files are the only copy: by path they load to the same scenes as by name
+    folder = resources.files("robocritics.scenes")
+    assert Scene.builtin_names() == ["breakfast", "recycling", "sorting"]
     for name in Scene.builtin_names():
-        assert Scene.load(f"examples/scenes/{name}.json") == Scene.builtin(name)
+        path = str(folder / f"{name}.json")
+        assert Scene.load(path) == Scene.builtin(name) == Scene.resolve(path) == Scene.resolve(name)
 
 
 @pytest.mark.parametrize(
