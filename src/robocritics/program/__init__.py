@@ -7,8 +7,10 @@
 ['move_above(green_apple, height=0.1)', 'close_gripper()']
 """
 
+from .budget import Budget
+from .language import SAFE_BUILTINS
 from .plan import FrozenArgs, Plan, SkillCall
-from .sandbox import Budget, check_program, run_program
+from .sandbox import check_program, run_program
 from .skills import SKILLS, ObjectView, api_reference, recording
 
 __all__ = [
@@ -18,6 +20,7 @@ __all__ = [
     "Budget",
     "run_program",
     "check_program",
+    "SAFE_BUILTINS",
     "SKILLS",
     "ObjectView",
     "api_reference",

@@ -30,7 +30,7 @@ through a guard" because
 The price is speed (a few microseconds per node), irrelevant for robot
 programs of a few hundred steps. The interpreter recurses in Python for nested
 calls and expressions; while a program runs, the recursion limit is raised (if
-lower) to the current depth + 4000 and restored afterwards, and a
+lower) to the current depth + ``_RECURSION_HEADROOM_FRAMES`` and restored afterwards, and a
 ``RecursionError`` still becomes a :class:`ProgramError`. Runs are independent
 (each has its own interpreter and scopes) and may happen in several threads.
 
@@ -47,14 +47,9 @@ Expressions: literals, arithmetic, comparisons, boolean operators, conditional
 expressions, ``lambda``, list/dict/set comprehensions and generator expressions
 (evaluated eagerly to a list), subscripts and slices, f-strings (format specs
 like ``{x:.2f}`` work; ``str.format`` and ``%`` formatting do not exist), calls.
-Builtins: range, len, min, max, abs, round, enumerate, zip, sum, sorted,
-reversed, list, tuple, dict, set, float, int, str, repr, bool, any, all, print.
-Methods: list append/extend/insert/pop/remove/index/count/reverse/sort/copy/
-clear; dict keys/values/items/get/pop/setdefault/update/copy/clear; set
-add/discard/remove/pop/union/intersection/difference/issubset/issuperset/
-update/copy/clear; str upper/lower/strip/lstrip/rstrip/startswith/endswith/
-split/join/replace/find/count/index/title/capitalize/isdigit/isalpha;
-tuple index/count.
+Builtins, methods and ``math`` members: exactly those of
+:mod:`robocritics.program.language` (``SAFE_BUILTINS``, ``SAFE_METHODS``,
+``MATH_NAMES``), the one list shared with the LLM prompt and the docs.
 
 Not available (rejected before running, with the line and a fix hint): other
 imports, names or attributes starting with ``_``, ``class``, ``try``,
@@ -71,61 +66,43 @@ import math
 import operator
 import re
 import sys
-import time
-from dataclasses import dataclass
 from typing import Any, Callable, Iterator
 
 from ..errors import ProgramError
 from ..scene import Scene
 from . import skills as _skills
+from .budget import Budget
+from .language import MATH_NAMES, SAFE_BUILTINS, SAFE_METHODS
 from .plan import Plan
 from .skills import SKILLS, Namespace, ObjectView, Recorder, _CURRENT, _suggest
 
 __all__ = ["Budget", "run_program", "check_program"]
 
 
-@dataclass(frozen=True)
-class Budget:
-    """Limits for one program run. Exceeding any of them raises :class:`ProgramError`.
-
-    Defaults are generous for robot programs (a pick-and-place task is a few
-    hundred steps) and small enough that a hostile program stops within a
-    fraction of a second.
-    """
-
-    max_steps: int = 100_000
-    """Executed statements + loop iterations + comprehension elements + function calls."""
-    max_skill_calls: int = 2_000
-    """Recorded skill calls."""
-    max_call_depth: int = 50
-    """Nested user-function calls (recursion depth)."""
-    max_seconds: float = 0.5
-    """Wall-clock time of the run, s."""
-    max_len: int = 10_000
-    """Elements of one list/tuple/dict/set, or of any sequence materialised from an iterable (e.g. ``list(range(n))``)."""
-    max_str_len: int = 100_000
-    """Characters of one string."""
-    max_alloc: int = 2_000_000
-    """Elements plus characters the program may create over the whole run."""
-    max_int_bits: int = 4_096
-    """Bit length of any integer (``2**4096`` is ~1234 digits)."""
-    max_nodes: int = 200_000
-    """Nested elements one comparison, hash or str() may walk (counts shared sub-lists each time)."""
-    max_source_chars: int = 100_000
-    """Length of the program source."""
-    max_nesting: int = 100
-    """Depth of the syntax tree (nested expressions/blocks)."""
-    max_output_chars: int = 100_000
-    """Total characters of ``print`` output."""
-
-    def __post_init__(self) -> None:
-        for name, value in self.__dict__.items():
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not value > 0:
-                raise ValueError(f"Budget.{name} must be a positive number, got {value!r}")
-
-
 # --------------------------------------------------------------------------------------
 # tables
+
+_RECURSION_HEADROOM_FRAMES = 4_000
+"""Python frames a run may add: max_call_depth calls x a few frames per call, each with expressions
+nested up to max_nesting deep at a few frames per node, fit with room to spare."""
+_MAX_COLLECTED_PROBLEMS = 20
+"""The static check stops collecting after this many problems: more only slow down rejecting a hostile program."""
+_MAX_LISTED_PROBLEMS = 9
+"""Further problems listed under the first one: enough to fix several in one revision, short enough to read."""
+_STR_CHARS_PER_NODE = 64
+"""Weighing counts a string as one node per this many characters (comparing or hashing it walks them all)."""
+_SCALAR_REPR_CHARS = 24
+"""Upper estimate of the printed length of a float or other scalar (the longest float repr is 24 characters)."""
+_MAX_FORMAT_WIDTH = 1_000
+"""Largest width or precision in an f-string format spec: a wider field is only padding, built in C uncounted."""
+_MAX_ROUND_DIGITS = 400
+"""Largest ``abs(ndigits)`` of round(): more digits than a float has (308 + 17) change nothing but cost big-int work."""
+_MAX_KEYS_SHOWN = 20
+"""Keys listed in a KeyError message."""
+_QUOTED_VALUE_CHARS = 60
+"""Values quoted in error messages are cut to this length so the message stays readable."""
+_QUOTED_INT_BITS = 64
+"""Integers wider than this are quoted in error messages by their bit length, not their digits."""
 
 _MODULE_ALIASES = {"math": "math", "lib": "lib", "robot_lib": "lib", "robocritics": "lib", "skills": "lib"}
 _MODULE_HINTS = {
@@ -205,25 +182,11 @@ _UNARY: dict[type, Callable[[Any], Any]] = {
     ast.UAdd: operator.pos, ast.USub: operator.neg, ast.Not: operator.not_, ast.Invert: operator.invert,
 }
 
-_METHODS: dict[type, frozenset[str]] = {
-    list: frozenset("append extend insert pop remove index count reverse sort copy clear".split()),
-    dict: frozenset("keys values items get pop setdefault update copy clear".split()),
-    set: frozenset(
-        "add discard remove pop union intersection difference issubset issuperset update copy clear".split()
-    ),
-    str: frozenset(
-        "upper lower strip lstrip rstrip startswith endswith split join replace find count index title "
-        "capitalize isdigit isalpha".split()
-    ),
-    tuple: frozenset("index count".split()),
-}
+_METHODS: dict[type, frozenset[str]] = {t: frozenset(names) for t, names in SAFE_METHODS.items()}
 
-_MATH_NAMES = (
-    "pi e tau inf nan sqrt sin cos tan asin acos atan atan2 sinh cosh tanh hypot degrees radians floor ceil "
-    "trunc fabs exp log log10 log2 pow copysign fmod isclose isfinite isinf isnan gcd isqrt modf remainder"
-).split()
+# math functions whose C versions would iterate without limits: the interpreter implements them (_m_<name>)
 _MATH_WRAPPED = ("fsum", "prod", "dist")
-_MATH_ALL = frozenset((*_MATH_NAMES, *_MATH_WRAPPED))
+_MATH_ALL = frozenset(MATH_NAMES)
 
 _NoneType = type(None)
 _SCALARS = frozenset({int, float, bool, complex, str, _NoneType, type(Ellipsis)})
@@ -239,7 +202,7 @@ _ITERATORS = frozenset(
         type(iter(())),
         type(iter("")),
         type(iter(range(1))),
-        type(iter(range(2**70))),
+        type(iter(range(2**70))),  # ranges past a C long iterate with their own type
         type(iter({})),
         type(iter({}.values())),
         type(iter({}.items())),
@@ -325,7 +288,7 @@ class _Checker:
         max_depth = self.budget.max_nesting
         # (node, depth, in_loop, in_func, parent, where)
         stack: list[tuple[Any, int, bool, bool, Any, tuple[int, int]]] = [(tree, 0, False, False, None, (0, 0))]
-        while stack and len(self.problems) < 20:
+        while stack and len(self.problems) < _MAX_COLLECTED_PROBLEMS:
             node, depth, in_loop, in_func, parent, where = stack.pop()
             if hasattr(node, "lineno"):
                 where = (node.lineno, self.src.col(node.lineno, node.col_offset))
@@ -363,10 +326,10 @@ class _Checker:
             rest = self.problems[1:]
             if rest:
                 message += "\nOther problems:" + "".join(
-                    f"\n  line {ln}, column {c}: {m}" for ln, c, m in rest[:9]
+                    f"\n  line {ln}, column {c}: {m}" for ln, c, m in rest[:_MAX_LISTED_PROBLEMS]
                 )
-                if len(rest) > 9:
-                    message += f"\n  ... and {len(rest) - 9} more"
+                if len(rest) > _MAX_LISTED_PROBLEMS:
+                    message += f"\n  ... and {len(rest) - _MAX_LISTED_PROBLEMS} more"
             raise ProgramError(message, line, col)
 
     def _node(self, node: Any, t: type, in_loop: bool, in_func: bool, parent: Any, where: tuple[int, int]) -> None:
@@ -618,10 +581,11 @@ class _Interpreter:
         self.b = budget
         self.src = _Source(source)
         self.plan = Plan(source=source, calls=[], output=[])
-        self.rec = Recorder(scene, self.plan, budget.max_skill_calls, budget.max_output_chars)
+        self.rec = Recorder(scene, self.plan, budget)
         self.steps = 0
         self.depth = 0
         self.alloc = 0
+        self.clock = budget.clock
         self.deadline = 0.0
         self.call_lines: list[int] = []
         self.loops: list[Any] = []
@@ -633,22 +597,19 @@ class _Interpreter:
         views = self.rec.views
         lib_members = {name: _Builtin(name, fn, "skill", self) for name, fn in SKILLS.items()}
         math_members: dict[str, Any] = {}
-        for name in _MATH_NAMES:
+        for name in MATH_NAMES:
+            if name in _MATH_WRAPPED:
+                math_members[name] = _Builtin(name, getattr(self, "_m_" + name), "math", self)
+                continue
             value = getattr(math, name)
             math_members[name] = _Builtin(name, value, "math", self, bind=False) if callable(value) else value
-        math_members["fsum"] = _Builtin("fsum", self._m_fsum, "math", self)
-        math_members["prod"] = _Builtin("prod", self._m_prod, "math", self)
-        math_members["dist"] = _Builtin("dist", self._m_dist, "math", self)
         self.modules = {
             "lib": Namespace("lib", lib_members, "skill"),
             "math": Namespace("math", math_members, "member"),
         }
-        base: dict[str, Any] = {}
-        for name in (
-            "range len min max abs round enumerate zip sum sorted reversed list tuple dict set float int str repr "
-            "bool any all print"
-        ).split():
-            base[name] = _Builtin(name, getattr(self, "_b_" + name), "builtin", self)
+        base: dict[str, Any] = {
+            name: _Builtin(name, getattr(self, "_b_" + name), "builtin", self) for name in SAFE_BUILTINS
+        }
         base.update(lib_members)
         base["lib"] = self.modules["lib"]
         base["math"] = self.modules["math"]
@@ -663,11 +624,11 @@ class _Interpreter:
         token = _CURRENT.set(self.rec)
         old_limit = sys.getrecursionlimit()
         here = _frame_depth()
-        wanted = here + 4_000
+        wanted = here + _RECURSION_HEADROOM_FRAMES
         if old_limit < wanted:
             sys.setrecursionlimit(wanted)
         try:
-            self.deadline = time.perf_counter() + self.b.max_seconds
+            self.deadline = self.clock() + self.b.max_seconds
             module = _Scope({}, None, None, "<module>")
             self._exec_block(self.tree.body, module)
         except RecursionError:
@@ -714,7 +675,7 @@ class _Interpreter:
                 "does a loop never end? A robot task needs far fewer steps",
                 where,
             )
-        if time.perf_counter() > self.deadline:
+        if self.clock() > self.deadline:
             where = self.loops[-1] if self.loops else node
             raise self._error(
                 f"the program ran longer than {self.b.max_seconds:g} s; does a loop never end or do too much work?",
@@ -781,7 +742,7 @@ class _Interpreter:
             v, depth = pop()
             t = type(v)
             if t is str:
-                count += 1 + len(v) // 64
+                count += 1 + len(v) // _STR_CHARS_PER_NODE
                 nchars += len(v) + 2
                 continue
             if depth >= max_depth:
@@ -801,9 +762,9 @@ class _Interpreter:
                 for x in elems:
                     tx = type(x)
                     if tx is int:
-                        nchars += (x.bit_length() * 3) // 10 + 2
+                        nchars += (x.bit_length() * 3) // 10 + 2  # decimal digits: bits x log10(2), rounded up
                     elif tx not in _DEEP:
-                        nchars += 24
+                        nchars += _SCALAR_REPR_CHARS
         if count > limit:
             raise self._error(
                 f"this value is too large to compare, hash or print (more than {limit} nested elements; "
@@ -1052,7 +1013,7 @@ class _Interpreter:
             except KeyError:
                 keys = [k for k in obj if isinstance(k, str)]
                 hint = _suggest(key, keys) if isinstance(key, str) else ""
-                shown = ", ".join(repr(k) for k in list(obj)[:20])
+                shown = ", ".join(repr(k) for k in list(obj)[:_MAX_KEYS_SHOWN])
                 raise self._error(
                     f"KeyError: key {_short_repr(key)} is not in the dict{hint or '.'} Keys: {shown or '(none)'}",
                     node,
@@ -1708,8 +1669,10 @@ class _Interpreter:
         if not spec:
             return self._to_str(value, node)
         for digits in re.findall(r"\d+", spec):
-            if len(digits) > 4 or int(digits) > 1000:
-                raise self._error(f"format spec {spec!r} asks for a width or precision above 1000", node)
+            if len(digits) > len(str(_MAX_FORMAT_WIDTH)) or int(digits) > _MAX_FORMAT_WIDTH:
+                raise self._error(
+                    f"format spec {spec!r} asks for a width or precision above {_MAX_FORMAT_WIDTH}", node
+                )
         if type(value) not in _SCALARS and type(value) is not ObjectView:
             raise TypeError(f"format spec {spec!r} only applies to numbers and strings, not {_tname(value)}")
         return format(value, spec)
@@ -1785,8 +1748,8 @@ class _Interpreter:
         if ndigits is not None:
             if type(ndigits) not in (int, bool):
                 raise TypeError(f"round() ndigits must be a whole number, not {_tname(ndigits)}")
-            if abs(ndigits) > 400:
-                raise ValueError("round() ndigits must be between -400 and 400")
+            if abs(ndigits) > _MAX_ROUND_DIGITS:
+                raise ValueError(f"round() ndigits must be between -{_MAX_ROUND_DIGITS} and {_MAX_ROUND_DIGITS}")
             return round(number, ndigits)
         return round(number)
 
@@ -1931,10 +1894,10 @@ def _check_callable(fn: Any, what: str) -> None:
 
 
 def _short_repr(value: Any) -> str:
-    if type(value) is int and value.bit_length() > 64:
+    if type(value) is int and value.bit_length() > _QUOTED_INT_BITS:
         return f"<{value.bit_length()}-bit integer>"
     text = repr(value) if type(value) in _SCALARS or type(value) is ObjectView else f"<{_tname(value)}>"
-    return text if len(text) <= 60 else text[:57] + "..."
+    return text if len(text) <= _QUOTED_VALUE_CHARS else text[: _QUOTED_VALUE_CHARS - 3] + "..."
 
 
 def _not_iterable(value: Any) -> TypeError:

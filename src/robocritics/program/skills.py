@@ -28,11 +28,14 @@ import inspect
 import math
 import numbers
 import sys
+import textwrap
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator, Mapping
 
 from ..errors import ProgramError
 from ..scene import Container, Scene, SceneObject
+from .budget import Budget
+from .language import SAFE_BUILTINS
 from .plan import Plan, SkillCall
 
 __all__ = [
@@ -59,6 +62,13 @@ __all__ = [
 ]
 
 _MAX_COORD_M = 10.0
+"""Largest |coordinate| accepted, m: ten times any tabletop arm's reach, so millimetres given as metres are caught."""
+_MAX_MOVE_M = 1.0
+"""Largest relative move or clearance (move_up/move_down dz, move_above height), m: more than a UR3e's reach."""
+_MAX_WAIT_S = 10.0
+"""Longest wait(), s: a pause in a pick-and-place task, not a way to stall the robot."""
+_DESCRIBED_STR_CHARS = 40
+"""Strings quoted in argument errors are cut to this length."""
 
 
 def _suggest(name: str, candidates: Any, n: int = 3) -> str:
@@ -237,22 +247,16 @@ class Recorder:
 
     ``where`` is ``(line, col, call_stack)`` of the skill call being made; the
     sandbox sets it before every call. In ``direct`` mode (plain Python, see
-    :func:`recording`) it is taken from the caller's frame.
+    :func:`recording`) it is taken from the caller's frame. ``budget`` gives the
+    limits on skill calls and printed characters.
     """
 
-    def __init__(
-        self,
-        scene: Scene,
-        plan: Plan,
-        max_skill_calls: int = 2_000,
-        max_output_chars: int = 100_000,
-        direct: bool = False,
-    ):
+    def __init__(self, scene: Scene, plan: Plan, budget: Budget = Budget(), direct: bool = False):
         self.scene = scene
         self.plan = plan
         self.views = views_of(scene)
-        self.max_skill_calls = max_skill_calls
-        self.max_output_chars = max_output_chars
+        self.max_skill_calls = budget.max_skill_calls
+        self.max_output_chars = budget.max_output_chars
         self.output_chars = 0
         self.direct = direct
         self.where: tuple[int, int, tuple[int, ...]] = (0, 0, ())
@@ -300,10 +304,13 @@ _CURRENT: contextvars.ContextVar[Recorder | None] = contextvars.ContextVar("robo
 
 
 @contextmanager
-def recording(scene: Scene, plan: Plan | None = None, max_skill_calls: int = 2_000) -> Iterator[Plan]:
-    """Record skill calls made by trusted Python code into a Plan (line numbers from the caller)."""
+def recording(scene: Scene, plan: Plan | None = None, budget: Budget | None = None) -> Iterator[Plan]:
+    """Record skill calls made by trusted Python code into a Plan (line numbers from the caller).
+
+    ``budget`` limits skill calls and printed characters as in a sandboxed run.
+    """
     plan = plan if plan is not None else Plan()
-    token = _CURRENT.set(Recorder(scene, plan, max_skill_calls=max_skill_calls, direct=True))
+    token = _CURRENT.set(Recorder(scene, plan, budget or Budget(), direct=True))
     try:
         yield plan
     finally:
@@ -327,7 +334,7 @@ def _describe(value: Any) -> str:
     if isinstance(value, ObjectView):
         return f"scene object {value._id}"
     if isinstance(value, str):
-        text = value if len(value) <= 40 else value[:37] + "..."
+        text = value if len(value) <= _DESCRIBED_STR_CHARS else value[: _DESCRIBED_STR_CHARS - 3] + "..."
         return f"str {text!r}"
     if isinstance(value, (bool, int, float)):
         return f"{type(value).__name__} {value!r}"
@@ -392,8 +399,10 @@ def _dz(rec: Recorder, dz: Any, skill: str) -> float:
     if v <= 0:
         other = "move_down" if skill == "move_up" else "move_up"
         raise rec.error(f"{skill}: dz must be a positive distance in metres, got {v:g}; use {other} to go the other way")
-    if v > 1.0:
-        raise rec.error(f"{skill}: dz={v:g} m is more than 1 m; distances are in metres (did you mean {v / 1000:g}?)")
+    if v > _MAX_MOVE_M:
+        raise rec.error(
+            f"{skill}: dz={v:g} m is more than {_MAX_MOVE_M:g} m; distances are in metres (did you mean {v / 1000:g}?)"
+        )
     return v
 
 
@@ -445,8 +454,11 @@ def move_above(obj, height=0.1):
     h = _number(rec, height, "move_above", "height", "metres")
     if h < 0:
         raise rec.error(f"move_above: height must be >= 0 m above the top, got {h:g}; use move_to to go lower")
-    if h > 1.0:
-        raise rec.error(f"move_above: height={h:g} m is more than 1 m; heights are in metres (did you mean {h / 1000:g}?)")
+    if h > _MAX_MOVE_M:
+        raise rec.error(
+            f"move_above: height={h:g} m is more than {_MAX_MOVE_M:g} m; heights are in metres "
+            f"(did you mean {h / 1000:g}?)"
+        )
     if isinstance(obj, (ObjectView, str)):
         args: dict[str, Any] = {"object": rec.object_id(obj, "move_above", "obj"), "height": h}
     elif isinstance(obj, (list, tuple)):
@@ -582,8 +594,8 @@ def wait(seconds):
     """
     rec = _rec()
     s = _number(rec, seconds, "wait", "seconds", "seconds")
-    if not 0 <= s <= 10:
-        raise rec.error(f"wait: seconds must be in 0..10, got {s:g}")
+    if not 0 <= s <= _MAX_WAIT_S:
+        raise rec.error(f"wait: seconds must be in 0..{_MAX_WAIT_S:g}, got {s:g}")
     rec.record("wait", {"seconds": s})
 
 
@@ -643,13 +655,7 @@ Conventions: lengths in metres, angles in radians, times in seconds. Coordinates
 are in the robot base frame: x forward, y left, z up; the table top is z = 0.
 The fingertips point down in every move.
 
-Call skills directly (`move_to(...)`) or through `lib` (`lib.move_to(...)`).
-`math` is available (`import math` / `from math import pi` also work). You may
-define helper functions, use variables, lists, dicts, loops, `if`, f-strings and
-the builtins range, len, min, max, abs, round, enumerate, zip, sum, sorted,
-reversed, list, tuple, dict, set, float, int, str, bool, any, all, print.
-Other imports, classes, try/except, files and names starting with `_` are not
-available.
+{language}
 
 Scene objects and containers are variables named by their id (e.g.
 `green_apple`, `white_box`); `objects` lists all objects and `containers` all
@@ -676,9 +682,21 @@ Example:
 """
 
 
+def _language_rules() -> str:
+    """What a program may use besides the skills; the builtins are the sandbox's own list."""
+    return textwrap.fill(
+        "Call skills directly (`move_to(...)`) or through `lib` (`lib.move_to(...)`). `math` is available "
+        "(`import math` / `from math import pi` also work). You may define helper functions, use variables, "
+        "lists, dicts, loops, `if`, f-strings and the builtins " + ", ".join(SAFE_BUILTINS) + ". Other imports, "
+        "classes, try/except, files and names starting with `_` are not available.",
+        width=80,
+        break_on_hyphens=False,
+    )
+
+
 def api_reference() -> str:
     """All skill signatures and docstrings plus the language rules, for the model's system prompt."""
-    parts = [_PREAMBLE, "## Skills\n"]
+    parts = [_PREAMBLE.format(language=_language_rules()), "## Skills\n"]
     for name, fn in [*SKILLS.items(), ("print", print)]:
         doc = inspect.cleandoc(fn.__doc__ or "")
         body = "\n".join("    " + line if line else "" for line in doc.splitlines())
