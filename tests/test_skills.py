@@ -11,7 +11,17 @@ import pickle
 import pytest
 
 from robocritics.errors import ProgramError
-from robocritics.program import SKILLS, ObjectView, Plan, SkillCall, api_reference, recording, run_program
+from robocritics.program import (
+    SAFE_BUILTINS,
+    SKILLS,
+    Budget,
+    ObjectView,
+    Plan,
+    SkillCall,
+    api_reference,
+    recording,
+    run_program,
+)
 from robocritics.program import skills
 from robocritics.program.plan import FrozenArgs
 from robocritics.scene import Scene
@@ -279,3 +289,24 @@ def test_docstring_examples_run():
         plan = run_program("import math\n" + "\n".join(lines), SORTING)
         if name != "print":
             assert name in [c.skill for c in plan.calls], name
+
+
+def test_api_reference_names_the_sandbox_builtins():
+    text = " ".join(api_reference().split())
+    assert "the builtins " + ", ".join(SAFE_BUILTINS) + "." in text
+
+
+def test_skill_docstrings_state_the_limits_the_skills_enforce():
+    assert f"0 <= seconds <= {skills._MAX_WAIT_S:g}" in skills.wait.__doc__
+    for fn in (skills.move_up, skills.move_down):
+        assert f"0 < dz <= {skills._MAX_MOVE_M:g}" in fn.__doc__
+    assert f"must be 0..{skills._MAX_MOVE_M:g}" in skills.move_above.__doc__
+    last_ok = f"wait({skills._MAX_WAIT_S:g})\nmove_up({skills._MAX_MOVE_M:g})\n"
+    assert [c.skill for c in run_program(last_ok, SORTING).calls] == ["wait", "move_up"]
+
+
+def test_recording_takes_the_sandbox_budget():
+    with pytest.raises(ProgramError, match="more than 2 skill calls"):
+        with recording(SORTING, budget=Budget(max_skill_calls=2)):
+            for _ in range(3):
+                skills.home()
