@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
 from critic_reference import ref_space_usage
 from robocritics.critic import Flag
-from robocritics.critics.space_usage import hull_points, hull_volume, outside_distance, volume_error_bound
+from robocritics.critics.space_usage import hull_points, hull_volume, volume_error_bound
 from robocritics.scene import Scene, Workspace
 from strategies import trajectories
 from synth import make_trajectory, realistic_trajectory
@@ -94,10 +94,18 @@ def test_decimated_hull_is_within_its_error_bound_of_the_exact_hull():
         assert beyond.max() <= tol + 1e-12
 
 
-def test_fast_outside_distance_matches_the_workspace_definition():
+def test_workspace_outside_distance_matches_a_per_point_reference():
+    """The component-wise formula against |p - c| - r evaluated point by point with math.dist."""
     ws = Workspace(center=(0.1, -0.2, 0.3), radius_m=0.4)
     X = np.random.default_rng(1).uniform(-1, 1, (50, 4, 3))
-    np.testing.assert_allclose(outside_distance(ws, X), ws.outside_distance(X), rtol=0, atol=1e-12)
+    X[0, 0] = ws.center  # the centre: -r
+    X[0, 1] = np.array(ws.center) + [0.4, 0.0, 0.0]  # on the sphere: 0
+    expected = np.array([[math.dist(p, ws.center) - ws.radius_m for p in row] for row in X.tolist()])
+    got = ws.outside_distance(X)
+    assert got.shape == (50, 4)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    assert got[0, 0] == pytest.approx(-0.4) and got[0, 1] == pytest.approx(0.0, abs=1e-12)
+    assert float(ws.outside_distance([0.1, -0.2, 1.0])) == pytest.approx(0.3)  # a single point
 
 
 def test_critic_uses_a_custom_workspace_method():

@@ -37,8 +37,8 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..critic import CriticParams, Flag, Verdict, fmt_length, fmt_value, hookimpl, make_signal, threshold_verdict
-from ._fast import take_columns
+from .. import hookimpl
+from ..critic import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["CollisionCritic", "register_critics", "Counted", "counted_distances"]
 
@@ -128,7 +128,7 @@ class Counted:
         always = self.columns.copy()
         always[self.gcols] = False
         out = np.min(P, axis=1, where=always, initial=np.inf)
-        gripper = np.min(take_columns(P, self.gcols), axis=1, where=~self.intended, initial=np.inf)
+        gripper = np.min(np.take(P, self.gcols, axis=1), axis=1, where=~self.intended, initial=np.inf)
         return np.minimum(out, gripper, out=out)
 
 

@@ -37,9 +37,9 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..critic import CriticParams, Flag, Verdict, fmt_value, hookimpl, make_signal, threshold_verdict
+from .. import hookimpl
+from ..critic import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
 from ..errors import CriticError
-from ._fast import time_derivative
 
 __all__ = ["EndEffectorPoseCritic", "register_critics", "spearing_speed"]
 
@@ -74,16 +74,13 @@ def spearing_speed(poses: np.ndarray, time: np.ndarray) -> tuple[np.ndarray, np.
     """
     p = np.ascontiguousarray(poses[:, :3, 3].T)  # (3, T) m
     f = np.array(poses[:, :3, 2].T, order="C")  # (3, T) finger direction, a copy we may normalise
-    norm = np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+    norm = np.linalg.norm(f, axis=0)
     if np.any(norm < 1e-9):
         i = int(np.argmax(norm < 1e-9))
         raise CriticError(f"the finger direction (z axis of the TCP frame) is zero at sample {i}; cannot judge spearing")
     f /= norm
-    v = time_derivative(p, time)  # (3, T) m/s
-    s = v[0] * f[0]
-    s += v[1] * f[1]
-    s += v[2] * f[2]
-    np.maximum(s, 0.0, out=s)
+    v = np.gradient(p, time, axis=1) if len(time) > 1 else np.zeros_like(p)  # (3, T) m/s
+    s = np.maximum(np.einsum("it,it->t", v, f), 0.0)
     return s, v, f
 
 
@@ -103,7 +100,7 @@ class EndEffectorPoseCritic:
             "max_spearing_speed_m_s": worst,
             "tcp_speed_at_worst_m_s": speed,
             "alignment_at_worst": worst / speed if speed > 0 else 0.0,
-            "max_tcp_speed_m_s": float(np.sqrt((v * v).sum(axis=0)).max()),
+            "max_tcp_speed_m_s": float(np.linalg.norm(v, axis=0).max()),
         }
         signal = make_signal(
             time,

@@ -42,11 +42,10 @@ import numpy as np
 from pydantic import Field
 from scipy.spatial import ConvexHull, QhullError
 
-from ..critic import CriticParams, Flag, Verdict, fmt_length, hookimpl, make_signal, threshold_verdict
-from ._fast import positions as frame_positions
-from ._fast import row_max, sq_norm3
+from .. import hookimpl
+from ..critic import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
 
-__all__ = ["SpaceUsageCritic", "register_critics", "hull_points", "hull_volume", "volume_error_bound", "outside_distance"]
+__all__ = ["SpaceUsageCritic", "register_critics", "hull_points", "hull_volume", "volume_error_bound"]
 
 BLOCK = 64
 
@@ -85,7 +84,7 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
         M = np.empty((nb * BLOCK, L))  # squared second-difference norms by sample (0 where undefined)
         M[0] = 0.0
         M[T - 1 :] = 0.0
-        sq_norm3(d2, out=M[1 : T - 1])
+        np.einsum("tli,tli->tl", d2, d2, out=M[1 : T - 1])
         Mb = np.sqrt(M.reshape(nb, BLOCK, L).max(axis=1))  # (nb, L) block maxima, m
         with np.errstate(divide="ignore"):
             smax = np.sqrt(8.0 * tolerance_m / Mb)
@@ -114,11 +113,6 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
         if dup.any():
             P, ti, li = P[~dup], ti[~dup], li[~dup]
     return P, ti, li
-
-
-def outside_distance(workspace, X: np.ndarray) -> np.ndarray:
-    """``workspace.outside_distance(X)`` for ``X (T, L, 3)``, m (> 0 outside), as a float array."""
-    return np.asarray(workspace.outside_distance(X), dtype=float)
 
 
 def hull_volume(P: np.ndarray) -> tuple[float, float, np.ndarray]:
@@ -152,16 +146,16 @@ class SpaceUsageCritic:
         if params.frames:
             sel = [trajectory.frame_index(n) for n in params.frames]
             names = tuple(names[i] for i in sel)
-            X = frame_positions(trajectory.frames, sel)
+            X = np.ascontiguousarray(trajectory.frames[:, sel][:, :, :3, 3])
         else:
-            X = frame_positions(trajectory.frames)
+            X = np.ascontiguousarray(trajectory.frames[:, :, :3, 3])  # (T, L, 3) m; contiguous: 3x faster to scan
         time = trajectory.time
         workspace = scene.workspace
         w_volume = float(workspace.volume_m3)
 
         # --- leaving the workspace: every point ---------------------------------
-        outside = outside_distance(workspace, X)  # (T, L) m, > 0 outside
-        per_sample = row_max(outside)
+        outside = np.asarray(workspace.outside_distance(X), dtype=float)  # (T, L) m, > 0 outside
+        per_sample = outside.max(axis=1)
         flat = int(np.argmax(outside))
         oi, ol = divmod(flat, outside.shape[1])
         worst_out = float(outside[oi, ol])
