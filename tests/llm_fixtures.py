@@ -1,6 +1,6 @@
 """pytest fixtures for the LLM tests: a fresh ``LLMServer`` and clients pointed at it.
 
-Import the fixtures into a test module: ``from llm_fixtures import llm_server, make_client``.
+Import the fixtures into a test module: ``from llm_fixtures import llm_server, make_client, sleeps``.
 Modules that build clients from the environment should also use ``clean_llm_env``
 (e.g. ``pytestmark = pytest.mark.usefixtures("clean_llm_env")``), so a developer's
 real configuration or API key never reaches a test server.
@@ -42,11 +42,20 @@ def llm_server() -> Iterator[LLMServer]:
 
 
 @pytest.fixture
-def make_client(llm_server: LLMServer) -> Iterator[Callable[..., OpenAICompatible]]:
-    """Factory of ``OpenAICompatible`` clients for ``llm_server`` with fast retries.
+def sleeps() -> list[float]:
+    """The pauses (s) that clients made by ``make_client`` asked for between retries, in order."""
+    return []
 
-    Defaults: model ``test-chat``, embedding model ``test-embed``, timeout 2 s,
-    backoff base 0.01 s; any keyword overrides them. Clients are closed after the test.
+
+@pytest.fixture
+def make_client(llm_server: LLMServer, sleeps: list[float]) -> Iterator[Callable[..., OpenAICompatible]]:
+    """Factory of ``OpenAICompatible`` clients for ``llm_server`` that do not really wait between retries.
+
+    Each pause a client would sleep is appended to ``sleeps`` instead, so retry
+    timing is asserted exactly and costs no time. Defaults: model ``test-chat``,
+    embedding model ``test-embed``, timeout 2 s, backoff base 0.01 s capped at
+    0.05 s; any keyword overrides them (``sleep=time.sleep`` for real waits).
+    Clients are closed after the test.
     """
     clients: list[OpenAICompatible] = []
 
@@ -59,6 +68,7 @@ def make_client(llm_server: LLMServer) -> Iterator[Callable[..., OpenAICompatibl
             timeout_s=2.0,
             backoff_base_s=0.01,
             backoff_max_s=0.05,
+            sleep=sleeps.append,
         )
         options.update(overrides)
         client = OpenAICompatible(**options)

@@ -63,7 +63,7 @@ class Fail:
 
 @dataclass(frozen=True)
 class Delay:
-    """Sleep ``seconds`` before answering with ``then`` (default: the normal answer)."""
+    """Wait ``seconds`` (or until the server stops) before answering with ``then`` (default: the normal answer)."""
 
     seconds: float
     then: Action | None = None
@@ -177,12 +177,14 @@ class LLMServer:
         self.requests: list[RecordedRequest] = []
         self._actions: deque[Action] = deque()
         self._lock = threading.Lock()
+        self._stopping = threading.Event()  # ends every Delay, so stopping never waits for one
         self._httpd: ThreadingHTTPServer | None = None
         self._thread: threading.Thread | None = None
 
     # lifecycle
 
     def start(self) -> LLMServer:
+        self._stopping.clear()
         handler = _make_handler(self)
         self._httpd = ThreadingHTTPServer(("127.0.0.1", 0), handler)
         self._httpd.daemon_threads = True
@@ -193,6 +195,7 @@ class LLMServer:
         return self
 
     def stop(self) -> None:
+        self._stopping.set()
         if self._httpd is not None:
             self._httpd.shutdown()
             self._httpd.server_close()
@@ -308,7 +311,9 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
 
         def _perform(self, action: Action | None, request: Any) -> None:
             if isinstance(action, Delay):
-                time.sleep(action.seconds)
+                if server._stopping.wait(action.seconds):
+                    self.close_connection = True
+                    return
                 self._perform(action.then, request)
             elif isinstance(action, Fail):
                 headers = dict(action.headers)

@@ -34,7 +34,7 @@ import logging
 import math
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
@@ -61,7 +61,18 @@ ENV_API_KEYS = ("ROBOCRITICS_API_KEY", "OPENAI_API_KEY")
 #: Statuses that mean "try again later" rather than "your request is wrong".
 RETRYABLE_STATUSES = frozenset({408, 409, 429})
 
+#: Seconds per network phase: a local model can take most of a minute before the first byte of a long prompt.
+DEFAULT_TIMEOUT_S = 60.0
+#: Extra attempts: with the default backoff, about 7.5 s of waiting in all, enough to ride out a server restart.
+DEFAULT_MAX_RETRIES = 4
+#: Longest pause between two attempts, s: past it, waiting longer only delays the error.
+DEFAULT_BACKOFF_MAX_S = 30.0
+#: Longest Retry-After honoured, s: a server that asks for more is treated as down rather than throttling.
+DEFAULT_RETRY_AFTER_CAP_S = 60.0
+
+# Characters of a server's body quoted in an error: enough to recognise an HTML error page or a JSON error.
 _EXCERPT_CHARS = 300
+# Shorter runs of the key's characters are common in ordinary text; 8 cannot be guessed from an excerpt.
 _MIN_REDACTED_RUN = 8
 
 
@@ -182,7 +193,8 @@ class OpenAICompatible:
     so at most ``max_retries + 1`` requests are sent per call. Backoff before
     retry n (0-based) is ``min(backoff_base_s * 2**n, backoff_max_s)`` seconds,
     raised to the server's ``Retry-After`` × ``retry_after_scale`` capped at
-    ``retry_after_cap_s``. ``transport`` is passed to ``httpx.Client``.
+    ``retry_after_cap_s``; ``sleep(seconds)`` does the waiting (tests pass one
+    that records the pauses instead). ``transport`` is passed to ``httpx.Client``.
 
     ``name`` is the chat model; ``embedding_name`` the embedding model.
     """
@@ -192,17 +204,18 @@ class OpenAICompatible:
         base_url: str | None = None,
         model: str | None = None,
         api_key: str | None = None,
-        timeout_s: float = 60.0,
-        max_retries: int = 4,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+        max_retries: int = DEFAULT_MAX_RETRIES,
         embedding_model: str | None = None,
         temperature: float = 0.0,
         transport: httpx.BaseTransport | None = None,
         *,
         backoff_base_s: float = 0.5,
-        backoff_max_s: float = 30.0,
-        retry_after_cap_s: float = 60.0,
+        backoff_max_s: float = DEFAULT_BACKOFF_MAX_S,
+        retry_after_cap_s: float = DEFAULT_RETRY_AFTER_CAP_S,
         retry_after_scale: float = 1.0,
         embedding_batch_size: int = 64,
+        sleep: Callable[[float], None] = time.sleep,
     ):
         base_url = base_url or os.environ.get(ENV_BASE_URL) or None
         model = model or os.environ.get(ENV_MODEL) or None
@@ -236,6 +249,7 @@ class OpenAICompatible:
         self.retry_after_cap_s = float(retry_after_cap_s)
         self.retry_after_scale = float(retry_after_scale)
         self.embedding_batch_size = int(embedding_batch_size)
+        self._sleep = sleep
 
         self._http = httpx.Client(
             timeout=httpx.Timeout(self.timeout_s),
@@ -436,7 +450,7 @@ class OpenAICompatible:
                 log.warning(
                     "%s: attempt %d of %d %s; retrying in %.2f s", what, attempt + 1, attempts, last_problem, delay_s
                 )
-                time.sleep(delay_s)
+                self._sleep(delay_s)
         raise LLMError(f"{what} at {url} failed after {attempts} attempts; last error: {last_problem}")
 
     def _delay_s(self, attempt: int, retry_after_s: float | None) -> float:
@@ -580,8 +594,11 @@ def _error_message(body: Any) -> str | None:
     return None
 
 
-def _retry_after_seconds(headers: httpx.Headers) -> float | None:
-    """Seconds a server asked us to wait: ``retry-after-ms``, or ``Retry-After`` in seconds or as an HTTP date."""
+def _retry_after_seconds(headers: httpx.Headers, now_s: float | None = None) -> float | None:
+    """Seconds a server asked us to wait: ``retry-after-ms``, or ``Retry-After`` in seconds or as an HTTP date.
+
+    An HTTP date is measured from ``now_s`` (Unix time, s; default: the current time).
+    """
     ms = headers.get("retry-after-ms")
     if ms is not None:
         try:
@@ -605,4 +622,4 @@ def _retry_after_seconds(headers: httpx.Headers) -> float | None:
         return None
     if when is None:
         return None
-    return max(0.0, when.timestamp() - time.time())
+    return max(0.0, when.timestamp() - (time.time() if now_s is None else now_s))
