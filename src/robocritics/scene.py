@@ -20,7 +20,6 @@ path (``objects[2].size[0]``) and the problem.
 
 from __future__ import annotations
 
-import difflib
 import json
 import math
 import re
@@ -32,6 +31,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from ._suggest import did_you_mean
 from .errors import SceneError
 from .robot.arms import UR3E
 
@@ -325,9 +325,7 @@ class Scene(_Model):
         """One of the paper's task scenes: ``recycling``, ``sorting`` or ``breakfast``."""
         names = cls.builtin_names()
         if name not in names:
-            close = difflib.get_close_matches(name, names, n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise SceneError(f"no built-in scene {name!r} (have {', '.join(names)}){hint}")
+            raise SceneError(f"no built-in scene {name!r} (have {', '.join(names)}){did_you_mean(name, names)}")
         return cls.model_validate(json.loads(resources.files("robocritics.scenes").joinpath(f"{name}.json").read_text()))
 
     @classmethod

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import contextvars
 import copy
-import difflib
 import inspect
 import math
 import numbers
@@ -32,6 +31,7 @@ import textwrap
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator, Mapping
 
+from .._suggest import did_you_mean
 from ..errors import ProgramError
 from ..scene import Container, Scene, SceneObject
 from .budget import Budget
@@ -72,10 +72,8 @@ _DESCRIBED_STR_CHARS = 40
 
 
 def _suggest(name: str, candidates: Any, n: int = 3) -> str:
-    close = difflib.get_close_matches(str(name), [str(c) for c in candidates], n=n, cutoff=0.6)
-    if not close:
-        return ""
-    return "; did you mean " + " or ".join(repr(c) for c in close) + "?"
+    """Up to ``n`` close names (:func:`robocritics._suggest.did_you_mean`)."""
+    return did_you_mean(name, candidates, n)
 
 
 def _plain(value: Any) -> Any:
