@@ -90,12 +90,13 @@ class DH:
             and self.a[2] != 0.0
         )
 
+    def __hash__(self) -> int:
+        # IK caches per-arm models keyed by the DH set; hash the 19 fields once, not per lookup
+        return self._hash
+
     @cached_property
-    def _links(self) -> tuple[tuple[float, float, float, float], ...]:
-        """Per joint ``(a, d, cos alpha, sin alpha)`` for the scalar FK."""
-        return tuple(
-            (a, d, math.cos(al), math.sin(al)) for a, d, al in zip(self.a, self.d, self.alpha)
-        )
+    def _hash(self) -> int:
+        return hash((self.d, self.a, self.alpha, self.name))
 
     @cached_property
     def _ur(self) -> tuple[float, ...]:

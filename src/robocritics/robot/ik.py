@@ -51,7 +51,9 @@ has rotation ``R = [x_6 y_6 z_6]`` and position ``p``):
    ``q4 = atan2(x_4 · y_1, x_4 · x_1) - q2 - q3``.
 
 That gives up to 2 × 2 × 2 = 8 solutions. Every one is checked by forward
-kinematics (:func:`dh_forward`'s arithmetic) before it is returned.
+kinematics (Pinocchio on the URDF of the DH chain, :func:`dh_forward`) before it
+is returned. :func:`ur_ik_all` lists the branches; :func:`ur_ik` searches the same
+steps branch-and-bound for the one nearest a seed configuration.
 
 For arms that are not UR-like, :func:`numeric_ik` runs a damped-least-squares
 (Levenberg-Marquardt) iteration on a Pinocchio model with random restarts.
@@ -60,12 +62,16 @@ For arms that are not UR-like, :func:`numeric_ik` runs a damped-least-squares
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import threading
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from robocritics.errors import PlanningError, RobotModelError
+
+from .arms import DH, UR3E
 
 __all__ = [
     "DH",
@@ -110,99 +116,17 @@ _JOINT_NAMES = (
     "joint 6 (wrist 3)",
 )
 
-
-# --------------------------------------------------------------------------- #
-# DH parameters
-# --------------------------------------------------------------------------- #
-
-
-from .arms import DH, UR3E
-
 #: UR3e (e-series) nominal DH parameters, m / rad (from :data:`robocritics.robot.arms.UR3E`).
 UR3E_DH = UR3E.dh
 
 
 # --------------------------------------------------------------------------- #
-# Forward kinematics
+# Forward kinematics: Pinocchio on the URDF of the DH chain
 # --------------------------------------------------------------------------- #
 
 
-def dh_forward(dh: DH, q: Any) -> np.ndarray:
-    """Flange pose ``T_06(q) = A_1 ... A_6`` in the base frame.
-
-    ``q`` is ``(6,)`` rad → returns ``(4, 4)``; or ``(..., 6)`` → ``(..., 4, 4)``
-    (vectorised over leading axes). Translation in metres.
-    """
-    q = np.asarray(q, dtype=float)
-    if q.shape[-1:] != (6,):
-        raise RobotModelError(f"dh_forward: q must have 6 joint values in its last axis, got shape {q.shape}")
-    c = np.cos(q)
-    s = np.sin(q)
-    lead = q.shape[:-1]
-    T = np.broadcast_to(np.eye(4), lead + (4, 4)).copy()
-    A = np.zeros(lead + (4, 4))
-    A[..., 3, 3] = 1.0
-    for i, (a, d, ca, sa) in enumerate(dh._links):
-        ci, si = c[..., i], s[..., i]
-        A[..., 0, 0] = ci
-        A[..., 0, 1] = -si * ca
-        A[..., 0, 2] = si * sa
-        A[..., 0, 3] = a * ci
-        A[..., 1, 0] = si
-        A[..., 1, 1] = ci * ca
-        A[..., 1, 2] = -ci * sa
-        A[..., 1, 3] = a * si
-        A[..., 2, 1] = sa
-        A[..., 2, 2] = ca
-        A[..., 2, 3] = d
-        T = T @ A
-    return T
-
-
-def _fk_rows(links: tuple[tuple[float, float, float, float], ...], q: Sequence[float]) -> list[float]:
-    """Scalar FK in plain floats: the top 3 rows of ``T_06`` row-major (12 floats).
-
-    Right-multiplying a row ``(r0, r1, r2, r3)`` by ``A_i`` gives, with
-    ``u = r0 c + r1 s`` and ``v = r1 c - r0 s``,
-    ``(u, ca v + sa r2, ca r2 - sa v, a u + d r2 + r3)``.
-    """
-    x0, x1, x2, x3 = 1.0, 0.0, 0.0, 0.0
-    y0, y1, y2, y3 = 0.0, 1.0, 0.0, 0.0
-    z0, z1, z2, z3 = 0.0, 0.0, 1.0, 0.0
-    cos, sin = math.cos, math.sin
-    for (a, d, ca, sa), th in zip(links, q):
-        c = cos(th)
-        s = sin(th)
-        u = x0 * c + x1 * s
-        v = x1 * c - x0 * s
-        x0, x1, x2, x3 = u, ca * v + sa * x2, ca * x2 - sa * v, a * u + d * x2 + x3
-        u = y0 * c + y1 * s
-        v = y1 * c - y0 * s
-        y0, y1, y2, y3 = u, ca * v + sa * y2, ca * y2 - sa * v, a * u + d * y2 + y3
-        u = z0 * c + z1 * s
-        v = z1 * c - z0 * s
-        z0, z1, z2, z3 = u, ca * v + sa * z2, ca * z2 - sa * v, a * u + d * z2 + z3
-    return [x0, x1, x2, x3, y0, y1, y2, y3, z0, z1, z2, z3]
-
-
-def _pose_error(fk: Sequence[float], target: Sequence[float]) -> tuple[float, float]:
-    """(position error m, rotation error rad) between two 12-float row-major poses.
-
-    The rotation error uses ``||R_a - R_b||_F / sqrt(2)``, which equals
-    ``2 sin(theta/2)`` for a rotation by ``theta`` between them (≈ theta when small).
-    """
-    dp = math.sqrt(
-        (fk[3] - target[3]) ** 2 + (fk[7] - target[7]) ** 2 + (fk[11] - target[11]) ** 2
-    )
-    sq = 0.0
-    for i in (0, 1, 2, 4, 5, 6, 8, 9, 10):
-        e = fk[i] - target[i]
-        sq += e * e
-    return dp, math.sqrt(0.5 * sq)
-
-
 def dh_urdf(dh: DH, name: str | None = None, base: str = "base_link", tip: str = "tool0") -> str:
-    """A minimal URDF of the DH chain (for cross-checks and benchmarks).
+    """A minimal URDF of the DH chain (the model behind :func:`dh_forward` and the IK check).
 
     Joint ``i`` (``joint_1`` ... ``joint_6``, revolute about its local z, limits
     ±2π rad) sits at the end of the fixed part ``Tz(d) Tx(a) Rx(alpha)`` of link
@@ -238,8 +162,74 @@ def dh_urdf(dh: DH, name: str | None = None, base: str = "base_link", tip: str =
     return "\n".join(out)
 
 
+_CHAIN_MODELS: dict[DH, tuple[Any, int]] = {}
+_THREAD = threading.local()  # Pinocchio Data is scratch space: one per thread and chain
+
+
+class _Chain:
+    """Flange FK of one DH chain: its Pinocchio model and this thread's Data."""
+
+    __slots__ = ("model", "data", "flange")
+
+    def __init__(self, dh: DH):
+        entry = _CHAIN_MODELS.get(dh)
+        if entry is None:
+            model = pin.buildModelFromXML(dh_urdf(dh))
+            entry = _CHAIN_MODELS[dh] = (model, model.getFrameId("tool0", pin.FrameType.BODY))
+        self.model, self.flange = entry
+        datas = getattr(_THREAD, "datas", None)
+        if datas is None:
+            datas = _THREAD.datas = {}
+        data = datas.get(dh)
+        if data is None:
+            data = datas[dh] = self.model.createData()
+        self.data = data
+
+    def pose(self, q) -> Any:
+        """Flange placement ``pin.SE3`` for joints ``q`` (6 rad)."""
+        pin.forwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        return pin.updateFramePlacement(self.model, self.data, self.flange)
+
+    def error(self, q: Sequence[float], t: Sequence[float]) -> tuple[float, float]:
+        """(position error m, rotation error rad) of the flange at ``q`` against the 12-float target ``t``."""
+        return _pose_error(self.pose(q).homogeneous[:3].ravel().tolist(), t)
+
+
+def dh_forward(dh: DH, q: Any) -> np.ndarray:
+    """Flange pose ``T_06(q) = A_1 ... A_6`` in the base frame (Pinocchio on :func:`dh_urdf`).
+
+    ``q`` is ``(6,)`` rad → returns ``(4, 4)``; or ``(..., 6)`` → ``(..., 4, 4)``.
+    Translation in metres.
+    """
+    q = np.asarray(q, dtype=float)
+    if q.shape[-1:] != (6,):
+        raise RobotModelError(f"dh_forward: q must have 6 joint values in its last axis, got shape {q.shape}")
+    chain = _Chain(dh)
+    flat = q.reshape(-1, 6)
+    out = np.empty((len(flat), 4, 4))
+    for i, qi in enumerate(flat):
+        out[i] = chain.pose(qi).homogeneous
+    return out.reshape(q.shape[:-1] + (4, 4))
+
+
+def _pose_error(fk: Sequence[float], target: Sequence[float]) -> tuple[float, float]:
+    """(position error m, rotation error rad) between two 12-float row-major poses.
+
+    The rotation error uses ``||R_a - R_b||_F / sqrt(2)``, which equals
+    ``2 sin(theta/2)`` for a rotation by ``theta`` between them (≈ theta when small).
+    """
+    dp = math.sqrt(
+        (fk[3] - target[3]) ** 2 + (fk[7] - target[7]) ** 2 + (fk[11] - target[11]) ** 2
+    )
+    sq = 0.0
+    for i in (0, 1, 2, 4, 5, 6, 8, 9, 10):
+        e = fk[i] - target[i]
+        sq += e * e
+    return dp, math.sqrt(0.5 * sq)
+
+
 # --------------------------------------------------------------------------- #
-# Analytic UR inverse kinematics
+# Analytic UR inverse kinematics: the steps of the closed form
 # --------------------------------------------------------------------------- #
 
 
@@ -260,76 +250,10 @@ def _pose12(pose: Any) -> list[float]:
     return arr[:3].ravel().tolist()
 
 
-def _branches(
-    k: tuple[float, ...], t: Sequence[float], q6_free: float, planar: list[float] | None = None
-) -> list[list[float]]:
-    """All closed-form branches (unwrapped angles, possibly duplicated) for the
-    12-float row-major target ``t``. See the module docstring for the maths.
-
-    If ``planar`` is a list, the shoulder-to-wrist-1 distance in the arm plane
-    (m) of every (shoulder, wrist) branch is appended to it (for diagnostics)."""
-    d1, a2, a3, d4, d5, d6, a2a3_sq, two_a2a3 = k
-    xx, yx, zx, px, xy, yy, zy, py, xz, yz, zz, pz = t
-    cos, sin, atan2, acos, sqrt = math.cos, math.sin, math.atan2, math.acos, math.sqrt
-
-    shoulder = _shoulder_pans(k, t)
-    if shoulder is None:
-        return []
-    p5x, p5y, pans = shoulder
-    out: list[list[float]] = []
-    for q1 in pans:
-        s1 = sin(q1)
-        c1 = cos(q1)
-        # z1 = (s1, -c1, 0) in the base frame
-        xz1 = xx * s1 - xy * c1  # = cos q6 sin q5
-        yz1 = yx * s1 - yy * c1  # = -sin q6 sin q5
-        zz1 = zx * s1 - zy * c1  # = cos q5
-        s5abs = sqrt(xz1 * xz1 + yz1 * yz1)
-        singular = s5abs < _WRIST_SINGULAR
-        for sign in (1.0, -1.0):
-            q5 = atan2(sign * s5abs, zz1)
-            c5 = cos(q5)
-            s5 = sin(q5)
-            q6 = q6_free if singular else atan2(-sign * yz1, sign * xz1)
-            for attempt in (0, 1):
-                c6 = cos(q6)
-                s6 = sin(q6)
-                # z4 = -(s6 x6 + c6 y6); wrist-1 centre p4 = p5 - d5 z4 in frame-1 planar coordinates
-                z4x = -(s6 * xx + c6 * yx)
-                z4y = -(s6 * xy + c6 * yy)
-                z4z = -(s6 * xz + c6 * yz)
-                X = (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1
-                Y = pz - d6 * zz - d5 * z4z - d1
-                if planar is not None and attempt == 0:
-                    planar.append(sqrt(X * X + Y * Y))
-                c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
-                if -1.0 <= c3 <= 1.0 or attempt or s5abs >= _WRIST_NEAR_SINGULAR:
-                    break
-                q6n = _singular_q6(k, t, c1, s1, p5x, p5y, q6, c3 > 1.0)
-                if q6n is None:
-                    break
-                q6 = q6n
-            if not (-1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL):
-                continue
-            c3 = 1.0 if c3 > 1.0 else (-1.0 if c3 < -1.0 else c3)
-            # x4 = c5 x5 - s5 z6 with x5 = c6 x6 - s6 y6
-            x4x = c5 * (c6 * xx - s6 * yx) - s5 * zx
-            x4y = c5 * (c6 * xy - s6 * yy) - s5 * zy
-            x4z = c5 * (c6 * xz - s6 * yz) - s5 * zz
-            q234 = atan2(x4z, x4x * c1 + x4y * s1)
-            base = atan2(Y, X)
-            t3 = acos(c3)
-            for q3 in (t3, -t3):
-                s3 = sin(q3)
-                q2 = base - atan2(a3 * s3, a2 + a3 * c3)
-                out.append([q1, q2, q3, q234 - q2 - q3, q5, q6])
-    return out
-
-
 def _shoulder_pans(k: tuple[float, ...], t: Sequence[float]) -> tuple[float, float, tuple[float, float]] | None:
-    """Step 1 of the closed form: the base-frame (x, y) of the wrist-2 centre
-    ``p5 = p - d6 z6`` and the two shoulder pans ``q1 = phi + pi/2 ± acos(d4 / r)``;
-    None when the wrist is inside the cylinder of radius ``d4`` around the base axis."""
+    """Step 1: the base-frame (x, y) of the wrist-2 centre ``p5 = p - d6 z6`` and
+    the two shoulder pans ``q1 = phi + pi/2 ± acos(d4 / r)``; None when the wrist
+    is inside the cylinder of radius ``d4`` around the base axis."""
     d4, d6 = k[3], k[5]
     p5x = t[3] - d6 * t[2]
     p5y = t[7] - d6 * t[6]
@@ -343,6 +267,108 @@ def _shoulder_pans(k: tuple[float, ...], t: Sequence[float]) -> tuple[float, flo
     phi = math.atan2(p5y, p5x) + _HALF_PI
     dphi = math.acos(ratio)
     return p5x, p5y, (phi + dphi, phi - dphi)
+
+
+def _wrists(
+    t: Sequence[float], c1: float, s1: float, q6_free: float
+) -> tuple[float, tuple[tuple[float, float], tuple[float, float]]]:
+    """Steps 2 and 3 for the shoulder pan with cosine ``c1`` and sine ``s1``:
+    ``(|sin q5|, ((q5, q6) wrist up, (q5, q6) wrist down))``. At the wrist
+    singularity (``|sin q5| < 1e-10``) ``q6`` is ``q6_free``."""
+    xx, yx, zx, _, xy, yy, zy = t[:7]
+    xz1 = xx * s1 - xy * c1  # z1 = (s1, -c1, 0) in flange axes: cos q6 sin q5
+    yz1 = yx * s1 - yy * c1  # -sin q6 sin q5
+    zz1 = zx * s1 - zy * c1  # cos q5
+    s5abs = math.sqrt(xz1 * xz1 + yz1 * yz1)
+    if s5abs < _WRIST_SINGULAR:
+        return s5abs, ((math.atan2(s5abs, zz1), q6_free), (math.atan2(-s5abs, zz1), q6_free))
+    return s5abs, (
+        (math.atan2(s5abs, zz1), math.atan2(-yz1, xz1)),
+        (math.atan2(-s5abs, zz1), math.atan2(yz1, -xz1)),
+    )
+
+
+def _wrist1_planar(
+    k: tuple[float, ...], t: Sequence[float], c1: float, s1: float, p5x: float, p5y: float, q6: float
+) -> tuple[float, float]:
+    """Step 4, first half: the wrist-1 centre ``p4 = p5 - d5 z4`` (``z4 = -(sin q6 x6 + cos q6 y6)``)
+    in the planar coordinates ``(X, Y)`` of frame 1 (m)."""
+    d1, d5, d6 = k[0], k[4], k[5]
+    xx, yx, _, _, xy, yy, _, _, xz, yz, zz, pz = t
+    c6 = math.cos(q6)
+    s6 = math.sin(q6)
+    z4x = -(s6 * xx + c6 * yx)
+    z4y = -(s6 * xy + c6 * yy)
+    z4z = -(s6 * xz + c6 * yz)
+    return (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1, pz - d6 * zz - d5 * z4z - d1
+
+
+def _elbow(
+    k: tuple[float, ...],
+    t: Sequence[float],
+    c1: float,
+    s1: float,
+    p5x: float,
+    p5y: float,
+    s5abs: float,
+    q5: float,
+    q6: float,
+) -> tuple[float, float, float, float] | None:
+    """Step 4 for one (shoulder, wrist) branch: ``(cos q3, atan2(Y, X), q2 + q3 + q4, q6)``,
+    or None when the wrist-1 centre is out of the elbow's range. Near the wrist
+    singularity ``q6`` may come back nudged (see :func:`_singular_q6`)."""
+    a2a3_sq, two_a2a3 = k[6], k[7]
+    X, Y = _wrist1_planar(k, t, c1, s1, p5x, p5y, q6)
+    c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
+    if not -1.0 <= c3 <= 1.0 and s5abs < _WRIST_NEAR_SINGULAR:
+        nudged = _singular_q6(k, t, c1, s1, p5x, p5y, q6, c3 > 1.0)
+        if nudged is not None:
+            q6 = nudged
+            X, Y = _wrist1_planar(k, t, c1, s1, p5x, p5y, q6)
+            c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
+    if not -1.0 <= c3 <= 1.0:
+        if not -1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL:
+            return None
+        c3 = 1.0 if c3 > 1.0 else -1.0
+    xx, yx, zx, _, xy, yy, zy, _, xz, yz, zz, _ = t
+    c5 = math.cos(q5)
+    s5 = math.sin(q5)
+    c6 = math.cos(q6)
+    s6 = math.sin(q6)
+    # x4 = c5 x5 - s5 z6 with x5 = c6 x6 - s6 y6
+    x4x = c5 * (c6 * xx - s6 * yx) - s5 * zx
+    x4y = c5 * (c6 * xy - s6 * yy) - s5 * zy
+    x4z = c5 * (c6 * xz - s6 * yz) - s5 * zz
+    return c3, math.atan2(Y, X), math.atan2(x4z, x4x * c1 + x4y * s1), q6
+
+
+def _shoulder_lift(k: tuple[float, ...], base: float, q3: float, c3: float) -> float:
+    """Step 4, last: ``q2 = atan2(Y, X) - atan2(a3 sin q3, a2 + a3 cos q3)``."""
+    a2, a3 = k[1], k[2]
+    return base - math.atan2(a3 * math.sin(q3), a2 + a3 * c3)
+
+
+def _branches(k: tuple[float, ...], t: Sequence[float], q6_free: float) -> list[list[float]]:
+    """Every closed-form branch (unwrapped angles, not yet FK-checked, possibly
+    duplicated) for the 12-float row-major target ``t``; see the module docstring."""
+    shoulder = _shoulder_pans(k, t)
+    if shoulder is None:
+        return []
+    p5x, p5y, pans = shoulder
+    out: list[list[float]] = []
+    for q1 in pans:
+        c1, s1 = math.cos(q1), math.sin(q1)
+        s5abs, wrists = _wrists(t, c1, s1, q6_free)
+        for q5, q6 in wrists:
+            elbow = _elbow(k, t, c1, s1, p5x, p5y, s5abs, q5, q6)
+            if elbow is None:
+                continue
+            c3, base, q234, q6 = elbow
+            t3 = math.acos(c3)
+            for q3 in (t3, -t3):
+                q2 = _shoulder_lift(k, base, q3, c3)
+                out.append([q1, q2, q3, q234 - q2 - q3, q5, q6])
+    return out
 
 
 def _singular_q6(
@@ -415,7 +441,8 @@ def _fmt_pos(t: Sequence[float]) -> str:
 
 def _diagnose(dh: DH, t: Sequence[float]) -> str:
     """Plain-words reason why the closed form found no branch for target ``t``."""
-    d1, a2, a3, d4, d5, d6, _, _ = dh._ur
+    k = dh._ur
+    d1, a2, a3, d4, d5, d6, _, _ = k
     rot = np.array([t[0:3], t[4:7], t[8:11]])
     if not np.all(np.isfinite(t)):
         return "the target pose contains NaN or infinite values"
@@ -427,21 +454,23 @@ def _diagnose(dh: DH, t: Sequence[float]) -> str:
     reach = ur_reach(dh)
     if dist > reach:
         return f"out of reach: target is {dist:.3f} m from the shoulder, the arm reaches {reach:.3f} m"
-    p5x, p5y = px - d6 * t[2], py - d6 * t[6]
-    r = math.hypot(p5x, p5y)
-    if r < abs(d4):
+    shoulder = _shoulder_pans(k, t)
+    if shoulder is None:
+        r = math.hypot(px - d6 * t[2], py - d6 * t[6])
         return (
             f"too close to the base axis: the wrist (flange minus d6 = {d6:.4f} m along the "
             f"flange z-axis) is {r:.3f} m from the base z-axis, and the shoulder offset keeps it "
             f"at least {abs(d4):.3f} m away"
         )
     # planar distance shoulder -> wrist-1 centre over the shoulder/wrist branches
+    p5x, p5y, pans = shoulder
+    dists: list[float] = []
+    for q1 in pans:
+        c1, s1 = math.cos(q1), math.sin(q1)
+        for _q5, q6 in _wrists(t, c1, s1, 0.0)[1]:
+            dists.append(math.hypot(*_wrist1_planar(k, t, c1, s1, p5x, p5y, q6)))
     reach_planar = abs(a2) + abs(a3)
     fold = abs(abs(a2) - abs(a3))
-    dists: list[float] = []
-    _branches(dh._ur, t, 0.0, dists)
-    if not dists:
-        return "no branch found (numerical edge case)"
     far = min(dists)
     if far > reach_planar:
         return (
@@ -474,77 +503,69 @@ def ur_ik_all(dh: DH, flange_pose: Any, *, q6_singular: float = 0.0) -> np.ndarr
 
     At the wrist singularity (``sin q5 ≈ 0``) ``q6`` is set to ``q6_singular``.
     """
-    k = dh._ur
-    t = _pose12(flange_pose)
-    links = dh._links
+    return np.array(_solutions(dh, _pose12(flange_pose), q6_singular), dtype=float).reshape(-1, 6)
+
+
+def _solutions(dh: DH, t: Sequence[float], q6_singular: float) -> list[list[float]]:
+    """:func:`ur_ik_all` for the 12-float target ``t``."""
+    chain = _Chain(dh)
     sols: list[list[float]] = []
-    for b in _branches(k, t, q6_singular):
+    for b in _branches(dh._ur, t, q6_singular):
         w = [_wrap(x) for x in b]
         if any(max(abs(_wrap(u - v)) for u, v in zip(w, s)) < _DUPLICATE_TOL for s in sols):
             continue
-        dp, dr = _pose_error(_fk_rows(links, w), t)
+        dp, dr = chain.error(w, t)
         if dp <= _VERIFY_TOL and dr <= _VERIFY_TOL:
             sols.append(w)
-    return np.array(sols, dtype=float).reshape(-1, 6)
+    return sols
 
 
-def _nearest_equivalent(
-    x: float, seed: float, lo: float, hi: float, slack: float = _LIMIT_SLACK
-) -> float | None:
+def _nearest_equivalent(x: float, seed: float, lo: float, hi: float) -> float | None:
     """``x + 2 pi n`` within ``[lo, hi]`` nearest to ``seed`` (clamped into the
-    limits if it is at most ``slack`` outside), or None if none fits."""
-    n = round((seed - x) / _TWO_PI)
-    n_min = math.ceil((lo - slack - x) / _TWO_PI)
-    n_max = math.floor((hi + slack - x) / _TWO_PI)
+    limits if it is at most ``_LIMIT_SLACK`` outside), or None if none fits."""
+    v = x + round((seed - x) / _TWO_PI) * _TWO_PI
+    if lo <= v <= hi:  # the common case: the seed-nearest equivalent is within the limits
+        return v
+    n_min = math.ceil((lo - _LIMIT_SLACK - x) / _TWO_PI)
+    n_max = math.floor((hi + _LIMIT_SLACK - x) / _TWO_PI)
     if n_min > n_max:
         return None
-    n = n_max if n > n_max else (n_min if n < n_min else n)
-    v = x + n * _TWO_PI
+    v = x + (n_max if v > hi else n_min) * _TWO_PI
     return hi if v > hi else (lo if v < lo else v)
 
 
-def _nearest_branch(
+def _nearest_solution(
     k: tuple[float, ...],
     t: Sequence[float],
     sd: Sequence[float],
     lo: Sequence[float],
     hi: Sequence[float],
     w: Sequence[float],
+    verify: Callable[[list[float]], bool] | None = None,
 ) -> list[float] | None:
-    """Fast path of :func:`ur_ik`: the closed form of :func:`_branches` fused
-    with a branch-and-bound search for the seed-nearest branch.
+    """The branch of the closed form with the smallest ``sum w_i (q_i - seed_i)²``
+    within the limits (and, if ``verify`` is given, that passes it), or None.
 
-    Every angle is moved to its ``2 pi``-equivalent within the limits nearest
-    to the seed as soon as it is known; a shoulder branch is abandoned when
-    ``w1 dq1²`` already exceeds the best complete cost, a wrist branch when
-    ``w1 dq1² + w5 dq5² + w6 dq6²`` does, so the trigonometry of branches that
-    cannot win is never evaluated. Returns None when nothing is found, or
-    when the wrist is (nearly) singular, ``|sin q5| < 1e-6`` (``q6`` is then
-    free, or noisy and possibly in need of the nudge of :func:`_branches`):
-    the caller then takes the general path.
+    The same steps as :func:`_branches`, searched branch-and-bound: each angle
+    is moved to its ``2 pi``-equivalent within the limits nearest to the seed
+    as soon as it is known, and a branch is abandoned as soon as its partial
+    cost reaches the best complete one, so the trigonometry of branches that
+    cannot win is never evaluated. At the wrist singularity ``q6`` keeps the seed's.
     """
-    d1, a2, a3, d4, d5, d6, a2a3_sq, two_a2a3 = k
-    xx, yx, zx, px, xy, yy, zy, py, xz, yz, zz, pz = t
-    s0, s1_, s2, s3_, s4, s5_ = sd
-    l0, l1, l2, l3, l4, l5 = lo
-    h0, h1, h2, h3, h4, h5 = hi
-    w0, w1, w2, w3, w4, w5 = w
-    cos, sin, atan2, acos, sqrt = math.cos, math.sin, math.atan2, math.acos, math.sqrt
-    pi2 = _TWO_PI
-    near = _nearest_equivalent
-
     shoulder = _shoulder_pans(k, t)
     if shoulder is None:
         return None
     p5x, p5y, pans = shoulder
+    s0, s1_, s2, s3, s4, s5 = sd
+    l0, l1, l2, l3, l4, l5 = lo
+    h0, h1, h2, h3, h4, h5 = hi
+    w0, w1, w2, w3, w4, w5 = w
+    near = _nearest_equivalent
     shoulders = []
     for q1 in pans:
-        v1 = q1 + round((s0 - q1) / pi2) * pi2
-        if not l0 <= v1 <= h0:
-            v1 = near(q1, s0, l0, h0)
-            if v1 is None:
-                continue
-        shoulders.append((w0 * (v1 - s0) * (v1 - s0), q1, v1))
+        v1 = near(q1, s0, l0, h0)
+        if v1 is not None:
+            shoulders.append((w0 * (v1 - s0) * (v1 - s0), q1, v1))
     if len(shoulders) == 2 and shoulders[1][0] < shoulders[0][0]:
         shoulders.reverse()
 
@@ -553,83 +574,59 @@ def _nearest_branch(
     for cost1, q1, v1 in shoulders:
         if cost1 >= best:
             break
-        s1 = sin(q1)
-        c1 = cos(q1)
-        xz1 = xx * s1 - xy * c1
-        yz1 = yx * s1 - yy * c1
-        zz1 = zx * s1 - zy * c1
-        s5abs = sqrt(xz1 * xz1 + yz1 * yz1)
-        if s5abs < _WRIST_NEAR_SINGULAR:
-            return None  # wrist (near-)singular: q6 is free or noisy, general path
+        c1, s1 = math.cos(q1), math.sin(q1)
+        s5abs, pairs = _wrists(t, c1, s1, s5)
+        q6_final = s5abs >= _WRIST_NEAR_SINGULAR  # else the elbow step may nudge q6
         wrists = []
-        for sign in (1.0, -1.0):
-            q5 = atan2(sign * s5abs, zz1)
-            q6 = atan2(-sign * yz1, sign * xz1)
-            v5 = q5 + round((s4 - q5) / pi2) * pi2
-            if not l4 <= v5 <= h4:
-                v5 = near(q5, s4, l4, h4)
-                if v5 is None:
-                    continue
-            v6 = q6 + round((s5_ - q6) / pi2) * pi2
-            if not l5 <= v6 <= h5:
-                v6 = near(q6, s5_, l5, h5)
+        for q5, q6 in pairs:
+            v5 = near(q5, s4, l4, h4)
+            if v5 is None:
+                continue
+            cost = cost1 + w4 * (v5 - s4) * (v5 - s4)
+            v6 = None
+            if q6_final:
+                v6 = near(q6, s5, l5, h5)
                 if v6 is None:
                     continue
-            cost = cost1 + w4 * (v5 - s4) * (v5 - s4) + w5 * (v6 - s5_) * (v6 - s5_)
+                cost += w5 * (v6 - s5) * (v6 - s5)
             wrists.append((cost, q5, q6, v5, v6))
         if len(wrists) == 2 and wrists[1][0] < wrists[0][0]:
             wrists.reverse()
         for cost56, q5, q6, v5, v6 in wrists:
             if cost56 >= best:
                 break
-            c5 = cos(q5)
-            s5 = sin(q5)
-            c6 = cos(q6)
-            s6 = sin(q6)
-            z4x = -(s6 * xx + c6 * yx)
-            z4y = -(s6 * xy + c6 * yy)
-            z4z = -(s6 * xz + c6 * yz)
-            X = (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1
-            Y = pz - d6 * zz - d5 * z4z - d1
-            c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
-            if not -1.0 <= c3 <= 1.0:
-                if not -1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL:
+            elbow = _elbow(k, t, c1, s1, p5x, p5y, s5abs, q5, q6)
+            if elbow is None:
+                continue
+            c3, base, q234, q6 = elbow
+            if v6 is None:
+                v6 = near(q6, s5, l5, h5)
+                if v6 is None:
                     continue
-                c3 = 1.0 if c3 > 1.0 else -1.0
-            x4x = c5 * (c6 * xx - s6 * yx) - s5 * zx
-            x4y = c5 * (c6 * xy - s6 * yy) - s5 * zy
-            x4z = c5 * (c6 * xz - s6 * yz) - s5 * zz
-            q234 = atan2(x4z, x4x * c1 + x4y * s1)
-            base = atan2(Y, X)
-            t3 = acos(c3)
+                cost56 += w5 * (v6 - s5) * (v6 - s5)
+            t3 = math.acos(c3)
             for q3 in (t3, -t3):
-                v3 = q3 + round((s2 - q3) / pi2) * pi2
-                if not l2 <= v3 <= h2:
-                    v3 = near(q3, s2, l2, h2)
-                    if v3 is None:
-                        continue
+                v3 = near(q3, s2, l2, h2)
+                if v3 is None:
+                    continue
                 cost3 = cost56 + w2 * (v3 - s2) * (v3 - s2)
                 if cost3 >= best:
                     continue
-                q2 = base - atan2(a3 * sin(q3), a2 + a3 * c3)
-                v2 = q2 + round((s1_ - q2) / pi2) * pi2
-                if not l1 <= v2 <= h1:
-                    v2 = near(q2, s1_, l1, h1)
-                    if v2 is None:
-                        continue
+                q2 = _shoulder_lift(k, base, q3, c3)
+                v2 = near(q2, s1_, l1, h1)
+                if v2 is None:
+                    continue
                 cost2 = cost3 + w1 * (v2 - s1_) * (v2 - s1_)
                 if cost2 >= best:
                     continue
-                q4 = q234 - q2 - q3
-                v4 = q4 + round((s3_ - q4) / pi2) * pi2
-                if not l3 <= v4 <= h3:
-                    v4 = near(q4, s3_, l3, h3)
-                    if v4 is None:
-                        continue
-                cost = cost2 + w3 * (v4 - s3_) * (v4 - s3_)
+                v4 = near(q234 - q2 - q3, s3, l3, h3)
+                if v4 is None:
+                    continue
+                cost = cost2 + w3 * (v4 - s3) * (v4 - s3)
                 if cost < best:
-                    best = cost
-                    best_q = [v1, v2, v3, v4, v5, v6]
+                    q = [v1, v2, v3, v4, v5, v6]
+                    if verify is None or verify(q):
+                        best, best_q = cost, q
     return best_q
 
 
@@ -645,11 +642,12 @@ def ur_ik(
 ) -> np.ndarray:
     """The closed-form IK solution nearest to ``seed`` within the joint limits.
 
-    Every branch of :func:`ur_ik_all` (plus its ``2 pi``-shifted equivalents,
-    as UR joints range ±2π) is moved per joint to the equivalent within
+    Every branch of the closed form (with its ``2 pi``-shifted equivalents, as
+    UR joints range ±2π) is moved per joint to the equivalent within
     ``[lower, upper]`` nearest to ``seed``; the branch with the smallest
     weighted joint distance ``sum_i w_i (q_i - seed_i)²`` (``weights`` default
-    all ones) wins. At the wrist singularity, ``q6`` keeps the seed's value.
+    all ones) whose forward kinematics reproduces the pose wins. At the wrist
+    singularity, ``q6`` keeps the seed's value.
 
     Arguments: ``flange_pose`` ``(4, 4)`` pose of ``tool0`` in the base frame (m);
     ``seed``, ``lower``, ``upper`` ``(6,)`` rad. Returns ``(6,)`` rad, verified
@@ -657,8 +655,9 @@ def ur_ik(
 
     Raises :class:`PlanningError` naming the target position and the reason:
     out of reach (with the distance from the shoulder and the arm's reach), too
-    close to the base axis, or "no solution within the joint limits (branches
-    found: k)".
+    close to the base axis, "no solution within the joint limits (branches
+    found: k; the joints that rule them out)", or, at the very edge of the
+    workspace, that no branch reproduces the pose.
     """
     k = dh._ur
     t = _pose12(flange_pose)
@@ -671,60 +670,48 @@ def ur_ik(
         w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
     else:
         w = weights.tolist() if isinstance(weights, np.ndarray) else [float(v) for v in weights]
-    links = dh._links
-    # Fast path: fused closed form + branch-and-bound, then FK-verify the winner.
-    best_q = _nearest_branch(k, t, sd, lo, hi, w)
-    if best_q is not None:
-        dp, dr = _pose_error(_fk_rows(links, best_q), t)
-        if dp <= tol and dr <= tol:
-            return np.array(best_q)
+    chain = _Chain(dh)
 
-    branches = _branches(k, t, sd[5])
-    if not branches:
-        raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_diagnose(dh, t)}")
+    def reproduces_pose(q: list[float]) -> bool:
+        dp, dr = chain.error(q, t)
+        return dp <= tol and dr <= tol
 
-    # Slow path (no branch within limits, or the nearest failed the FK check):
-    # rank every branch within limits and take the first that verifies.
-    # (Each branch twice: clamped onto a limit it overshoots by rounding, and
-    # strictly inside the limits, in case the clamp spoils the FK check.)
-    candidates: list[tuple[float, list[float]]] = []
+    # The nearest branch nearly always reproduces the pose; only at the edge of the
+    # workspace does it not, and then the search is repeated checking every candidate.
+    best = _nearest_solution(k, t, sd, lo, hi, w)
+    if best is not None and not reproduces_pose(best):
+        best = _nearest_solution(k, t, sd, lo, hi, w, reproduces_pose)
+    if best is not None:
+        return np.array(best)
+    raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_why_no_solution(dh, t, sd, lo, hi, chain, tol)}")
+
+
+def _why_no_solution(
+    dh: DH, t: Sequence[float], sd: Sequence[float], lo: Sequence[float], hi: Sequence[float], chain: _Chain, tol: float
+) -> str:
+    """Why :func:`ur_ik` found nothing: the pose is unreachable, or every exact
+    solution is outside the joint limits (and which joints rule them out)."""
+    solutions = _solutions(dh, t, sd[5])
     blocked: dict[int, int] = {}
-    for slack in (_LIMIT_SLACK, 0.0):
-        for b in branches:
-            q = []
-            cost = 0.0
-            for j, (x, s, l, h, wi) in enumerate(zip(b, sd, lo, hi, w)):
-                v = _nearest_equivalent(x, s, l, h, slack)
-                if v is None:
-                    if slack:
-                        blocked[j] = blocked.get(j, 0) + 1
-                    break
-                q.append(v)
-                cost += wi * (v - s) * (v - s)
-            else:
-                candidates.append((cost, q))
-    if not candidates:
-        n = len(ur_ik_all(dh, flange_pose, q6_singular=sd[5]))
-        which = ", ".join(
-            f"{_JOINT_NAMES[j]} [{lo[j]:.3f}, {hi[j]:.3f}] rad rules out {c}"
-            for j, c in sorted(blocked.items())
+    for q in solutions:
+        for j in range(6):
+            if _nearest_equivalent(q[j], sd[j], lo[j], hi[j]) is None:
+                blocked[j] = blocked.get(j, 0) + 1
+                break
+    if solutions and sum(blocked.values()) == len(solutions):
+        which = "".join(
+            f"; {_JOINT_NAMES[j]} [{lo[j]:.3f}, {hi[j]:.3f}] rad rules out {c}" for j, c in sorted(blocked.items())
         )
-        raise PlanningError(
-            f"cannot reach flange target {_fmt_pos(t)}: no solution within the joint limits "
-            f"(branches found: {n}; {which})"
-        )
-    candidates.sort(key=lambda c: c[0])
-    worst = (math.inf, math.inf)
-    for _, q in candidates:
-        dp, dr = _pose_error(_fk_rows(links, q), t)
-        if dp <= tol and dr <= tol:
-            return np.array(q)
-        worst = min(worst, (dp, dr))
-    raise PlanningError(
-        f"cannot reach flange target {_fmt_pos(t)}: at the edge of the workspace, no branch "
-        f"reproduces the pose within {tol:g} m / {tol:g} rad (best: {worst[0]:.2g} m, "
-        f"{worst[1]:.2g} rad); {_diagnose(dh, t)}"
+        return f"no solution within the joint limits (branches found: {len(solutions)}{which})"
+    branches = _branches(dh._ur, t, sd[5])
+    if not branches:
+        return _diagnose(dh, t)
+    worst = min(chain.error(b, t) for b in branches)
+    return (
+        f"at the edge of the workspace, no branch reproduces the pose within {tol:g} m / {tol:g} rad "
+        f"(best: {worst[0]:.2g} m, {worst[1]:.2g} rad); {_diagnose(dh, t)}"
     )
+
 
 
 # --------------------------------------------------------------------------- #
@@ -734,8 +721,6 @@ def ur_ik(
 
 def _parse_target(target: Any) -> tuple[np.ndarray, np.ndarray | None]:
     """(position (3,) m, rotation (3, 3) or None for position-only)."""
-    import pinocchio as pin
-
     if isinstance(target, pin.SE3):
         return np.array(target.translation, dtype=float), np.array(target.rotation, dtype=float)
     if isinstance(target, tuple) and len(target) == 2:
@@ -771,7 +756,7 @@ def numeric_ik(
 ) -> np.ndarray:
     """Damped-least-squares IK on a Pinocchio model (any serial arm).
 
-    Solves ``oMf(q) = target`` for the frame ``frame_id`` (id or name).
+    Solves ``oMf(q) = target`` for the frame ``frame_id`` (a frame id, or a link name).
     ``target``: a ``pin.SE3`` or ``(4, 4)`` transform (full pose), a ``(3,)``
     position, or ``(position, rotation)`` where ``rotation=None`` means
     position-only. ``seed``: ``(nq,)`` rad. ``lower``/``upper``: ``(nq,)``
@@ -789,9 +774,14 @@ def numeric_ik(
     ``rng``). Returns ``(nq,)``; raises :class:`PlanningError` with the best
     residual (m, rad) if nothing converged.
     """
-    import pinocchio as pin
-
-    fid = model.getFrameId(frame_id) if isinstance(frame_id, str) else int(frame_id)
+    if isinstance(frame_id, str):
+        if not model.existFrame(frame_id, pin.FrameType.BODY):
+            raise RobotModelError(
+                f"numeric_ik: no link {frame_id!r} in model {model.name!r} (pass a frame id for other frame types)"
+            )
+        fid = model.getFrameId(frame_id, pin.FrameType.BODY)
+    else:
+        fid = int(frame_id)
     if fid < 0 or fid >= model.nframes:
         raise RobotModelError(f"numeric_ik: no frame {frame_id!r} in model {model.name!r}")
     p_des, R_des = _parse_target(target)

@@ -59,6 +59,18 @@ def _rpy(r: float, p: float, y: float) -> np.ndarray:
     return pin.rpy.rpyToMatrix(r, p, y)
 
 
+def _read_only(values) -> np.ndarray:
+    """An own float copy of ``values`` that cannot be written in place (robots share nothing mutable)."""
+    arr = np.array(values, dtype=float)
+    arr.flags.writeable = False
+    return arr
+
+
+# Capsule pairs closer than this (m) with the arm stretched out (q = 0) are parts of one
+# housing (the compact UR wrist, base and shoulder column), not a pinch point to check.
+_SAME_HOUSING_GAP_M = 0.06
+
+
 def _axis_rotations(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """``(T, 3, 3)`` rotations by angles ``q`` (rad) about the unit ``axis`` (Rodrigues)."""
     k = axis / np.linalg.norm(axis)
@@ -71,6 +83,13 @@ class Robot:
     """Kinematic and collision model of an arm with a two-finger gripper.
 
     Use :meth:`ur3e` for the bundled UR3e, or :meth:`from_urdf` for other arms.
+
+    A robot's facts are immutable: its arrays (``lower``, ``upper``, the
+    velocity/acceleration/jerk limits, ``home_q``, ...) are read-only and its
+    pair lists are tuples, so robots can share them. To change the home pose,
+    assign a new one (``robot.home_q = q``, checked against the limits); that
+    changes this robot only. The Pinocchio ``model`` is shared between copies
+    and must be treated as read-only; ``data`` is each robot's own scratch space.
     """
 
     def __init__(
@@ -98,34 +117,41 @@ class Robot:
         self.dh = dh
         self.n = self.model.nq
         self.joint_names = tuple(self.model.names[1:])
-        self.lower = np.array(self.model.lowerPositionLimit, dtype=float)
-        self.upper = np.array(self.model.upperPositionLimit, dtype=float)
-        self.velocity_limits = np.array(self.model.velocityLimit, dtype=float)
+        self.lower = _read_only(self.model.lowerPositionLimit)
+        self.upper = _read_only(self.model.upperPositionLimit)
+        self.velocity_limits = _read_only(self.model.velocityLimit)
         if np.any(self.velocity_limits <= 0):
             raise RobotModelError(f"{self.urdf_path}: every joint needs a positive <limit velocity=...>")
-        # UR does not publish joint acceleration limits; these follow movej's practical maxima.
-        self.acceleration_limits = (
-            np.asarray(acceleration_limits, float) if acceleration_limits is not None else 1.6 * self.velocity_limits
+        # URDF has no acceleration or jerk limits. Unless given (robot/arms.py has the UR3e's):
+        # 1.6 x the speed limit per second, reached in a 0.1 s jerk ramp
+        self.acceleration_limits = _read_only(
+            acceleration_limits if acceleration_limits is not None else 1.6 * self.velocity_limits
         )
-        self.jerk_limits = np.asarray(jerk_limits, float) if jerk_limits is not None else 10.0 * self.acceleration_limits
-        if not self.model.existFrame(tcp_frame):
+        self.jerk_limits = _read_only(jerk_limits if jerk_limits is not None else 10.0 * self.acceleration_limits)
+        if not self.model.existFrame(tcp_frame, pin.FrameType.BODY):
             raise RobotModelError(
-                f"{self.urdf_path}: no frame {tcp_frame!r}; frames are "
+                f"{self.urdf_path}: no link {tcp_frame!r} for the TCP; links are "
                 + ", ".join(f.name for f in self.model.frames if f.type == pin.FrameType.BODY)
             )
         self.tcp_frame = tcp_frame
-        self._tcp_frame_id = self.model.getFrameId(tcp_frame)
+        self._tcp_frame_id = self.model.getFrameId(tcp_frame, pin.FrameType.BODY)
         self._parse_urdf_extras()
         self.fixed_links = tuple(fixed_links)
         self._build_fk_tables()
-        self.home_q = np.asarray(home, float) if home is not None else np.clip(np.zeros(self.n), self.lower, self.upper)
-        self.self_pairs = self._default_self_pairs() if self_pairs is None else [tuple(p) for p in self_pairs]
+        self.home_q = home if home is not None else np.clip(np.zeros(self.n), self.lower, self.upper)
+        self.self_pairs: tuple[tuple[str, str], ...] = (
+            self._default_self_pairs() if self_pairs is None else tuple((str(a), str(b)) for a, b in self_pairs)
+        )
 
     # --- construction -----------------------------------------------------------------
 
     @classmethod
     def ur3e(cls) -> "Robot":
-        """The bundled UR3e (e-series DH) with a Robotiq 2F-85-sized gripper; TCP at the fingertips."""
+        """The bundled UR3e (e-series DH) with a Robotiq 2F-85-sized gripper; TCP at the fingertips.
+
+        Each call returns an independent robot (the URDF is parsed once and its
+        immutable parts shared).
+        """
         return _ur3e_cached().copy()
 
     @classmethod
@@ -134,10 +160,32 @@ class Robot:
         return cls(path, tcp_frame=tcp_frame, **kwargs)
 
     def copy(self) -> "Robot":
+        """An independent robot: the immutable facts are shared, Pinocchio ``data`` is new."""
         other = object.__new__(Robot)
         other.__dict__.update(self.__dict__)
         other.data = self.model.createData()
         return other
+
+    @property
+    def home_q(self) -> np.ndarray:
+        """Home configuration ``(n,)`` rad (read-only; assign a new one to change it)."""
+        return self._home_q
+
+    @home_q.setter
+    def home_q(self, q) -> None:
+        try:
+            home = _read_only(np.reshape(q, -1))
+        except (TypeError, ValueError):
+            raise RobotModelError(f"home_q must be {self.n} joint angles in rad, got {q!r}") from None
+        if home.shape != (self.n,):
+            raise RobotModelError(f"home_q must be {self.n} joint angles in rad, got {home.size}")
+        for j, (v, lo, hi) in enumerate(zip(home, self.lower, self.upper)):
+            if not (math.isfinite(v) and lo - 1e-9 <= v <= hi + 1e-9):
+                raise RobotModelError(
+                    f"home_q joint {j} ({self.joint_names[j]}) = {v:.4f} rad is outside its limits "
+                    f"[{lo:.4f}, {hi:.4f}] rad"
+                )
+        self._home_q = home
 
     def _parse_urdf_extras(self) -> None:
         root = ET.parse(self.urdf_path).getroot()
@@ -201,12 +249,12 @@ class Robot:
         if "tool0" in self._frame_index:
             fk = self._forward_static(np.zeros(self.n))
             tcp_in_flange = np.linalg.inv(fk[self._frame_index["tool0"]]) @ fk[self.tcp_index]
-        self.tcp_in_flange = tcp_in_flange
-        self._flange_in_tcp = None if tcp_in_flange is None else np.linalg.inv(tcp_in_flange)
+        self.tcp_in_flange = None if tcp_in_flange is None else _read_only(tcp_in_flange)
+        self._flange_in_tcp = None if tcp_in_flange is None else _read_only(np.linalg.inv(tcp_in_flange))
         self._capsule_frame = np.array([self._frame_index[c.frame] for c in self.capsules])
-        self._capsule_p0 = np.array([c.p0 for c in self.capsules])
-        self._capsule_p1 = np.array([c.p1 for c in self.capsules])
-        self.capsule_radii = np.array([c.radius_m for c in self.capsules])
+        self._capsule_p0 = _read_only([c.p0 for c in self.capsules])
+        self._capsule_p1 = _read_only([c.p1 for c in self.capsules])
+        self.capsule_radii = _read_only([c.radius_m for c in self.capsules])
         self.capsule_names = tuple(c.name for c in self.capsules)
         self.capsule_groups = tuple(c.group for c in self.capsules)
         self._finger_sign = np.array(
@@ -323,9 +371,7 @@ class Robot:
             if self.dh is not None and self.tcp_in_flange is not None:
                 flange = target @ self._flange_in_tcp
                 return _ik.ur_ik(self.dh, flange, seed, self.lower, self.upper)
-            return _ik.numeric_ik(
-                self.model, self.data, self.model.getFrameId(self.tcp_frame), target, seed, self.lower, self.upper
-            )
+            return _ik.numeric_ik(self.model, self.data, self._tcp_frame_id, target, seed, self.lower, self.upper)
         except PlanningError as exc:
             pose = "with the fingers down" if orientation is None else "in the requested orientation"
             raise PlanningError(
@@ -334,12 +380,12 @@ class Robot:
 
     # --- self-collision pairs ---------------------------------------------------------
 
-    def _default_self_pairs(self) -> list[tuple[str, str]]:
+    def _default_self_pairs(self) -> tuple[tuple[str, str], ...]:
         """Capsule pairs checked for pinch points.
 
         Adjacent links (sharing a joint) are never pairs. Beyond that we drop the
-        pairs that are close *by construction*: those closer than 0.06 m (the
-        pinch warning distance) in the zero configuration with the links
+        pairs that are close *by construction*: those closer than
+        ``_SAME_HOUSING_GAP_M`` (0.06 m) in the zero configuration with the links
         stretched out, i.e. parts of one housing (the compact UR wrist, base and
         shoulder column). What remains are non-adjacent arm links and arm links
         against the gripper, the pairs that can close on a hand.
@@ -363,10 +409,10 @@ class Robot:
                 if ji == jj or self.model.parents[ji] == jj or self.model.parents[jj] == ji:
                     continue
                 d = capsule_capsule(p0[:, i], p1[:, i], ci.radius_m, p0[:, j], p1[:, j], cj.radius_m)[0]
-                if d < 0.06:
+                if d < _SAME_HOUSING_GAP_M:
                     continue
                 pairs.append((ci.name, cj.name))
-        return pairs
+        return tuple(pairs)
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, {self.n} joints, tcp={self.tcp_frame!r}, {len(self.capsules)} capsules)"
