@@ -58,6 +58,22 @@ def near_singular(q: np.ndarray, dh: DH = UR3E_DH, eps: float = 1e-4) -> bool:
     return abs(math.sin(q[4])) < eps or abs(math.sin(q[2])) < eps or shoulder
 
 
+# UR3e e-series DH as Universal Robots publish it, typed in again here on purpose:
+# the textbook product below is an independent check of the library's FK.
+_D = (0.15185, 0.0, 0.0, 0.13105, 0.08535, 0.0921)
+_A = (0.0, -0.24355, -0.2132, 0.0, 0.0, 0.0)
+_ALPHA = (math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0)
+
+
+def textbook_flange(q) -> np.ndarray:
+    """T_06 = prod_i Rz(q_i) Tz(d_i) Tx(a_i) Rx(alpha_i), one 4x4 matrix per joint."""
+    T = np.eye(4)
+    for qi, d, a, al in zip(q, _D, _A, _ALPHA):
+        ct, st_, ca, sa = math.cos(qi), math.sin(qi), math.cos(al), math.sin(al)
+        T = T @ np.array([[ct, -st_ * ca, st_ * sa, a * ct], [st_, ct * ca, -ct * sa, a * st_], [0, sa, ca, d], [0, 0, 0, 1]])
+    return T
+
+
 def nearest_reference(
     dh: DH, T: np.ndarray, seed: np.ndarray, lower: np.ndarray, upper: np.ndarray
 ) -> float | None:
@@ -122,14 +138,12 @@ def test_dh_forward_vectorised_matches_single():
         dh_forward(UR3E_DH, np.zeros(5))
 
 
-def test_dh_forward_matches_pinocchio_model_of_the_dh_urdf():
-    model = pin.buildModelFromXML(dh_urdf(UR3E_DH))
-    data = model.createData()
-    fid = model.getFrameId("tool0")
+def test_dh_forward_matches_the_textbook_dh_product():
     rng = np.random.default_rng(2)
-    for q in rng.uniform(-TWO_PI, TWO_PI, (30, 6)):
-        pin.framesForwardKinematics(model, data, q)
-        assert np.allclose(data.oMf[fid].homogeneous, dh_forward(UR3E_DH, q), atol=1e-13)
+    Q = rng.uniform(-TWO_PI, TWO_PI, (200, 6))
+    batch = dh_forward(UR3E_DH, Q)
+    for q, T in zip(Q, batch):
+        assert np.allclose(T, textbook_flange(q), atol=1e-13)
 
 
 def test_reach():
@@ -347,6 +361,28 @@ def test_joint_limits_are_respected(q, width, centre):
     assert ref is not None and np.sum((sol - seed) ** 2) <= ref + 1e-9
 
 
+def test_stretched_arm_outside_the_joint_limits_is_a_limits_error():
+    # Found by Hypothesis: the arm fully stretched (elbow straight, wrist 2 at 2.8e-7 rad).
+    # Its exact solutions need wrist 1 near 0 (or 2 pi), outside [2, 4] rad; the only branch
+    # inside the limits is the wrist-down one nudged to reach, which misses the orientation
+    # by 1e-7 rad, so it is not a solution, and the error must say the limits rule it out.
+    q = np.array([0.0, 0.0, 0.0, 0.0, 2.78e-07, 0.0])
+    lower = np.array([-1.0, -1.0, -1.0, 2.0, -1.0, -3.0])
+    upper = np.array([1.0, 1.0, 1.0, 4.0, 1.0, 3.0])
+    T = dh_forward(UR3E_DH, q)
+    seed = np.clip(q, lower, upper)
+    assert nearest_reference(UR3E_DH, T, seed, lower, upper) is None
+    with pytest.raises(PlanningError) as exc:
+        ur_ik(UR3E_DH, T, seed, lower, upper)
+    assert "no solution within the joint limits" in str(exc.value)
+    assert "joint 4 (wrist 1) [2.000, 4.000] rad rules out" in str(exc.value)
+    # with wrist 1 free the same pose is solved exactly
+    lower[3], upper[3] = -1.0, 1.0
+    sol = ur_ik(UR3E_DH, T, np.clip(q, lower, upper), lower, upper)
+    dp, dr = pose_errors(dh_forward(UR3E_DH, sol), T)
+    assert dp < 1e-9 and dr < 1e-9
+
+
 def test_ur_ik_argument_shapes():
     with pytest.raises(PlanningError, match="6 values"):
         ur_ik(UR3E_DH, np.eye(4), np.zeros(5), UR_LOWER, UR_UPPER)
@@ -390,7 +426,7 @@ def arm(tmp_path_factory):
     path = tmp_path_factory.mktemp("urdf") / "test_arm.urdf"
     path.write_text(_ARM_URDF)
     model = pin.buildModelFromUrdf(str(path))
-    return model, model.createData(), model.getFrameId("tip")
+    return model, model.createData(), model.getFrameId("tip", pin.FrameType.BODY)
 
 
 def _fk(model, data, fid, q) -> pin.SE3:
@@ -421,6 +457,21 @@ def test_numeric_ik_accepts_a_matrix_and_a_frame_name(arm):
     assert np.allclose(_fk(model, data, fid, sol).homogeneous, T, atol=1e-8)
     with pytest.raises(RobotModelError):
         numeric_ik(model, data, 10_000, T, q)
+    with pytest.raises(RobotModelError, match="no link 'j3'"):
+        numeric_ik(model, data, "j3", T, q)  # a joint, not a link
+
+
+def test_numeric_ik_finds_the_link_when_a_joint_has_its_name(tmp_path):
+    # the joint that turns link l2 is called "l3", the name of the next link
+    urdf = _ARM_URDF.replace('joint name="j2"', 'joint name="l3"')
+    model = pin.buildModelFromXML(urdf)
+    data = model.createData()
+    link = model.getFrameId("l3", pin.FrameType.BODY)
+    assert model.frames[link].type == pin.FrameType.BODY
+    q = np.array([0.3, -0.5, 1.0, 0.2, -0.7, 0.4])
+    target = _fk(model, data, link, q).homogeneous
+    sol = numeric_ik(model, data, "l3", target, q + 0.1)
+    assert np.allclose(_fk(model, data, link, sol).homogeneous, target, atol=1e-8)
 
 
 def test_numeric_ik_position_only(arm):
@@ -454,7 +505,7 @@ def test_numeric_ik_unreachable_reports_the_residual(arm):
 def test_numeric_ik_agrees_with_the_closed_form_on_a_ur3e_model():
     model = pin.buildModelFromXML(dh_urdf(UR3E_DH))
     data = model.createData()
-    fid = model.getFrameId("tool0")
+    fid = model.getFrameId("tool0", pin.FrameType.BODY)
     rng = np.random.default_rng(11)
     for _ in range(10):
         q = rng.uniform(-math.pi, math.pi, 6)

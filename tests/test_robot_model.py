@@ -1,4 +1,5 @@
-"""UR3e model: vectorised FK against an independent DH computation, URDF facts, IK round trip."""
+"""UR3e model: vectorised FK against an independent DH computation, URDF facts, IK round trip,
+independent robots, frames looked up by type."""
 
 import math
 
@@ -72,7 +73,8 @@ def test_forward_matches_pinocchio(robot, q):
     for t in range(q.shape[0]):
         pin.framesForwardKinematics(robot.model, data, q[t])
         for i, name in enumerate(robot.frame_names):
-            np.testing.assert_allclose(frames[t, i], data.oMf[robot.model.getFrameId(name)].homogeneous, atol=1e-12)
+            frame = robot.model.getFrameId(name, pin.FrameType.BODY)
+            np.testing.assert_allclose(frames[t, i], data.oMf[frame].homogeneous, atol=1e-12)
 
 
 def test_urdf_limits_and_masses(robot):
@@ -95,30 +97,107 @@ def test_fingers_follow_the_opening(robot):
     np.testing.assert_allclose(gap, [0.085, 0.04, 0.0], atol=1e-12)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300)
 @given(
-    x=st.floats(0.12, 0.40),
-    y=st.floats(-0.35, 0.35),
-    z=st.floats(0.02, 0.30),
+    radius=st.floats(0.16, 0.34),
+    heading=st.floats(-math.pi, math.pi),
+    z=st.floats(0.02, 0.25),
     yaw=st.floats(-math.pi, math.pi),
 )
-def test_ik_round_trip_fingers_down(robot, x, y, z, yaw):
-    target = np.array([x, y, z])
-    try:
-        q = robot.ik(target, yaw_rad=yaw)
-    except PlanningError as exc:
-        # only genuinely unreachable targets may fail, and they say where and why
-        assert f"{x:.3f}" in str(exc)
-        return
+def test_ik_round_trip_fingers_down(robot, radius, heading, z, yaw):
+    # the whole working annulus around the base is reachable with the fingers down:
+    # outside the d4 + TCP-offset cylinder at the base axis, inside the arm's reach
+    target = np.array([radius * math.cos(heading), radius * math.sin(heading), z])
+    q = robot.ik(target, yaw_rad=yaw)
     tcp = robot.tcp_pose(q)
     np.testing.assert_allclose(tcp[:3, 3], target, atol=1e-6)
     np.testing.assert_allclose(tcp[:3, 2], [0, 0, -1], atol=1e-6)  # fingers straight down
+    np.testing.assert_allclose(tcp[:3, 0], [math.cos(yaw), math.sin(yaw), 0], atol=1e-6)  # turned by yaw
     assert robot.in_limits(q)
 
 
-def test_ik_unreachable_names_target(robot):
-    with pytest.raises(PlanningError, match=r"\(0\.900, 0\.000, 0\.100\).*out of reach"):
-        robot.ik([0.9, 0.0, 0.1])
+@pytest.mark.parametrize(
+    "unreachable, neighbour, reason",
+    [
+        ((0.9, 0.0, 0.1), (0.3, 0.0, 0.1), "out of reach"),
+        ((0.0, 0.0, 0.1), (0.2, 0.0, 0.1), "too close to the base axis"),
+    ],
+)
+def test_ik_unreachable_names_target(robot, unreachable, neighbour, reason):
+    x, y, z = unreachable
+    with pytest.raises(PlanningError, match=rf"\({x:.3f}, {y:.3f}, {z:.3f}\) m with the fingers down: .*{reason}"):
+        robot.ik(unreachable)
+    # the same direction, within reach, is solved: the failure is the target's, not the solver's
+    q = robot.ik(neighbour)
+    np.testing.assert_allclose(robot.tcp_pose(q)[:3, 3], neighbour, atol=1e-9)
+
+
+def test_each_ur3e_is_independent():
+    a, b = Robot.ur3e(), Robot.ur3e()
+    home = Robot.ur3e().home_q.copy()
+    for arr in (a.home_q, a.lower, a.upper, a.velocity_limits, a.acceleration_limits, a.jerk_limits,
+                a.capsule_radii, a.tcp_in_flange):
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0] += 1.0
+    assert isinstance(a.self_pairs, tuple)
+    # a new home pose changes that robot only
+    a.home_q = home + 0.1
+    np.testing.assert_array_equal(b.home_q, home)
+    np.testing.assert_array_equal(Robot.ur3e().home_q, home)
+    np.testing.assert_allclose(a.home_q, home + 0.1)
+    # each robot has its own Pinocchio scratch data
+    pa, pb = a.tcp_pose(a.home_q), b.tcp_pose(b.home_q)
+    np.testing.assert_allclose(a.tcp_pose(a.home_q), pa)
+    assert not np.allclose(pa, pb)
+
+
+def test_home_q_is_checked(robot):
+    other = robot.copy()
+    with pytest.raises(RobotModelError, match="6 joint angles"):
+        other.home_q = [0.0, 0.0]
+    with pytest.raises(RobotModelError, match=r"joint 2 \(elbow_joint\) = 4.0000 rad is outside its limits"):
+        other.home_q = [0.0, 0.0, 4.0, 0.0, 0.0, 0.0]
+    np.testing.assert_array_equal(other.home_q, robot.home_q)
+
+
+# A two-joint arm whose names collide: the joint that turns link "upper" is called
+# "forearm", and the fixed joint that carries the TCP is called "tcp", like the links.
+_SHARED_NAMES_URDF = """<?xml version="1.0"?>
+<robot name="shared_names">
+  <link name="base"/>
+  <link name="upper"><collision><origin xyz="0.15 0 0" rpy="0 1.5707963267948966 0"/>
+    <geometry><cylinder radius="0.03" length="0.3"/></geometry></collision></link>
+  <link name="forearm"><collision><origin xyz="0.1 0 0" rpy="0 1.5707963267948966 0"/>
+    <geometry><cylinder radius="0.02" length="0.2"/></geometry></collision></link>
+  <link name="tcp"/>
+  <joint name="forearm" type="revolute"><parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="2"/></joint>
+  <joint name="elbow" type="revolute"><parent link="upper"/><child link="forearm"/>
+    <origin xyz="0.3 0 0" rpy="0 0 0"/><axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="1" velocity="2"/></joint>
+  <joint name="tcp" type="fixed"><parent link="forearm"/><child link="tcp"/><origin xyz="0.2 0 0" rpy="0 0 0"/></joint>
+</robot>
+"""
+
+
+def test_links_are_found_when_joints_share_their_names(tmp_path):
+    path = tmp_path / "shared_names.urdf"
+    path.write_text(_SHARED_NAMES_URDF)
+    arm = Robot.from_urdf(path)
+    assert arm.frame_names == ("base", "upper", "forearm", "tcp")
+    a, b = 0.7, -0.4
+    frames = arm.forward(np.array([a, b]))
+    # link "forearm" sits at the elbow, 0.3 m out along the turned x axis (the joint
+    # called "forearm" is at the base: picking its frame would put it at (0, 0, 0.1))
+    np.testing.assert_allclose(frames[2, :3, 3], [0.3 * math.cos(a), 0.3 * math.sin(a), 0.1], atol=1e-12)
+    # the TCP 0.2 m further along the forearm, pitched by the elbow
+    reach = 0.3 + 0.2 * math.cos(b)
+    expected = [reach * math.cos(a), reach * math.sin(a), 0.1 - 0.2 * math.sin(b)]
+    np.testing.assert_allclose(arm.tcp_pose(np.array([a, b]))[:3, 3], expected, atol=1e-12)
+    np.testing.assert_allclose(frames[3], arm.tcp_pose(np.array([a, b])), atol=1e-12)
+    # numeric IK targets the tcp link too
+    target = arm.tcp_pose(np.array([a, b]))
+    q = arm.ik(target[:3, 3], target[:3, :3], seed=np.array([0.5, -0.2]))
+    np.testing.assert_allclose(arm.tcp_pose(q), target, atol=1e-8)
 
 
 def test_bad_inputs_are_typed(robot, tmp_path):
