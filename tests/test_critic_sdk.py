@@ -9,7 +9,6 @@ from pydantic import BaseModel, Field
 from robocritics.critic import (
     BUILTIN_CRITICS,
     Critic,
-    CriticError,
     CriticParams,
     Flag,
     Verdict,
@@ -19,7 +18,9 @@ from robocritics.critic import (
     select_critics,
 )
 from robocritics.critics.joint_speed import Params as JointSpeedParams
-from robocritics.scene import Scene
+from robocritics.errors import CriticError
+from robocritics.scene import Scene, Workspace
+from robocritics.simulate import Execution
 from synth import line_motion, make_trajectory, realistic_trajectory
 
 
@@ -81,7 +82,7 @@ def test_params_override_any_threshold(traj):
     [
         ({"joint_speed": {"warn_speed_m_s": "fast"}}, r"critic 'joint_speed'.*warn_speed_m_s.*valid number"),
         ({"joint_speed": {"warn_speed_m_s": -1}}, r"critic 'joint_speed'.*warn_speed_m_s.*greater than 0"),
-        ({"joint_speed": {"warn_speed": 1.0}}, r"unknown parameter 'warn_speed' \(did you mean 'warn_speed_m_s'\?\)"),
+        ({"joint_speed": {"warn_speed": 1.0}}, r"unknown parameter 'warn_speed'; did you mean 'warn_speed_m_s'\? \(its parameters: warn_speed_m_s, "),
         ({"joint_speed": {"warn_speed_m_s": 2.0}}, r"critic 'joint_speed'.*must not exceed max_speed_m_s"),
         ({"joint_sped": {}}, r"params given for unknown critic 'joint_sped'; did you mean 'joint_speed'"),
         ({"joint_speed": 3}, r"params for critic 'joint_speed' must be a mapping"),
@@ -110,8 +111,77 @@ class Always:
 
 def test_critic_objects_can_be_passed_directly(traj):
     r = critique(traj, Scene(), critics=[Always(), "pinch_point"], params={"always": {"level": "ERROR"}})
-    assert r.flag_of("always") is Flag.ERROR
-    assert r.score == pytest.approx(5.0)  # 0 + 2 of 4, scaled
+    assert r.critics == ["always", "pinch_point"]
+    assert r.flag_of("always") is Flag.ERROR and r.flag_of("pinch_point") is Flag.OK
+    # the score is the motion critics' index (pinch_point alone here, scaled); `always` is beside it
+    assert r.score == 10.0
+    assert [v.critic for v in r.other_verdicts] == ["always"]
+    assert r.has_errors and not r.passed
+    assert "beside the score: always Error" in r.summary()
+
+
+class NoParams:
+    name = "no_params"
+    description = "forgot its thresholds"
+
+    def check(self, trajectory, scene, params):
+        return Verdict(critic=self.name, flag=Flag.OK, message="fine")
+
+
+class NoCheck:
+    name = "no_check"
+    description = "forgot to judge"
+    Params = CriticParams
+
+
+class Nameless:
+    description = "no name"
+    Params = CriticParams
+
+    def check(self, trajectory, scene, params):
+        return Verdict(critic="?", flag=Flag.OK, message="fine")
+
+
+class Defaultless(Always):
+    name = "defaultless"
+
+    class Params(CriticParams):
+        limit_m: float = Field(description="no default, m")
+
+
+@pytest.mark.parametrize(
+    "critic, match",
+    [
+        (NoParams(), r"critic 'no_params' has no `Params`"),
+        (NoCheck(), r"critic 'no_check' has no `check`"),
+        (Nameless(), r"needs a `name`.*got None"),
+        (Defaultless(), r"critic 'defaultless': every field of Params needs a default"),
+        (Always, r"Always is a class; pass an instance: Always\(\)"),
+        (42, r"needs a `name`"),
+    ],
+)
+def test_an_ad_hoc_critic_is_validated_like_a_registered_one(traj, critic, match):
+    with pytest.raises(CriticError, match=match):
+        critique(traj, Scene(), critics=[critic])
+
+
+def test_critique_takes_an_execution_and_its_scene():
+    traj = make_trajectory(*line_motion(0.1))  # 0.1 m, about 0.3 m from the shoulder
+    inside = Scene()
+    tiny = Scene(workspace=Workspace(radius_m=0.05))  # the motion is outside it
+    execution = Execution(trajectory=traj, plan=None, events=[], final_scene=tiny, scene=tiny, robot=None)
+    r = critique(execution, critics=["space_usage"])
+    assert r.flag_of("space_usage") is Flag.ERROR  # judged in the execution's scene
+    assert r.trajectory_hash == traj.content_hash()
+    assert r == critique(traj, tiny, critics=["space_usage"])
+    assert critique(execution, inside, critics=["space_usage"]).flag_of("space_usage") is Flag.OK  # an explicit scene wins
+
+
+def test_critique_needs_a_trajectory_and_a_scene(traj):
+    with pytest.raises(CriticError, match=r"needs the scene"):
+        critique(traj, critics=["joint_speed"])
+    with pytest.raises(CriticError, match=r"judges a Trajectory or an Execution, got dict"):
+        critique({"q": []}, Scene())
 
 
 def test_a_failing_critic_is_named(traj):
@@ -136,8 +206,8 @@ def test_a_failing_critic_is_named(traj):
 def test_checks_are_pure_and_deterministic():
     traj = realistic_trajectory(duration_s=3.0, rate_hz=250.0, n_waypoints=3)
     before = {k: getattr(traj, k).copy() for k in ("q", "time", "frames", "proximity", "step")}
-    a = critique(traj, Scene.builtin("sorting"))
-    b = critique(traj, Scene.builtin("sorting"))
+    a = critique(traj, Scene.builtin("sorting"), critics=BUILTIN_CRITICS)
+    b = critique(traj, Scene.builtin("sorting"), critics=BUILTIN_CRITICS)
     assert a == b
     for k, arr in before.items():
         np.testing.assert_array_equal(getattr(traj, k), arr)

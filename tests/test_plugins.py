@@ -20,8 +20,10 @@ from pathlib import Path
 
 import pytest
 
-from robocritics import plugins
-from robocritics.critic import BUILTIN_CRITICS, CriticParams, Flag, Verdict, critique, get_critics, hookimpl
+import robocritics.critic
+from robocritics import hookimpl, plugins
+from robocritics.critic import BUILTIN_CRITICS, CriticParams, Flag, Verdict, critique, get_critics
+from robocritics.errors import CriticError
 from robocritics.plugins import PluginWarning, critic_sources, pm
 from robocritics.scene import Scene
 from synth import line_motion, make_trajectory
@@ -144,7 +146,8 @@ def test_critique_runs_the_plugin_critic_alongside_the_builtins(plugin_site):
         traj = make_trajectory(time, pos)
         report = critique(traj, Scene())
         print(json.dumps({"critics": report.critics, "flag": report.flag_of("cycle_time").value,
-                          "message": report.verdict("cycle_time").message, "score": report.score}))
+                          "message": report.verdict("cycle_time").message, "score": report.score,
+                          "beside": [v.critic for v in report.other_verdicts], "passed": report.passed}))
         report = critique(traj, Scene(), critics=["cycle_time"], params={"cycle_time": {"max_cycle_time_s": 40, "target_cycle_time_s": 30}})
         print(report.flag_of("cycle_time").value)
         """,
@@ -156,7 +159,8 @@ def test_critique_runs_the_plugin_critic_alongside_the_builtins(plugin_site):
     data = json.loads(first)
     assert data["critics"] == list(BUILTIN_CRITICS) + ["cycle_time"]
     assert data["flag"] == "WARNING" and "50.0 s" in data["message"]
-    assert data["score"] == pytest.approx(10 * 11 / 12, abs=0.01)  # five OK + one warning, scaled
+    assert data["score"] == 10  # the five motion critics' index; the plugin's warning stands beside it
+    assert data["beside"] == ["cycle_time"] and data["passed"] is False
     assert second == "ERROR"
 
 
@@ -240,3 +244,66 @@ def test_bad_and_duplicate_critics_are_rejected_by_name(registered):
     assert "'joint_speed' is already provided by robocritics" in text
     assert "fine_one" in critics and "no_params" not in critics
     assert critics["joint_speed"].__class__.__module__ == "robocritics.critics.joint_speed"
+
+
+# --- registering a critic in a notebook ---------------------------------------------------
+
+
+class _Slow:
+    """A notebook-style critic: warns when the motion lasts longer than ``limit_s``."""
+
+    name = "slow_motion"
+    description = "motion duration against a limit"
+
+    class Params(CriticParams):
+        limit_s: float = 0.5
+
+    def check(self, trajectory, scene, params):
+        flag = Flag.WARNING if trajectory.duration_s > params.limit_s else Flag.OK
+        return Verdict(critic=self.name, flag=flag, message=f"{trajectory.duration_s:.1f} s")
+
+
+@pytest.fixture
+def notebook_critics():
+    yield robocritics.critic.register
+    for name in ("slow_motion",):
+        robocritics.critic.unregister(name)
+    assert "slow_motion" not in get_critics()
+
+
+def test_register_adds_a_critic_that_critique_runs_by_default(notebook_critics):
+    traj = make_trajectory(*line_motion(0.1))  # 1 s
+    critic = notebook_critics(_Slow())
+    assert isinstance(critic, _Slow)
+    assert get_critics()["slow_motion"] is critic and critic_sources()["slow_motion"] == ""
+    assert list(get_critics())[:5] == list(BUILTIN_CRITICS)
+    report = critique(traj, Scene())
+    assert report.critics[-1] == "slow_motion" and report.flag_of("slow_motion") is Flag.WARNING
+    assert [v.critic for v in report.other_verdicts] == ["slow_motion"]
+    assert report.score == critique(traj, Scene(), critics=BUILTIN_CRITICS).score
+    # re-running the notebook cell (with an edited critic) replaces it
+    class Patient(_Slow):
+        class Params(CriticParams):
+            limit_s: float = 2.0
+
+    notebook_critics(Patient())
+    assert critique(traj, Scene(), critics=["slow_motion"]).flag_of("slow_motion") is Flag.OK
+    assert list(get_critics()).count("slow_motion") == 1
+
+
+def test_register_validates_at_once_and_refuses_an_installed_name(notebook_critics):
+    class NoCheck:
+        name = "slow_motion"
+        description = "x"
+        Params = CriticParams
+
+    with pytest.raises(CriticError, match="critic 'slow_motion' has no `check`"):
+        notebook_critics(NoCheck())
+    with pytest.raises(CriticError, match="_Slow is a class; pass an instance"):
+        notebook_critics(_Slow)
+    impostor = _Slow()
+    impostor.name = "joint_speed"
+    with pytest.raises(CriticError, match="'joint_speed' is already provided by robocritics"):
+        notebook_critics(impostor)
+    assert get_critics()["joint_speed"].__class__.__module__ == "robocritics.critics.joint_speed"
+    assert "slow_motion" not in get_critics()

@@ -1,16 +1,115 @@
-"""The public API named in the design is importable from the package root, lazily."""
+"""The public API named in the design is importable from the package root, lazily, and nothing more."""
 
 import subprocess
 import sys
 
+import pytest
+
 import robocritics
+from robocritics import errors
+
+ROOT_NAMES = {
+    "Robot",
+    "Scene",
+    "Trajectory",
+    "simulate",
+    "critique",
+    "Report",
+    "Verdict",
+    "Flag",
+    "Critic",
+    "CriticParams",
+    "Loop",
+    "hookimpl",
+}
+ERROR_NAMES = {
+    "RoboCriticsError",
+    "SceneError",
+    "ProgramError",
+    "PlanningError",
+    "TrajectoryError",
+    "RobotModelError",
+    "CriticError",
+    "LLMError",
+    "DeployError",
+    "RTDEError",
+}
 
 
-def test_every_public_name_resolves():
-    for name in robocritics.__all__:
-        assert getattr(robocritics, name) is not None, name
-    assert issubclass(robocritics.PlanningError, robocritics.RoboCriticsError)
-    assert issubclass(robocritics.DeployError, robocritics.RoboCriticsError)
+def test_the_root_exports_exactly_the_designed_names():
+    assert set(robocritics.__all__) == ROOT_NAMES | ERROR_NAMES
+    assert len(robocritics.__all__) == len(set(robocritics.__all__))
+    assert set(dir(robocritics)) >= ROOT_NAMES | ERROR_NAMES
+
+
+def test_each_root_name_is_the_object_its_module_defines():
+    from robocritics.critic import Critic, CriticParams, critique
+    from robocritics.hookspecs import hookimpl
+    from robocritics.llm.loop import Loop
+    from robocritics.report import Report
+    from robocritics.robot.model import Robot
+    from robocritics.scene import Scene
+    from robocritics.trajectory import Trajectory
+    from robocritics.verdict import Flag, Verdict
+
+    import robocritics.simulate as _  # noqa: F401  (the module, not the function the root binds)
+
+    simulate_module = sys.modules["robocritics.simulate"]
+    expected = {
+        "Robot": Robot,
+        "Scene": Scene,
+        "Trajectory": Trajectory,
+        "simulate": simulate_module.simulate,
+        "critique": critique,
+        "Report": Report,
+        "Verdict": Verdict,
+        "Flag": Flag,
+        "Critic": Critic,
+        "CriticParams": CriticParams,
+        "Loop": Loop,
+        "hookimpl": hookimpl,
+    }
+    for name, obj in expected.items():
+        assert getattr(robocritics, name) is obj, name
+    assert callable(robocritics.simulate) and robocritics.simulate.__module__ == "robocritics.simulate"
+    for name in ERROR_NAMES:
+        cls = getattr(robocritics, name)
+        assert cls is getattr(errors, name), name
+        assert issubclass(cls, errors.RoboCriticsError)
+
+
+@pytest.mark.parametrize(
+    "name, module",
+    [
+        ("State", "robocritics.trajectory"),
+        ("Execution", "robocritics.simulate"),
+        ("Evidence", "robocritics.critic"),
+        ("get_critics", "robocritics.critic"),
+        ("critic_sources", "robocritics.critic"),
+        ("URArm", "robocritics.deploy"),
+        ("Attempt", "robocritics.llm"),
+        ("OpenAICompatible", "robocritics.llm"),
+    ],
+)
+def test_names_that_left_the_root_say_where_they_live(name, module):
+    with pytest.raises(AttributeError, match=f"use `from {module} import {name}`"):
+        getattr(robocritics, name)
+    done = subprocess.run(
+        [sys.executable, "-c", f"from {module} import {name}; print({name}.__name__)"], capture_output=True, text=True
+    )
+    assert done.returncode == 0 and done.stdout.strip() == name, done.stderr
+
+
+def test_a_mistyped_root_name_suggests_the_right_one():
+    with pytest.raises(AttributeError, match=r"no attribute 'Scen'; did you mean 'Scene'\?"):
+        robocritics.Scen  # noqa: B018
+
+
+def test_hookimpl_has_one_import_path():
+    import robocritics.critic
+
+    assert not hasattr(robocritics.critic, "hookimpl")
+    assert "hookimpl" not in robocritics.critic.__all__
 
 
 def test_import_is_lazy():

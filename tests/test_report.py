@@ -7,7 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from robocritics.critic import ALL_PASSED, BUILTIN_CRITICS, CriticError, Evidence, Flag, Report, Verdict, critique, make_signal
+from robocritics.critic import ALL_PASSED, BUILTIN_CRITICS, Evidence, Flag, Report, Verdict, critique, make_signal
+from robocritics.errors import CriticError
+from robocritics.report import format_score
 from robocritics.scene import Scene
 from robocritics.trajectory import Step
 from synth import FRAME_NAMES, line_motion, make_trajectory, realistic_trajectory
@@ -41,12 +43,44 @@ def test_score_of_the_five_builtins_is_the_sum(flags, score):
     assert r.has_errors == (Flag.ERROR in flags)
 
 
-def test_score_with_another_critic_set_is_scaled_to_ten():
+def test_score_is_the_motion_critics_index_and_other_critics_stand_beside_it():
+    five = [Flag.OK, Flag.WARNING, Flag.OK, Flag.OK, Flag.OK]  # 9/10
+    r = report_of(five + [Flag.ERROR, Flag.WARNING], names=[*BUILTIN_CRITICS, "cycle_time", "noise"])
+    assert r.score == 9  # the plugins' verdicts do not move the index ...
+    assert [v.critic for v in r.other_verdicts] == ["cycle_time", "noise"]
+    assert [v.critic for v in r.scored_verdicts] == list(BUILTIN_CRITICS)
+    assert r.has_errors and not r.passed  # ... but they count toward pass/fail
+    assert r.summary().startswith("RoboCritics report: score 9/10 (1 error, 2 warnings); beside the score: cycle_time Error, noise Warning;")
+    assert report_of(five).other_verdicts == [] and not report_of(five).has_errors
+    assert report_of([Flag.OK] * 5).passed and not report_of(five).passed
+
+
+def test_score_of_some_of_the_five_is_scaled_to_ten():
+    r = report_of([Flag.OK, Flag.WARNING, Flag.ERROR])  # space_usage, collision, joint_speed: 3 of 6 points
+    assert r.score == pytest.approx(5.0)
+    r = report_of([Flag.WARNING, Flag.OK, Flag.ERROR], names=["joint_speed", "cycle_time", "pinch_point"])
+    assert r.score == pytest.approx(2.5)  # 1 of 4 points; cycle_time OK beside it
+    assert [v.critic for v in r.other_verdicts] == ["cycle_time"]
+
+
+def test_a_report_without_the_five_scores_its_own_critics():
     r = report_of([Flag.OK, Flag.WARNING, Flag.ERROR], names=["a", "b", "c"])
     assert r.score == pytest.approx(5.0)  # 3 of 6 points
+    assert r.other_verdicts == [] and "beside the score" not in r.summary()
     r = report_of([Flag.OK, Flag.WARNING, Flag.OK, Flag.OK, Flag.OK, Flag.WARNING], names=list("abcdef"))
     assert r.score == pytest.approx(10 * 10 / 12, abs=0.01)
     assert report_of([Flag.WARNING], names=["a"]).score == 5.0
+    assert Report(verdicts=[], trajectory_hash="h").score == 10.0
+
+
+@pytest.mark.parametrize("score, text", [(10.0, "10/10"), (7, "7/10"), (8.33, "8.3/10"), (0.0, "0/10"), (None, "-")])
+def test_one_score_format(score, text):
+    assert format_score(score) == text
+
+
+def test_score_text_is_the_formatted_score():
+    assert report_of([Flag.OK, Flag.WARNING, Flag.ERROR, Flag.OK, Flag.OK]).score_text == "7/10"
+    assert report_of([Flag.OK, Flag.WARNING, Flag.WARNING]).score_text == "6.7/10"
 
 
 def test_lists_and_lookup():
@@ -55,8 +89,10 @@ def test_lists_and_lookup():
     assert [v.critic for v in r.warnings] == ["collision", "pinch_point"]
     assert r.flag_of("collision") is Flag.WARNING
     assert r.flag is Flag.ERROR
-    with pytest.raises(CriticError, match="did you mean 'collision'"):
+    with pytest.raises(CriticError, match=r"no verdict of critic 'colision' in this report; did you mean 'collision'\? \(critics that ran: space_usage, "):
         r.flag_of("colision")
+    with pytest.raises(CriticError, match=r"no verdict of critic 'cycle_time' in this report \(critics that ran: space_usage, "):
+        r.verdict("cycle_time")
 
 
 def sorting_like_report():
@@ -68,7 +104,7 @@ def sorting_like_report():
     step = np.clip(np.arange(T) * 4 // T, 1, 3)
     step[0] = 0
     traj = make_trajectory(time, positions, steps=steps, step=step)
-    return traj, critique(traj, Scene())
+    return traj, critique(traj, Scene(), critics=BUILTIN_CRITICS)
 
 
 def test_report_binds_the_trajectory_and_records_params():
@@ -123,14 +159,14 @@ def test_text_rendering_names_every_critic_and_the_score():
     traj, r = sorting_like_report()
     text = str(r)
     assert text == r.to_text()
-    assert text.splitlines()[0].startswith(f"RoboCritics report: score {int(r.score)}/10")
+    assert text.splitlines()[0].startswith(f"RoboCritics report: score 7/10 (1 error, 1 warning); {len(traj)} samples")
     for name in BUILTIN_CRITICS:
         assert name in text
     assert "Hint: To minimize joint speed" in text
 
 
 def test_html_has_a_table_and_an_svg_per_signal():
-    r = critique(realistic_trajectory(duration_s=4.0, rate_hz=250.0, n_waypoints=3), Scene.builtin("sorting"))
+    r = critique(realistic_trajectory(duration_s=4.0, rate_hz=250.0, n_waypoints=3), Scene.builtin("sorting"), critics=BUILTIN_CRITICS)
     html = r._repr_html_()
     assert "<table" in html and html.count("<svg") == sum(v.signal is not None for v in r.verdicts) >= 4
     assert "<polyline" in html and "stroke-dasharray" in html

@@ -6,6 +6,12 @@ critics (:func:`critique`) flag joint speed, space usage, collision, spearing
 and pinch-point problems with explanations and fix hints (:class:`Report`);
 :class:`Loop` sends that feedback back to the model; only a verified trace is
 deployed to a UR3e (:mod:`robocritics.deploy`).
+
+The root holds the names most programs need; everything else lives in its
+module: ``robocritics.simulate.Execution``, ``robocritics.trajectory.State``,
+``robocritics.critic`` (``Evidence``, ``get_critics``, ``critic_sources``,
+``register``, the verdict helpers), ``robocritics.llm`` (``OpenAICompatible``,
+``Attempt``), ``robocritics.deploy`` (``URArm``).
 """
 
 from __future__ import annotations
@@ -22,38 +28,30 @@ _EXPORTS = {
     "Robot": "robocritics.robot.model",
     "Scene": "robocritics.scene",
     "Trajectory": "robocritics.trajectory",
-    "State": "robocritics.trajectory",
     "critique": "robocritics.critic",
-    "Flag": "robocritics.critic",
-    "Verdict": "robocritics.critic",
-    "Report": "robocritics.critic",
     "Critic": "robocritics.critic",
     "CriticParams": "robocritics.critic",
+    "Flag": "robocritics.verdict",
+    "Verdict": "robocritics.verdict",
+    "Report": "robocritics.report",
+    "hookimpl": "robocritics.hookspecs",
+    "Loop": "robocritics.llm.loop",
+}
+# Names that used to be exported here, and the module to import them from.
+_MOVED = {
+    "State": "robocritics.trajectory",
+    "Execution": "robocritics.simulate",
     "Evidence": "robocritics.critic",
     "get_critics": "robocritics.critic",
     "critic_sources": "robocritics.critic",
-    "hookimpl": "robocritics.hookspecs",
-    "URArm": "robocritics.deploy.stream",
-    "Loop": "robocritics.llm.loop",
-    "Attempt": "robocritics.llm.loop",
-    "OpenAICompatible": "robocritics.llm.client",
+    "URArm": "robocritics.deploy",
+    "Attempt": "robocritics.llm",
+    "OpenAICompatible": "robocritics.llm",
 }
-_ERRORS = (
-    "RoboCriticsError",
-    "SceneError",
-    "ProgramError",
-    "PlanningError",
-    "TrajectoryError",
-    "RobotModelError",
-    "CriticError",
-    "LLMError",
-    "DeployError",
-    "RTDEError",
-)
 
 # Eager, and cheap (its heavy imports are inside the function): the submodule
 # `robocritics.simulate` would otherwise shadow the function of the same name.
-from .simulate import Execution, simulate  # noqa: E402
+from .simulate import simulate  # noqa: E402
 from .errors import (  # noqa: E402
     CriticError,
     DeployError,
@@ -67,18 +65,31 @@ from .errors import (  # noqa: E402
     TrajectoryError,
 )
 
-__all__ = [*_EXPORTS, "simulate", "Execution", *_ERRORS]
+_ERRORS = (
+    "RoboCriticsError",
+    "SceneError",
+    "ProgramError",
+    "PlanningError",
+    "TrajectoryError",
+    "RobotModelError",
+    "CriticError",
+    "LLMError",
+    "DeployError",
+    "RTDEError",
+)
+
+__all__ = [*_EXPORTS, "simulate", *_ERRORS]
 
 
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), moved=_MOVED)
 
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .critic import Critic, CriticParams, Evidence, Flag, Report, Verdict, critic_sources, critique, get_critics
+    from .critic import Critic, CriticParams, critique
     from .hookspecs import hookimpl
-    from ..deploy.stream import URArm
-    from .llm.client import OpenAICompatible
-    from .llm.loop import Attempt, Loop
+    from .llm.loop import Loop
+    from .report import Report
     from .robot.model import Robot
     from .scene import Scene
-    from .trajectory import State, Trajectory
+    from .trajectory import Trajectory
+    from .verdict import Flag, Verdict

@@ -9,13 +9,15 @@ program lines and skills).
 
 Critics are plugins: each is registered through the ``robocritics``
 entry-point group by a ``register_critics(register)`` hook (see
-:mod:`robocritics.hookspecs`), the built-in ones exactly like third-party ones.
+:mod:`robocritics.hookspecs`), the built-in ones exactly like third-party ones;
+:func:`register` adds one from a notebook through the same plugin manager.
 :func:`get_critics` lists the installed critics; :func:`critique` runs them.
 
 Writing a critic::
 
     from pydantic import Field
-    from robocritics.critic import CriticParams, Flag, Verdict, hookimpl, make_evidence
+    from robocritics import hookimpl
+    from robocritics.critic import CriticParams, Flag, Verdict
 
     class CycleTime:
         name = "cycle_time"
@@ -28,22 +30,31 @@ Writing a critic::
             ...
             return Verdict(critic=self.name, flag=Flag.OK, message="...")
 
-    @hookimpl
+    @hookimpl                      # in a package, named by a `robocritics` entry point
     def register_critics(register):
         register(CycleTime())
+
+    robocritics.critic.register(CycleTime())   # or, in a notebook
 """
 
 from __future__ import annotations
 
-import difflib
 from typing import TYPE_CHECKING, Any, Iterable, Mapping, Protocol, Union, runtime_checkable
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from ._suggest import did_you_mean
 from .errors import CriticError, RoboCriticsError
-from .hookspecs import hookimpl, hookspec
-from .plugins import critic_distributions, critic_sources, get_critics, plugin_errors
-from .report import ALL_PASSED, BUILTIN_CRITICS, Report, signal_svg
+from .plugins import (
+    critic_distributions,
+    critic_sources,
+    get_critics,
+    plugin_errors,
+    register,
+    unregister,
+    validate_critic,
+)
+from .report import ALL_PASSED, BUILTIN_CRITICS, Report, format_score, signal_svg
 from .verdict import (
     MAX_SIGNAL_POINTS,
     Evidence,
@@ -63,6 +74,7 @@ from .verdict import (
 
 if TYPE_CHECKING:  # pragma: no cover
     from .scene import Scene
+    from .simulate import Execution
     from .trajectory import Trajectory
 
 __all__ = [
@@ -79,9 +91,10 @@ __all__ = [
     "critic_sources",
     "critic_distributions",
     "plugin_errors",
+    "register",
+    "unregister",
+    "validate_critic",
     "resolve_params",
-    "hookimpl",
-    "hookspec",
     "BUILTIN_CRITICS",
     "ALL_PASSED",
     "MAX_SIGNAL_POINTS",
@@ -90,6 +103,7 @@ __all__ = [
     "threshold_verdict",
     "format_lines",
     "format_skills",
+    "format_score",
     "during",
     "fmt_value",
     "fmt_length",
@@ -128,11 +142,9 @@ class CriticParams(BaseModel):
 ParamsArg = Union[Mapping[str, Any], BaseModel, None]
 
 
-def _did_you_mean(name: str, names: Iterable[str], what: str = "critic") -> str:
-    names = sorted(names)
-    close = difflib.get_close_matches(name, names, n=1, cutoff=0.5)
-    hint = f"did you mean {close[0]!r}? " if close else ""
-    return f"; {hint}installed {what}s: {', '.join(names) if names else '(none)'}"
+def _unknown(what: str, name: str, available: Iterable[str]) -> str:
+    names = sorted(available)
+    return f"{what} {name!r}{did_you_mean(name, names)} (installed critics: {', '.join(names) or 'none'})"
 
 
 def resolve_params(critic: Critic, given: ParamsArg) -> BaseModel:
@@ -158,9 +170,7 @@ def resolve_params(critic: Critic, given: ParamsArg) -> BaseModel:
         field = ".".join(str(p) for p in err["loc"]) or "params"
         fields = list(cls.model_fields)
         if err["type"] == "extra_forbidden":
-            close = difflib.get_close_matches(str(err["loc"][0]), fields, n=1, cutoff=0.5)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            message = f"unknown parameter {field!r}{hint}; its parameters are {', '.join(fields)}"
+            message = f"unknown parameter {field!r}{did_you_mean(err['loc'][0], fields)} (its parameters: {', '.join(fields)})"
         else:
             msg = err["msg"]
             if msg.startswith("Value error, "):
@@ -179,16 +189,16 @@ def _select(critics: Any, available: dict[str, Any]) -> list[Any]:
     for item in critics:
         if isinstance(item, str):
             if item not in available:
-                raise CriticError(f"unknown critic {item!r}{_did_you_mean(item, available)}")
+                raise CriticError(_unknown("unknown critic", item, available))
             item = available[item]
-        elif not callable(getattr(item, "check", None)) or not isinstance(getattr(item, "name", None), str):
-            raise CriticError(f"{item!r} is neither a critic name nor a critic (needs `name`, `Params`, `check`)")
+        else:
+            validate_critic(item)  # an ad-hoc critic object, checked like a registered one
         if item.name in seen:
             continue
         seen.add(item.name)
         selected.append(item)
     if not selected:
-        raise CriticError("no critics selected" + _did_you_mean("", available))
+        raise CriticError(f"no critics selected (installed critics: {', '.join(sorted(available)) or 'none'})")
     return selected
 
 
@@ -210,26 +220,39 @@ def select_critics(
     selected_names = {c.name for c in selected}
     for name in params:
         if not isinstance(name, str) or (name not in available and name not in selected_names):
-            raise CriticError(f"params given for unknown critic {name!r}{_did_you_mean(str(name), available)}")
+            raise CriticError(_unknown("params given for unknown critic", str(name), available))
     return [(critic, resolve_params(critic, params.get(critic.name))) for critic in selected]
 
 
 def critique(
-    trajectory: "Trajectory",
-    scene: "Scene",
+    trajectory: "Trajectory | Execution",
+    scene: "Scene | None" = None,
     critics: Iterable[str | Critic] | str | None = None,
     params: Mapping[str, ParamsArg] | None = None,
 ) -> Report:
     """Run critics on a trajectory in a scene and collect their verdicts in a :class:`Report`.
 
-    ``critics``: names (or a comma-separated string, or critic objects) to run,
-    in that order; default every installed critic (:func:`get_critics`: the five
-    built-ins plus any plugin's). ``params``: ``{critic_name: {field: value} |
-    ParamsInstance}`` overriding thresholds. Unknown critic names, unknown or
-    invalid parameters raise :class:`CriticError` naming the critic and the
-    field; so does a critic that fails or returns something other than a
-    :class:`Verdict`.
+    ``trajectory``: a :class:`~robocritics.trajectory.Trajectory`, or the
+    :class:`~robocritics.simulate.Execution` that :func:`robocritics.simulate` returns
+    (its trajectory is judged, and ``scene`` defaults to the scene it was simulated in).
+    ``critics``: names (or a comma-separated string, or critic objects, validated like
+    registered ones) to run, in that order; default every installed critic
+    (:func:`get_critics`: the five built-ins plus any plugin's or :func:`register`'s).
+    ``params``: ``{critic_name: {field: value} | ParamsInstance}`` overriding thresholds.
+    Unknown critic names, unknown or invalid parameters raise :class:`CriticError` naming
+    the critic and the field; so does a critic that fails or returns something other than
+    a :class:`Verdict`.
     """
+    from .simulate import Execution
+    from .trajectory import Trajectory
+
+    if isinstance(trajectory, Execution):
+        scene = trajectory.scene if scene is None else scene
+        trajectory = trajectory.trajectory
+    if not isinstance(trajectory, Trajectory):
+        raise CriticError(f"critique() judges a Trajectory or an Execution, got {type(trajectory).__name__}")
+    if scene is None:
+        raise CriticError("critique(trajectory) needs the scene the trajectory moves in: critique(trajectory, scene)")
     verdicts: list[Verdict] = []
     used: dict[str, dict[str, Any]] = {}
     for critic, p in select_critics(critics, params):

@@ -9,14 +9,15 @@ entry-point group, with a function marked ``@hookimpl`` named
     cycle_time = "robocritics_cycle_time"
 
     # robocritics_cycle_time.py
-    from robocritics.hookspecs import hookimpl
+    from robocritics import hookimpl
 
     @hookimpl
     def register_critics(register):
         register(CycleTimeCritic())
 
 The built-in critics are registered in exactly this way, through robocritics'
-own entry points.
+own entry points. ``hookimpl`` is defined here and imported as
+``robocritics.hookimpl``, its one public path.
 """
 
 from __future__ import annotations

@@ -12,6 +12,11 @@ package's.
 :func:`get_critics` calls each plugin's ``register_critics`` hook and returns
 the critics by name; :func:`critic_sources` tells which distribution provides
 each one.
+
+:func:`register` adds a critic object to the same plugin manager from a
+notebook or script, without a package: it is validated at once (a
+:class:`~robocritics.errors.CriticError` says what is missing) and from then on
+listed by :func:`get_critics` and run by ``critique()`` like an installed one.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import pluggy
 from pydantic import BaseModel
 
 from . import hookspecs
+from .errors import CriticError
 
 __all__ = [
     "pm",
@@ -37,6 +43,9 @@ __all__ = [
     "get_critics",
     "critic_sources",
     "critic_distributions",
+    "validate_critic",
+    "register",
+    "unregister",
     "ENTRY_POINT_GROUP",
     "BUILTIN_CRITICS",
 ]
@@ -76,7 +85,7 @@ _warned: set[PluginError] = set()
 
 _plugin_dist: dict[str, tuple[str, str]] = {}  # plugin name -> (distribution name, version)
 _loaded = False
-_cache_key: frozenset[int] | None = None
+_cache_key: frozenset[Any] | None = None
 _critics: dict[str, Any] = {}
 _sources: dict[str, tuple[str, str]] = {}
 
@@ -140,29 +149,39 @@ def _dist_of(ep) -> tuple[str, str]:
         return ("", "")
 
 
-def _critic_problem(critic: Any) -> str:
-    """Why ``critic`` does not follow the Critic protocol ('' if it does)."""
+def validate_critic(critic: Any) -> None:
+    """Raise :class:`CriticError` saying what ``critic`` lacks to follow the Critic protocol.
+
+    A critic is an object (not a class) with a ``name`` (letters, digits, ``_ . -``), a
+    ``description`` string, a pydantic ``Params`` model class whose fields all have defaults,
+    and a ``check(trajectory, scene, params)`` method. Registered critics and critic objects
+    passed to ``critique(critics=[...])`` are checked alike.
+    """
+    if isinstance(critic, type):
+        raise CriticError(f"{critic.__name__} is a class; pass an instance: {critic.__name__}()")
     name = getattr(critic, "name", None)
     if not isinstance(name, str) or not _NAME.match(name):
-        return f"critic {critic!r} needs a `name` (letters, digits, _ . -), got {name!r}"
-    if not isinstance(getattr(critic, "description", None), str):
-        return f"critic {name!r} needs a `description` string"
-    params = getattr(critic, "Params", None)
+        raise CriticError(f"critic {critic!r} needs a `name` (letters, digits, _ . -), got {name!r}")
+    missing = [attr for attr in ("description", "Params", "check") if not hasattr(critic, attr)]
+    if missing:
+        raise CriticError(f"critic {name!r} has no {', '.join(f'`{m}`' for m in missing)} (a critic needs `name`, `description`, `Params` and `check`)")
+    if not isinstance(critic.description, str):
+        raise CriticError(f"critic {name!r}: `description` must be a string, got {type(critic.description).__name__}")
+    params = critic.Params
     if not (isinstance(params, type) and issubclass(params, BaseModel)):
-        return f"critic {name!r} needs a pydantic `Params` model class"
+        raise CriticError(f"critic {name!r}: `Params` must be a pydantic model class (e.g. a CriticParams subclass), got {params!r}")
     try:
         params()
     except Exception as exc:  # noqa: BLE001
-        return f"critic {name!r}: every field of Params needs a default ({exc})"
-    if not callable(getattr(critic, "check", None)):
-        return f"critic {name!r} needs a `check(trajectory, scene, params)` method"
-    return ""
+        raise CriticError(f"critic {name!r}: every field of Params needs a default ({exc})") from None
+    if not callable(critic.check):
+        raise CriticError(f"critic {name!r}: `check` must be a method check(trajectory, scene, params)")
 
 
 def _collect() -> None:
     global _cache_key, _critics, _sources
     load_plugins()
-    key = frozenset(id(p) for p in pm.get_plugins())
+    key = frozenset(pm.get_plugins())  # the plugins themselves (not ids, which a replaced plugin may reuse)
     if key == _cache_key:
         return
     critics: dict[str, Any] = {}
@@ -181,9 +200,10 @@ def _collect() -> None:
         dist_label = " ".join(p for p in dist if p)
 
         def register(critic: Any, _plugin: str = plugin_name, _dist: tuple[str, str] = dist, _label: str = dist_label) -> None:
-            problem = _critic_problem(critic)
-            if problem:
-                reject(PluginError(_plugin, _plugin, _label, f"CriticError: {problem}"))
+            try:
+                validate_critic(critic)
+            except CriticError as exc:
+                reject(PluginError(_plugin, _plugin, _label, f"CriticError: {exc}"))
                 return
             if critic.name in critics:
                 other = " ".join(p for p in sources[critic.name] if p) or "another plugin"
@@ -220,3 +240,39 @@ def critic_distributions() -> dict[str, tuple[str, str]]:
     """``(distribution name, version)`` providing each critic."""
     _collect()
     return dict(_sources)
+
+
+_REGISTERED_PREFIX = "registered:"
+
+
+def register(critic: Any) -> Any:
+    """Add ``critic`` to the plugin manager, as a package's entry point would; returns ``critic``.
+
+    For notebooks and scripts: the critic is validated at once (:class:`CriticError` saying what
+    is missing), then :func:`get_critics` lists it (its package is ``""``) and
+    ``critique()`` runs it by default and by name. Registering a critic of the same name again
+    replaces the earlier one registered this way (re-running a notebook cell); a name that an
+    installed package provides is refused. :func:`unregister` removes it.
+    """
+    validate_critic(critic)
+    load_plugins()
+    installed = get_critics()
+    if critic.name in installed and not pm.has_plugin(_REGISTERED_PREFIX + critic.name):
+        other = " ".join(p for p in _sources[critic.name] if p) or "another plugin"
+        raise CriticError(f"a critic named {critic.name!r} is already provided by {other}; choose another name")
+    unregister(critic.name)
+
+    class _Plugin:
+        @hookspecs.hookimpl
+        def register_critics(self, register):  # type: ignore[no-untyped-def]
+            register(critic)
+
+    pm.register(_Plugin(), name=_REGISTERED_PREFIX + critic.name)
+    return critic
+
+
+def unregister(name: str) -> None:
+    """Remove the critic ``name`` added by :func:`register` (nothing happens if there is none)."""
+    plugin = pm.get_plugin(_REGISTERED_PREFIX + name)
+    if plugin is not None:
+        pm.unregister(plugin)

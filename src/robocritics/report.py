@@ -1,16 +1,19 @@
 """The verdicts of one critique run: score, feedback text, terminal text, JSON, notebook HTML.
 
-``Report.score`` is the paper's 0-10 program quality index: each critic
-scores 2 (OK), 1 (Warning) or 0 (Error); with the five built-in critics the
-score is that sum, and with any other set of ``n`` critics the sum is scaled
-to 0-10 (``10 * sum / (2 n)``). ``trajectory_hash`` is the
-:meth:`~robocritics.trajectory.Trajectory.content_hash` of the motion judged,
-so a report can be bound to the exact motion that will be deployed.
+``Report.score`` is the paper's 0-10 program quality index over the five built-in
+motion critics (:data:`~robocritics.plugins.BUILTIN_CRITICS`): each scores 2 (OK),
+1 (Warning) or 0 (Error) and the score is their sum; when only some of the five
+ran, the sum is scaled to 0-10 (``10 * sum / (2 n)``). Every other critic that ran
+(a plugin's, or one passed to ``critique()``) is reported beside the score, not in
+it, and counts toward pass/fail (:attr:`Report.has_errors`, :attr:`Report.passed`).
+A report with none of the five scores its own critics the same way.
+
+``trajectory_hash`` is the :meth:`~robocritics.trajectory.Trajectory.content_hash`
+of the motion judged, so a report can be bound to the exact motion that will be deployed.
 """
 
 from __future__ import annotations
 
-import difflib
 import html
 import math
 import textwrap
@@ -18,15 +21,23 @@ from typing import Any, Iterable
 
 from pydantic import BaseModel, ConfigDict, Field, computed_field
 
+from ._suggest import did_you_mean
 from .errors import CriticError
 from .plugins import BUILTIN_CRITICS
 from .verdict import Flag, Signal, Verdict, fmt_value, format_lines
 
-__all__ = ["Report", "BUILTIN_CRITICS", "ALL_PASSED"]
+__all__ = ["Report", "BUILTIN_CRITICS", "ALL_PASSED", "format_score"]
 
 ALL_PASSED = "All selected critics passed."
 
 _FLAG_COLOURS = {"OK": "#1a7f37", "WARNING": "#b35900", "ERROR": "#c62828"}
+
+
+def format_score(score: float | None) -> str:
+    """A 0-10 score as people read it: ``"7/10"``, ``"8.3/10"``; ``"-"`` for None (not scored)."""
+    if score is None:
+        return "-"
+    return f"{int(score)}/10" if float(score).is_integer() else f"{score:.1f}/10"
 
 
 class Report(BaseModel):
@@ -45,11 +56,37 @@ class Report(BaseModel):
     @computed_field  # type: ignore[prop-decorator]
     @property
     def score(self) -> float:
-        """Program quality index, 0-10 (sum of 2/1/0 per critic, scaled to 0-10 for n != 5 critics)."""
-        if not self.verdicts:
+        """Program quality index, 0-10, over :attr:`scored_verdicts`: the sum of their 2/1/0 points,
+        scaled to 0-10 when fewer than five are scored."""
+        scored = self.scored_verdicts
+        if not scored:
             return 10.0
-        total = sum(v.flag.score for v in self.verdicts)
-        return round(10.0 * total / (2 * len(self.verdicts)), 2)
+        total = sum(v.flag.score for v in scored)
+        return round(10.0 * total / (2 * len(scored)), 2)
+
+    @property
+    def score_text(self) -> str:
+        """:attr:`score` formatted, e.g. ``"7/10"`` (:func:`format_score`)."""
+        return format_score(self.score)
+
+    @property
+    def scored_verdicts(self) -> list[Verdict]:
+        """The verdicts the score is made of: those of the five built-in motion critics that ran
+        (every verdict when none of the five ran)."""
+        motion = [v for v in self.verdicts if v.critic in BUILTIN_CRITICS]
+        return motion or list(self.verdicts)
+
+    @property
+    def other_verdicts(self) -> list[Verdict]:
+        """Verdicts of the critics that ran beside the score (plugins, ad-hoc critics); they count toward
+        :attr:`has_errors` and :attr:`passed` but not toward :attr:`score`."""
+        others = [v for v in self.verdicts if v.critic not in BUILTIN_CRITICS]
+        return others if len(others) < len(self.verdicts) else []
+
+    @property
+    def passed(self) -> bool:
+        """Whether every critic that ran, scored or not, gave OK."""
+        return all(v.flag is Flag.OK for v in self.verdicts)
 
     @property
     def critics(self) -> list[str]:
@@ -57,6 +94,7 @@ class Report(BaseModel):
 
     @property
     def has_errors(self) -> bool:
+        """Whether any critic that ran, scored or not, gave an Error."""
         return any(v.flag is Flag.ERROR for v in self.verdicts)
 
     @property
@@ -76,7 +114,11 @@ class Report(BaseModel):
         for v in self.verdicts:
             if v.critic == name:
                 return v
-        raise CriticError(f"no verdict of critic {name!r} in this report{_did_you_mean(name, self.critics)}")
+        raise CriticError(self._not_here(name))
+
+    def _not_here(self, name: str) -> str:
+        ran = ", ".join(self.critics) or "none"
+        return f"no verdict of critic {name!r} in this report{did_you_mean(name, self.critics)} (critics that ran: {ran})"
 
     def flag_of(self, name: str) -> Flag:
         """The flag the critic ``name`` gave (CriticError if it did not run)."""
@@ -99,7 +141,7 @@ class Report(BaseModel):
             names = [critics] if isinstance(critics, str) else list(critics)
             for name in names:
                 if name not in self.critics:
-                    raise CriticError(f"no verdict of critic {name!r} in this report{_did_you_mean(name, self.critics)}")
+                    raise CriticError(self._not_here(name))
             selected = [v for v in self.verdicts if v.critic in names]
         flagged = [v for v in selected if v.flag is not Flag.OK]
         if not flagged:
@@ -109,11 +151,8 @@ class Report(BaseModel):
 
     # --- text for a terminal -------------------------------------------------------
 
-    def _score_text(self) -> str:
-        s = self.score
-        return f"{int(s)}/10" if float(s).is_integer() else f"{s:.1f}/10"
-
     def summary(self) -> str:
+        """One line: the score, the errors and warnings of every critic, the critics beside the score, the motion."""
         n_err, n_warn = len(self.errors), len(self.warnings)
         parts = []
         if n_err:
@@ -121,9 +160,11 @@ class Report(BaseModel):
         if n_warn:
             parts.append(f"{n_warn} warning{'s' if n_warn != 1 else ''}")
         status = ", ".join(parts) if parts else "all passed"
+        beside = ", ".join(f"{v.critic} {v.flag.label}" for v in self.other_verdicts)
         return (
-            f"RoboCritics report: score {self._score_text()} ({status}); "
-            f"{self.samples} samples, {self.duration_s:.2f} s, trajectory {self.trajectory_hash[:12]}"
+            f"RoboCritics report: score {self.score_text} ({status})"
+            + (f"; beside the score: {beside}" if beside else "")
+            + f"; {self.samples} samples, {self.duration_s:.2f} s, trajectory {self.trajectory_hash[:12]}"
         )
 
     def to_text(self, width: int = 100) -> str:
@@ -192,12 +233,6 @@ class Report(BaseModel):
             "<thead><tr><th>flag</th><th>critic</th><th>finding</th><th>measured</th><th>evidence</th></tr></thead>"
             f"<tbody>{''.join(rows)}</tbody></table>{plots}</div>"
         )
-
-
-def _did_you_mean(name: str, names: Iterable[str]) -> str:
-    names = list(names)
-    close = difflib.get_close_matches(name, names, n=1)
-    return f"; did you mean {close[0]!r}?" if close else (f"; have {', '.join(names)}" if names else "")
 
 
 def _evidence_text(v: Verdict) -> str:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import UsageError, load_params, positive_float, read_text, scene_for, subcommand
+from ._common import load_params, positive_float, read_text, scene_for, subcommand
 
 
 @subcommand("check")
@@ -13,7 +13,8 @@ def _build_check(sub) -> None:
         "check",
         help="simulate a robot program and run the critics on its motion",
         description="Simulate PROGRAM in a scene, run the critics on the trajectory and print the report. "
-        "Exit status: 0 no Error verdict, 1 at least one Error, 2 bad input.",
+        "The score is the 0-10 index of the five built-in motion critics; other critics are reported beside it. "
+        "Exit status: 0 no Error verdict (from any critic), 1 at least one Error, 2 bad input.",
     )
     p.add_argument("program", metavar="PROGRAM", help="robot program file (Python using the skill API)")
     p.add_argument(
@@ -35,17 +36,14 @@ def _build_check(sub) -> None:
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from ..critic import critique, select_critics
+    from ..simulate import simulate
 
     source = read_text(args.program, "program")
     scene = scene_for(args.program, args.scene)
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
     select_critics(critics, params)  # fail fast on bad names or params, before simulating
-    try:
-        from ..simulate import simulate
-    except ImportError as exc:  # pragma: no cover - only while the simulator is missing
-        raise UsageError(f"simulation is not available in this installation: {exc}") from None
     execution = simulate(source, scene, sample_rate_hz=args.rate)
-    report = critique(execution.trajectory, getattr(execution, "scene", scene), critics=critics, params=params)
+    report = critique(execution, critics=critics, params=params)
     print(report.to_json() if args.json else report.to_text())
     return 1 if report.has_errors else 0

@@ -12,16 +12,8 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field, model_validator
 
-from robocritics.critic import (
-    CriticParams,
-    Flag,
-    Verdict,
-    format_lines,
-    hookimpl,
-    make_evidence,
-    make_signal,
-    threshold_verdict,
-)
+from robocritics import hookimpl
+from robocritics.critic import CriticParams, Flag, Verdict, format_lines, make_evidence, make_signal, threshold_verdict
 
 __all__ = ["CycleTimeCritic", "register_critics"]
 __version__ = "0.1.0"
