@@ -1,11 +1,11 @@
-"""Hand-built trajectories for critic tests and benchmarks (no robot model needed).
+"""Hand-built trajectories for critic tests and benchmarks (no planner needed).
 
 * :func:`make_trajectory` wraps arrays into a valid :class:`Trajectory` with sensible defaults;
 * :func:`frames_from` builds ``(T, L, 4, 4)`` poses from positions and (optionally) finger directions;
 * :func:`line_motion` moves one point along a straight line at a known speed;
 * :func:`realistic_trajectory` synthesises a pick-and-place-like UR3e motion
-  (DH forward kinematics, 12 frames, ~60 tagged proximity pairs, steps with lines,
-  an attached object) at any sample rate.
+  (the UR3e model's forward kinematics, 12 frames, ~60 tagged proximity pairs,
+  steps with lines, an attached object) at any sample rate.
 """
 
 from __future__ import annotations
@@ -14,41 +14,23 @@ import math
 
 import numpy as np
 
+from robocritics.robot.model import Robot
 from robocritics.trajectory import Pair, RobotLimits, Step, Trajectory
 
-FRAME_NAMES = (
-    "base_link",
-    "shoulder_link",
-    "upper_arm_link",
-    "forearm_link",
-    "wrist_1_link",
-    "wrist_2_link",
-    "wrist_3_link",
-    "tool0",
-    "gripper_body",
-    "left_finger",
-    "right_finger",
-    "tcp",
-)
-JOINT_NAMES = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
-UR3E_VEL = (math.pi, math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 * math.pi)
+_UR3E = Robot.ur3e()
+FRAME_NAMES = _UR3E.frame_names  # base_link ... wrist_3_link, tool0, gripper_body, left/right_finger, tcp
 
 
 def limits(n: int = 6, velocity=None) -> RobotLimits:
-    vel = tuple(velocity) if velocity is not None else (UR3E_VEL if n == 6 else (math.pi,) * n)
-    names = JOINT_NAMES if n == 6 else tuple(f"joint_{i}" for i in range(n))
+    """The UR3e's joint limits for 6 joints (``velocity`` rad/s overrides its speed limits), generic ones otherwise."""
+    if n == 6:
+        ur3e = _UR3E.limits
+        return ur3e if velocity is None else ur3e.model_copy(update={"velocity_rad_s": tuple(velocity)})
     return RobotLimits(
-        joint_names=names,
+        joint_names=tuple(f"joint_{i}" for i in range(n)),
         lower_rad=(-2 * math.pi,) * n,
         upper_rad=(2 * math.pi,) * n,
-        velocity_rad_s=vel,
+        velocity_rad_s=tuple(velocity) if velocity is not None else (math.pi,) * n,
         acceleration_rad_s2=(10.0,) * n,
     )
 
@@ -150,59 +132,6 @@ def env_pair(a: str, b: str, group_a: str = "gripper", group_b: str = "object", 
 
 # --- a realistic motion ----------------------------------------------------------------
 
-_DH_D = (0.15185, 0.0, 0.0, 0.13105, 0.08535, 0.0921)
-_DH_A = (0.0, -0.24355, -0.2132, 0.0, 0.0, 0.0)
-_DH_ALPHA = (math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0)
-
-
-def _dh(theta: np.ndarray, d: float, a: float, alpha: float) -> np.ndarray:
-    ct, st = np.cos(theta), np.sin(theta)
-    ca, sa = math.cos(alpha), math.sin(alpha)
-    M = np.zeros(theta.shape + (4, 4))
-    M[..., 0, 0] = ct
-    M[..., 0, 1] = -st * ca
-    M[..., 0, 2] = st * sa
-    M[..., 0, 3] = a * ct
-    M[..., 1, 0] = st
-    M[..., 1, 1] = ct * ca
-    M[..., 1, 2] = -ct * sa
-    M[..., 1, 3] = a * st
-    M[..., 2, 1] = sa
-    M[..., 2, 2] = ca
-    M[..., 2, 3] = d
-    M[..., 3, 3] = 1.0
-    return M
-
-
-def _offset(x=0.0, y=0.0, z=0.0) -> np.ndarray:
-    M = np.eye(4)
-    M[:3, 3] = (x, y, z)
-    return M
-
-
-def ur3e_frames(q: np.ndarray) -> np.ndarray:
-    """``(T, 12, 4, 4)`` frames of a UR3e (e-series DH) with a gripper; tcp z = tool z = finger direction."""
-    T = q.shape[0]
-    out = np.empty((T, 12, 4, 4))
-    M = np.broadcast_to(np.eye(4), (T, 4, 4)).copy()
-    out[:, 0] = M
-    chain = []
-    for i in range(6):
-        M = M @ _dh(q[:, i], _DH_D[i], _DH_A[i], _DH_ALPHA[i])
-        chain.append(M)
-    out[:, 1] = chain[0]
-    out[:, 2] = chain[0] @ _offset(z=0.12)
-    out[:, 3] = chain[1]
-    out[:, 4] = chain[2]
-    out[:, 5] = chain[3]
-    out[:, 6] = chain[4]
-    out[:, 7] = chain[5]
-    out[:, 8] = chain[5] @ _offset(z=0.05)
-    out[:, 9] = chain[5] @ _offset(x=0.03, z=0.15)
-    out[:, 10] = chain[5] @ _offset(x=-0.03, z=0.15)
-    out[:, 11] = chain[5] @ _offset(z=0.16)
-    return out
-
 
 def realistic_trajectory(duration_s: float = 60.0, rate_hz: float = 500.0, seed: int = 0, n_waypoints: int = 16) -> Trajectory:
     """A pick-and-place-like UR3e motion: minimum-jerk moves between random joint waypoints,
@@ -216,7 +145,7 @@ def realistic_trajectory(duration_s: float = 60.0, rate_hz: float = 500.0, seed:
     s = (time - knots[seg]) / (knots[seg + 1] - knots[seg])
     s = 10 * s**3 - 15 * s**4 + 6 * s**5
     q = wp[seg] + (wp[seg + 1] - wp[seg]) * s[:, None]
-    frames = ur3e_frames(q)
+    frames = _UR3E.forward(q)
     pos = frames[:, :, :3, 3]
 
     arm = ["upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link", "wrist_3_link"]
