@@ -1,6 +1,6 @@
 """pytest fixtures for the LLM tests: a fresh ``LLMServer`` and clients pointed at it.
 
-Import the fixtures into a test module: ``from llm_fixtures import llm_server, make_client, sleeps``.
+Import the fixtures into a test module: ``from llm_fixtures import llm_server, make_client``.
 Modules that build clients from the environment should also use ``clean_llm_env``
 (e.g. ``pytestmark = pytest.mark.usefixtures("clean_llm_env")``), so a developer's
 real configuration or API key never reaches a test server.
@@ -8,7 +8,7 @@ real configuration or API key never reaches a test server.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 
 import pytest
 from llm_server import LLMServer
@@ -41,40 +41,41 @@ def llm_server() -> Iterator[LLMServer]:
         yield server
 
 
-@pytest.fixture
-def sleeps() -> list[float]:
-    """The pauses (s) that clients made by ``make_client`` asked for between retries, in order."""
-    return []
-
-
-@pytest.fixture
-def make_client(llm_server: LLMServer, sleeps: list[float]) -> Iterator[Callable[..., OpenAICompatible]]:
-    """Factory of ``OpenAICompatible`` clients for ``llm_server`` that do not really wait between retries.
+class ClientFactory:
+    """Makes ``OpenAICompatible`` clients for one ``LLMServer`` that do not really wait between retries.
 
     Each pause a client would sleep is appended to ``sleeps`` instead, so retry
     timing is asserted exactly and costs no time. Defaults: model ``test-chat``,
     embedding model ``test-embed``, timeout 2 s, backoff base 0.01 s capped at
     0.05 s; any keyword overrides them (``sleep=time.sleep`` for real waits).
-    Clients are closed after the test.
     """
-    clients: list[OpenAICompatible] = []
 
-    def make(**overrides) -> OpenAICompatible:
+    def __init__(self, server: LLMServer):
+        self.server = server
+        self.sleeps: list[float] = []
+        self.clients: list[OpenAICompatible] = []
+
+    def __call__(self, **overrides) -> OpenAICompatible:
         options = dict(
-            base_url=llm_server.url,
+            base_url=self.server.url,
             model=TEST_MODEL,
             embedding_model=TEST_EMBEDDING_MODEL,
             api_key="sk-test-not-a-secret",
             timeout_s=2.0,
             backoff_base_s=0.01,
             backoff_max_s=0.05,
-            sleep=sleeps.append,
+            sleep=self.sleeps.append,
         )
         options.update(overrides)
         client = OpenAICompatible(**options)
-        clients.append(client)
+        self.clients.append(client)
         return client
 
-    yield make
-    for client in clients:
+
+@pytest.fixture
+def make_client(llm_server: LLMServer) -> Iterator[ClientFactory]:
+    """A :class:`ClientFactory` for ``llm_server``; its clients are closed after the test."""
+    factory = ClientFactory(llm_server)
+    yield factory
+    for client in factory.clients:
         client.close()

@@ -122,3 +122,36 @@ def test_endpoint_failure_exits_2(llm_server, capsys):
     assert run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m") == 2
     err = capsys.readouterr().err
     assert "LLM endpoint failed" in err and "404" in err
+
+
+def test_params_file_reaches_the_critics(llm_server, capsys, tmp_path):
+    strict = tmp_path / "strict.json"
+    strict.write_text('{"joint_speed": {"warn_speed_m_s": 0.001, "max_speed_m_s": 0.002}}')
+    program = "```python\nmove_above(green_apple)\n```"
+    llm_server.reply(program, program)
+    base = (TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", "joint_speed")
+    assert run(*base) == 0
+    assert run(*base, "--params", str(strict)) == 1  # the same motion is now far too fast
+    assert "final: attempt 1, score" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        ("{not json", "is not valid JSON"),  # the shared loader's own words (cli._common.load_params)
+        ('{"joint_speed": 0.8}', "must hold a JSON object of critic names to objects"),
+    ],
+)
+def test_a_bad_params_file_exits_2_before_any_request(llm_server, capsys, tmp_path, content, message):
+    bad = tmp_path / "params.json"
+    bad.write_text(content)
+    assert run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--params", str(bad)) == 2
+    assert message in capsys.readouterr().err
+    assert llm_server.requests == []
+
+
+def test_defaults_match_the_library():
+    from robocritics.llm.loop import DEFAULT_MAX_ATTEMPTS
+
+    args = parse(TASK, "--scene", "sorting")
+    assert args.max_attempts == DEFAULT_MAX_ATTEMPTS

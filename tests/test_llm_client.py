@@ -1,6 +1,6 @@
 """OpenAICompatible against a real HTTP server on 127.0.0.1 (tests/llm_server.py).
 
-Retry pauses are recorded, not slept (the ``sleeps`` fixture), so their timing is asserted exactly;
+Retry pauses are recorded, not slept (``make_client.sleeps``), so their timing is asserted exactly;
 only the network timeouts are real, against a server that stalls far longer than the timeout.
 """
 
@@ -18,7 +18,7 @@ import traceback
 import httpx
 import numpy as np
 import pytest
-from llm_fixtures import TEST_EMBEDDING_MODEL, TEST_MODEL, clean_llm_env, llm_server, make_client, sleeps  # noqa: F401
+from llm_fixtures import TEST_EMBEDDING_MODEL, TEST_MODEL, clean_llm_env, llm_server, make_client  # noqa: F401
 from llm_server import Delay, Drop, Fail, Garbage, LLMServer, RawJSON, Reply, hashed_embedding
 
 from robocritics.errors import LLMError, RoboCriticsError
@@ -200,25 +200,25 @@ def test_malformed_messages_are_rejected_before_any_request(llm_server, make_cli
 # -- retries --------------------------------------------------------------------
 
 
-def test_429_is_retried_after_the_retry_after_delay(llm_server, make_client, sleeps):
+def test_429_is_retried_after_the_retry_after_delay(llm_server, make_client):
     llm_server.script(Fail(429, retry_after=1), Reply("ok"))
     client = make_client(retry_after_scale=0.25, retry_after_cap_s=5.0)
     reply = client.chat(USER)
     assert reply.content == "ok" and reply.attempts == 2
     assert len(llm_server.requests) == 2
-    assert sleeps == [0.25]  # Retry-After 1 s x scale 0.25, above the 0.01 s backoff
+    assert make_client.sleeps == [0.25]  # Retry-After 1 s x scale 0.25, above the 0.01 s backoff
 
 
-def test_retry_after_is_capped(llm_server, make_client, sleeps):
+def test_retry_after_is_capped(llm_server, make_client):
     llm_server.script(Fail(429, retry_after=3600), Reply("ok"))
     assert make_client(retry_after_cap_s=0.15).complete(USER) == "ok"
-    assert sleeps == [0.15]
+    assert make_client.sleeps == [0.15]
 
 
-def test_retry_after_ms_header_is_honoured(llm_server, make_client, sleeps):
+def test_retry_after_ms_header_is_honoured(llm_server, make_client):
     llm_server.script(Fail(503, headers={"retry-after-ms": "200"}), Reply("ok"))
     assert make_client().complete(USER) == "ok"
-    assert sleeps == [0.2]
+    assert make_client.sleeps == [0.2]
 
 
 def test_the_default_sleep_really_waits(llm_server, make_client):
@@ -242,18 +242,18 @@ def test_retry_after_parsing():
     assert _retry_after_seconds(httpx.Headers({"Retry-After": long_ago})) == 0.0
 
 
-def test_backoff_grows_exponentially(llm_server, make_client, sleeps):
+def test_backoff_grows_exponentially(llm_server, make_client):
     llm_server.script(Fail(500), Fail(500), Fail(500), Reply("ok"))
     client = make_client(backoff_base_s=0.05, backoff_max_s=10.0)
     assert client.complete(USER) == "ok"
     assert len(llm_server.requests) == 4
-    assert sleeps == [0.05, 0.1, 0.2]
+    assert make_client.sleeps == [0.05, 0.1, 0.2]
 
 
-def test_backoff_is_capped(llm_server, make_client, sleeps):
+def test_backoff_is_capped(llm_server, make_client):
     llm_server.script(Fail(500), Fail(500), Fail(500), Fail(500), Reply("ok"))
     assert make_client(backoff_base_s=0.01, backoff_max_s=0.03, max_retries=4).complete(USER) == "ok"
-    assert sleeps == [0.01, 0.02, 0.03, 0.03]
+    assert make_client.sleeps == [0.01, 0.02, 0.03, 0.03]
 
 
 @pytest.mark.parametrize("status", [500, 502, 503, 504, 408, 409])
@@ -263,7 +263,7 @@ def test_transient_statuses_are_retried(llm_server, make_client, status):
     assert reply.content == "ok" and reply.attempts == 2
 
 
-def test_a_timeout_is_retried(llm_server, make_client, sleeps):
+def test_a_timeout_is_retried(llm_server, make_client):
     llm_server.script(Delay(STALL_S), Reply("ok"))
     client = make_client(timeout_s=0.3)
     started = time.monotonic()
@@ -271,7 +271,7 @@ def test_a_timeout_is_retried(llm_server, make_client, sleeps):
     assert reply.content == "ok" and reply.attempts == 2
     assert time.monotonic() - started >= 0.3  # the real timeout ran out (a lower bound)
     assert len(llm_server.chat_requests()) == 2
-    assert sleeps == [0.01]
+    assert make_client.sleeps == [0.01]
 
 
 def test_a_dropped_connection_is_retried(llm_server, make_client):
@@ -285,7 +285,7 @@ def test_a_non_json_5xx_is_retried(llm_server, make_client):
     assert make_client().complete(USER) == "ok"
 
 
-def test_gives_up_after_max_retries_naming_the_last_status(llm_server, make_client, sleeps):
+def test_gives_up_after_max_retries_naming_the_last_status(llm_server, make_client):
     llm_server.script(Fail(500), Fail(502), Fail(503), Fail(503))
     client = make_client(max_retries=2)
     with pytest.raises(LLMError) as caught:
@@ -296,7 +296,7 @@ def test_gives_up_after_max_retries_naming_the_last_status(llm_server, make_clie
     assert "scripted failure 503" in message  # the server's own words
     assert len(llm_server.requests) == 3
     assert llm_server.pending == 1
-    assert sleeps == [0.01, 0.02]  # none after the last attempt
+    assert make_client.sleeps == [0.01, 0.02]  # none after the last attempt
 
 
 def test_gives_up_after_repeated_timeouts(llm_server, make_client):
@@ -306,12 +306,12 @@ def test_gives_up_after_repeated_timeouts(llm_server, make_client):
         client.complete(USER)
 
 
-def test_max_retries_zero_sends_one_request(llm_server, make_client, sleeps):
+def test_max_retries_zero_sends_one_request(llm_server, make_client):
     llm_server.script(Fail(429, retry_after=0))
     with pytest.raises(LLMError, match="1 attempts.*HTTP 429"):
         make_client(max_retries=0).complete(USER)
     assert len(llm_server.requests) == 1
-    assert sleeps == []
+    assert make_client.sleeps == []
 
 
 def test_nothing_listening_is_a_connection_error():
@@ -544,11 +544,11 @@ def test_embed_without_an_embedding_model_says_what_to_set(llm_server, make_clie
         make_client(embedding_model=None).embed(["x"])
 
 
-def test_embed_retries_like_chat(llm_server, make_client, sleeps):
+def test_embed_retries_like_chat(llm_server, make_client):
     llm_server.script(Fail(429, retry_after=0), Drop())
     assert make_client().embed(["a", "b"]).shape == (2, 64)
     assert len(llm_server.embedding_requests()) == 3
-    assert sleeps == [0.01, 0.02]
+    assert make_client.sleeps == [0.01, 0.02]
 
 
 def test_embed_accepts_base64_vectors_and_out_of_order_indices(llm_server, make_client):

@@ -32,6 +32,8 @@ CAREFUL = (PROGRAMS / "sorting_careful.py").read_text()
 TASK = "sort the apples by ripeness: red apples into the brown box, the green apple into the white box"
 # The critics the careful program is written to satisfy and the naive one violates.
 SPEED_CRITICS = ["joint_speed", "end_effector_pose"]
+# The paper's five motion critics: pinned, so an installed plugin does not change what the tests expect.
+MOTION_CRITICS = ["joint_speed", "end_effector_pose", "collision", "pinch_point", "space_usage"]
 
 
 # A short real motion (a program that does not move at all has nothing to judge).
@@ -56,7 +58,7 @@ def last_user(request) -> str:
 
 def test_fix_round_trip_raises_the_score(llm_server, make_client, sorting):
     llm_server.reply(fenced(NAIVE), fenced(CAREFUL, "I slowed the robot down near the objects:"))
-    loop = Loop(make_client(), sorting)
+    loop = Loop(make_client(), sorting, critics=MOTION_CRITICS)
     first = loop.request(TASK)
     assert isinstance(first, Attempt) and first.index == 1 and first.kind == "request"
     assert first.program == NAIVE and first.report is not None and first.execution is not None
@@ -110,7 +112,7 @@ def test_fix_refuses_without_anything_to_fix(llm_server, make_client, sorting):
 def test_run_stops_when_the_model_says_complete(llm_server, make_client, sorting):
     llm_server.reply(fenced(NAIVE), "I have reviewed the feedback. PROGRAM COMPLETE", fenced(CAREFUL))
     seen: list[Attempt] = []
-    loop = Loop(make_client(), sorting, on_attempt=seen.append)
+    loop = Loop(make_client(), sorting, critics=MOTION_CRITICS, on_attempt=seen.append)
     best = loop.run(TASK, max_attempts=5)
     assert len(loop.last_run) == 2 and seen == loop.attempts == loop.last_run
     first, done = loop.attempts
@@ -123,7 +125,7 @@ def test_run_stops_when_the_model_says_complete(llm_server, make_client, sorting
 
 def test_run_same_program_with_complete_counts_as_done(llm_server, make_client, sorting):
     llm_server.reply(fenced(NAIVE), fenced(NAIVE, "No change needed. PROGRAM COMPLETE."))
-    loop = Loop(make_client(), sorting)
+    loop = Loop(make_client(), sorting, critics=MOTION_CRITICS)
     loop.run(TASK)
     assert [a.complete for a in loop.last_run] == [False, True]
     assert loop.last_run[1].diff == ""
@@ -396,7 +398,7 @@ def test_history_is_trimmed_but_keeps_the_task(llm_server, make_client, sorting)
 
 def test_review_turn_and_embedded_rules(llm_server, make_client, sorting):
     llm_server.reply(SHORT, "PROGRAM COMPLETE")
-    loop = Loop(make_client(), sorting, embedded_rules=True)
+    loop = Loop(make_client(), sorting, critics=MOTION_CRITICS, embedded_rules=True)
     with pytest.raises(NothingToFixError):
         loop.review()
     best = loop.run(TASK, feedback="review")
@@ -404,7 +406,8 @@ def test_review_turn_and_embedded_rules(llm_server, make_client, sorting):
     first, second = llm_server.chat_requests()
     assert REVIEW_INSTRUCTION in first.messages[0]["content"]  # the rules are in the system prompt
     assert last_user(second) == REVIEW_INSTRUCTION  # no trace feedback in this condition
-    assert loop.attempts[0].report.feedback() not in second.text or loop.attempts[0].passed
+    trace_feedback = loop.attempts[0].report.feedback()
+    assert trace_feedback and trace_feedback not in second.text  # the first program was criticised, silently
 
 
 def test_constructor_checks(make_client, sorting):

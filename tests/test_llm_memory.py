@@ -395,30 +395,37 @@ WRITER = textwrap.dedent(
     from robocritics.llm.memory import InteractionMemory
 
     path, name, go = sys.argv[1], sys.argv[2], sys.argv[5]
-    count, size, pause_s = int(sys.argv[3]), int(sys.argv[4]), float(sys.argv[6])
+    count, size, pause_s, parties = int(sys.argv[3]), int(sys.argv[4]), float(sys.argv[6]), int(sys.argv[7])
     memory = InteractionMemory(path, busy_timeout_s=30)
     if go:
         print("ready", flush=True)
-    while go and not os.path.exists(go):  # start line, so that writers really overlap
+    while go and not os.path.exists(go):  # start line
         time.sleep(0.001)
     for i in range(count):
         program = f"# {name} {i}\\n" + "x" * size
         row = memory.add(name, f"request {i}", program, f"feedback {i}", i % 11)
         print(row, i, flush=True)  # printed only after the commit returned
+        if i == 0 and parties:  # barrier: nobody writes a second row before everyone wrote a first
+            open(f"{go}.{name}", "w").close()
+            while sum(f.startswith(os.path.basename(go) + ".") for f in os.listdir(os.path.dirname(go))) < parties:
+                time.sleep(0.001)
         time.sleep(pause_s)  # like the LLM call between two interactions
     """
 )
 
 
-def run_writer(path, name: str, count: int, size: int = 10, go: str = "", pause_s: float = 0.0) -> subprocess.Popen:
+def run_writer(
+    path, name: str, count: int, size: int = 10, go: str = "", pause_s: float = 0.0, parties: int = 0
+) -> subprocess.Popen:
     """A process adding ``count`` interactions to ``path``, printing "<id> <i>" after each commit.
 
-    With ``go`` it opens the memory, prints "ready", then waits until the file ``go`` exists.
-    It sleeps ``pause_s`` after each write (without, one writer can hold on to the lock:
-    SQLite's busy handler is not fair).
+    With ``go`` it opens the memory, prints "ready", then waits until the file ``go`` exists;
+    with ``parties`` too, after its first row it waits until that many writers wrote theirs, so
+    the writers overlap however the machine schedules them. It sleeps ``pause_s`` after each
+    write (without, one writer can hold on to the lock: SQLite's busy handler is not fair).
     """
     return subprocess.Popen(
-        [sys.executable, "-c", WRITER, str(path), name, str(count), str(size), go, str(pause_s)],
+        [sys.executable, "-c", WRITER, str(path), name, str(count), str(size), go, str(pause_s), str(parties)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -428,9 +435,11 @@ def run_writer(path, name: str, count: int, size: int = 10, go: str = "", pause_
 def test_several_processes_writing_one_file(tmp_path):
     path = tmp_path / "shared.sqlite"
     go = tmp_path / "go"
-    writers = [run_writer(path, f"proc-{n}", 100, go=str(go), pause_s=0.002) for n in range(4)]
+    writers = [run_writer(path, f"proc-{n}", 100, go=str(go), pause_s=0.002, parties=4) for n in range(4)]
     for writer in writers:
-        assert writer.stdout is not None and writer.stdout.readline() == "ready\n"
+        assert writer.stdout is not None
+        line = writer.stdout.readline()
+        assert line == "ready\n", f"a writer did not start: {line!r}"
     go.touch()
     outputs = [w.communicate(timeout=120) for w in writers]
     for writer, (_, err) in zip(writers, outputs):
@@ -444,8 +453,8 @@ def test_several_processes_writing_one_file(tmp_path):
             reported = [int(line.split()[0]) for line in out.splitlines()]
             assert reported == [i.id for i in history]
             spans.append((history[0].id, history[-1].id))
-    # the writers really ran at the same time: their id ranges overlap
-    assert any(a[0] < b[1] and b[0] < a[1] for a in spans for b in spans if a != b)
+    # the writers really ran at the same time (the barrier makes sure): every id range overlaps every other
+    assert all(a[0] < b[1] and b[0] < a[1] for a in spans for b in spans if a != b), spans
     with sqlite3.connect(path) as raw:
         assert raw.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
 

@@ -23,12 +23,15 @@ from robocritics.llm.prompts import (
     says_complete,
     system_prompt,
 )
+from robocritics.program.language import SAFE_BUILTINS
 from robocritics.program.sandbox import run_program
 from robocritics.simulate import simulate
 from robocritics.program.skills import SKILLS, api_reference
 from robocritics.scene import Scene
 
 PROGRAMS = Path(__file__).resolve().parent.parent / "examples" / "programs"
+# The paper's five motion critics: pinned, so an installed plugin does not change what the tests expect.
+MOTION_CRITICS = ["joint_speed", "end_effector_pose", "collision", "pinch_point", "space_usage"]
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +40,7 @@ def naive_sorting():
     scene = Scene.builtin("sorting")
     program = (PROGRAMS / "sorting_naive.py").read_text()
     execution = simulate(program, scene)
-    return program, critique(execution.trajectory, scene)
+    return program, critique(execution.trajectory, scene, MOTION_CRITICS)
 
 
 # --- system prompt --------------------------------------------------------------------------
@@ -68,6 +71,8 @@ def test_system_prompt_lists_api_and_every_scene_entity(name):
     assert "Table: top surface at z = 0.000 m" in text
     assert "metres" in text and "robot base frame" in text
     assert "Allowed workspace" in text
+    # the sandbox's own list of builtins, every one of them
+    assert "the builtins " + ", ".join(SAFE_BUILTINS) + "." in " ".join(text.split())
     # the rules of the conversation
     assert "```python" in text
     assert COMPLETE_MARKER in text

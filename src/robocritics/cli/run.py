@@ -34,6 +34,13 @@ from ..errors import LLMError, RoboCriticsError
 
 __all__ = ["add_run_parser", "run_command"]
 
+# Seconds per HTTP phase; longer than the library's default because an interactive run is often the first
+# request to a local server, which loads the model before it answers.
+_TIMEOUT_S = 120.0
+# Model replies with --auto: the paper's five attempts per task (llm.loop.DEFAULT_MAX_ATTEMPTS, not imported
+# here so that building the parser stays cheap).
+_MAX_ATTEMPTS = 5
+
 
 def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``run`` subcommand to ``subparsers``; its handler (``args.func``) is :func:`run_command`."""
@@ -69,8 +76,8 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         "--max-attempts",
         metavar="N",
         type=positive_int,
-        default=5,
-        help="most model replies with --auto (default 5, as in the paper)",
+        default=_MAX_ATTEMPTS,
+        help=f"most model replies with --auto (default {_MAX_ATTEMPTS}, as in the paper)",
     )
     p.add_argument("--critics", metavar="A,B", help="comma-separated critic names (default: all installed)")
     p.add_argument(
@@ -85,7 +92,13 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         help="also paste the critics' rules into the system prompt (the paper's embedded condition)",
     )
     p.add_argument("--temperature", metavar="T", type=float, default=None, help="sampling temperature (default 0)")
-    p.add_argument("--timeout", metavar="S", type=positive_float, default=120.0, help="seconds per HTTP phase (default 120)")
+    p.add_argument(
+        "--timeout",
+        metavar="S",
+        type=positive_float,
+        default=_TIMEOUT_S,
+        help=f"seconds per HTTP phase (default {_TIMEOUT_S:g})",
+    )
     p.set_defaults(func=run_command)
     return p
 

@@ -84,6 +84,13 @@ Approve = Callable[[str, str], bool]
 
 log = logging.getLogger("robocritics.llm")
 
+#: User/assistant messages sent per call: the last few revisions, small enough for a small model's context.
+DEFAULT_MAX_HISTORY_MESSAGES = 12
+#: Model replies per run: the paper's limit of five attempts per task.
+DEFAULT_MAX_ATTEMPTS = 5
+# Memory hits fetched per example wanted: attempts at the same request share a text, only the best one is kept.
+_HITS_PER_EXAMPLE = 4
+
 
 class NothingToFixError(RoboCriticsError):
     """:meth:`Loop.fix` was called with nothing to fix: no attempt yet, or every selected critic passed."""
@@ -226,7 +233,8 @@ class Loop:
       (the paper's *embedded* condition).
     * ``on_attempt`` — called with each :class:`Attempt` as soon as it is made.
     * ``model_options`` — keyword arguments for ``model.complete`` (temperature, seed ...).
-    * ``sample_rate_hz`` — trajectory sample rate for simulation.
+    * ``sample_rate_hz`` — trajectory sample rate for simulation, Hz (default:
+      :func:`~robocritics.simulate.simulate`'s).
     """
 
     def __init__(
@@ -240,14 +248,14 @@ class Loop:
         automation: Automation = "guided",
         approve: Approve | None = None,
         session: str | None = None,
-        max_history_messages: int = 12,
+        max_history_messages: int = DEFAULT_MAX_HISTORY_MESSAGES,
         *,
-        max_attempts: int = 5,
+        max_attempts: int = DEFAULT_MAX_ATTEMPTS,
         memory_k: int = 3,
         embedded_rules: bool = False,
         on_attempt: Callable[[Attempt], None] | None = None,
         model_options: Mapping[str, Any] | None = None,
-        sample_rate_hz: float = 125.0,
+        sample_rate_hz: float | None = None,
     ):
         from ..critic import select_critics
 
@@ -285,7 +293,7 @@ class Loop:
         self.embedded_rules = bool(embedded_rules)
         self.on_attempt = on_attempt
         self.model_options = dict(model_options or {})
-        self.sample_rate_hz = float(sample_rate_hz)
+        self.sample_rate_hz = None if sample_rate_hz is None else float(sample_rate_hz)
 
         self.attempts: list[Attempt] = []
         self.history: list[dict[str, str]] = []  # user/assistant turns, never trimmed
@@ -571,7 +579,8 @@ class Loop:
 
         assert attempt.program is not None
         try:
-            execution = simulate(attempt.program, self.scene, self.robot, sample_rate_hz=self.sample_rate_hz)
+            rate = {} if self.sample_rate_hz is None else {"sample_rate_hz": self.sample_rate_hz}
+            execution = simulate(attempt.program, self.scene, self.robot, **rate)
         except (ProgramError, PlanningError, TrajectoryError) as exc:
             attempt.error = runtime_feedback(exc, program=attempt.program)
             self._pending_error = attempt.error
@@ -601,7 +610,7 @@ class Loop:
         """The ``memory_k`` most relevant past interactions other than this loop's own, one per request text."""
         if self.memory is None or self.memory_k == 0:
             return []
-        hits = self.memory.search(text, k=self.memory_k * 4 + len(self._memory_ids))
+        hits = self.memory.search(text, k=self.memory_k * _HITS_PER_EXAMPLE + len(self._memory_ids))
         by_request: dict[str, Interaction] = {}
         for hit in hits:  # best similarity first
             if hit.id in self._memory_ids or not hit.program.strip():

@@ -57,6 +57,9 @@ __all__ = ["Interaction", "InteractionMemory"]
 
 SCHEMA_VERSION = 1
 
+# Pause between tries to switch a file to WAL while another connection holds it: short, as the switch is.
+_WAL_RETRY_PAUSE_S = 0.01
+
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS sessions (
     id        TEXT PRIMARY KEY,
@@ -196,7 +199,7 @@ class InteractionMemory:
             except sqlite3.OperationalError:
                 if time.monotonic() > deadline:
                     raise
-                time.sleep(0.01)
+                time.sleep(_WAL_RETRY_PAUSE_S)
 
     @contextmanager
     def _write(self) -> Iterator[sqlite3.Connection]:

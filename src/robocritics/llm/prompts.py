@@ -62,8 +62,11 @@ _COMPLETE = re.compile(r"\bPROGRAM[\s_-]*COMPLETE\b", re.IGNORECASE)
 _EXAMPLE_PROGRAM_LINES = 40
 _EXAMPLE_FEEDBACK_CHARS = 600
 _EXAMPLE_REQUEST_CHARS = 300
-# Programs longer than this are quoted only around the flagged lines in fix prompts.
+# Programs longer than this are quoted only around the flagged lines in fix prompts,
+# with this many lines of context on each side.
 _FULL_LISTING_LINES = 80
+_FLAGGED_CONTEXT_LINES = 2
+# A reply without code is quoted this far back to the model: enough to recognise it, not to re-send it.
 _REPLY_EXCERPT_CHARS = 200
 
 
@@ -222,7 +225,8 @@ def format_memory_examples(examples: Iterable[Any]) -> str:
     """Past interactions (``request``, ``program``, ``feedback``, ``score``), compactly, for the system prompt.
 
     Items are :class:`~robocritics.llm.memory.Interaction` objects or mappings
-    with those keys. Programs are cut at 40 lines and feedback at 600 characters.
+    with those keys. Programs and feedback are cut short (``_EXAMPLE_PROGRAM_LINES``,
+    ``_EXAMPLE_FEEDBACK_CHARS``).
     Returns "" for no examples.
     """
     parts = []
@@ -334,7 +338,7 @@ def fix_prompt(report: "Report", critics: Iterable[str] | str | None = None, *, 
     if program:
         marked = [n for n in _flagged_lines(report, critics) if 1 <= n <= len(program.splitlines())]
         long = len(program.splitlines()) > _FULL_LISTING_LINES
-        listing = numbered_program(program, marked, context=2 if long and marked else None)
+        listing = numbered_program(program, marked, context=_FLAGGED_CONTEXT_LINES if long and marked else None)
         note = " (lines the critics point at are marked >>)" if marked else ""
         parts.append(f"Your program{note}:\n{listing}")
     parts.append(
