@@ -66,6 +66,9 @@ def _read_only(values) -> np.ndarray:
     return arr
 
 
+#: Joint angles this far outside a limit [rad] are rounding (IK, a controller's reading), not a violation.
+LIMIT_TOLERANCE_RAD = 1e-9
+
 # Capsule pairs closer than this (m) with the arm stretched out (q = 0) are parts of one
 # housing (the compact UR wrist, base and shoulder column), not a pinch point to check.
 _SAME_HOUSING_GAP_M = 0.06
@@ -180,7 +183,7 @@ class Robot:
         if home.shape != (self.n,):
             raise RobotModelError(f"home_q must be {self.n} joint angles in rad, got {home.size}")
         for j, (v, lo, hi) in enumerate(zip(home, self.lower, self.upper)):
-            if not (math.isfinite(v) and lo - 1e-9 <= v <= hi + 1e-9):
+            if not (math.isfinite(v) and lo - LIMIT_TOLERANCE_RAD <= v <= hi + LIMIT_TOLERANCE_RAD):
                 raise RobotModelError(
                     f"home_q joint {j} ({self.joint_names[j]}) = {v:.4f} rad is outside its limits "
                     f"[{lo:.4f}, {hi:.4f}] rad"
@@ -338,7 +341,8 @@ class Robot:
 
         return build_trajectory(self, scene, q, time, **kwargs)
 
-    def in_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:
+    def in_limits(self, q: np.ndarray, tol: float = LIMIT_TOLERANCE_RAD) -> bool:
+        """True when every joint of ``q`` (rad) is within its limits, up to ``tol`` rad."""
         q = np.asarray(q)
         return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
 

@@ -34,10 +34,22 @@ from ..errors import PlanningError
 from ..program.plan import Plan, SkillCall
 from ..scene import Container, Scene, SceneObject, rpy_matrix
 from ..trajectory import Step
-from .model import Robot, fingers_down
+from .model import LIMIT_TOLERANCE_RAD, Robot, fingers_down
 from .motion import JOINT_SPEED_MARGIN, Limits, Segment, sample_times, time_joint_move, time_path_1d
 
 __all__ = ["Planner", "PlannerSettings", "Event", "plan_approach", "checked_start_q"]
+
+# Numerical tolerances (the physical choices are in PlannerSettings; joint limits use
+# robot.model.LIMIT_TOLERANCE_RAD):
+#: Samples closer than this [s] are one instant: time must strictly increase, so a closing
+#: sample this near the previous one replaces it instead of following it.
+MIN_SAMPLE_GAP_S = 1e-6
+#: A straight line shorter than this [m] is no move.
+SAME_POINT_M = 1e-9
+#: A point this close to a container floor [m] (above or below) is on it.
+ON_SURFACE_M = 1e-6
+#: |dq/ds| floor [rad/m] on a Cartesian line: a joint that does not move imposes no speed cap.
+_STILL_JOINT_RAD_PER_M = 1e-12
 
 
 def checked_start_q(robot: Robot, start_q) -> np.ndarray:
@@ -52,7 +64,7 @@ def checked_start_q(robot: Robot, start_q) -> np.ndarray:
     if q.shape != (robot.n,):
         raise PlanningError(f"start_q must be {robot.n} joint angles in rad, got {q.size}")
     for j, (v, lo, hi) in enumerate(zip(q, robot.lower, robot.upper)):
-        if not (math.isfinite(v) and lo - 1e-9 <= v <= hi + 1e-9):
+        if not (math.isfinite(v) and lo - LIMIT_TOLERANCE_RAD <= v <= hi + LIMIT_TOLERANCE_RAD):
             raise PlanningError(
                 f"start_q joint {j} ({robot.joint_names[j]}) = {v:.4f} rad is outside its limits [{lo:.4f}, {hi:.4f}] rad"
             )
@@ -82,25 +94,33 @@ def plan_approach(
     limits = Limits(robot.velocity_limits, robot.acceleration_limits, robot.jerk_limits)
     seg = time_joint_move(start, goal, limits, speed_fraction, sample_rate_hz)
     # ruckig samples up to, not always at, the end: close the move on the goal itself
-    if seg.duration_s > 0 and seg.duration_s - float(seg.time[-1]) < 1e-6:
+    # (no motion at all: the goal one sample period after the start)
+    if seg.duration_s > 0 and seg.duration_s - float(seg.time[-1]) < MIN_SAMPLE_GAP_S:
         q, t = np.vstack([seg.q[:-1], goal]), np.append(seg.time[:-1], seg.duration_s)
     else:
-        end_t = max(seg.duration_s, float(seg.time[-1]) + (1.0 / sample_rate_hz if seg.duration_s == 0 else 1e-6))
+        gap = 1.0 / sample_rate_hz if seg.duration_s == 0 else MIN_SAMPLE_GAP_S
+        end_t = max(seg.duration_s, float(seg.time[-1]) + gap)
         q, t = np.vstack([seg.q, goal]), np.append(seg.time, end_t)
     return q, t
 
 
 @dataclass(frozen=True)
 class PlannerSettings:
-    """Planner constants (SI units)."""
+    """Planner constants (SI units), each with the reason for its default."""
 
-    linear_speed_mps: float = 1.0  # TCP speed of straight-line moves at speed fraction 1
-    linear_accel_mps2: float = 4.0
-    linear_jerk_mps3: float = 40.0
+    linear_speed_mps: float = 1.0  # TCP speed of straight-line moves at speed fraction 1: the UR3e's typical TCP speed
+    linear_accel_mps2: float = 4.0  # their TCP acceleration: full speed within 0.25 s
+    linear_jerk_mps3: float = 40.0  # their jerk: 10x the acceleration (a 0.1 s ramp, as the joints' jerk limits)
     gripper_time_s: float = 0.5  # Robotiq 2F-85 full stroke at its default speed
     obstacle_clearance_m: float = 0.08  # how high above an avoided object's top the TCP crosses
+    obstacle_margin_m: float = 0.08  # a path within this of an avoided object's footprint (m, in xy) crosses above it
     line_step_m: float = 0.005  # dense-IK spacing on straight lines (spline in between)
+    line_max_joint_step_rad: float = 0.5  # a joint turning more between two line grid points is a singularity or branch flip
     grasp_region_m: float = 0.03  # how far an object's centre may sit from the finger axis to be grasped
+    grasp_depth_m: float = 0.05  # how far behind the fingertips (into the hand) an object's centre may sit to be grasped
+    grasp_tip_gap_m: float = 0.01  # how far short of an object's near face the fingertips may stop and still grasp it
+    stack_footprint_fraction: float = 0.9  # a released object rests on another if its centre is within this share of the larger radius
+    stack_gap_m: float = 0.02  # ...and the other's top is at most this above the released object's bottom
 
 
 @dataclass(frozen=True)
@@ -114,6 +134,8 @@ class Event:
     detail: str
 
 class Planner:
+    """Turns a plan's skill calls into timed joint samples; one instance per program run."""
+
     def __init__(
         self,
         scene: Scene,
@@ -220,7 +242,7 @@ class Planner:
             # local z: along the fingers (+ beyond the tips); y: closing axis; x: finger width
             if abs(local[0]) > self.settings.grasp_region_m or abs(local[1]) > self.robot.max_opening_m / 2:
                 continue
-            if not (-0.05 <= local[2] <= o.half_height + 0.01):
+            if not (-self.settings.grasp_depth_m <= local[2] <= o.half_height + self.settings.grasp_tip_gap_m):
                 continue
             d = float(np.hypot(local[0], local[1]))
             if d < best_d:
@@ -231,14 +253,16 @@ class Planner:
         """The entity an object at ``position`` would settle on, and the z of that surface."""
         best_id, best_z = "table", self.scene.table.top_z
         for c in self.scene.containers:
-            if c.contains_point((position[0], position[1], c.floor_top + 1e-6)) and position[2] >= c.floor_top - 1e-6:
+            on_floor = (position[0], position[1], c.floor_top + ON_SURFACE_M)
+            if c.contains_point(on_floor) and position[2] >= c.floor_top - ON_SURFACE_M:
                 if c.floor_top > best_z:
                     best_id, best_z = c.id, c.floor_top
+        footprint, gap = self.settings.stack_footprint_fraction, self.settings.stack_gap_m
         for other_id, other in self.objects.items():
             if other_id == oid:
                 continue
             horizontal = math.hypot(other.position[0] - position[0], other.position[1] - position[1])
-            if horizontal < max(radius, other.width / 2) * 0.9 and other.top <= position[2] - half_height + 0.02:
+            if horizontal < max(radius, other.width / 2) * footprint and other.top <= position[2] - half_height + gap:
                 if other.top > best_z:
                     best_id, best_z = other_id, other.top
         return best_id, best_z
@@ -288,7 +312,7 @@ class Planner:
         for oid in self.obstacles:
             centre, top = self.entity_top(oid)
             ent = self.objects.get(oid) or self.scene.entity(oid)
-            reach = (max(ent.size[:2]) / 2 if isinstance(ent, Container) else ent.width / 2) + 0.08
+            reach = (max(ent.size[:2]) / 2 if isinstance(ent, Container) else ent.width / 2) + self.settings.obstacle_margin_m
             ab = b - a
             t = 0.0 if not ab.any() else float(np.clip(np.dot(centre[:2] - a, ab) / np.dot(ab, ab), 0, 1))
             if np.linalg.norm(a + t * ab - centre[:2]) <= reach:
@@ -325,7 +349,7 @@ class Planner:
     def line_move(self, goal: np.ndarray, call: SkillCall, step: int) -> None:
         start = self.tcp()[:3, 3]
         length = float(np.linalg.norm(goal - start))
-        if length < 1e-9:
+        if length < SAME_POINT_M:
             return
         direction = (goal - start) / length
         # dense IK to bound |dq/ds| so the timed line respects every joint speed limit
@@ -335,7 +359,7 @@ class Planner:
         seed = self.q
         for i, s in enumerate(grid):
             seed = q_grid[i] = self.ik(start + s * direction, call, seed=seed)
-            if i and np.max(np.abs(q_grid[i] - q_grid[i - 1])) > 0.5:
+            if i and np.max(np.abs(q_grid[i] - q_grid[i - 1])) > self.settings.line_max_joint_step_rad:
                 raise PlanningError(
                     f"{call.describe()}: the straight line passes a singularity or a joint limit near "
                     f"({(start + s * direction)[0]:.3f}, {(start + s * direction)[1]:.3f}, {(start + s * direction)[2]:.3f}) m; "
@@ -343,14 +367,14 @@ class Planner:
                     line=call.line,
                 )
         dq_ds = np.max(np.abs(np.diff(q_grid, axis=0)), axis=0) / (length / (n_grid - 1))
-        joint_cap = np.min(JOINT_SPEED_MARGIN * self.limits.velocity / np.maximum(dq_ds, 1e-12))
+        joint_cap = np.min(JOINT_SPEED_MARGIN * self.limits.velocity / np.maximum(dq_ds, _STILL_JOINT_RAD_PER_M))
         f = self.speed
         v = min(self.settings.linear_speed_mps, joint_cap) * f
         a = self.settings.linear_accel_mps2 * f**2
         j = self.settings.linear_jerk_mps3 * f**3
         s, times, duration = time_path_1d(length, v, a, j, self.rate)
         # q(s) between the dense-IK grid points by a cubic spline: its deviation from
-        # the exact line is O(step^4), far below a micrometre at 2 mm spacing
+        # the exact line shrinks as line_step_m^4
         q = CubicSpline(grid, q_grid, axis=0)(s)
         self.emit(Segment(q, times, duration), step)
         self.q = q_grid[-1]
