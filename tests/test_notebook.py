@@ -4,22 +4,50 @@ import json
 import os
 from pathlib import Path
 
+import pytest
+
+import robocritics.critic
+from robocritics.critic import BUILTIN_CRITICS, Flag, get_critics
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-def test_notebook_cells_run(capsys):
-    notebook = json.loads((EXAMPLES / "notebook.ipynb").read_text())
+@pytest.fixture
+def notebook(capsys):
+    """The notebook's namespace after running every code cell, and what it printed."""
+    cells = json.loads((EXAMPLES / "notebook.ipynb").read_text())["cells"]
     namespace: dict = {}
     cwd = os.getcwd()
     os.chdir(EXAMPLES)
     try:
-        for cell in notebook["cells"]:
+        for cell in cells:
             if cell["cell_type"] == "code":
                 exec(compile("".join(cell["source"]), "notebook", "exec"), namespace)
     finally:
         os.chdir(cwd)
-    assert namespace["report"].score < 10 <= namespace["fixed"].score
-    assert "<svg" in namespace["fixed"]._repr_html_()
-    assert [v.critic for v in namespace["strict"].verdicts] == ["joint_speed", "collision"]
-    assert namespace["strict"].params["collision"]["d_warn_m"] == 0.08
-    assert "Warning" in capsys.readouterr().out or "Error" in namespace["report"].feedback()
+        robocritics.critic.unregister("time_budget")  # the notebook registers a critic: leave none behind
+    yield namespace, capsys.readouterr().out
+    assert "time_budget" not in get_critics()
+
+
+def test_notebook_cells_run(notebook):
+    namespace, printed = notebook
+    report, fixed, strict, timed = (namespace[k] for k in ("report", "fixed", "strict", "timed"))
+    # the naive program: the critics' errors and warnings, printed as the feedback the model gets
+    assert report.score < 10 and report.has_errors
+    assert {v.critic for v in report.scored_verdicts if v.flag is Flag.ERROR} == {"space_usage", "end_effector_pose"}
+    assert report.feedback() in printed
+    assert report.feedback().startswith("Error: The robot leaves the allowed workspace")
+    # the careful program passes every motion critic and puts the apple in the box
+    assert fixed.score == 10 and all(v.flag is Flag.OK for v in fixed.scored_verdicts)
+    assert "10/10 True" in printed
+    assert "<svg" in fixed._repr_html_()
+    assert [v.critic for v in strict.verdicts] == ["joint_speed", "collision"]
+    assert strict.params["collision"]["d_warn_m"] == 0.08
+    # the notebook's own critic stands beside the unchanged score and counts toward pass/fail
+    assert timed.score == fixed.score
+    beside = [v.critic for v in timed.other_verdicts]  # time_budget, after any installed plugin's critics
+    assert beside[-1] == "time_budget" and not set(beside) & set(BUILTIN_CRITICS)
+    assert timed.flag_of("time_budget") is Flag.WARNING and not timed.passed
+    assert [v.critic for v in timed.scored_verdicts] == list(BUILTIN_CRITICS)
+    assert "; beside the score: " in printed and f"time_budget Warning; {timed.samples} samples" in printed
