@@ -15,7 +15,6 @@ from robocritics.program import (
     SAFE_BUILTINS,
     SKILLS,
     Budget,
-    ObjectView,
     Plan,
     SkillCall,
     api_reference,
@@ -306,7 +305,7 @@ def test_skill_docstrings_state_the_limits_the_skills_enforce():
 
 
 def test_recording_takes_the_sandbox_budget():
-    with pytest.raises(ProgramError, match="more than 2 skill calls"):
-        with recording(SORTING, budget=Budget(max_skill_calls=2)):
-            for _ in range(3):
-                skills.home()
+    two_calls = Budget(max_skill_calls=2)
+    with pytest.raises(ProgramError, match="more than 2 skill calls"), recording(SORTING, budget=two_calls):
+        for _ in range(3):
+            skills.home()

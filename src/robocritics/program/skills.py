@@ -249,7 +249,7 @@ class Recorder:
     limits on skill calls and printed characters.
     """
 
-    def __init__(self, scene: Scene, plan: Plan, budget: Budget = Budget(), direct: bool = False):
+    def __init__(self, scene: Scene, plan: Plan, budget: Budget, direct: bool = False):
         self.scene = scene
         self.plan = plan
         self.views = views_of(scene)
