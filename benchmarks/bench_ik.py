@@ -17,13 +17,14 @@ What is measured
   converting the target to each solver's input type and resetting a solver's
   state to the seed happen outside the timed region (which favours lively and
   Pinocchio, not us).
-* Accuracy: the returned joints are pushed through ``dh_forward`` and compared
+* Accuracy: the returned joints are pushed through ``dh_forward`` (Pinocchio) and compared
   with the target: position error (m) and rotation angle error (rad). Maxima
   over all targets are reported, plus how many targets were solved to 1e-6 m
   and 1e-6 rad.
 * Solvers:
-  - ``robocritics ur_ik``: closed form, all branches, nearest to the seed
-    within the limits, FK-verified (the function the planner calls).
+  - ``robocritics ur_ik``: closed form searched branch-and-bound for the
+    branch nearest to the seed within the limits, FK-verified (the function
+    the planner calls).
   - ``robocritics ur_ik_all``: all (up to 8) branches, each FK-verified.
   - ``Pinocchio DLS``: ``robocritics.robot.ik.numeric_ik`` on a Pinocchio model
     built from a URDF generated from the same DH table (tol 1e-10).
@@ -165,7 +166,7 @@ def bench_ours(poses: np.ndarray, seeds: np.ndarray) -> list[Result]:
 def bench_pinocchio(poses: np.ndarray, seeds: np.ndarray) -> Result:
     model = pin.buildModelFromXML(dh_urdf(UR3E_DH))
     data = model.createData()
-    fid = model.getFrameId("tool0")
+    fid = model.getFrameId("tool0", pin.FrameType.BODY)
     targets = [pin.SE3(T) for T in poses]
     return run("Pinocchio DLS (numeric_ik)", len(poses), lambda i: None,
                lambda i, _: numeric_ik(model, data, fid, targets[i], seeds[i], LOWER, UPPER),

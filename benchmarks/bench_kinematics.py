@@ -2,7 +2,8 @@
 
 Compares the vectorised trajectory builder (FK for every frame, every self and
 environment pair) with the obvious implementation: Pinocchio FK per sample and
-``coal.distance`` called pair by pair in a Python loop.
+``coal.distance`` called pair by pair in a Python loop; and the batched FK alone
+(``Robot.forward``) with Pinocchio's ``framesForwardKinematics`` per sample.
 
 Run: .venv/bin/python benchmarks/bench_kinematics.py
 """
@@ -75,7 +76,7 @@ def reference(robot: Robot, scene: Scene, q: np.ndarray, pairs) -> np.ndarray:
         local = np.eye(4)
         local[:3, :3] = np.column_stack([x, np.cross(z, x), z])
         local[:3, 3] = (p0 + p1) / 2
-        caps.append((robot.model.getFrameId(c.frame), coal.Capsule(c.radius_m, length), local))
+        caps.append((robot.model.getFrameId(c.frame, pin.FrameType.BODY), coal.Capsule(c.radius_m, length), local))
     shapes = {s.name: (coal_geometry(s.kind, s.size), transform(s.pose[:3, :3], s.pose[:3, 3])) for s in scene.shapes()}
     index = {name: i for i, name in enumerate(robot.capsule_names)}
     req, res = coal.DistanceRequest(), coal.DistanceResult()
@@ -95,6 +96,18 @@ def reference(robot: Robot, scene: Scene, q: np.ndarray, pairs) -> np.ndarray:
                 gb, tb = shapes[b]
             res.clear()
             out[t, k] = coal.distance(ga, ta, gb, tb, req, res)
+    return out
+
+
+def pinocchio_frames(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """Every body frame of every sample, one ``framesForwardKinematics`` per sample."""
+    data = robot.model.createData()
+    ids = [robot.model.getFrameId(name, pin.FrameType.BODY) for name in robot.frame_names]
+    out = np.empty((len(q), len(ids), 4, 4))
+    for t, qt in enumerate(q):
+        pin.framesForwardKinematics(robot.model, data, qt)
+        for k, fid in enumerate(ids):
+            out[t, k] = data.oMf[fid].homogeneous
     return out
 
 
@@ -125,6 +138,12 @@ def main() -> None:
     ref_time = (time.perf_counter() - t0) * SAMPLES / ref_samples
     err = np.max(np.abs(ref - traj.proximity[:ref_samples]))
 
+    fk_fast, _ = timed(lambda: robot.forward(q), 7)
+    t0 = time.perf_counter()
+    fk_ref = pinocchio_frames(robot, q)
+    fk_loop = time.perf_counter() - t0
+    fk_err = float(np.max(np.abs(fk_ref - robot.forward(q))))
+
     limits = Limits(robot.velocity_limits, robot.acceleration_limits, robot.jerk_limits)
     rng = np.random.default_rng(5)
     waypoints = robot.home_q + rng.uniform(-1.0, 1.0, (6, robot.n))
@@ -139,6 +158,8 @@ def main() -> None:
         ("FK + all proximities, vectorised", f"{fast * 1e3:.1f} ms", f"{SAMPLES} samples x {n_pairs} pairs"),
         ("Pinocchio FK + coal.distance loop", f"{ref_time * 1e3:.0f} ms", f"timed on {ref_samples} samples, scaled"),
         ("speed-up", f"{ref_time / fast:.0f}x", f"max |difference| {err:.2e} m"),
+        ("FK only, batched (Robot.forward)", f"{fk_fast * 1e3:.1f} ms", f"{SAMPLES} samples x {len(robot.frame_names)} frames"),
+        ("FK only, Pinocchio per sample", f"{fk_loop * 1e3:.0f} ms", f"max |difference| {fk_err:.1e}; speed-up {fk_loop / fk_fast:.1f}x"),
         ("ruckig, 6-waypoint joint motion", f"{ruckig_median * 1e3:.2f} ms", "5 rest-to-rest segments, sampled at 125 Hz"),
     ]
     width = max(len(r[0]) for r in rows)

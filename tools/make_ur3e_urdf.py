@@ -19,19 +19,16 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 from robocritics.robot.arms import UR3E  # noqa: E402  (the one source of the arm's numbers)
 
-PI = math.pi
-d1, d4, d5, d6 = (UR3E.dh.d[i] for i in (0, 3, 4, 5))
-a2, a3 = UR3E.dh.a[1], UR3E.dh.a[2]
+dh = UR3E.dh
+d1, d4, d5, d6 = (dh.d[i] for i in (0, 3, 4, 5))
+a2, a3 = dh.a[1], dh.a[2]
 masses = list(UR3E.link_masses_kg)
+_links = ["base_link", "shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link", "wrist_3_link"]
+# joint i + 1 sits at the fixed part Tz(d_i) Tx(a_i) Rx(alpha_i) of DH row i: URDF origin
+# xyz (a_i, 0, d_i), rpy (alpha_i, 0, 0); before joint 1 there is no row (the identity)
+_rows = [(0.0, 0.0, 0.0)] + list(zip(dh.a, dh.d, dh.alpha))
 # (parent, child, origin xyz, origin rpy) per joint; limits, speeds and torques from UR3E
-_chain = [
-    ("base_link", "shoulder_link", (0, 0, 0), (0, 0, 0)),
-    ("shoulder_link", "upper_arm_link", (0, 0, d1), (PI / 2, 0, 0)),
-    ("upper_arm_link", "forearm_link", (a2, 0, 0), (0, 0, 0)),
-    ("forearm_link", "wrist_1_link", (a3, 0, 0), (0, 0, 0)),
-    ("wrist_1_link", "wrist_2_link", (0, 0, d4), (PI / 2, 0, 0)),
-    ("wrist_2_link", "wrist_3_link", (0, 0, d5), (-PI / 2, 0, 0)),
-]
+_chain = [(_links[i], _links[i + 1], (a, 0, d), (alpha, 0, 0)) for i, (a, d, alpha) in enumerate(_rows[:6])]
 # (name, parent, child, origin xyz, origin rpy, lower, upper, velocity rad/s, effort N m)
 joints = [
     (name, parent, child, xyz, rpy, lo, hi, vel, eff)
@@ -105,17 +102,18 @@ for name, parent, child, xyz, rpy, lo, hi, vel, eff in joints:
         f'    <origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>\n    <axis xyz="0 0 1"/>\n'
         f'    <limit lower="{lo:.17g}" upper="{hi:.17g}" velocity="{vel:.17g}" effort="{eff:g}"/>\n  </joint>\n'
     )
+a6, _, alpha6 = _rows[6]  # the flange: DH row 6's fixed part (tool0 is DH frame 6)
 fixed = [
-    ("flange_joint", "wrist_3_link", "tool0", (0, 0, d6)),
-    ("gripper_mount_joint", "tool0", "gripper_body", (0, 0, 0)),
-    ("left_finger_joint", "gripper_body", "left_finger", (0, finger_y, FINGER_Z)),
-    ("right_finger_joint", "gripper_body", "right_finger", (0, -finger_y, FINGER_Z)),
-    ("tcp_joint", "gripper_body", "tcp", (0, 0, TCP_Z)),
+    ("flange_joint", "wrist_3_link", "tool0", (a6, 0, d6), (alpha6, 0, 0)),
+    ("gripper_mount_joint", "tool0", "gripper_body", (0, 0, 0), (0, 0, 0)),
+    ("left_finger_joint", "gripper_body", "left_finger", (0, finger_y, FINGER_Z), (0, 0, 0)),
+    ("right_finger_joint", "gripper_body", "right_finger", (0, -finger_y, FINGER_Z), (0, 0, 0)),
+    ("tcp_joint", "gripper_body", "tcp", (0, 0, TCP_Z), (0, 0, 0)),
 ]
-for name, parent, child, xyz in fixed:
+for name, parent, child, xyz, rpy in fixed:
     out.append(
         f'  <joint name="{name}" type="fixed">\n    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
-        f'    <origin xyz="{fmt(xyz)}" rpy="0 0 0"/>\n  </joint>\n'
+        f'    <origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>\n  </joint>\n'
     )
 out.append(
     f'  <!-- robocritics gripper: fingers at full opening {MAX_OPENING} m; they move along tcp y. -->\n'
