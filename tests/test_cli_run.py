@@ -68,7 +68,7 @@ def test_auto_run_end_to_end(llm_server, capsys, tmp_path, monkeypatch):
     assert llm_server.pending == 1
     requests = llm_server.chat_requests()
     assert {r.json["model"] for r in requests} == {"cli-model"}
-    assert "Joint speed" in requests[1].text or "fingers point" in requests[1].text
+    assert "Joint speed" in requests[1].text and "fingers point" in requests[1].text  # both critics failed
     with InteractionMemory(memory) as stored:
         assert len(stored) == 2
 

@@ -187,7 +187,7 @@ def test_replies_without_usable_code_are_fed_back(llm_server, make_client, sorti
     no_code, garbled, good = loop.attempts
     assert no_code.program is None and no_code.report is None and "no Python program" in no_code.error
     assert garbled.program is not None and garbled.report is None and garbled.execution is None
-    assert "line 2" in garbled.error or "line 3" in garbled.error
+    assert "line 2, column 15" in garbled.error  # the unclosed '('
     assert good.report is not None and good.error is None
     requests = llm_server.chat_requests()
     assert no_code.error in last_user(requests[1])
@@ -233,7 +233,8 @@ def test_complete_after_a_failure_is_not_accepted(llm_server, make_client, sorti
     failed, claimed, fixed = loop.attempts
     assert not claimed.complete and "did not run" in claimed.error
     assert "did not run" in last_user(llm_server.chat_requests()[2])
-    assert fixed.report is not None
+    assert fixed.program == "move_above(green_apple)\nhome()\n"
+    assert fixed.report is not None and fixed.error is None and loop.current is fixed
 
 
 # --- approval --------------------------------------------------------------------------------
