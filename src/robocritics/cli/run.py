@@ -109,6 +109,8 @@ def _error(message: str, stream: TextIO) -> int:
 
 
 def _print_attempt(attempt, out: TextIO) -> None:
+    from ..report import format_score
+
     print(f"=== attempt {attempt.index} [{attempt.kind}] ===", file=out)
     if attempt.error and attempt.program is None:
         print("The reply contained no program.", file=out)
@@ -125,8 +127,7 @@ def _print_attempt(attempt, out: TextIO) -> None:
     elif attempt.report is not None and (attempt.changed or attempt.index == 1):
         print("--- critics ---", file=out)
         print(str(attempt.report), file=out)
-    score = "-" if attempt.score is None else f"{attempt.score:g}/10"
-    print(f"score: {score}", file=out)
+    print(f"score: {format_score(attempt.score)}", file=out)
     print(file=out, flush=True)
 
 
@@ -137,6 +138,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     from ..llm.client import OpenAICompatible
     from ..llm.loop import Loop
     from ..llm.memory import InteractionMemory
+    from ..report import format_score
 
     out = stdout or sys.stdout
     err = stderr or sys.stderr
@@ -195,7 +197,6 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         except RoboCriticsError as exc:
             return _error(str(exc), err)
         n = len(loop.attempts)
-        score = "-" if final.score is None else f"{final.score:g}/10"
         if final.report is None:
             verdict = "its program did not run"
         elif final.report.has_errors:
@@ -203,7 +204,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         else:
             verdict = "no Error"
         which = f"attempt {final.index} of {n}" if n > 1 else "attempt 1"
-        print(f"final: {which}, score {score}, {verdict}", file=out, flush=True)
+        print(f"final: {which}, score {format_score(final.score)}, {verdict}", file=out, flush=True)
         return 1 if final.has_errors else 0
     finally:
         if memory is not None:

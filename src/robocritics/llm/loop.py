@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
 from ..errors import CriticError, PlanningError, ProgramError, RoboCriticsError, TrajectoryError
+from ..report import format_score
 from .client import ChatModel
 from .memory import Interaction, InteractionMemory
 from .prompts import (
@@ -171,21 +172,15 @@ class Attempt:
         elif self.error:
             outcome = "did not run: " + self.error.splitlines()[0]
         elif self.complete:
-            outcome = f"model says complete; score {_score_text(self.score)}"
+            outcome = f"model says complete; score {format_score(self.score)}"
         elif self.report is not None:
             flagged = ", ".join(f"{v.critic} {v.flag.label}" for v in self.report.verdicts if not v.ok)
-            outcome = f"score {_score_text(self.score)}" + (f" ({flagged})" if flagged else " (all critics OK)")
+            outcome = f"score {format_score(self.score)}" + (f" ({flagged})" if flagged else " (all critics OK)")
             if not self.changed:
                 outcome += "; program unchanged"
         else:
             outcome = "no result"
         return f"attempt {self.index} [{self.kind}]: {outcome}"
-
-
-def _score_text(score: float | None) -> str:
-    if score is None:
-        return "-"
-    return f"{int(score)}/10" if float(score).is_integer() else f"{score:.1f}/10"
 
 
 def _normalise(program: str) -> str:
@@ -480,7 +475,7 @@ class Loop:
         if not failing:
             raise NothingToFixError(
                 f"nothing to fix: {'every selected critic' if critics is not None else 'every critic'} passed "
-                f"on attempt {current.index} (score {_score_text(report.score)})"
+                f"on attempt {current.index} (score {format_score(report.score)})"
             )
         return fix_prompt(report, failing, program=current.program)
 

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ..errors import CriticError, PlanningError, ProgramError, RoboCriticsError
+from ..report import format_score
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic import Report
@@ -215,10 +216,7 @@ def _cut(text: str, max_chars: int) -> str:
 
 
 def _score_text(score: Any) -> str:
-    if score is None:
-        return "not scored (it did not run)"
-    score = float(score)
-    return f"{int(score)}/10" if score.is_integer() else f"{score:.1f}/10"
+    return "not scored (it did not run)" if score is None else format_score(float(score))
 
 
 def format_memory_examples(examples: Iterable[Any]) -> str:
