@@ -18,40 +18,13 @@ from __future__ import annotations
 import socket
 import time
 
+from robocritics.deploy.rtde import RobotMode
 from robocritics.errors import RTDEError
 
-__all__ = ["DASHBOARD_PORT", "GREETING", "ROBOT_MODES", "SAFETY_STATUSES", "DashboardClient"]
+__all__ = ["DASHBOARD_PORT", "GREETING", "DashboardClient"]
 
 DASHBOARD_PORT = 29999
 GREETING = "Connected: Universal Robots Dashboard Server"
-
-ROBOT_MODES = (
-    "NO_CONTROLLER",
-    "DISCONNECTED",
-    "CONFIRM_SAFETY",
-    "BOOTING",
-    "POWER_OFF",
-    "POWER_ON",
-    "IDLE",
-    "BACKDRIVE",
-    "RUNNING",
-)
-"""Robot modes as the dashboard spells them (``robotmode`` → ``Robotmode: <MODE>``)."""
-
-SAFETY_STATUSES = (
-    "NORMAL",
-    "REDUCED",
-    "PROTECTIVE_STOP",
-    "RECOVERY",
-    "SAFEGUARD_STOP",
-    "SYSTEM_EMERGENCY_STOP",
-    "ROBOT_EMERGENCY_STOP",
-    "VIOLATION",
-    "FAULT",
-    "AUTOMATIC_MODE_SAFEGUARD_STOP",
-    "SYSTEM_THREE_POSITION_ENABLING_STOP",
-)
-"""Safety statuses as the dashboard spells them (``safetystatus`` → ``Safetystatus: <STATUS>``)."""
 
 
 class DashboardClient:
@@ -210,12 +183,12 @@ class DashboardClient:
         raise RTDEError(f"dashboard {self.address}: 'stop' got unexpected reply {reply!r}")
 
     def robot_mode(self) -> str:
-        """Robot mode, e.g. ``"RUNNING"``, ``"IDLE"``, ``"POWER_OFF"`` (see :data:`ROBOT_MODES`)."""
+        """Robot mode, e.g. ``"RUNNING"``, ``"IDLE"``, ``"POWER_OFF"`` (a :class:`~robocritics.deploy.rtde.RobotMode` name)."""
         reply = self._expect("robotmode", "Robotmode:")
         return reply.split(":", 1)[1].strip()
 
     def safety_status(self) -> str:
-        """Safety status, e.g. ``"NORMAL"`` or ``"PROTECTIVE_STOP"`` (see :data:`SAFETY_STATUSES`)."""
+        """Safety status, e.g. ``"NORMAL"`` or ``"PROTECTIVE_STOP"`` (a :class:`~robocritics.deploy.rtde.SafetyMode` name)."""
         reply = self._expect("safetystatus", "Safetystatus:")
         return reply.split(":", 1)[1].strip()
 
@@ -248,8 +221,8 @@ class DashboardClient:
     def wait_robot_mode(self, mode: str, timeout_s: float = 10.0, poll_s: float = 0.05) -> None:
         """Poll ``robotmode`` until it equals ``mode`` [s]; raises with the last mode on timeout."""
         mode = mode.upper()
-        if mode not in ROBOT_MODES:
-            raise RTDEError(f"unknown robot mode {mode!r}; one of {', '.join(ROBOT_MODES)}")
+        if mode not in RobotMode.__members__:
+            raise RTDEError(f"unknown robot mode {mode!r}; one of {', '.join(RobotMode.__members__)}")
         deadline = time.monotonic() + timeout_s
         current = self.robot_mode()
         while current != mode:

@@ -45,12 +45,17 @@ import struct
 import threading
 import time
 from dataclasses import dataclass, field
+from enum import IntEnum
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from robocritics.errors import RTDEError
 
 __all__ = [
     "RTDE_PORT",
+    "RobotMode",
+    "SafetyMode",
+    "RuntimeState",
+    "mode_name",
     "Command",
     "DATA_TYPES",
     "MessageLevel",
@@ -77,39 +82,58 @@ V1_FREQUENCY_HZ = 125.0
 
 _HEADER = struct.Struct(">HB")
 
-ROBOT_MODES = {
-    -1: "NO_CONTROLLER",
-    0: "DISCONNECTED",
-    1: "CONFIRM_SAFETY",
-    2: "BOOTING",
-    3: "POWER_OFF",
-    4: "POWER_ON",
-    5: "IDLE",
-    6: "BACKDRIVE",
-    7: "RUNNING",
-    8: "UPDATING_FIRMWARE",
-}
-"""Values of the ``robot_mode`` output → name."""
+class RobotMode(IntEnum):
+    """Values of the ``robot_mode`` output; the dashboard's ``robotmode`` answers with the names."""
 
-SAFETY_MODES = {
-    1: "NORMAL",
-    2: "REDUCED",
-    3: "PROTECTIVE_STOP",
-    4: "RECOVERY",
-    5: "SAFEGUARD_STOP",
-    6: "SYSTEM_EMERGENCY_STOP",
-    7: "ROBOT_EMERGENCY_STOP",
-    8: "VIOLATION",
-    9: "FAULT",
-    10: "VALIDATE_JOINT_ID",
-    11: "UNDEFINED_SAFETY_MODE",
-    12: "AUTOMATIC_MODE_SAFEGUARD_STOP",
-    13: "SYSTEM_THREE_POSITION_ENABLING_STOP",
-}
-"""Values of the ``safety_mode`` output → name."""
+    NO_CONTROLLER = -1
+    DISCONNECTED = 0
+    CONFIRM_SAFETY = 1
+    BOOTING = 2
+    POWER_OFF = 3
+    POWER_ON = 4
+    IDLE = 5
+    BACKDRIVE = 6
+    RUNNING = 7
+    UPDATING_FIRMWARE = 8
 
-RUNTIME_STATES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED", 5: "RESUMING"}
-"""Values of the ``runtime_state`` output → name."""
+
+class SafetyMode(IntEnum):
+    """Values of the ``safety_mode`` output; the dashboard's ``safetystatus`` answers with the names."""
+
+    NORMAL = 1
+    REDUCED = 2
+    PROTECTIVE_STOP = 3
+    RECOVERY = 4
+    SAFEGUARD_STOP = 5
+    SYSTEM_EMERGENCY_STOP = 6
+    ROBOT_EMERGENCY_STOP = 7
+    VIOLATION = 8
+    FAULT = 9
+    VALIDATE_JOINT_ID = 10
+    UNDEFINED_SAFETY_MODE = 11
+    AUTOMATIC_MODE_SAFEGUARD_STOP = 12
+    SYSTEM_THREE_POSITION_ENABLING_STOP = 13
+
+
+class RuntimeState(IntEnum):
+    """Values of the ``runtime_state`` output (the dashboard's ``programState`` prints the names)."""
+
+    STOPPING = 0
+    STOPPED = 1
+    PLAYING = 2
+    PAUSING = 3
+    PAUSED = 4
+    RESUMING = 5
+
+
+def mode_name(kind: type[IntEnum], value: Any) -> str:
+    """``"RUNNING (7)"`` for ``mode_name(RobotMode, 7)``; ``"UNKNOWN (99)"``; ``"unknown"`` for None."""
+    if value is None:
+        return "unknown"
+    try:
+        return f"{kind(int(value)).name} ({int(value)})"
+    except ValueError:
+        return f"UNKNOWN ({int(value)})"
 
 
 class Command:

@@ -1,62 +1,22 @@
-"""Deploy a verified trajectory to a UR arm: the gate, then a paced 500 Hz servo stream.
+"""Streaming a verified trajectory to a UR arm: resampling to the control rate, the paced servo
+stream, fault detection while it runs, and stopping the arm.
 
-Only the motion the critics judged may move the robot::
+:meth:`robocritics.deploy.URArm.deploy` runs the gate (:mod:`robocritics.deploy.gate`)
+and then this module's stream; use it through ``URArm``.
 
-    execution = robocritics.simulate(source, scene)
-    report = robocritics.critique(execution.trajectory, scene)
-    with URArm("192.168.1.10") as arm:
-        try:
-            result = arm.deploy(execution, report)
-        except DeployError as exc:
-            if exc.cause != "start_mismatch":
-                raise
-            approach, approach_report = arm.approach(execution)   # slow joint move to the start
-            arm.deploy(approach, approach_report)                  # passes the same gate
-            result = arm.deploy(execution, report)
-        print(result.summary())
+**Resampling** (:func:`resample`). The trajectory (physical time axis) is resampled
+to ``rate_hz`` (500 Hz: one setpoint per 2 ms control cycle; linear interpolation of
+q and the gripper opening for sources at >= 125 Hz, monotone cubic (PCHIP) below).
 
-**The gate** (:meth:`URArm.deploy` refuses with :class:`DeployRefused`, a
-:class:`~robocritics.errors.DeployError`, before anything is sent that could
-move the arm; ``exc.cause`` is the first reason, ``exc.causes`` all of them):
-
-===================  ===========================================================
-cause                rule
-===================  ===========================================================
-``no_report``        a :class:`~robocritics.report.Report` is required
-``report_errors``    the report has an Error verdict (names each critic and its
-                     message); ``allow_errors=True`` overrides this rule only
-``hash_mismatch``    ``report.trajectory_hash != trajectory.content_hash()``:
-                     the report judged a different motion
-``trajectory``       not 6 joints, or non-finite values
-``setpoint_speed``   a 2 ms setpoint step of the resampled stream asks for more
-                     than the trajectory's joint speed limits (the controller
-                     would protective-stop); not overridable
-``robot_mode``       RTDE ``robot_mode`` is not RUNNING (7)
-``safety_mode``      RTDE ``safety_mode`` is not NORMAL (1)
-``remote_control``   the dashboard says the controller is in local control
-``program_running``  ``runtime_state`` is not STOPPED (another program runs)
-``start_mismatch``   the first sample is farther than ``start_tolerance_rad``
-                     from ``actual_q`` on some joint; the message offers
-                     ``arm.approach(...)``
-``secondary_         (dry run only) the secondary interface does not accept
-interface``          connections
-===================  ===========================================================
-
-Offline rules (the first five) are checked before the robot is asked anything;
-if one fails, the robot rules are not evaluated.
-
-**Streaming.** The trajectory (physical time axis) is resampled to ``rate_hz``
-(500 Hz: one setpoint per 2 ms control cycle; linear interpolation of q and the
-gripper opening for sources at >= 125 Hz, monotone cubic (PCHIP) below). The
-client holds the first setpoint (sequence counter incrementing every period)
-*before* sending :func:`~robocritics.deploy.urscript.streaming_program` (from a
-helper thread, so holding never pauses), waits until the program reports
+**Streaming.** The client holds the first setpoint (sequence counter incrementing
+every period) *before* sending :func:`~robocritics.deploy.urscript.streaming_program`
+(from a helper thread, so holding never pauses), waits until the program reports
 STREAMING with this deploy's random session id, then streams with absolute
 deadlines ``t0 + k / rate_hz`` (sleep, then spin the last ``spin_s``; a client
 more than 5 periods late shifts its schedule rather than bursting the missed
-setpoints, which the controller would see as a jump). After the
-last setpoint it holds the final one until the arm settles (or
-``settle_timeout_s``), sends the done command and waits for the program to end.
+setpoints, which the controller would see as a jump). After the last setpoint it
+holds the final one until the arm settles (or ``settle_timeout_s``), sends the
+done command and waits for the program to end.
 
 **Faults.** Every data package is checked while streaming; any of these stops
 the arm and raises :class:`DeployFault` (a ``DeployError``) with ``cause``,
@@ -67,7 +27,7 @@ the arm and raises :class:`DeployFault` (a ``DeployError``) with ``cause``,
 ``robot_mode``, ``connection_drop`` (RTDE connection failed),
 ``controller_silent`` (no data package for ``silence_timeout_s``),
 ``controller_slow`` (data rate below ``min_data_rate_fraction`` of the recipe
-frequency over a 0.25 s window), ``program_stalled`` / ``program_stopped`` /
+frequency over a :data:`STREAM_RATE_WINDOW_S` window while data still arrives), ``program_stalled`` / ``program_stopped`` /
 ``session`` (program state register, runtime_state, session echo),
 ``start_rejected`` / ``program_not_started`` (start-up), ``tracking_error``
 (``actual_q`` farther than ``max_tracking_error_rad`` from every setpoint sent
@@ -76,7 +36,7 @@ in the last ``lookahead_time_s + 20 ms``), ``remote_control`` / ``dashboard``
 ``program_did_not_finish``, ``interrupted`` (KeyboardInterrupt etc.; re-raised
 after the stop).
 
-Stopping: the done command over RTDE (the program ``stopj``'s), confirmed by
+**Stopping**: the done command over RTDE (the program ``stopj``'s), confirmed by
 ``runtime_state``; if RTDE is gone or the program does not stop within
 ``stop_timeout_s``, the dashboard ``stop``. The controller's own RTDE watchdog
 (``watchdog_min_hz``) stops the program as soon as the client stops sending, so
@@ -85,49 +45,25 @@ the arm stops even if both channels fail. Every wait has a deadline.
 
 from __future__ import annotations
 
-import collections
 import math
-import random
 import statistics
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
+from robocritics.deploy.dashboard import DashboardClient
+from robocritics.deploy.rtde import MessageLevel, RobotMode, RuntimeState, SafetyMode, mode_name
+from robocritics.deploy.urscript import OUTPUT_FIELDS, ProgramState, send_program, setpoint
 from robocritics.errors import DeployError, RTDEError
-from robocritics.deploy.dashboard import DASHBOARD_PORT, DashboardClient
-from robocritics.deploy.rtde import (
-    ROBOT_MODES,
-    RTDE_PORT,
-    RUNTIME_STATES,
-    SAFETY_MODES,
-    InputRecipe,
-    MessageLevel,
-    RTDEClient,
-    TextMessage,
-)
-from robocritics.deploy.urscript import (
-    INPUT_FIELDS,
-    OUTPUT_FIELDS,
-    SECONDARY_PORT,
-    ProgramState,
-    send_program,
-    setpoint,
-    streaming_program,
-)
+from robocritics.trajectory import Trajectory
 
-__all__ = [
-    "URArm",
-    "DeployResult",
-    "DeployRefused",
-    "DeployFault",
-    "Approach",
-    "StreamPlan",
-    "resample",
-    "STATE_FIELDS",
-]
+if TYPE_CHECKING:  # pragma: no cover
+    from robocritics.deploy.arm import URArm
+
+__all__ = ["DeployFault", "DeployResult", "StreamPlan", "resample", "STATE_FIELDS", "STILL_RAD_S"]
 
 STATE_FIELDS: tuple[str, ...] = (
     "timestamp",
@@ -139,46 +75,19 @@ STATE_FIELDS: tuple[str, ...] = (
     "runtime_state",
     *OUTPUT_FIELDS,
 )
-"""The output recipe :class:`URArm` sets up (at 500 Hz)."""
+"""The output recipe :class:`~robocritics.deploy.URArm` sets up (at 500 Hz)."""
 
-CONTROL_PERIOD_S = 0.002
-"""e-series control period; one sequence step of the streaming program is 2 ms of trajectory [s]."""
-
-ROBOT_MODE_RUNNING = 7
-SAFETY_NORMAL = 1
-SAFETY_PROTECTIVE_STOP = 3
-RUNTIME_STOPPED = 1
-RUNTIME_PLAYING = 2
-UR3E_VELOCITY_LIMITS = (math.pi, math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 * math.pi)
-"""Joint speed limits used when a trajectory carries none [rad/s]."""
 STILL_RAD_S = 1e-3
 """Joint speeds below this count as standing still [rad/s]."""
 
-_PROGRAM_STATES = {s.value: s.name for s in ProgramState}
+STREAM_RATE_WINDOW_S = 0.25
+"""The data rate is checked over windows this long [s] (``controller_slow``)."""
+
+RESYNC_AFTER_PERIODS = 5
+"""A client this many periods late shifts its schedule instead of bursting the missed setpoints."""
 
 
-def _name(table: dict[int, str], value: Any) -> str:
-    return f"{table.get(int(value), 'UNKNOWN')} ({int(value)})" if value is not None else "unknown"
-
-
-# ---------------------------------------------------------------------------- errors and results
-
-
-class DeployRefused(DeployError):
-    """The gate refused to deploy; nothing that moves the arm was sent.
-
-    ``cause`` is the first reason (see the module docstring), ``causes`` all of them,
-    ``reasons`` the ``(cause, explanation)`` pairs.
-    """
-
-    def __init__(self, reasons: Sequence[tuple[str, str]]):
-        self.reasons = tuple(reasons)
-        self.causes = tuple(c for c, _ in self.reasons)
-        lines = "\n".join(f"  - [{c}] {text}" for c, text in self.reasons)
-        n = len(self.reasons)
-        super().__init__(f"deploy refused ({n} reason{'s' if n != 1 else ''}); nothing was sent to the robot:\n{lines}",
-                         sample=-1, cause=self.causes[0] if self.causes else "refused")
-
+# ---------------------------------------------------------------------------- results
 
 class DeployFault(DeployError):
     """A fault stopped a running deployment.
@@ -289,44 +198,27 @@ class StreamPlan:
         return int(self.q.shape[0])
 
 
-@dataclass(frozen=True)
-class Approach:
-    """A slow joint move from the arm's actual position to a trajectory's start.
-
-    Execution-like (``trajectory``, ``robot``, ``scene``): deploy it with its own report.
-    """
-
-    trajectory: Any
-    robot: Any
-    scene: Any
-    start_q: tuple[float, ...]
-    """Where the arm was [rad]."""
-    goal_q: tuple[float, ...]
-    """The first sample of the trajectory to approach [rad]."""
-    speed_fraction: float
-
-    @property
-    def duration_s(self) -> float:
-        return float(self.trajectory.duration_s)
 
 
 # ---------------------------------------------------------------------------- resampling
 
 
-def resample(trajectory: Any, rate_hz: float = 500.0) -> StreamPlan:
+def resample(trajectory: Trajectory, rate_hz: float = 500.0) -> StreamPlan:
     """Resample ``trajectory`` (physical time axis) to ``rate_hz`` setpoints.
 
     Setpoint k is at ``k / rate_hz`` s from the first sample; the last setpoint is
     the last sample exactly (added if the duration is not a multiple of the
     period). q and the gripper opening are interpolated linearly when the source
     has samples at least every 8 ms (125 Hz), else with a monotone cubic (PCHIP),
-    which never overshoots between samples.
+    which never overshoots between samples. Raises :class:`DeployError` for
+    anything but a :class:`~robocritics.trajectory.Trajectory` or a rate that is
+    not a positive number of Hz.
     """
-    q_src = np.asarray(trajectory.q, dtype=float)
-    t_src = np.asarray(trajectory.time, dtype=float)
-    g_src = np.asarray(trajectory.gripper_opening_m, dtype=float)
-    if q_src.ndim != 2 or len(t_src) != q_src.shape[0] or len(t_src) == 0:
-        raise DeployError(f"trajectory arrays disagree: q {q_src.shape}, time {t_src.shape}")
+    if not isinstance(trajectory, Trajectory):
+        raise DeployError(f"resample() needs a robocritics.Trajectory, got {type(trajectory).__name__}")
+    if not (rate_hz > 0 and math.isfinite(rate_hz)):
+        raise DeployError(f"resample(): rate_hz must be a positive number of Hz, got {rate_hz}")
+    q_src, t_src, g_src = trajectory.q, trajectory.time, trajectory.gripper_opening_m
     t = t_src - t_src[0]
     period = 1.0 / float(rate_hz)
     end = float(t[-1])
@@ -355,15 +247,6 @@ def resample(trajectory: Any, rate_hz: float = 500.0) -> StreamPlan:
     return StreamPlan(q=q, gripper_opening_m=g, time=ts, source_index=src.astype(np.int64), rate_hz=float(rate_hz), interpolation=how)
 
 
-def _trajectory_of(execution: Any) -> Any:
-    traj = getattr(execution, "trajectory", execution)
-    if not (hasattr(traj, "q") and hasattr(traj, "time") and hasattr(traj, "content_hash")):
-        raise DeployError(
-            f"deploy needs an Execution (from robocritics.simulate), an Approach or a Trajectory, got {type(execution).__name__}"
-        )
-    return traj
-
-
 def _percentile(values: Sequence[float], p: float) -> float:
     return float(np.percentile(np.asarray(values, dtype=float), p)) if len(values) else float("nan")
 
@@ -380,8 +263,8 @@ class _Fault(Exception):
 
 def _safety_fault(safety_mode: Any, when: str = "") -> _Fault:
     """The fault for a safety mode other than NORMAL; ``when`` ends the message."""
-    cause = "protective_stop" if safety_mode == SAFETY_PROTECTIVE_STOP else "safety_mode"
-    return _Fault(cause, f"the controller's safety mode became {_name(SAFETY_MODES, safety_mode)}{when}")
+    cause = "protective_stop" if safety_mode == SafetyMode.PROTECTIVE_STOP else "safety_mode"
+    return _Fault(cause, f"the controller's safety mode became {mode_name(SafetyMode, safety_mode)}{when}")
 
 
 class _DashboardMonitor:
@@ -450,408 +333,22 @@ class _Run:
         return float(self.plan.time[max(self.k, 0)]) if self.sent_any else 0.0
 
 
-# ---------------------------------------------------------------------------- the arm
+
+# ---------------------------------------------------------------------------- the stream
 
 
-class URArm:
-    """A UR arm reached over RTDE (30004), the Dashboard Server (29999) and the secondary interface (30002).
+class _Stream:
+    """One streaming run on a connected :class:`~robocritics.deploy.URArm` (its connections, its sequence counter)."""
 
-    ``with URArm(host) as arm:`` connects RTDE (output recipe :data:`STATE_FIELDS`
-    at 500 Hz, input recipe :data:`~robocritics.deploy.urscript.INPUT_FIELDS`,
-    synchronisation started) and the dashboard; leaving the block closes both.
-    ``timeout_s`` bounds connecting and every request/reply [s]. Connection
-    problems raise :class:`~robocritics.errors.RTDEError` (a DeployError).
-    """
+    def __init__(self, arm: "URArm") -> None:
+        self.arm = arm
 
-    def __init__(
-        self,
-        host: str,
-        *,
-        rtde_port: int = RTDE_PORT,
-        dashboard_port: int = DASHBOARD_PORT,
-        secondary_port: int = SECONDARY_PORT,
-        timeout_s: float = 2.0,
-        frequency_hz: float = 500.0,
-    ) -> None:
-        if not timeout_s > 0:
-            raise DeployError(f"timeout_s must be > 0 s, got {timeout_s}")
-        self.host = host
-        self.rtde_port = int(rtde_port)
-        self.dashboard_port = int(dashboard_port)
-        self.secondary_port = int(secondary_port)
-        self.timeout_s = float(timeout_s)
-        self.frequency_hz = float(frequency_hz)
-        self._rtde: RTDEClient | None = None
-        self._dashboard: DashboardClient | None = None
-        self._dashboard_broken = False
-        self._dash_lock = threading.Lock()
-        self._inputs: InputRecipe | None = None
-        self._seq = 0
-        self._out_freq = self.frequency_hz
-        self._messages: collections.deque[TextMessage] = collections.deque(maxlen=256)
-
-    # ------------------------------------------------------------------ connection
-
-    def __enter__(self) -> "URArm":
-        self.connect()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def connect(self) -> None:
-        """Connect RTDE and the dashboard, set up the recipes, start synchronisation, read one package.
-
-        After a dropped connection (``DeployFault.cause == "connection_drop"``) call it again to reconnect.
-        """
-        if self._rtde is not None:
-            if self._rtde.connected:
-                raise DeployError(f"URArm {self.host} is already connected")
-            self.close()
-        rtde = RTDEClient(self.host, self.rtde_port, timeout_s=self.timeout_s, buffer_size=4096)
-        rtde.connect()
-        try:
-            recipe = rtde.setup_outputs(list(STATE_FIELDS), self.frequency_hz)
-            self._out_freq = recipe.frequency_hz
-            self._inputs = rtde.setup_inputs(list(INPUT_FIELDS))
-            rtde.start()
-            rtde.wait_next(self.timeout_s)
-        except BaseException:
-            rtde.close()
-            raise
-        dash = DashboardClient(self.host, self.dashboard_port, timeout_s=self.timeout_s)
-        try:
-            dash.connect()
-        except BaseException:
-            rtde.close()
-            raise
-        self._rtde = rtde
-        self._dashboard = dash
-        self._dashboard_broken = False
-
-    def close(self) -> None:
-        """Close both connections (bounded)."""
-        rtde, self._rtde = self._rtde, None
-        with self._dash_lock:
-            dash, self._dashboard = self._dashboard, None
-        if rtde is not None:
-            rtde.close()
-        if dash is not None:
-            dash.close()
-
-    @property
-    def rtde(self) -> RTDEClient:
-        """The RTDE client (raises if not connected)."""
-        if self._rtde is None:
-            raise DeployError(f"URArm {self.host} is not connected; use 'with URArm(...) as arm:' or connect()")
-        return self._rtde
-
-    @property
-    def dashboard(self) -> DashboardClient:
-        """The dashboard client, e.g. to power on: ``arm.dashboard.power_on()``."""
-        if self._dashboard is None:
-            raise DeployError(f"URArm {self.host} is not connected; use 'with URArm(...) as arm:' or connect()")
-        return self._dashboard
-
-    def _healthy_dashboard(self) -> DashboardClient:
-        """The dashboard client, reconnected if an earlier exchange failed (caller holds ``_dash_lock``)."""
-        dash = self.dashboard
-        if self._dashboard_broken:
-            dash.close()
-            dash = DashboardClient(self.host, self.dashboard_port, timeout_s=self.timeout_s)
-            dash.connect()
-            self._dashboard = dash
-            self._dashboard_broken = False
-        return dash
-
-    def state(self) -> dict[str, Any]:
-        """The next RTDE data package (fresh, waits at most ``timeout_s``)."""
-        return self.rtde.wait_next(self.timeout_s)
-
-    def actual_q(self) -> np.ndarray:
-        """Actual joint positions [rad] from a fresh data package."""
-        return np.asarray(self.state()["actual_q"], dtype=float)
-
-    # ------------------------------------------------------------------ approach
-
-    def approach(self, execution: Any, speed_fraction: float = 0.1, sample_rate_hz: float | None = None):
-        """A slow joint move from ``actual_q`` to the first sample of ``execution``, and its critics' report.
-
-        Timed with :func:`~robocritics.robot.motion.time_joint_move` at
-        ``speed_fraction`` of the robot's limits, built with
-        ``execution.robot.trajectory(...)`` in ``execution.scene`` (the scene at
-        the program's start) and judged by :func:`robocritics.critique`. Returns
-        ``(Approach, Report)``; deploy it like any execution — it passes the same
-        gate (a report with Errors is refused).
-        """
-        from robocritics.critic import critique
-        from robocritics.robot.motion import Limits, time_joint_move
-
-        robot = getattr(execution, "robot", None)
-        scene = getattr(execution, "scene", None)
-        if robot is None or scene is None:
-            raise DeployError("approach() needs an Execution with .robot and .scene (from robocritics.simulate)")
-        traj = _trajectory_of(execution)
-        if len(traj.attached) and str(traj.attached[0]):
-            raise DeployError(
-                f"approach(): the trajectory starts holding {traj.attached[0]!r}; plan the approach in the program instead"
-            )
-        goal = np.asarray(traj.q[0], dtype=float)
-        start = self.actual_q()
-        if start.shape != goal.shape:
-            raise DeployError(f"approach(): the arm has {start.size} joints, the trajectory {goal.size}")
-        if sample_rate_hz is None:
-            dts = np.diff(np.asarray(traj.time, float))
-            sample_rate_hz = float(1.0 / np.median(dts)) if len(dts) else 125.0
-        limits = Limits(
-            np.asarray(robot.velocity_limits, float),
-            np.asarray(robot.acceleration_limits, float),
-            np.asarray(robot.jerk_limits, float),
-        )
-        seg = time_joint_move(start, goal, limits, speed_fraction, sample_rate_hz)
-        dt = 1.0 / sample_rate_hz
-        end_t = max(seg.duration_s, float(seg.time[-1]) + (dt if seg.duration_s == 0 else 1e-6))
-        if seg.duration_s - float(seg.time[-1]) < 1e-6 and seg.duration_s > 0:
-            q = np.vstack([seg.q[:-1], goal])
-            t = np.append(seg.time[:-1], seg.duration_s)
-        else:
-            q = np.vstack([seg.q, goal])
-            t = np.append(seg.time, end_t)
-        opening = float(traj.gripper_opening_m[0])
-        trajectory = robot.trajectory(q, t, scene, gripper_opening_m=np.full(len(t), opening))
-        report = critique(trajectory, scene)
-        app = Approach(
-            trajectory=trajectory,
-            robot=robot,
-            scene=scene,
-            start_q=tuple(float(v) for v in start),
-            goal_q=tuple(float(v) for v in goal),
-            speed_fraction=float(speed_fraction),
-        )
-        return app, report
-
-    # ------------------------------------------------------------------ the gate
-
-    def _offline_gate(self, traj: Any, report: Any, allow_errors: bool, plan: StreamPlan | None) -> list[tuple[str, str]]:
-        reasons: list[tuple[str, str]] = []
-        if report is None or not hasattr(report, "trajectory_hash"):
-            reasons.append(("no_report", "deploy needs the Report that robocritics.critique() made for this trajectory"))
-        else:
-            errors = list(getattr(report, "errors", []))
-            if errors and allow_errors is not True:
-                listed = "; ".join(f"{v.critic}: {v.message}" for v in errors)
-                reasons.append((
-                    "report_errors",
-                    f"the critics' report has {len(errors)} Error(s) — {listed} — fix the program, or pass "
-                    "allow_errors=True to deploy anyway",
-                ))
-            actual_hash = traj.content_hash()
-            if report.trajectory_hash != actual_hash:
-                reasons.append((
-                    "hash_mismatch",
-                    f"the report judged trajectory {str(report.trajectory_hash)[:12]}… but this trajectory is "
-                    f"{actual_hash[:12]}…; critique exactly the motion you deploy",
-                ))
-        q = np.asarray(traj.q, dtype=float)
-        if q.ndim != 2 or q.shape[1] != 6:
-            reasons.append(("trajectory", f"a UR arm needs 6 joint values per sample, the trajectory has shape {q.shape}"))
-        elif not (np.all(np.isfinite(q)) and np.all(np.isfinite(np.asarray(traj.time, float)))):
-            reasons.append(("trajectory", "the trajectory has non-finite joint values or times"))
-        elif plan is not None and len(plan) > 1:
-            limits = getattr(traj, "limits", None)
-            vlim = np.asarray(getattr(limits, "velocity_rad_s", UR3E_VELOCITY_LIMITS), dtype=float)
-            speed = np.abs(np.diff(plan.q, axis=0)) * plan.rate_hz
-            ratio = speed / vlim
-            worst = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-            if ratio[worst] > 1.0 + 1e-6:
-                k, j = int(worst[0]) + 1, int(worst[1])
-                reasons.append((
-                    "setpoint_speed",
-                    f"setpoint {k} (trajectory sample {int(plan.source_index[k])}, t = {plan.time[k]:.3f} s) moves joint "
-                    f"{j} ({getattr(limits, 'joint_names', [''] * 6)[j]}) at "
-                    f"{speed[worst]:.3f} rad/s > its limit {vlim[j]:.3f} rad/s; the controller would protective-stop",
-                ))
-        return reasons
-
-    def _online_gate(self, state: dict[str, Any], q_first: np.ndarray, start_tolerance_rad: float) -> list[tuple[str, str]]:
-        reasons: list[tuple[str, str]] = []
-        rm, sm, rs = state.get("robot_mode"), state.get("safety_mode"), state.get("runtime_state")
-        if rm != ROBOT_MODE_RUNNING:
-            reasons.append((
-                "robot_mode",
-                f"robot mode is {_name(ROBOT_MODES, rm)}, not RUNNING (7); power on and release the brakes "
-                "(arm.dashboard.power_on(), arm.dashboard.brake_release())",
-            ))
-        if sm != SAFETY_NORMAL:
-            hint = "; inspect the cause, then arm.dashboard.unlock_protective_stop()" if sm == SAFETY_PROTECTIVE_STOP else ""
-            reasons.append(("safety_mode", f"safety mode is {_name(SAFETY_MODES, sm)}, not NORMAL (1){hint}"))
-        with self._dash_lock:
-            try:
-                remote = self._healthy_dashboard().is_in_remote_control()
-            except RTDEError as exc:
-                remote = None
-                reasons.append(("remote_control", f"cannot ask the dashboard whether the robot is in remote control: {exc}"))
-        if remote is False:
-            reasons.append((
-                "remote_control",
-                "the controller is in local control; it would ignore the streaming program — enable remote control on the teach pendant",
-            ))
-        if rs != RUNTIME_STOPPED:
-            reasons.append((
-                "program_running",
-                f"runtime state is {_name(RUNTIME_STATES, rs)}, not STOPPED: another program is running; stop it first",
-            ))
-        actual = np.asarray(state.get("actual_q", ()), dtype=float)
-        if actual.shape != (6,):
-            reasons.append(("start_mismatch", f"the controller reported actual_q {actual.tolist()}, not 6 joint positions"))
-        else:
-            dev = np.abs(q_first - actual)
-            j = int(np.argmax(dev))
-            if dev[j] > start_tolerance_rad:
-                reasons.append((
-                    "start_mismatch",
-                    f"the trajectory starts {dev[j]:.4f} rad away from the arm on joint {j} (> start_tolerance_rad "
-                    f"{start_tolerance_rad:g}); actual_q = [{', '.join(f'{v:.4f}' for v in actual)}], first sample = "
-                    f"[{', '.join(f'{v:.4f}' for v in q_first)}]. Move there first: "
-                    "approach, approach_report = arm.approach(execution); arm.deploy(approach, approach_report)",
-                ))
-        return reasons
-
-    # ------------------------------------------------------------------ deploy
-
-    def deploy(
-        self,
-        execution: Any,
-        report: Any,
-        *,
-        allow_errors: bool = False,
-        dry_run: bool = False,
-        start_tolerance_rad: float = 0.01,
-        max_tracking_error_rad: float = 0.05,
-        rate_hz: float = 500.0,
-        lookahead_time_s: float = 0.1,
-        gain: float = 300.0,
-        watchdog_min_hz: float = 10.0,
-        silence_timeout_s: float = 0.2,
-        min_data_rate_fraction: float = 0.5,
-        start_timeout_s: float = 3.0,
-        settle_tolerance_rad: float = 1e-4,
-        settle_timeout_s: float = 1.0,
-        stop_timeout_s: float = 2.0,
-        monitor_period_s: float = 0.1,
-        spin_s: float = 2e-4,
-    ) -> DeployResult:
-        """Check ``execution`` against ``report`` and the arm (the gate), then stream it.
-
-        ``execution``: an :class:`~robocritics.simulate.Execution`, an
-        :class:`Approach` or a Trajectory; ``report``: the
-        :class:`~robocritics.report.Report` of exactly that trajectory.
-        ``allow_errors`` must be passed explicitly to deploy a report with Errors.
-        ``dry_run`` does the gate, the connection checks, the resampling, the
-        program text and the pacing schedule, and checks that the secondary
-        interface accepts connections, but sends no program and no setpoint.
-        ``rate_hz`` must divide 500 (500, 250, 125, …): each setpoint advances the
-        sequence counter by ``500 / rate_hz`` control cycles.
-        The other parameters are the thresholds in the module docstring.
-
-        Raises :class:`DeployRefused` (gate, nothing sent) or :class:`DeployFault`
-        (a fault stopped the arm). Returns a :class:`DeployResult`.
-        """
-        traj = _trajectory_of(execution)
-        steps = 500.0 / float(rate_hz)
-        if not (rate_hz > 0 and abs(steps - round(steps)) < 1e-9 and round(steps) >= 1):
-            raise DeployError(f"rate_hz must divide 500 Hz (500, 250, 125, 100, …), got {rate_hz}")
-        if not (0 < start_tolerance_rad <= 0.5):
-            raise DeployError(f"start_tolerance_rad must be in (0, 0.5] rad, got {start_tolerance_rad}")
-        if not max_tracking_error_rad > 0:
-            raise DeployError(f"max_tracking_error_rad must be > 0 rad, got {max_tracking_error_rad}")
-        rtde = self.rtde
-        plan: StreamPlan | None = None
-        try:
-            plan = resample(traj, rate_hz)
-        except (DeployError, ValueError) as exc:
-            raise DeployRefused([("trajectory", f"cannot resample the trajectory: {exc}")]) from None
-        reasons = self._offline_gate(traj, report, allow_errors, plan)
-        if reasons:
-            raise DeployRefused(reasons)
-        state = rtde.wait_next(self.timeout_s)
-        reasons = self._online_gate(state, plan.q[0], start_tolerance_rad)
-        if reasons:
-            raise DeployRefused(reasons)
-        program = streaming_program(
-            lookahead_time_s=lookahead_time_s,
-            gain=gain,
-            watchdog_min_hz=watchdog_min_hz,
-            max_start_deviation_rad=min(0.5, start_tolerance_rad + 0.005),
-        )
-        trajectory_hash = traj.content_hash()
-        if dry_run:
-            self._probe_secondary()
-            final_q = tuple(float(v) for v in state["actual_q"])
-            return DeployResult(
-                samples_sent=0,
-                trajectory_samples=len(traj.q),
-                rate_hz=float(rate_hz),
-                duration_s=0.0,
-                trajectory_duration_s=float(plan.time[-1]),
-                period_error_median_ms=float("nan"),
-                period_error_p99_ms=float("nan"),
-                period_error_max_ms=float("nan"),
-                lateness_p99_ms=float("nan"),
-                max_tracking_error_rad=0.0,
-                final_q=final_q,
-                final_error_rad=float(np.max(np.abs(np.asarray(final_q) - plan.q[-1]))),
-                settle_s=0.0,
-                resyncs=0,
-                data_packages=1,
-                trajectory_hash=trajectory_hash,
-                session=0,
-                dry_run=True,
-                program=program,
-                planned_setpoints=len(plan),
-            )
-        window_s = lookahead_time_s + 0.02
-        run = _Run(
-            plan=plan,
-            session=random.randint(1, 2**31 - 1),
-            step=int(round(steps)),
-            max_tracking_error_rad=float(max_tracking_error_rad),
-            window=max(1, int(math.ceil(window_s * rate_hz))),
-        )
-        return self._stream(
-            run,
-            program,
-            trajectory_hash=trajectory_hash,
-            trajectory_samples=len(traj.q),
-            silence_timeout_s=silence_timeout_s,
-            min_data_rate_fraction=min_data_rate_fraction,
-            start_timeout_s=start_timeout_s,
-            settle_tolerance_rad=settle_tolerance_rad,
-            settle_timeout_s=settle_timeout_s,
-            stop_timeout_s=stop_timeout_s,
-            monitor_period_s=monitor_period_s,
-            spin_s=spin_s,
-        )
-
-    def _probe_secondary(self) -> None:
-        import socket
-
-        try:
-            with socket.create_connection((self.host, self.secondary_port), timeout=self.timeout_s):
-                pass
-        except OSError as exc:
-            raise DeployRefused([(
-                "secondary_interface",
-                f"cannot connect to the secondary interface at {self.host}:{self.secondary_port}: {exc}",
-            )]) from None
-
-    # ------------------------------------------------------------------ streaming
 
     def _send(self, run: _Run, q: np.ndarray, opening: float, *, done: bool = False, bump: bool = True) -> None:
         if bump:
-            self._seq = ((self._seq + run.step + 2**31) % 2**32) - 2**31
+            self.arm._seq = ((self.arm._seq + run.step + 2**31) % 2**32) - 2**31
         try:
-            self.rtde.send(setpoint(self._seq, q, opening, done=done, session=run.session), self._inputs)
+            self.arm.rtde.send(setpoint(self.arm._seq, q, opening, done=done, session=run.session), self.arm._inputs)
         except RTDEError as exc:
             raise _Fault("connection_drop", f"the RTDE connection failed: {exc}") from None
         run.sent_any = True
@@ -859,18 +356,18 @@ class URArm:
         run.last_opening = opening
 
     def _collect_messages(self, run: _Run) -> None:
-        rtde = self._rtde
+        rtde = self.arm._rtde
         if rtde is None:
             return
         for m in rtde.messages():
-            self._messages.append(m)
+            self.arm._messages.append(m)
             if m.level <= MessageLevel.WARNING:
                 run.messages.append(f"{m.level_name} [{m.source}] {m.message}")
 
     def _check(self, run: _Run, monitor: _DashboardMonitor | None, now: float, rate_hz: float,
                silence_timeout_s: float, min_rate: float) -> None:
         """Raise _Fault if anything is wrong; process every data package received since the last check."""
-        rtde = self.rtde
+        rtde = self.arm.rtde
         if monitor is not None and monitor.fault is not None:
             raise monitor.fault
         if not rtde.connected:
@@ -883,24 +380,24 @@ class URArm:
         for st in packages:
             run.packages += 1
             run.last_state = st
-            if st["safety_mode"] != SAFETY_NORMAL:
+            if st["safety_mode"] != SafetyMode.NORMAL:
                 raise _safety_fault(st["safety_mode"])
-            if st["robot_mode"] != ROBOT_MODE_RUNNING:
-                raise _Fault("robot_mode", f"the robot mode became {_name(ROBOT_MODES, st['robot_mode'])}")
+            if st["robot_mode"] != RobotMode.RUNNING:
+                raise _Fault("robot_mode", f"the robot mode became {mode_name(RobotMode, st['robot_mode'])}")
             if run.phase in ("streaming", "settling"):
                 pstate = st[OUTPUT_FIELDS[1]]
                 if pstate == ProgramState.STALLED:
                     raise _Fault("program_stalled", "the streaming program reported STALLED (it saw the sequence counter stop) and stopped")
                 if st[OUTPUT_FIELDS[2]] != run.session:
                     raise _Fault("session", f"the program echoes session {st[OUTPUT_FIELDS[2]]}, not ours ({run.session}); another program took over")
-                if st["runtime_state"] != RUNTIME_PLAYING:
+                if st["runtime_state"] != RuntimeState.PLAYING:
                     raise _Fault(
                         "program_stopped",
-                        f"the program stopped: runtime state {_name(RUNTIME_STATES, st['runtime_state'])}, program state "
-                        f"{_name(_PROGRAM_STATES, pstate)} (controller watchdog, a dashboard stop, or a crash)",
+                        f"the program stopped: runtime state {mode_name(RuntimeState, st['runtime_state'])}, program state "
+                        f"{mode_name(ProgramState, pstate)} (controller watchdog, a dashboard stop, or a crash)",
                     )
                 if pstate != ProgramState.STREAMING:
-                    raise _Fault("program_stopped", f"the program left the STREAMING state: {_name(_PROGRAM_STATES, pstate)}")
+                    raise _Fault("program_stopped", f"the program left the STREAMING state: {mode_name(ProgramState, pstate)}")
             # tracking: distance to the nearest setpoint of the lookahead window
             actual = np.asarray(st["actual_q"], dtype=float)
             k = run.k
@@ -921,18 +418,20 @@ class URArm:
         if age > silence_timeout_s:
             raise _Fault("controller_silent", f"no RTDE data package for {age:.3f} s (> silence_timeout_s {silence_timeout_s:g})")
         elapsed = now - run.rate_t0
-        if elapsed >= 0.25:
+        if elapsed >= STREAM_RATE_WINDOW_S:
             n = rtde.packages_received - run.rate_n0
-            expected = self._out_freq * elapsed
-            if n < min_rate * expected:
+            expected = self.arm._out_freq * elapsed
+            # a controller that stopped sending altogether is reported as silent once silence_timeout_s passed
+            still_sending = age <= 0.5 * silence_timeout_s
+            if n < min_rate * expected and still_sending:
                 raise _Fault(
                     "controller_slow",
                     f"the controller sent {n} data packages in {elapsed:.3f} s ({n / elapsed:.0f} Hz, expected "
-                    f"{self._out_freq:g} Hz; minimum {min_rate:.0%}): it is overloaded or throttled",
+                    f"{self.arm._out_freq:g} Hz; minimum {min_rate:.0%}): it is overloaded or throttled",
                 )
             run.rate_t0, run.rate_n0 = now, rtde.packages_received
 
-    def _stream(
+    def run(
         self,
         run: _Run,
         program: str,
@@ -948,20 +447,20 @@ class URArm:
         monitor_period_s: float,
         spin_s: float,
     ) -> DeployResult:
-        rtde = self.rtde
+        rtde = self.arm.rtde
         plan = run.plan
         period = 1.0 / plan.rate_hz
         rate = plan.rate_hz
         rtde.drain()
         self._collect_messages(run)
         run.messages.clear()
-        monitor = _DashboardMonitor(self, monitor_period_s)
+        monitor = _DashboardMonitor(self.arm, monitor_period_s)
         monitor.start()
         sent_times: list[float] = []
         deadlines: list[float] = []
         settle_s = 0.0
         resyncs = 0
-        resync_after_s = 5 * period
+        resync_after_s = RESYNC_AFTER_PERIODS * period
 
         def check(now: float) -> None:
             self._check(run, monitor, now, rate, silence_timeout_s, min_data_rate_fraction)
@@ -976,7 +475,7 @@ class URArm:
 
             def send_it() -> None:
                 try:
-                    send_program(self.host, program, self.secondary_port, timeout_s=self.timeout_s)
+                    send_program(self.arm.host, program, self.arm.secondary_port, timeout_s=self.arm.timeout_s)
                 except BaseException as exc:  # reported by the streaming thread
                     sender_error.append(exc)
 
@@ -1001,7 +500,7 @@ class URArm:
                 if st:
                     pstate = st[OUTPUT_FIELDS[1]]
                     if (
-                        st["runtime_state"] == RUNTIME_PLAYING
+                        st["runtime_state"] == RuntimeState.PLAYING
                         and pstate == ProgramState.STREAMING
                         and st[OUTPUT_FIELDS[2]] == run.session
                     ):
@@ -1017,7 +516,7 @@ class URArm:
                         f"{start_timeout_s:g} s (last state {st.get(OUTPUT_FIELDS[1]) if st else None}, runtime "
                         f"{st.get('runtime_state') if st else None})",
                     )
-            sender.join(timeout=self.timeout_s)
+            sender.join(timeout=self.arm.timeout_s)
 
             # ---- stream with absolute deadlines
             run.phase = "streaming"
@@ -1078,9 +577,9 @@ class URArm:
                 packages = rtde.drain()
                 run.packages += len(packages)
                 for st in packages:
-                    if st["safety_mode"] != SAFETY_NORMAL:
+                    if st["safety_mode"] != SafetyMode.NORMAL:
                         raise _safety_fault(st["safety_mode"], " while finishing")
-                    if st["runtime_state"] == RUNTIME_STOPPED and max(abs(v) for v in st["actual_qd"]) < STILL_RAD_S:
+                    if st["runtime_state"] == RuntimeState.STOPPED and max(abs(v) for v in st["actual_qd"]) < STILL_RAD_S:
                         final = st
                         break
                     run.last_state = st
@@ -1139,7 +638,7 @@ class URArm:
         stopped, how = self._stop_arm(run, stop_timeout_s, silence_timeout_s)
         self._collect_messages(run)
         actual = None
-        rtde = self._rtde
+        rtde = self.arm._rtde
         if rtde is not None:
             try:
                 latest = rtde.latest(allow_stale=True)
@@ -1169,7 +668,7 @@ class URArm:
 
     def _stop_arm(self, run: _Run, stop_timeout_s: float, silence_timeout_s: float) -> tuple[bool, str]:
         """Stop the program and the arm: the done command over RTDE, else the dashboard ``stop``. Bounded."""
-        rtde = self._rtde
+        rtde = self.arm._rtde
         deadline = time.monotonic() + stop_timeout_s
         steps: list[str] = []
         rtde_ok = rtde is not None and rtde.connected
@@ -1186,7 +685,7 @@ class URArm:
                     if rtde.age_s() > silence_timeout_s:
                         continue
                     st = rtde.latest()
-                    if st.get("runtime_state") != RUNTIME_PLAYING:
+                    if st.get("runtime_state") != RuntimeState.PLAYING:
                         confirmed = True
                         break
                 steps.append("done command sent over RTDE" + (" (program stopped)" if confirmed else " (no confirmation)"))
@@ -1210,13 +709,13 @@ class URArm:
         return False, "; ".join(steps)
 
     def _dashboard_stop(self, timeout_s: float) -> str:
-        timeout_s = min(timeout_s, self.timeout_s)
-        acquired = self._dash_lock.acquire(timeout=min(0.05, timeout_s))  # busy (monitor stuck)? use a fresh connection
+        timeout_s = min(timeout_s, self.arm.timeout_s)
+        acquired = self.arm._dash_lock.acquire(timeout=min(0.05, timeout_s))  # busy (monitor stuck)? use a fresh connection
         try:
-            dash = self._dashboard if acquired and not self._dashboard_broken else None
+            dash = self.arm._dashboard if acquired and not self.arm._dashboard_broken else None
             fresh = None
             if dash is None:
-                fresh = DashboardClient(self.host, self.dashboard_port, timeout_s=max(0.1, timeout_s))
+                fresh = DashboardClient(self.arm.host, self.arm.dashboard_port, timeout_s=max(0.1, timeout_s))
                 try:
                     fresh.connect()
                 except RTDEError as exc:
@@ -1226,32 +725,32 @@ class URArm:
                 ran = dash.stop()
                 return "dashboard stop sent" + ("" if ran else " (no program was running)")
             except RTDEError as exc:
-                if dash is self._dashboard:
-                    self._dashboard_broken = True
+                if dash is self.arm._dashboard:
+                    self.arm._dashboard_broken = True
                 return f"dashboard stop failed ({exc})"
             finally:
                 if fresh is not None:
                     fresh.close()
         finally:
             if acquired:
-                self._dash_lock.release()
+                self.arm._dash_lock.release()
 
     def _confirm_stopped(self, deadline: float, silence_timeout_s: float) -> bool | None:
         """True once runtime_state is not PLAYING (RTDE, else dashboard ``running``); None if unknown."""
-        rtde = self._rtde
+        rtde = self.arm._rtde
         while time.monotonic() < deadline:
             if rtde is not None and rtde.connected and rtde.age_s() <= silence_timeout_s:
-                if rtde.latest().get("runtime_state") != RUNTIME_PLAYING:
+                if rtde.latest().get("runtime_state") != RuntimeState.PLAYING:
                     return True
                 time.sleep(0.005)
                 continue
             break
         # RTDE is gone or silent: ask the dashboard
-        acquired = self._dash_lock.acquire(timeout=max(0.0, min(0.05, deadline - time.monotonic())))
+        acquired = self.arm._dash_lock.acquire(timeout=max(0.0, min(0.05, deadline - time.monotonic())))
         if not acquired:
             return None
         try:
-            dash = self._dashboard if not self._dashboard_broken else None
+            dash = self.arm._dashboard if not self.arm._dashboard_broken else None
             if dash is None:
                 return None
             while time.monotonic() < deadline:
@@ -1259,15 +758,15 @@ class URArm:
                     if not dash.running():
                         return True
                 except RTDEError:
-                    self._dashboard_broken = True
+                    self.arm._dashboard_broken = True
                     return None
                 time.sleep(0.02)
             return False
         finally:
-            self._dash_lock.release()
+            self.arm._dash_lock.release()
 
     def _wait_still(self, deadline: float) -> bool:
-        rtde = self._rtde
+        rtde = self.arm._rtde
         if rtde is None or not rtde.connected:
             return False
         while time.monotonic() < deadline:

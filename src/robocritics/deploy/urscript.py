@@ -54,6 +54,7 @@ from enum import IntEnum
 from typing import Any, Mapping, Sequence
 
 from robocritics.errors import DeployError, RTDEError
+from robocritics.robot.arms import UR3E
 
 __all__ = [
     "SECONDARY_PORT",
@@ -157,7 +158,7 @@ def streaming_program(
     gain: float = 300,
     watchdog_min_hz: float = 10.0,
     *,
-    servo_t_s: float = 0.002,
+    servo_t_s: float = UR3E.control_period_s,
     stop_deceleration_rad_s2: float = 2.0,
     max_start_deviation_rad: float = 0.05,
     gripper_close_below_m: float = 0.0425,
@@ -176,7 +177,7 @@ def streaming_program(
         Minimum update rate of the sequence counter [Hz]; slower (or a counter
         that stops changing for ``1/watchdog_min_hz`` s) stops the program.
     servo_t_s:
-        ``servoj`` blocking time = control period [s] (0.002 on e-series).
+        ``servoj`` blocking time = control period [s] (``UR3E.control_period_s``, 2 ms on e-series).
     stop_deceleration_rad_s2:
         Joint deceleration of the final ``stopj`` [rad/s²].
     max_start_deviation_rad:

@@ -2,7 +2,18 @@
 
 :class:`URSim` is what the tests and benchmarks deploy to. It is not a physics
 simulator and does not interpret URScript; it is a protocol-exact stand-in for
-an e-series controller (UR3e joint limits) that runs *our* streaming program:
+an e-series controller that runs *our* streaming program. Every UR3e number it
+uses (control period, joint speed limits, DH table for ``actual_TCP_pose``) comes
+from :data:`robocritics.robot.arms.UR3E`, its forward kinematics from
+:func:`robocritics.robot.ik.dh_forward`, its mode numbers from the tables in
+:mod:`robocritics.deploy.rtde`; it starts at the robot model's home pose, in robot
+mode RUNNING.
+
+* **Time** is control cycles × 2 ms, and every rule below runs on it. With
+  ``clock="realtime"`` (the default; ``robocritics ursim``) a thread runs a cycle
+  every 2 ms of wall time. With ``clock="stepped"`` the time is simulated: one
+  cycle per RTDE input data package (a streaming client's setpoints clock the
+  controller) plus :meth:`URSim.step`, so tests are deterministic on a loaded host.
 
 * **RTDE** (default port 30004): protocol versions 2 and 1 byte for byte —
   version negotiation, controller version, output recipes (v2 with a frequency
@@ -12,12 +23,12 @@ an e-series controller (UR3e joint limits) that runs *our* streaming program:
   ``robot_mode``, ``safety_mode``, ``runtime_state``, all registers, …), answers
   ``NOT_FOUND`` for unknown fields and ``IN_USE`` for inputs another client holds
   (or registers 0-23 when ``fieldbus_registers=True``). Output packages are
-  produced by the 500 Hz control loop (a recipe at f Hz gets f of every 500
+  produced by the control cycles (a recipe at f Hz gets f of every 500
   cycles). A client that does not read its data for ``slow_client_timeout_s``
   is disconnected, as a real controller does.
 * **Dashboard** (default 29999): greeting, power on/off, brake release, load,
   play, stop, pause, robotmode, safetystatus, unlock protective stop (refused for
-  ``unlock_delay_s`` after the stop, 5 s like the real controller),
+  ``unlock_delay_s`` of controller time after the stop, 5 s like the real controller),
   is in remote control, programState, running, quit.
 * **Secondary interface** (default 30002): accepts program text. Programs made
   by :func:`~robocritics.deploy.urscript.streaming_program` (recognised by their
@@ -30,8 +41,8 @@ statement by statement, once per 2 ms control cycle:
 * ``servoj`` tracking: joint velocity = setpoint velocity (difference of the
   last two setpoints over their sequence distance × 2 ms; applied in the cycle a
   new setpoint arrives) + (target − q)/τ with τ = lookahead_time × 300 / gain
-  (at least 2 ms), clipped to the UR3e joint speed limits (π rad/s joints 0-2,
-  2π rad/s joints 3-5). No acceleration limit, no dynamics.
+  (at least 2 ms), clipped to the joint speed limits (``UR3E.velocity_rad_s``
+  unless ``speed_limits`` says otherwise). No acceleration limit, no dynamics.
 * RTDE watchdog: no update of ``input_int_register_24`` for longer than
   ``1/min_hz`` s → the controller stops the program (``runtime_state`` STOPPED,
   joints decelerate at 4 rad/s²) and sends a text message.
@@ -46,9 +57,10 @@ statement by statement, once per 2 ms control cycle:
 
 Fault injection: :meth:`URSim.inject_drop`, :meth:`URSim.trigger_protective_stop`,
 :meth:`URSim.set_slow`, :meth:`URSim.set_silent`, :meth:`URSim.set_remote_control`,
-and the constructor's ``fieldbus_registers``.
+the constructor's ``fieldbus_registers`` — now, or at a known point of a
+deployment with :meth:`URSim.at_program_time`.
 
-Run it from a shell with ``python -m robocritics.testing.ursim.controller`` (or the
+Run it from a shell with ``python -m robocritics.testing.ursim`` (or the
 ``robocritics ursim`` command); Ctrl-C stops it.
 """
 
@@ -66,50 +78,45 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
-from robocritics.errors import DeployError
 from robocritics.deploy import urscript
 from robocritics.deploy.rtde import (
     DATA_TYPES,
     MAX_FREQUENCY_HZ,
-    ROBOT_MODES,
-    RUNTIME_STATES,
-    SAFETY_MODES,
     V1_FREQUENCY_HZ,
     Command,
     MessageLevel,
     Recipe,
+    RobotMode,
+    RuntimeState,
+    SafetyMode,
     TextMessage,
     decode_text_message,
     encode_text_message,
     pack_package,
 )
+from robocritics.errors import DeployError
+from robocritics.robot.arms import DH, UR3E
+from robocritics.robot.ik import dh_forward
 
 __all__ = ["URSim", "SimSnapshot", "SimEvent", "KNOWN_OUTPUTS", "KNOWN_INPUTS", "main"]
 
 log = logging.getLogger(__name__)
 
-DT = 0.002
-"""Control period of an e-series controller [s] (500 Hz)."""
+DT = UR3E.control_period_s
+"""Control period [s]: one control cycle of the UR3e (``robocritics.robot.arms.UR3E``)."""
 
-UR3E_SPEED_LIMITS = (math.pi, math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 * math.pi)
-"""UR3e joint speed limits [rad/s]."""
+DEFAULT_ROBOT_MODE = "RUNNING"
+"""Robot mode a new controller starts in (``URSim()`` and ``robocritics ursim``): powered, brakes released."""
 
-HOME_Q = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
-"""Default initial joint positions [rad]."""
-
-_DH_D = (0.15185, 0.0, 0.0, 0.13105, 0.08535, 0.0921)
-_DH_A = (0.0, -0.24355, -0.2132, 0.0, 0.0, 0.0)
-_DH_ALPHA = (math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0)
+CLOCKS = ("realtime", "stepped")
+"""How the controller's time advances (see :class:`URSim`)."""
 
 CONTROLLER_STOP_DECEL = 4.0
 """Deceleration when the controller stops a program (watchdog, dashboard stop) [rad/s²]."""
 PROTECTIVE_STOP_DECEL = 10.0
 """Deceleration of a protective stop [rad/s²]."""
 
-POWER_OFF, IDLE, RUNNING = 3, 5, 7
-NORMAL, PROTECTIVE_STOP = 1, 3
-STOPPED, PLAYING, PAUSED = 1, 2, 4
-_JOINT_MODE = {POWER_OFF: 239, IDLE: 255, RUNNING: 253}
+_JOINT_MODE = {RobotMode.POWER_OFF: 239, RobotMode.IDLE: 255, RobotMode.RUNNING: 253}
 _SAFETY_STATUS_BIT = {1: 0, 2: 1, 3: 2, 4: 3, 5: 4, 6: 5, 7: 6, 8: 8, 9: 9}
 """safety_mode → its bit in ``safety_status_bits``."""
 
@@ -120,23 +127,6 @@ UNLOCK_TOO_EARLY_REPLY = (
 
 
 # ---------------------------------------------------------------------------- kinematics
-
-
-def _dh(theta: float, i: int) -> list[list[float]]:
-    ct, st = math.cos(theta), math.sin(theta)
-    ca, sa = math.cos(_DH_ALPHA[i]), math.sin(_DH_ALPHA[i])
-    a, d = _DH_A[i], _DH_D[i]
-    return [[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0.0, sa, ca, d]]
-
-
-def _mul(m: list[list[float]], n: list[list[float]]) -> list[list[float]]:
-    return [
-        [
-            m[r][0] * n[0][c] + m[r][1] * n[1][c] + m[r][2] * n[2][c] + (m[r][3] if c == 3 else 0.0)
-            for c in range(4)
-        ]
-        for r in range(3)
-    ]
 
 
 def _rotvec(r: list[list[float]]) -> tuple[float, float, float]:
@@ -162,16 +152,17 @@ def _rotvec(r: list[list[float]]) -> tuple[float, float, float]:
     return ((r[2][1] - r[1][2]) * k, (r[0][2] - r[2][0]) * k, (r[1][0] - r[0][1]) * k)
 
 
+_ELBOW_DH = DH(d=(UR3E.dh.d[0],) + (0.0,) * 5, a=(0.0, UR3E.dh.a[1]) + (0.0,) * 4,
+               alpha=(UR3E.dh.alpha[0],) + (0.0,) * 5, name="ur3e shoulder and upper arm")
+"""The UR3e's first two DH links alone: its flange pose is the elbow frame ``T_02``."""
+
+
 def ur3e_fk(q: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, float, float]]:
-    """UR3e forward kinematics (flange, no tool): ((x, y, z [m], rx, ry, rz [rad, rotation vector]), elbow xyz [m])."""
-    t = _dh(q[0], 0)
-    elbow = (0.0, 0.0, 0.0)
-    for i in range(1, 6):
-        t = _mul(t, _dh(q[i], i))
-        if i == 1:
-            elbow = (t[0][3], t[1][3], t[2][3])
-    rv = _rotvec(t)
-    return (t[0][3], t[1][3], t[2][3], *rv), elbow
+    """UR3e forward kinematics by :func:`robocritics.robot.ik.dh_forward` (flange, no tool):
+    ((x, y, z [m], rx, ry, rz [rad, rotation vector]), elbow xyz [m])."""
+    t = dh_forward(UR3E.dh, q)
+    elbow = dh_forward(_ELBOW_DH, (q[0], q[1], 0.0, 0.0, 0.0, 0.0))[:3, 3]
+    return (*(float(v) for v in t[:3, 3]), *_rotvec(t[:3, :3].tolist())), (float(elbow[0]), float(elbow[1]), float(elbow[2]))
 
 
 # ---------------------------------------------------------------------------- state
@@ -188,8 +179,8 @@ class _State:
         self.target_qd = [0.0] * 6
         self.target_qdd = [0.0] * 6
         self.robot_mode = robot_mode
-        self.safety_mode = NORMAL
-        self.runtime_state = STOPPED
+        self.safety_mode = SafetyMode.NORMAL
+        self.runtime_state = RuntimeState.STOPPED
         self.in_int = [0] * 48
         self.in_double = [0.0] * 48
         self.in_bits = 0  # 128 bits
@@ -223,16 +214,16 @@ class _State:
 
     @property
     def powered(self) -> bool:
-        return self.robot_mode >= 4
+        return self.robot_mode >= RobotMode.POWER_ON
 
     def robot_status_bits(self) -> int:
-        return (1 if self.powered else 0) | (2 if self.runtime_state == PLAYING else 0)
+        return (1 if self.powered else 0) | (2 if self.runtime_state == RuntimeState.PLAYING else 0)
 
     def safety_status_bits(self) -> int:
         bits = 1 << _SAFETY_STATUS_BIT.get(self.safety_mode, 0)
-        if self.safety_mode in (6, 7):
+        if self.safety_mode in (SafetyMode.SYSTEM_EMERGENCY_STOP, SafetyMode.ROBOT_EMERGENCY_STOP):
             bits |= 1 << 7
-        if self.safety_mode != NORMAL and self.safety_mode != 2:
+        if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
             bits |= 1 << 10
         return bits
 
@@ -422,18 +413,28 @@ class SimSnapshot:
     """output_int_register_24 (last sequence number the program applied)."""
     gripper_opening_m: float
     digital_out: int
+    program_time_s: float = 0.0
+    """Controller time the running program has run [s] (0 if none runs)."""
 
     @property
     def robot_mode_name(self) -> str:
-        return ROBOT_MODES.get(self.robot_mode, str(self.robot_mode))
+        return _enum_name(RobotMode, self.robot_mode)
 
     @property
     def safety_mode_name(self) -> str:
-        return SAFETY_MODES.get(self.safety_mode, str(self.safety_mode))
+        return _enum_name(SafetyMode, self.safety_mode)
 
     @property
     def runtime_state_name(self) -> str:
-        return RUNTIME_STATES.get(self.runtime_state, str(self.runtime_state))
+        return _enum_name(RuntimeState, self.runtime_state)
+
+
+def _enum_name(kind: type, value: int) -> str:
+    """The name of ``value`` in the IntEnum ``kind`` (``"UNKNOWN"`` if it has none)."""
+    try:
+        return kind(value).name
+    except ValueError:
+        return "UNKNOWN"
 
 
 # ---------------------------------------------------------------------------- programs
@@ -624,9 +625,11 @@ class URSim:
         Ports; 0 picks a free ephemeral port. The bound ports are in the
         attributes of the same name after :meth:`start`.
     initial_q:
-        Joint positions at start [rad].
+        Joint positions at start [rad]; default the robot model's home pose
+        (``Robot.ur3e().home_q``, where :func:`robocritics.simulate` starts).
     robot_mode:
-        ``"POWER_OFF"`` (like a freshly booted controller), ``"IDLE"`` or ``"RUNNING"``.
+        ``"RUNNING"`` (default: powered, brakes released), ``"IDLE"`` or
+        ``"POWER_OFF"`` (like a freshly booted controller).
     remote_control:
         False = local control: the dashboard refuses commands that move the
         robot and the secondary interface refuses programs.
@@ -639,14 +642,30 @@ class URSim:
     jump_margin:
         Protective-stop threshold as a multiple of the joint speed limit (see module doc).
     unlock_delay_s:
-        Time after a protective stop before ``unlock protective stop`` is accepted [s].
+        Controller time after a protective stop before ``unlock protective stop`` is accepted [s].
     slow_client_timeout_s:
-        A client whose data has been waiting unsent this long is disconnected [s].
+        A client whose data has been waiting unsent this long (wall time) is disconnected [s].
     extra_outputs, extra_inputs:
         Additional fields, name → RTDE type (e.g. a newer firmware's fields); their
         values are in :attr:`extras` (outputs read it, inputs write it).
     speed_limits:
-        Joint speed limits [rad/s], default UR3e.
+        Joint speed limits [rad/s], default ``UR3E.velocity_rad_s``.
+    clock:
+        How controller time advances; it is always control cycles × 2 ms, and every
+        rule (watchdog, stall, protective stop, unlock delay, output rates, events)
+        runs on it.
+
+        * ``"realtime"`` (default): a thread runs one cycle every 2 ms of wall time,
+          as a real controller does.
+        * ``"stepped"``: simulated time. A cycle runs for every RTDE input data package
+          received (a streaming client's setpoints are the controller's clock, one per
+          2 ms cycle) and for every cycle asked of :meth:`step`; nothing else moves.
+          Deterministic: the same inputs give the same states, however loaded the host.
+    idle_after_s:
+        ``clock="stepped"`` only: once no input package has arrived for this long
+        (wall time, s), cycles also run every 2 ms of wall time until one arrives —
+        so a client that only reads still gets data, and the RTDE watchdog still
+        stops the program of a client that died. None (default): no idle cycles.
     """
 
     def __init__(
@@ -655,8 +674,8 @@ class URSim:
         rtde_port: int = 30004,
         dashboard_port: int = 29999,
         secondary_port: int = 30002,
-        initial_q: Sequence[float] = HOME_Q,
-        robot_mode: str = "POWER_OFF",
+        initial_q: Sequence[float] | None = None,
+        robot_mode: str = DEFAULT_ROBOT_MODE,
         remote_control: bool = True,
         fieldbus_registers: bool = False,
         protocol_versions: Iterable[int] = (1, 2),
@@ -666,13 +685,22 @@ class URSim:
         slow_client_timeout_s: float = 1.0,
         extra_outputs: dict[str, str] | None = None,
         extra_inputs: dict[str, str] | None = None,
-        speed_limits: Sequence[float] = UR3E_SPEED_LIMITS,
+        speed_limits: Sequence[float] = UR3E.velocity_rad_s,
+        clock: str = "realtime",
+        idle_after_s: float | None = None,
     ) -> None:
+        if initial_q is None:
+            from robocritics.robot.model import Robot
+
+            initial_q = tuple(float(v) for v in Robot.ur3e().home_q)
         if len(initial_q) != 6:
             raise DeployError(f"URSim initial_q needs 6 joint positions [rad], got {len(initial_q)}")
-        modes = {v: k for k, v in ROBOT_MODES.items()}
         if robot_mode.upper() not in ("POWER_OFF", "IDLE", "RUNNING"):
             raise DeployError(f"URSim robot_mode must be POWER_OFF, IDLE or RUNNING, got {robot_mode!r}")
+        if clock not in CLOCKS:
+            raise DeployError(f"URSim clock must be one of {', '.join(CLOCKS)}, got {clock!r}")
+        if idle_after_s is not None and (clock != "stepped" or not idle_after_s > 0):
+            raise DeployError(f"URSim idle_after_s needs clock='stepped' and a positive number of s, got {idle_after_s!r}")
         for fields_ in (extra_outputs or {}, extra_inputs or {}):
             for n, t in fields_.items():
                 if t not in DATA_TYPES:
@@ -689,8 +717,10 @@ class URSim:
         self.unlock_delay_s = float(unlock_delay_s)
         self.slow_client_timeout_s = float(slow_client_timeout_s)
         self.speed_limits = tuple(float(v) for v in speed_limits)
+        self.clock = clock
+        self.idle_after_s = idle_after_s
         self._lock = threading.RLock()
-        self._state = _State(initial_q, modes[robot_mode.upper()])
+        self._state = _State(initial_q, RobotMode[robot_mode.upper()])
         self._outputs = dict(KNOWN_OUTPUTS)
         self._inputs = dict(KNOWN_INPUTS)
         for n, t in (extra_outputs or {}).items():
@@ -699,12 +729,14 @@ class URSim:
             self._inputs[n] = (t, lambda s, v, p, n=n: s.extras.__setitem__(n, v))
             self._outputs.setdefault(n, (t, _extra_getter(n, t)))
         self._program: _StreamProgram | _HoldProgram | None = None
+        self._program_start_tick = 0
         self._stopping_decel: float | None = None
         self._loaded_program: str | None = None
-        self._protective_stop_time: float | None = None
+        self._protective_stop_tick: int | None = None
         self._conns: list[_RTDEConn] = []
         self._input_owner: dict[str, _RTDEConn] = {}
         self._events: list[SimEvent] = []
+        self._actions: list[tuple[float, Callable[[], None]]] = []
         self._running = threading.Event()
         self._threads: list[threading.Thread] = []
         self._listeners: list[socket.socket] = []
@@ -714,10 +746,11 @@ class URSim:
         self._silent_rtde = False
         self._silent_dashboard = False
         self._drop_after_packages: int | None = None
-        self._drop_at: float | None = None
+        self._drop_at_tick: int | None = None
         self._packages_total = 0
+        self._last_input_wall = time.monotonic()
         self.loop_overruns = 0
-        """Control cycles that started more than 2 ms late (the host was busy)."""
+        """Control cycles that started more than 2 ms late (the host was busy; ``clock="realtime"``)."""
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -729,7 +762,7 @@ class URSim:
         self.stop()
 
     def start(self) -> "URSim":
-        """Bind the three servers and start the control loop; returns self."""
+        """Bind the three servers and start the control loop (``clock="realtime"``); returns self."""
         if self._running.is_set():
             raise DeployError("URSim is already running")
         bound = []
@@ -760,7 +793,10 @@ class URSim:
         for ls, handler in bound:
             self._listeners.append(ls)
             self._spawn(self._accept_loop, ls, handler, name=f"ursim-accept-{ls.getsockname()[1]}")
-        self._spawn(self._control_loop, name="ursim-control")
+        if self.clock == "realtime":
+            self._spawn(self._control_loop, name="ursim-control")
+        elif self.idle_after_s is not None:
+            self._spawn(self._idle_loop, name="ursim-idle-cycles")
         self._event("started", f"listening on {self.host}: RTDE {self.rtde_port}, dashboard {self.dashboard_port}, secondary {self.secondary_port}")
         return self
 
@@ -837,6 +873,7 @@ class URSim:
                 applied_seq=s.out_int[urscript.APPLIED_SEQ_REGISTER],
                 gripper_opening_m=s.gripper_opening_m,
                 digital_out=s.digital_out,
+                program_time_s=(s.tick - self._program_start_tick) * DT if self._program is not None else 0.0,
             )
 
     @property
@@ -844,6 +881,12 @@ class URSim:
         """Actual joint positions [rad]."""
         with self._lock:
             return tuple(self._state.q)
+
+    @property
+    def packages_sent(self) -> int:
+        """RTDE data packages queued for all clients so far."""
+        with self._lock:
+            return self._packages_total
 
     @property
     def extras(self) -> dict[str, Any]:
@@ -858,7 +901,12 @@ class URSim:
             return [e for e in self._events if kind is None or e.kind == kind]
 
     def wait_for(self, predicate: Callable[[SimSnapshot], bool], timeout_s: float, what: str = "condition") -> SimSnapshot:
-        """Poll :meth:`snapshot` until ``predicate`` holds; raises TimeoutError after ``timeout_s`` [s]."""
+        """Poll :meth:`snapshot` until ``predicate`` holds; raises TimeoutError after ``timeout_s`` of wall time [s].
+
+        For a controller whose time others advance (``clock="realtime"``, or stepped
+        by a client's inputs or idle cycles); with ``clock="stepped"`` use
+        :meth:`step_until` to advance time yourself.
+        """
         deadline = time.monotonic() + timeout_s
         while True:
             snap = self.snapshot()
@@ -867,6 +915,48 @@ class URSim:
             if time.monotonic() > deadline:
                 raise TimeoutError(f"URSim: {what} not reached within {timeout_s:g} s; state {snap}")
             time.sleep(0.002)
+
+    # ------------------------------------------------------------------ simulated time (clock="stepped")
+
+    @property
+    def time_s(self) -> float:
+        """Controller time: control cycles run so far × 2 ms [s]."""
+        with self._lock:
+            return self._state.tick * DT
+
+    def step(self, cycles: int = 1) -> float:
+        """Run ``cycles`` control cycles now (``clock="stepped"``): the program steps, data packages are
+        sent. Returns the controller time [s]."""
+        if self.clock != "stepped":
+            raise DeployError(f"URSim.step() needs clock='stepped'; this controller's clock is {self.clock!r}")
+        if cycles < 0:
+            raise DeployError(f"URSim.step(): cycles must be >= 0, got {cycles}")
+        for _ in range(int(cycles)):
+            self._cycle()
+        return self.time_s
+
+    def step_until(self, predicate: Callable[[SimSnapshot], bool], max_s: float, what: str = "condition") -> SimSnapshot:
+        """Run cycles (``clock="stepped"``) until ``predicate(snapshot)`` holds; raises TimeoutError after
+        ``max_s`` of controller time [s]."""
+        end = self.time_s + max_s
+        while True:
+            snap = self.snapshot()
+            if predicate(snap):
+                return snap
+            if snap.time_s >= end - 1e-12:
+                raise TimeoutError(f"URSim: {what} not reached within {max_s:g} s of controller time; state {snap}")
+            self.step()
+
+    def at_program_time(self, time_s: float, action: Callable[[], None]) -> None:
+        """Run ``action()`` once, in the first control cycle in which the running program has run for
+        ``time_s`` of controller time [s] — a fault injected at a known point of a deployment.
+
+        The action runs inside the cycle with the controller's lock held: it may call this object's
+        methods (:meth:`trigger_protective_stop`, :meth:`inject_drop`, :meth:`set_silent`, …) but must
+        not wait for the controller's own servers (start a thread for a dashboard exchange).
+        """
+        with self._lock:
+            self._actions.append((float(time_s), action))
 
     # ------------------------------------------------------------------ direct control
 
@@ -882,7 +972,7 @@ class URSim:
     def power_on(self, brake_release: bool = True) -> None:
         """Power on (→ IDLE) and by default release the brakes (→ RUNNING), as the dashboard would."""
         with self._lock:
-            self._state.robot_mode = RUNNING if brake_release else max(self._state.robot_mode, IDLE)
+            self._state.robot_mode = RobotMode.RUNNING if brake_release else max(self._state.robot_mode, RobotMode.IDLE)
 
     def write_output_register(self, kind: str, n: int, value: Any) -> None:
         """Set an output register as a program would: ``kind`` is "int", "double" or "bit"."""
@@ -905,14 +995,14 @@ class URSim:
 
     def inject_drop(self, after_packages: int | None = None, after_s: float | None = None) -> None:
         """Close every RTDE connection once ``after_packages`` more data packages have been
-        sent (to all clients together) or ``after_s`` seconds have passed, whichever comes first.
-        With neither, drop now. One-shot."""
+        sent (to all clients together) or ``after_s`` seconds of controller time have passed,
+        whichever comes first. With neither, drop now. One-shot."""
         with self._lock:
             if after_packages is None and after_s is None:
                 self._drop_after_packages = self._packages_total
             else:
                 self._drop_after_packages = None if after_packages is None else self._packages_total + int(after_packages)
-                self._drop_at = None if after_s is None else time.monotonic() + float(after_s)
+                self._drop_at_tick = None if after_s is None else self._state.tick + max(1, round(float(after_s) / DT))
 
     def trigger_protective_stop(self, reason: str = "injected fault") -> None:
         """Protective-stop the robot now (safety_mode 3, program stopped)."""
@@ -939,16 +1029,21 @@ class URSim:
 
     # ------------------------------------------------------------------ control loop
 
+    def _cycle(self) -> None:
+        """One control cycle: the program steps, the data packages due are queued and sent."""
+        t0 = time.perf_counter()
+        with self._lock:
+            self._tick()
+            self._publish()
+            self._state.exec_time_ms = (time.perf_counter() - t0) * 1000.0
+        self._flush_all()
+        self._check_drop()
+
     def _control_loop(self) -> None:
+        """``clock="realtime"``: one cycle every 2 ms of wall time."""
         next_t = time.perf_counter()
         while self._running.is_set():
-            t0 = time.perf_counter()
-            with self._lock:
-                self._tick()
-                self._publish()
-                self._state.exec_time_ms = (time.perf_counter() - t0) * 1000.0
-            self._flush_all()
-            self._check_drop()
+            self._cycle()
             next_t += DT
             delay = next_t - time.perf_counter()
             if delay > 0:
@@ -958,10 +1053,25 @@ class URSim:
                 if delay < -0.05:  # far behind (host stalled): resynchronise instead of bursting
                     next_t = time.perf_counter()
 
+    def _idle_loop(self) -> None:
+        """``clock="stepped"`` with ``idle_after_s``: cycles every 2 ms of wall time while no input arrives."""
+        assert self.idle_after_s is not None
+        while self._running.is_set():
+            time.sleep(DT)
+            if time.monotonic() - self._last_input_wall >= self.idle_after_s:
+                self._cycle()
+
     def _tick(self) -> None:
         s = self._state
         s.tick += 1
-        if self._program is not None and s.runtime_state == PAUSED:
+        if self._actions and self._program is not None:
+            ran_s = (s.tick - self._program_start_tick) * DT
+            due = [a for a in self._actions if a[0] <= ran_s + 1e-12]
+            if due:
+                self._actions = [a for a in self._actions if a not in due]
+                for _, action in due:
+                    action()
+        if self._program is not None and s.runtime_state == RuntimeState.PAUSED:
             self._decelerate(s, CONTROLLER_STOP_DECEL)
         elif self._program is not None:
             self._program.step(s)
@@ -990,7 +1100,7 @@ class URSim:
     def _end_program(self, kind: str, message: str, decel: float | None) -> None:
         """Stop the running program (lock held); ``decel`` None = joints already still."""
         self._program = None
-        self._state.runtime_state = STOPPED
+        self._state.runtime_state = RuntimeState.STOPPED
         self._stopping_decel = decel
         self._event(kind, message)
         level = MessageLevel.INFO if kind in ("program_ended",) else MessageLevel.ERROR
@@ -998,19 +1108,20 @@ class URSim:
 
     def _protective_stop(self, reason: str) -> None:
         s = self._state
-        s.safety_mode = PROTECTIVE_STOP
-        self._protective_stop_time = time.monotonic()
+        s.safety_mode = SafetyMode.PROTECTIVE_STOP
+        self._protective_stop_tick = s.tick
         if self._program is not None:
             self._program = None
-            s.runtime_state = STOPPED
+            s.runtime_state = RuntimeState.STOPPED
         self._stopping_decel = PROTECTIVE_STOP_DECEL
         self._event("protective_stop", f"protective stop: {reason}")
         self._broadcast(TextMessage(f"Protective stop: {reason}", "Controller", MessageLevel.ERROR))
 
     def _start_program(self, program: _StreamProgram | _HoldProgram) -> None:
         self._program = program
+        self._program_start_tick = self._state.tick
         self._stopping_decel = None
-        self._state.runtime_state = PLAYING
+        self._state.runtime_state = RuntimeState.PLAYING
         self._event("program_started", f"program {program.name} started")
 
     def _event(self, kind: str, message: str) -> None:
@@ -1202,13 +1313,16 @@ class URSim:
                 setter(s, values[name], pending)
                 s.input_update_tick[name] = s.tick
             _apply_pending(s, pending)
+        if self.clock == "stepped":  # the client's inputs are the controller's clock: one package, one cycle
+            self._last_input_wall = time.monotonic()
+            self._cycle()
 
     def _publish(self) -> None:
         """Queue the data packages due this cycle (lock held)."""
         if self._silent_rtde:
             return
         s = self._state
-        step = self._rate_factor / 500.0
+        step = self._rate_factor * DT
         for conn in self._conns:
             if not conn.started:
                 continue
@@ -1271,11 +1385,11 @@ class URSim:
         with self._lock:
             if self._drop_after_packages is not None and self._packages_total >= self._drop_after_packages:
                 due = True
-            if self._drop_at is not None and time.monotonic() >= self._drop_at:
+            if self._drop_at_tick is not None and self._state.tick >= self._drop_at_tick:
                 due = True
             if due:
                 self._drop_after_packages = None
-                self._drop_at = None
+                self._drop_at_tick = None
                 conns = list(self._conns)
         if due:
             for c in conns:
@@ -1309,17 +1423,17 @@ class URSim:
             if low == "quit":
                 return "Disconnected", True
             if low == "robotmode":
-                return f"Robotmode: {ROBOT_MODES.get(s.robot_mode, 'UNKNOWN')}", False
+                return f"Robotmode: {_enum_name(RobotMode, s.robot_mode)}", False
             if low == "safetystatus":
-                return f"Safetystatus: {SAFETY_MODES.get(s.safety_mode, 'UNKNOWN')}", False
+                return f"Safetystatus: {_enum_name(SafetyMode, s.safety_mode)}", False
             if low == "safetymode":
-                return f"Safetymode: {SAFETY_MODES.get(s.safety_mode, 'UNKNOWN')}", False
+                return f"Safetymode: {_enum_name(SafetyMode, s.safety_mode)}", False
             if low == "is in remote control":
                 return ("true" if remote else "false"), False
             if low == "running":
-                return f"Program running: {'true' if s.runtime_state == PLAYING else 'false'}", False
+                return f"Program running: {'true' if s.runtime_state == RuntimeState.PLAYING else 'false'}", False
             if low == "programstate":
-                state = RUNTIME_STATES.get(s.runtime_state, "STOPPED")
+                state = _enum_name(RuntimeState, s.runtime_state)
                 name = self._program.name if self._program is not None else (self._loaded_program or "<unnamed>")
                 return f"{state} {name}", False
             if low == "polyscopeversion":
@@ -1334,18 +1448,18 @@ class URSim:
                 if not remote:
                     return LOCAL_CONTROL_REPLY, False
             if low == "power on":
-                if s.robot_mode < IDLE:
-                    s.robot_mode = IDLE
+                if s.robot_mode < RobotMode.IDLE:
+                    s.robot_mode = RobotMode.IDLE
                 return "Powering on", False
             if low == "power off":
                 if self._program is not None:
                     self._end_program("program_ended", f"{self._program.name} stopped: power off", None)
-                s.robot_mode = POWER_OFF
+                s.robot_mode = RobotMode.POWER_OFF
                 s.qd = [0.0] * 6
                 self._stopping_decel = None
                 return "Powering off", False
             if low == "brake release":
-                s.robot_mode = RUNNING
+                s.robot_mode = RobotMode.RUNNING
                 return "Brake releasing", False
             if low.startswith("load "):
                 prog = line.strip()[5:].strip()
@@ -1354,12 +1468,12 @@ class URSim:
                 self._loaded_program = prog
                 return f"Loading program: {prog}", False
             if low == "play":
-                if self._loaded_program is None or s.robot_mode != RUNNING or s.safety_mode != NORMAL:
+                if self._loaded_program is None or s.robot_mode != RobotMode.RUNNING or s.safety_mode != SafetyMode.NORMAL:
                     return "Failed to execute: play", False
                 if self._program is None:
                     self._start_program(_HoldProgram(self._loaded_program))
-                elif s.runtime_state == PAUSED:
-                    s.runtime_state = PLAYING
+                elif s.runtime_state == RuntimeState.PAUSED:
+                    s.runtime_state = RuntimeState.PLAYING
                 return "Starting program", False
             if low == "stop":
                 if self._program is None:
@@ -1369,14 +1483,14 @@ class URSim:
             if low == "pause":
                 if self._program is None:
                     return "Failed to execute: pause", False
-                s.runtime_state = PAUSED
+                s.runtime_state = RuntimeState.PAUSED
                 return "Pausing program", False
             if low == "unlock protective stop":
-                if s.safety_mode == PROTECTIVE_STOP:
-                    since = time.monotonic() - (self._protective_stop_time or 0.0)
+                if s.safety_mode == SafetyMode.PROTECTIVE_STOP:
+                    since = (s.tick - (self._protective_stop_tick or 0)) * DT
                     if since < self.unlock_delay_s:
                         return UNLOCK_TOO_EARLY_REPLY, False
-                    s.safety_mode = NORMAL
+                    s.safety_mode = SafetyMode.NORMAL
                     self._event("protective_stop_released", "protective stop released from the dashboard")
                 return "Protective stop releasing", False
         return f"could not understand: '{line}'", False
@@ -1413,10 +1527,10 @@ class URSim:
             params = None
             if not self.remote_control:
                 reason = "the robot is in local control (enable remote control on the teach pendant)"
-            elif s.robot_mode != RUNNING:
-                reason = f"the robot is not running (robot mode {ROBOT_MODES.get(s.robot_mode)}); power on and release the brakes"
-            elif s.safety_mode != NORMAL:
-                reason = f"safety mode is {SAFETY_MODES.get(s.safety_mode)}; unlock the protective stop first"
+            elif s.robot_mode != RobotMode.RUNNING:
+                reason = f"the robot is not running (robot mode {_enum_name(RobotMode, s.robot_mode)}); power on and release the brakes"
+            elif s.safety_mode != SafetyMode.NORMAL:
+                reason = f"safety mode is {_enum_name(SafetyMode, s.safety_mode)}; unlock the protective stop first"
             else:
                 try:
                     params = urscript.parse_streaming_program(script)
@@ -1468,8 +1582,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--rtde-port", type=int, default=30004, help="RTDE port (0 = any free port; default 30004)")
     ap.add_argument("--dashboard-port", type=int, default=29999, help="Dashboard port (default 29999)")
     ap.add_argument("--secondary-port", type=int, default=30002, help="secondary interface port (default 30002)")
-    ap.add_argument("--initial-q", type=float, nargs=6, metavar="RAD", default=list(HOME_Q), help="initial joint positions [rad]")
-    ap.add_argument("--robot-mode", default="RUNNING", choices=["POWER_OFF", "IDLE", "RUNNING"], help="initial robot mode (default RUNNING)")
+    ap.add_argument("--initial-q", type=float, nargs=6, metavar="RAD",
+                    help="initial joint positions [rad] (default the robot model's home pose, where `simulate` starts)")
+    ap.add_argument("--robot-mode", default=DEFAULT_ROBOT_MODE, choices=["POWER_OFF", "IDLE", "RUNNING"],
+                    help=f"initial robot mode (default {DEFAULT_ROBOT_MODE})")
     ap.add_argument("--local-control", action="store_true", help="start in local control (programs are refused)")
     ap.add_argument("--fieldbus", action="store_true", help="a fieldbus holds input registers 0-23")
     ap.add_argument("--protocol", type=int, choices=[1, 2], default=2, help="highest RTDE protocol version accepted")

@@ -1,0 +1,202 @@
+"""The deploy gate: what a trajectory, its report and the arm must satisfy before anything moves.
+
+Plain functions of typed inputs — a :class:`~robocritics.trajectory.Trajectory`,
+the :class:`~robocritics.report.Report` that judged it, the resampled
+:class:`~robocritics.deploy.stream.StreamPlan` and one RTDE state package — each
+returning the ``(cause, explanation)`` reasons it finds (empty: the rule passes).
+:meth:`robocritics.deploy.URArm.deploy` runs them and raises :class:`DeployRefused`
+with every reason before it sends anything that could move the arm.
+
+===================  ===========================================================
+cause                rule
+===================  ===========================================================
+``no_report``        a :class:`~robocritics.report.Report` is required
+``report_errors``    the report has an Error verdict (names each critic and its
+                     message); ``allow_errors=True`` overrides this rule only
+``hash_mismatch``    ``report.trajectory_hash != trajectory.content_hash()``:
+                     the report judged a different motion
+``trajectory``       not an Execution or a Trajectory, not 6 joints, non-finite
+                     values, or it cannot be resampled
+``setpoint_speed``   a setpoint step of the resampled stream asks for more than
+                     the trajectory's joint speed limits (the controller would
+                     protective-stop); not overridable
+``robot_mode``       RTDE ``robot_mode`` is not RUNNING (7)
+``safety_mode``      RTDE ``safety_mode`` is not NORMAL (1)
+``remote_control``   the dashboard says the controller is in local control (or
+                     cannot be asked)
+``program_running``  ``runtime_state`` is not STOPPED (another program runs)
+``start_mismatch``   the first sample is farther than ``start_tolerance_rad``
+                     from ``actual_q`` on some joint
+``secondary_         (dry run only) the secondary interface does not accept
+interface``          connections
+===================  ===========================================================
+
+The offline rules (:func:`check_report`, :func:`check_trajectory`) are checked
+before the robot is asked anything; if one fails, the robot rules
+(:func:`check_robot`) are not evaluated.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from robocritics.deploy.rtde import RobotMode, RuntimeState, SafetyMode, mode_name
+from robocritics.deploy.stream import StreamPlan
+from robocritics.errors import DeployError
+from robocritics.report import Report
+from robocritics.simulate import Execution
+from robocritics.trajectory import Trajectory
+
+__all__ = [
+    "DeployRefused",
+    "Reason",
+    "trajectory_of",
+    "check_report",
+    "check_trajectory",
+    "check_robot",
+    "START_MISMATCH_HINT",
+]
+
+Reason = tuple[str, str]
+"""``(cause, explanation)``: one rule that failed."""
+
+START_MISMATCH_HINT = (
+    "Plan the motion from where the arm is: `robocritics deploy PROGRAM --host HOST` does that (it simulates "
+    "from the arm's joints); in Python, `simulate(program, scene, start_q=arm.actual_q())`. Or move to the start "
+    "first with a critiqued approach: `approach = arm.approach(execution)`, then "
+    "`arm.deploy(approach, critique(approach, execution.scene))`"
+)
+"""What the ``start_mismatch`` reason tells the user to do."""
+
+
+class DeployRefused(DeployError):
+    """The gate refused to deploy; nothing that moves the arm was sent.
+
+    ``cause`` is the first reason (see the module docstring), ``causes`` all of them,
+    ``reasons`` the ``(cause, explanation)`` pairs.
+    """
+
+    def __init__(self, reasons: Sequence[Reason]):
+        self.reasons = tuple(reasons)
+        self.causes = tuple(c for c, _ in self.reasons)
+        lines = "\n".join(f"  - [{c}] {text}" for c, text in self.reasons)
+        n = len(self.reasons)
+        super().__init__(f"deploy refused ({n} reason{'s' if n != 1 else ''}); nothing was sent to the robot:\n{lines}",
+                         sample=-1, cause=self.causes[0] if self.causes else "refused")
+
+
+def trajectory_of(motion: Execution | Trajectory) -> Trajectory:
+    """The trajectory to deploy: ``motion`` itself or ``motion.trajectory`` of an Execution.
+
+    Anything else is refused (cause ``trajectory``) naming the type it got.
+    """
+    if isinstance(motion, Execution):
+        motion = motion.trajectory
+    if not isinstance(motion, Trajectory):
+        raise DeployRefused([(
+            "trajectory",
+            f"deploy needs a robocritics.Trajectory or the Execution robocritics.simulate() returned, "
+            f"got {type(motion).__name__}",
+        )])
+    return motion
+
+
+def check_report(trajectory: Trajectory, report: Report | None, *, allow_errors: bool = False) -> list[Reason]:
+    """``no_report``, ``report_errors`` (unless ``allow_errors is True``) and ``hash_mismatch``."""
+    if not isinstance(report, Report):
+        got = "none" if report is None else f"a {type(report).__name__}"
+        return [("no_report", f"deploy needs the Report that robocritics.critique() made for this trajectory, got {got}")]
+    reasons: list[Reason] = []
+    errors = report.errors
+    if errors and allow_errors is not True:
+        listed = "; ".join(f"{v.critic}: {v.message}" for v in errors)
+        reasons.append((
+            "report_errors",
+            f"the critics' report has {len(errors)} Error(s) — {listed} — fix the program, or pass "
+            "allow_errors=True to deploy anyway",
+        ))
+    actual_hash = trajectory.content_hash()
+    if report.trajectory_hash != actual_hash:
+        reasons.append((
+            "hash_mismatch",
+            f"the report judged trajectory {report.trajectory_hash[:12]}… but this trajectory is "
+            f"{actual_hash[:12]}…; critique exactly the motion you deploy",
+        ))
+    return reasons
+
+
+def check_trajectory(trajectory: Trajectory, plan: StreamPlan) -> list[Reason]:
+    """``trajectory`` (6 joints, finite) and ``setpoint_speed``: every step of ``plan`` within
+    ``trajectory.limits.velocity_rad_s``."""
+    q = trajectory.q
+    if q.ndim != 2 or q.shape[1] != 6:
+        return [("trajectory", f"a UR arm needs 6 joint values per sample, the trajectory has shape {q.shape}")]
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(trajectory.time))):
+        return [("trajectory", "the trajectory has non-finite joint values or times")]
+    if len(plan) < 2:
+        return []
+    vlim = np.asarray(trajectory.limits.velocity_rad_s, dtype=float)
+    speed = np.abs(np.diff(plan.q, axis=0)) * plan.rate_hz
+    ratio = speed / vlim
+    worst = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+    if ratio[worst] <= 1.0 + 1e-6:
+        return []
+    k, j = int(worst[0]) + 1, int(worst[1])
+    return [(
+        "setpoint_speed",
+        f"setpoint {k} (trajectory sample {int(plan.source_index[k])}, t = {plan.time[k]:.3f} s) moves joint "
+        f"{j} ({trajectory.limits.joint_names[j]}) at {speed[worst]:.3f} rad/s > its limit {vlim[j]:.3f} rad/s; "
+        "the controller would protective-stop",
+    )]
+
+
+def check_robot(
+    state: Mapping[str, Any],
+    first_q: np.ndarray,
+    *,
+    remote_control: bool | None,
+    start_tolerance_rad: float,
+    dashboard_error: str = "",
+) -> list[Reason]:
+    """The robot rules on one RTDE state package (``robot_mode``, ``safety_mode``,
+    ``runtime_state``, ``actual_q``) and the dashboard's answer to ``is in remote control``
+    (``remote_control``; None with ``dashboard_error`` when it could not be asked)."""
+    reasons: list[Reason] = []
+    rm, sm, rs = state.get("robot_mode"), state.get("safety_mode"), state.get("runtime_state")
+    if rm != RobotMode.RUNNING:
+        reasons.append((
+            "robot_mode",
+            f"robot mode is {mode_name(RobotMode, rm)}, not RUNNING ({RobotMode.RUNNING:d}); power on and release "
+            "the brakes (arm.dashboard.power_on(), arm.dashboard.brake_release())",
+        ))
+    if sm != SafetyMode.NORMAL:
+        hint = "; inspect the cause, then arm.dashboard.unlock_protective_stop()" if sm == SafetyMode.PROTECTIVE_STOP else ""
+        reasons.append(("safety_mode", f"safety mode is {mode_name(SafetyMode, sm)}, not NORMAL ({SafetyMode.NORMAL:d}){hint}"))
+    if remote_control is None:
+        reasons.append(("remote_control", f"cannot ask the dashboard whether the robot is in remote control: {dashboard_error}"))
+    elif remote_control is False:
+        reasons.append((
+            "remote_control",
+            "the controller is in local control; it would ignore the streaming program — enable remote control on the teach pendant",
+        ))
+    if rs != RuntimeState.STOPPED:
+        reasons.append((
+            "program_running",
+            f"runtime state is {mode_name(RuntimeState, rs)}, not STOPPED: another program is running; stop it first",
+        ))
+    actual = np.asarray(state.get("actual_q", ()), dtype=float)
+    if actual.shape != (6,):
+        reasons.append(("start_mismatch", f"the controller reported actual_q {actual.tolist()}, not 6 joint positions"))
+        return reasons
+    dev = np.abs(np.asarray(first_q, dtype=float) - actual)
+    j = int(np.argmax(dev))
+    if dev[j] > start_tolerance_rad:
+        reasons.append((
+            "start_mismatch",
+            f"the trajectory starts {dev[j]:.4f} rad away from the arm on joint {j} (> start_tolerance_rad "
+            f"{start_tolerance_rad:g} rad); actual_q = [{', '.join(f'{v:.4f}' for v in actual)}], first sample = "
+            f"[{', '.join(f'{v:.4f}' for v in first_q)}]. {START_MISMATCH_HINT}",
+        ))
+    return reasons
