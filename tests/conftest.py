@@ -5,6 +5,10 @@ database), so a CI run is reproducible and a failure is reproduced by rerunning
 the test; ``deadline=None`` because a loaded 2-core machine is no measure of
 speed. ``HYPOTHESIS_PROFILE=explore`` turns the randomness back on to hunt for
 new counterexamples locally.
+
+Hypothesis also mixes literal constants of the loaded project modules into its
+examples, so running a subset of the tests can draw other examples than the
+full suite; each selection is still the same on every run.
 """
 
 import os

@@ -175,7 +175,8 @@ class _Chain:
         entry = _CHAIN_MODELS.get(dh)
         if entry is None:
             model = pin.buildModelFromXML(dh_urdf(dh))
-            entry = _CHAIN_MODELS[dh] = (model, model.getFrameId("tool0", pin.FrameType.BODY))
+            # setdefault: if two threads build it at once, both use the first
+            entry = _CHAIN_MODELS.setdefault(dh, (model, model.getFrameId("tool0", pin.FrameType.BODY)))
         self.model, self.flange = entry
         datas = getattr(_THREAD, "datas", None)
         if datas is None:
