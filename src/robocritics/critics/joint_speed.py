@@ -125,9 +125,10 @@ class JointSpeedCritic:
 
         # --- measure: all samples at once --------------------------------------
         v = link_speeds(positions, time)  # (T-1, L), speed reached at sample t = i + 1
-        wi, wl = divmod(int(np.argmax(v)), v.shape[1])
-        worst_v = float(v[wi, wl])
         vmax = v.max(axis=1)  # (T-1,) fastest link per sample
+        wi = int(np.argmax(vmax))
+        wl = int(np.argmax(v[wi]))
+        worst_v = float(v[wi, wl])
         w = np.abs(np.diff(trajectory.q, axis=0)) / np.diff(time)[:, None]  # (T-1, n) rad/s
         if w.shape[1]:
             ratio = w / limits  # (T-1, n)

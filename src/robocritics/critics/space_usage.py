@@ -156,8 +156,8 @@ class SpaceUsageCritic:
         # --- leaving the workspace: every point ---------------------------------
         outside = np.asarray(workspace.outside_distance(X), dtype=float)  # (T, L) m, > 0 outside
         per_sample = outside.max(axis=1)
-        flat = int(np.argmax(outside))
-        oi, ol = divmod(flat, outside.shape[1])
+        oi = int(np.argmax(per_sample))
+        ol = int(np.argmax(outside[oi]))
         worst_out = float(outside[oi, ol])
         signal = make_signal(
             time,
@@ -183,12 +183,13 @@ class SpaceUsageCritic:
 
         verdict = partial(threshold_verdict, self.name, trajectory, signal=signal, details=details)
         if worst_out > params.outside_tolerance_m:
-            mask_tl = outside > params.outside_tolerance_m
+            rows = per_sample > params.outside_tolerance_m  # samples with some link outside
+            links_out = (outside[rows] > params.outside_tolerance_m).any(axis=0)
             return verdict(
                 Flag.ERROR,
-                mask_tl.any(axis=1),
+                rows,
                 worst=oi,
-                links=[names[i] for i in np.flatnonzero(mask_tl.any(axis=0))],
+                links=[names[i] for i in np.flatnonzero(links_out)],
                 value=worst_out,
                 threshold=params.outside_tolerance_m,
                 unit="m",
