@@ -9,7 +9,7 @@ Reproduce with::
 The whole chain runs: ``simulate`` → ``critique`` → the deploy gate → resampling
 to 500 Hz → the streaming program started over the secondary interface →
 setpoints paced with absolute deadlines over RTDE → done → program ended. The
-controller (:class:`robocritics.deploy.URSim`) runs in its own process, as a
+controller (:class:`robocritics.testing.ursim.URSim`) runs in its own process, as a
 real controller runs on its own machine; everything is on 127.0.0.1.
 
 Reported (from :class:`robocritics.deploy.DeployResult`):
@@ -44,7 +44,7 @@ def _controller(conn, initial_q) -> None:
     """Child process: the loopback controller."""
     from robocritics.testing.ursim import URSim
 
-    with URSim(rtde_port=0, dashboard_port=0, secondary_port=0, robot_mode="RUNNING", initial_q=initial_q) as sim:
+    with URSim(rtde_port=0, dashboard_port=0, secondary_port=0, initial_q=initial_q) as sim:
         conn.send((sim.rtde_port, sim.dashboard_port, sim.secondary_port))
         conn.recv()  # wait for "report"
         conn.send((sim.loop_overruns, [e.message for e in sim.events("protective_stop")], sim.q))

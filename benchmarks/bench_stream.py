@@ -9,7 +9,7 @@ The client paces setpoints with absolute deadlines (``t0 + k * period`` on
 ``time.perf_counter``): it sleeps until shortly before each deadline and spins
 the last ``--spin-us`` microseconds. A late setpoint does not shift the ones
 after it. Everything runs on 127.0.0.1 (controller, RTDE client, URScript
-program simulated by :class:`robocritics.deploy.URSim`).
+program simulated by :class:`robocritics.testing.ursim.URSim`).
 
 Reported:
 * period error — |actual send interval − period| [ms], median / p99 / max
@@ -57,7 +57,7 @@ def percentile(values: list[float], p: float) -> float:
 
 def _controller(conn) -> None:
     """Child process: the loopback controller, like a real controller on its own machine."""
-    with URSim(rtde_port=0, dashboard_port=0, secondary_port=0, robot_mode="RUNNING") as sim:
+    with URSim(rtde_port=0, dashboard_port=0, secondary_port=0) as sim:
         conn.send((sim.rtde_port, sim.secondary_port))
         conn.recv()  # wait for "report"
         conn.send((sim.loop_overruns, [e.message for e in sim.events("protective_stop")]))

@@ -9,8 +9,6 @@ however loaded the machine is.
 from __future__ import annotations
 
 import signal
-import subprocess
-import sys
 import time
 
 import pytest
