@@ -170,7 +170,8 @@ def resolve_params(critic: Critic, given: ParamsArg) -> BaseModel:
         field = ".".join(str(p) for p in err["loc"]) or "params"
         fields = list(cls.model_fields)
         if err["type"] == "extra_forbidden":
-            message = f"unknown parameter {field!r}{did_you_mean(err['loc'][0], fields)} (its parameters: {', '.join(fields)})"
+            hint = did_you_mean(err["loc"][0], fields)
+            message = f"unknown parameter {field!r}{hint} (its parameters: {', '.join(fields)})"
         else:
             msg = err["msg"]
             if msg.startswith("Value error, "):

@@ -164,12 +164,17 @@ def validate_critic(critic: Any) -> None:
         raise CriticError(f"critic {critic!r} needs a `name` (letters, digits, _ . -), got {name!r}")
     missing = [attr for attr in ("description", "Params", "check") if not hasattr(critic, attr)]
     if missing:
-        raise CriticError(f"critic {name!r} has no {', '.join(f'`{m}`' for m in missing)} (a critic needs `name`, `description`, `Params` and `check`)")
+        raise CriticError(
+            f"critic {name!r} has no {', '.join(f'`{m}`' for m in missing)} "
+            "(a critic needs `name`, `description`, `Params` and `check`)"
+        )
     if not isinstance(critic.description, str):
         raise CriticError(f"critic {name!r}: `description` must be a string, got {type(critic.description).__name__}")
     params = critic.Params
     if not (isinstance(params, type) and issubclass(params, BaseModel)):
-        raise CriticError(f"critic {name!r}: `Params` must be a pydantic model class (e.g. a CriticParams subclass), got {params!r}")
+        raise CriticError(
+            f"critic {name!r}: `Params` must be a pydantic model class (e.g. a CriticParams subclass), got {params!r}"
+        )
     try:
         params()
     except Exception as exc:  # noqa: BLE001
