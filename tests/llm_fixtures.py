@@ -8,6 +8,7 @@ real configuration or API key never reaches a test server.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 
 import pytest
@@ -45,15 +46,22 @@ class ClientFactory:
     """Makes ``OpenAICompatible`` clients for one ``LLMServer`` that do not really wait between retries.
 
     Each pause a client would sleep is appended to ``sleeps`` instead, so retry
-    timing is asserted exactly and costs no time. Defaults: model ``test-chat``,
-    embedding model ``test-embed``, timeout 2 s, backoff base 0.01 s capped at
-    0.05 s; any keyword overrides them (``sleep=time.sleep`` for real waits).
+    timing is asserted exactly and costs no time. The clients' clock is the
+    real monotonic clock plus every recorded pause (``clock()``), so pauses
+    count against the request deadline as if they had been slept. Defaults:
+    model ``test-chat``, embedding model ``test-embed``, timeout 2 s, backoff
+    base 0.01 s capped at 0.05 s; any keyword overrides them
+    (``sleep=time.sleep, clock=time.monotonic`` for real waits).
     """
 
     def __init__(self, server: LLMServer):
         self.server = server
         self.sleeps: list[float] = []
         self.clients: list[OpenAICompatible] = []
+
+    def clock(self) -> float:
+        """Seconds: ``time.monotonic()`` plus all recorded pauses."""
+        return time.monotonic() + sum(self.sleeps)
 
     def __call__(self, **overrides) -> OpenAICompatible:
         options = dict(
@@ -65,6 +73,7 @@ class ClientFactory:
             backoff_base_s=0.01,
             backoff_max_s=0.05,
             sleep=self.sleeps.append,
+            clock=self.clock,
         )
         options.update(overrides)
         client = OpenAICompatible(**options)

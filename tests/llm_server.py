@@ -7,8 +7,11 @@ keep-alive) and answers ``POST /v1/chat/completions`` and ``POST
 * ``server.script(...)`` queues actions; each incoming request (to either
   endpoint) takes the next one: ``Reply(text)``, ``Fail(status,
   retry_after=...)``, ``Delay(seconds, then=...)``, ``Garbage(body)``,
-  ``RawJSON(obj)``, ``Drop()``. ``server.reply(*texts)`` is shorthand for
-  queuing ``Reply`` actions.
+  ``RawJSON(obj)``, ``Drop()``, ``Stream(chunks, interval_s=...)`` (a body
+  sent piece by piece: one byte every few seconds, or 50 MB of chunks) and
+  ``SlowHeaders(interval_s)`` (the status line itself, a byte at a time).
+  ``server.reply(*texts)`` is shorthand for queuing ``Reply`` actions;
+  ``chat_body(text)`` is the JSON body a ``Reply`` sends, for hand-made bodies.
 * With the queue empty, chat requests go to ``server.responder`` (a callable
   ``request_json -> str | Action``; by default it echoes the last user message)
   and embedding requests get ``hashed_embedding`` vectors.
@@ -32,7 +35,7 @@ import socket
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Union
@@ -71,11 +74,36 @@ class Delay:
 
 @dataclass(frozen=True)
 class Garbage:
-    """Answer HTTP ``status`` with ``body`` bytes that are not what the client expects."""
+    """Answer HTTP ``status`` with ``body`` bytes that are not what the client expects (plus ``headers``)."""
 
     body: bytes | str = b"<html><body>502 Bad Gateway... just kidding, not JSON</body></html>"
     status: int = 200
     content_type: str = "text/html"
+    headers: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Stream:
+    """Answer HTTP ``status`` with the body ``chunks()`` yields, each chunk sent and flushed on its own.
+
+    ``interval_s`` is the pause before each chunk (a pause ends early when the
+    server stops). With ``length`` the body is announced with that
+    Content-Length; without, it is sent with chunked transfer encoding.
+    """
+
+    chunks: Callable[[], Iterable[bytes]]
+    interval_s: float = 0.0
+    length: int | None = None
+    status: int = 200
+    content_type: str = "application/json"
+    headers: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SlowHeaders:
+    """Send the status line and headers one byte every ``interval_s`` seconds (until the server stops)."""
+
+    interval_s: float
 
 
 @dataclass(frozen=True)
@@ -91,7 +119,25 @@ class Drop:
     """Read the request, then close the connection without sending any response."""
 
 
-Action = Union[Reply, Fail, Delay, Garbage, RawJSON, Drop]
+Action = Union[Reply, Fail, Delay, Garbage, RawJSON, Drop, Stream, SlowHeaders]
+
+
+def chat_body(content: str, model: str = "test-chat", finish_reason: str = "stop") -> bytes:
+    """The JSON body of a chat completion whose message is ``content`` (what ``Reply`` sends, minus usage)."""
+    return json.dumps(
+        {
+            "object": "chat.completion",
+            "model": model,
+            "choices": [
+                {"index": 0, "message": {"role": "assistant", "content": content}, "finish_reason": finish_reason}
+            ],
+        }
+    ).encode()
+
+
+def drip(body: bytes, interval_s: float) -> Stream:
+    """``body`` (with its Content-Length announced) one byte every ``interval_s`` seconds."""
+    return Stream(lambda: (body[i : i + 1] for i in range(len(body))), interval_s=interval_s, length=len(body))
 
 
 @dataclass(frozen=True)
@@ -326,7 +372,17 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
                     self._send_json(action.status, body, headers)
             elif isinstance(action, Garbage):
                 body = action.body.encode() if isinstance(action.body, str) else action.body
-                self._send(action.status, body, action.content_type)
+                self._send(action.status, body, action.content_type, action.headers)
+            elif isinstance(action, Stream):
+                self._stream(action)
+            elif isinstance(action, SlowHeaders):
+                self.close_connection = True
+                head = b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: 2\r\n\r\n{}" * 1000
+                for i in range(len(head)):
+                    if server._stopping.wait(action.interval_s):
+                        return
+                    self.wfile.write(head[i : i + 1])
+                    self.wfile.flush()
             elif isinstance(action, RawJSON):
                 self._send_json(action.status, action.obj)
             elif isinstance(action, Drop):
@@ -405,6 +461,33 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
                 },
             )
 
+        def _stream(self, action: Stream) -> None:
+            self.send_response(action.status)
+            self.send_header("Content-Type", action.content_type)
+            if action.length is not None:
+                self.send_header("Content-Length", str(action.length))
+            else:
+                self.send_header("Transfer-Encoding", "chunked")
+            for name, value in action.headers.items():
+                self.send_header(name, value)
+            self.end_headers()
+            self.wfile.flush()
+            for chunk in action.chunks():
+                if action.interval_s and server._stopping.wait(action.interval_s):
+                    self.close_connection = True
+                    return
+                if server._stopping.is_set():
+                    self.close_connection = True
+                    return
+                if action.length is None:
+                    self.wfile.write(b"%x\r\n%s\r\n" % (len(chunk), chunk))
+                else:
+                    self.wfile.write(chunk)
+                self.wfile.flush()
+            if action.length is None:
+                self.wfile.write(b"0\r\n\r\n")
+                self.wfile.flush()
+
         def _send_json(self, status: int, obj: Any, headers: dict[str, str] | None = None) -> None:
             self._send(status, json.dumps(obj).encode(), "application/json", headers)
 
@@ -419,3 +502,19 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
             self.wfile.flush()
 
     return Handler
+
+
+def gzip_bomb(inflated_mib: int) -> bytes:
+    """A gzip body of about ``inflated_mib`` MiB of zeros in ~1 KB per MiB (2048 MiB → 2 MB), built in milliseconds.
+
+    Every MiB is compressed after a full flush, so the segments are identical
+    and the stream is their repetition. The trailer's checksum is not that of
+    the data: a client must stop long before it (at its size limit).
+    """
+    import zlib
+
+    mib = bytes(1 << 20)
+    deflate = zlib.compressobj(9, zlib.DEFLATED, 16 + zlib.MAX_WBITS)
+    first = deflate.compress(mib) + deflate.flush(zlib.Z_FULL_FLUSH)
+    segment = deflate.compress(mib) + deflate.flush(zlib.Z_FULL_FLUSH)
+    return first + segment * (inflated_mib - 1) + deflate.flush()

@@ -209,10 +209,18 @@ def test_429_is_retried_after_the_retry_after_delay(llm_server, make_client):
     assert make_client.sleeps == [0.25]  # Retry-After 1 s x scale 0.25, above the 0.01 s backoff
 
 
-def test_retry_after_is_capped(llm_server, make_client):
-    llm_server.script(Fail(429, retry_after=3600), Reply("ok"))
+def test_a_retry_after_within_the_cap_is_waited(llm_server, make_client):
+    llm_server.script(Fail(429, retry_after=0.15), Reply("ok"))
     assert make_client(retry_after_cap_s=0.15).complete(USER) == "ok"
     assert make_client.sleeps == [0.15]
+
+
+def test_a_retry_after_beyond_the_cap_gives_up_at_once(llm_server, make_client):
+    llm_server.script(Fail(429, retry_after=3600), Reply("never sent"))
+    with pytest.raises(LLMError, match=r"retry after 3600 s, more than retry_after_cap_s=0.15 s.*treated as down"):
+        make_client(retry_after_cap_s=0.15).complete(USER)
+    assert make_client.sleeps == []  # no waiting at all
+    assert len(llm_server.requests) == 1 and llm_server.pending == 1
 
 
 def test_retry_after_ms_header_is_honoured(llm_server, make_client):

@@ -10,16 +10,32 @@ server, LM Studio and similar: it POSTs to ``{base_url}/chat/completions`` and
 
 Failure policy of ``OpenAICompatible``:
 
+* Every call has one total deadline, ``deadline_s`` (default 300 s): connecting,
+  sending, waiting for and reading the reply, every retry and every pause
+  between retries must fit in it. Each socket operation waits at most until
+  the deadline (``llm.transport.DeadlineTransport``), so a server that sends
+  one byte a second ends the call at the deadline with an ``LLMError``.
 * HTTP 408, 409, 429 and every 5xx, timeouts and connection errors (refused,
   reset, dropped before the response) are retried up to ``max_retries`` times
   with exponential backoff ``backoff_base_s * 2**attempt`` (capped at
   ``backoff_max_s``). A ``Retry-After`` header (seconds or HTTP date; or
   ``retry-after-ms``) is honoured: the wait is at least
-  ``min(retry_after * retry_after_scale, retry_after_cap_s)``.
+  ``retry_after * retry_after_scale``. A server that asks for more than
+  ``retry_after_cap_s``, or a pause that would end past the deadline, ends
+  the call at once with an ``LLMError`` instead of waiting.
+* Bodies are read incrementally and capped at ``max_response_bytes`` both on
+  the wire and after gzip/deflate decompression; JSON that nests too deep or
+  holds too many arrays/objects is refused before it is decoded; a chat reply
+  longer than ``max_reply_chars`` is refused. Requests larger than
+  ``max_request_bytes`` are refused before they are sent.
+* Text is cleaned of lone surrogates (``llm.limits.clean_text``) both ways:
+  in the messages sent and in the reply and error texts received.
 * 401/403 raise ``LLMError`` pointing at the API key, 404 and redirects at
   ``base_url`` (and the model name), other 4xx carry the server's own message.
 * A body that is not JSON, or JSON without ``choices[0].message.content``,
   raises ``LLMError`` quoting (a truncated, redacted excerpt of) what arrived.
+* Bad arguments (messages, limits, options) raise ``LLMArgumentError``, an
+  ``LLMError`` that is also a ``ValueError``.
 * The API key never appears in ``repr``/``str``, log records or error messages;
   any part of it a server echoes back (8 characters or more) is replaced by
   ``***`` before it reaches an exception.
@@ -43,10 +59,14 @@ import numpy as np
 
 from robocritics.errors import LLMError
 
+from .limits import DEFAULT_DEADLINE_S, MAX_REPLY_CHARS, MAX_REQUEST_BYTES, MAX_RESPONSE_BYTES, clean_text
+from .transport import ACCEPT_ENCODING, Deadline, DeadlineTransport, NotJSONError, deadline_scope, loads_json, read_body
+
 __all__ = [
     "ChatModel",
     "ChatReply",
     "EmbeddingModel",
+    "LLMArgumentError",
     "OpenAICompatible",
     "embedding_space_name",
 ]
@@ -72,8 +92,16 @@ DEFAULT_RETRY_AFTER_CAP_S = 60.0
 
 # Characters of a server's body quoted in an error: enough to recognise an HTML error page or a JSON error.
 _EXCERPT_CHARS = 300
+# Bytes of an error response read to quote it: an error page is short; the rest is not read.
+_ERROR_BODY_BYTES = 64 * 1024
+# Characters of the model name and finish reason taken from a reply: names are short.
+_NAME_CHARS = 200
 # Shorter runs of the key's characters are common in ordinary text; 8 cannot be guessed from an excerpt.
 _MIN_REDACTED_RUN = 8
+
+
+class LLMArgumentError(LLMError, ValueError):
+    """A bad argument to the client: malformed messages, an out-of-range limit or option, a request too large."""
 
 
 @runtime_checkable
@@ -188,13 +216,26 @@ class OpenAICompatible:
     * ``api_key`` ← ``ROBOCRITICS_API_KEY``, then ``OPENAI_API_KEY``; servers
       that need none (Ollama, llama.cpp) work without it.
 
-    ``timeout_s`` (seconds) bounds each network phase (connect, each read,
-    write). ``max_retries`` is the number of *extra* attempts after the first,
-    so at most ``max_retries + 1`` requests are sent per call. Backoff before
-    retry n (0-based) is ``min(backoff_base_s * 2**n, backoff_max_s)`` seconds,
-    raised to the server's ``Retry-After`` × ``retry_after_scale`` capped at
-    ``retry_after_cap_s``; ``sleep(seconds)`` does the waiting (tests pass one
-    that records the pauses instead). ``transport`` is passed to ``httpx.Client``.
+    Time: ``deadline_s`` (seconds) bounds each call (one HTTP exchange with
+    all its retries and pauses; ``embed`` has one per batch) in total;
+    ``timeout_s`` (seconds) bounds each network phase within it (connect,
+    each read, write), so a stalled server is retried before the deadline.
+    ``max_retries`` is the number of *extra* attempts after the first, so at
+    most ``max_retries + 1`` requests are sent per call. Backoff before retry
+    n (0-based) is ``min(backoff_base_s * 2**n, backoff_max_s)`` seconds,
+    raised to the server's ``Retry-After`` × ``retry_after_scale``; a server
+    asking for more than ``retry_after_cap_s`` is treated as down.
+    ``sleep(seconds)`` does the waiting and ``clock()`` (seconds, monotonic)
+    measures the deadline; tests pass ones that record the pauses instead.
+
+    Size: ``max_response_bytes`` caps a response body (on the wire and
+    decompressed), ``max_reply_chars`` the text of a chat reply and
+    ``max_request_bytes`` a request body (``llm.limits`` has the defaults
+    and their reasons).
+
+    ``transport`` replaces the HTTP transport (by default a
+    ``llm.transport.DeadlineTransport``); with another transport the deadline
+    is checked between reads, each of which may take up to ``timeout_s``.
 
     ``name`` is the chat model; ``embedding_name`` the embedding model.
     """
@@ -210,12 +251,17 @@ class OpenAICompatible:
         temperature: float = 0.0,
         transport: httpx.BaseTransport | None = None,
         *,
+        deadline_s: float = DEFAULT_DEADLINE_S,
         backoff_base_s: float = 0.5,
         backoff_max_s: float = DEFAULT_BACKOFF_MAX_S,
         retry_after_cap_s: float = DEFAULT_RETRY_AFTER_CAP_S,
         retry_after_scale: float = 1.0,
         embedding_batch_size: int = 64,
+        max_response_bytes: int = MAX_RESPONSE_BYTES,
+        max_reply_chars: int = MAX_REPLY_CHARS,
+        max_request_bytes: int = MAX_REQUEST_BYTES,
         sleep: Callable[[float], None] = time.sleep,
+        clock: Callable[[], float] = time.monotonic,
     ):
         base_url = base_url or os.environ.get(ENV_BASE_URL) or None
         model = model or os.environ.get(ENV_MODEL) or None
@@ -229,33 +275,32 @@ class OpenAICompatible:
                 f"no chat model configured: pass model= or set {ENV_MODEL} (e.g. gpt-4o-mini, or llama3.1 for Ollama)"
             )
         self.base_url = _normalise_base_url(base_url)
-        self.model = str(model)
+        self.model = clean_text(str(model))
         self.embedding_model = embedding_model or os.environ.get(ENV_EMBEDDING_MODEL) or None
         if api_key is None:
             api_key = next((os.environ[v] for v in ENV_API_KEYS if os.environ.get(v)), None)
         self._api_key = _Secret(api_key) if api_key else None
 
-        if timeout_s <= 0 or not math.isfinite(timeout_s):
-            raise ValueError(f"timeout_s must be a positive number of seconds, got {timeout_s!r}")
-        if max_retries < 0:
-            raise ValueError(f"max_retries must be >= 0, got {max_retries!r}")
-        if embedding_batch_size < 1:
-            raise ValueError(f"embedding_batch_size must be >= 1, got {embedding_batch_size!r}")
-        self.timeout_s = float(timeout_s)
-        self.max_retries = int(max_retries)
-        self.temperature = float(temperature)
-        self.backoff_base_s = float(backoff_base_s)
-        self.backoff_max_s = float(backoff_max_s)
-        self.retry_after_cap_s = float(retry_after_cap_s)
-        self.retry_after_scale = float(retry_after_scale)
-        self.embedding_batch_size = int(embedding_batch_size)
+        self.timeout_s = _seconds("timeout_s", timeout_s)
+        self.deadline_s = _seconds("deadline_s", deadline_s)
+        self.backoff_base_s = _seconds("backoff_base_s", backoff_base_s, zero=True)
+        self.backoff_max_s = _seconds("backoff_max_s", backoff_max_s, zero=True)
+        self.retry_after_cap_s = _seconds("retry_after_cap_s", retry_after_cap_s, zero=True)
+        self.retry_after_scale = _seconds("retry_after_scale", retry_after_scale, zero=True)
+        self.max_retries = _count("max_retries", max_retries, minimum=0)
+        self.embedding_batch_size = _count("embedding_batch_size", embedding_batch_size)
+        self.max_response_bytes = _count("max_response_bytes", max_response_bytes)
+        self.max_reply_chars = _count("max_reply_chars", max_reply_chars)
+        self.max_request_bytes = _count("max_request_bytes", max_request_bytes)
+        self.temperature = _temperature(temperature)
         self._sleep = sleep
+        self._clock = clock
 
         self._http = httpx.Client(
             timeout=httpx.Timeout(self.timeout_s),
-            transport=transport,
+            transport=transport if transport is not None else DeadlineTransport(),
             auth=_BearerAuth(self._api_key) if self._api_key else None,
-            headers={"Accept": "application/json"},
+            headers={"Accept": "application/json", "Accept-Encoding": ACCEPT_ENCODING},
         )
 
     # -- identity ---------------------------------------------------------
@@ -275,7 +320,7 @@ class OpenAICompatible:
         return (
             f"OpenAICompatible(base_url={self.base_url!r}, model={self.model!r}, "
             f"embedding_model={self.embedding_model!r}, api_key={key}, "
-            f"timeout_s={self.timeout_s}, max_retries={self.max_retries})"
+            f"timeout_s={self.timeout_s}, deadline_s={self.deadline_s}, max_retries={self.max_retries})"
         )
 
     __str__ = __repr__
@@ -306,11 +351,18 @@ class OpenAICompatible:
 
         Keyword arguments go into the request body as they are (``max_tokens``,
         ``seed``, ``stop``, ``response_format`` ...); ``temperature`` defaults to
-        the client's. Raises ``ValueError`` for malformed ``messages`` and
-        ``LLMError`` for everything the server does wrong.
+        the client's. Message texts are cleaned of lone surrogates. Raises
+        ``LLMArgumentError`` (a ``ValueError``) for malformed ``messages`` or
+        options and ``LLMError`` for everything the server does wrong.
         """
         _check_messages(messages)
-        payload: dict[str, Any] = {"model": self.model, "messages": list(messages), "temperature": self.temperature}
+        if "temperature" in kw:
+            kw["temperature"] = _temperature(kw["temperature"])
+        payload: dict[str, Any] = {
+            "model": self.model,
+            "messages": [_clean_message(m) for m in messages],
+            "temperature": self.temperature,
+        }
         payload.update(kw)
         body, attempts = self._post("/chat/completions", payload, what=f"chat completion with model {self.model!r}")
         content, finish_reason = self._parse_choice(body)
@@ -318,9 +370,10 @@ class OpenAICompatible:
             log.warning("model %s stopped at its token limit; the reply is truncated", self.model)
         raw_usage = body.get("usage")
         usage: dict[str, Any] = raw_usage if isinstance(raw_usage, dict) else {}
+        model = body.get("model")
         return ChatReply(
             content=content,
-            model=str(body.get("model") or self.model),
+            model=clean_text(model[:_NAME_CHARS]) if isinstance(model, str) and model else self.model,
             finish_reason=finish_reason,
             usage=usage,
             attempts=attempts,
@@ -348,8 +401,14 @@ class OpenAICompatible:
         if not isinstance(content, str):
             hint = " (the model answered with tool calls, not text)" if message.get("tool_calls") else ""
             raise LLMError(f"chat reply's message has no text 'content'{hint}; received {self._excerpt(body)}")
+        if len(content) > self.max_reply_chars:
+            raise LLMError(
+                f"chat reply from {self._url('/chat/completions')} is {len(content):,} characters long; the limit "
+                f"is {self.max_reply_chars:,} (max_reply_chars): a reply that long is not a program"
+            )
         finish_reason = choice.get("finish_reason")
-        return content, finish_reason if isinstance(finish_reason, str) else None
+        finish = clean_text(finish_reason[:_NAME_CHARS]) if isinstance(finish_reason, str) else None
+        return clean_text(content), finish
 
     # -- embeddings -------------------------------------------------------
 
@@ -367,8 +426,8 @@ class OpenAICompatible:
                 "(e.g. text-embedding-3-small, or nomic-embed-text for Ollama)"
             )
         if isinstance(texts, str) or not all(isinstance(t, str) for t in texts):
-            raise ValueError("embed() takes a list of strings")
-        texts = list(texts)
+            raise LLMArgumentError("embed() takes a list of strings")
+        texts = [clean_text(t) for t in texts]
         if not texts:
             return np.zeros((0, 0))
         rows: list[np.ndarray] = []
@@ -392,7 +451,16 @@ class OpenAICompatible:
             raise LLMError(
                 f"embeddings reply has {len(data)} vectors for {expected} texts; received {self._excerpt(body)}"
             )
-        items = sorted(data, key=lambda d: d.get("index", 0) if isinstance(d, dict) else 0)
+        indices = [d.get("index") if isinstance(d, dict) else None for d in data]
+        if all(isinstance(i, int) and not isinstance(i, bool) for i in indices):
+            if sorted(indices) != list(range(expected)):
+                raise LLMError(
+                    f"embeddings reply's 'index' fields are not 0..{expected - 1} once each; "
+                    f"received {self._excerpt(body)}"
+                )
+            items = [data[j] for j in np.argsort(np.asarray(indices), kind="stable")]
+        else:  # no (usable) indices: the server's order is the texts' order
+            items = list(data)
         vectors = []
         for item in items:
             raw = item.get("embedding") if isinstance(item, dict) else None
@@ -401,7 +469,7 @@ class OpenAICompatible:
                     vector = np.frombuffer(base64.b64decode(raw), dtype="<f4").astype(np.float64)
                 else:
                     vector = np.asarray(raw, dtype=np.float64)
-            except (ValueError, TypeError) as exc:
+            except (ValueError, TypeError, OverflowError) as exc:
                 raise LLMError(
                     f"embeddings reply holds a vector that is not numbers; received {self._excerpt(body)}"
                 ) from exc
@@ -412,57 +480,110 @@ class OpenAICompatible:
             vectors.append(vector)
         return vectors
 
-    # -- HTTP with retries ------------------------------------------------
+    # -- HTTP with retries and one deadline -------------------------------
 
     def _url(self, path: str) -> str:
         return self.base_url + path
 
+    def _encode(self, payload: dict, what: str) -> bytes:
+        try:
+            content = json.dumps(payload, ensure_ascii=False, allow_nan=False).encode("utf-8")
+        except (TypeError, ValueError) as exc:  # an option that is not JSON, NaN, a surrogate left in an option
+            raise LLMArgumentError(f"{what}: the request cannot be sent as JSON ({exc})") from None
+        if len(content) > self.max_request_bytes:
+            raise LLMArgumentError(
+                f"{what}: the request is {len(content):,} bytes; the limit is {self.max_request_bytes:,} "
+                "(max_request_bytes): send shorter messages"
+            )
+        return content
+
     def _post(self, path: str, payload: dict, what: str) -> tuple[dict, int]:
-        """POST JSON with retries; return (decoded JSON object, attempts used)."""
+        """POST JSON with retries, all within one deadline; return (decoded JSON object, attempts used)."""
         url = self._url(path)
+        content = self._encode(payload, what)
+        deadline = Deadline.after(self.deadline_s, self._clock)
         attempts = self.max_retries + 1
         last_problem = ""
         for attempt in range(attempts):
+            if deadline.passed():
+                raise self._deadline_error(what, url, attempt, last_problem)
             retry_after_s: float | None = None
             try:
-                response = self._http.post(url, json=payload)
+                with deadline_scope(deadline):
+                    outcome = self._exchange(url, content, what, deadline)
             except httpx.TimeoutException:
-                last_problem = f"timed out (timeout_s={self.timeout_s})"
+                if deadline.passed():
+                    raise self._deadline_error(what, url, attempt + 1, last_problem) from None
+                last_problem = f"timed out (timeout_s={self.timeout_s:g})"
             except httpx.TransportError as exc:
-                last_problem = f"connection failed ({type(exc).__name__}: {self._redact(str(exc))})"
+                last_problem = f"connection failed ({type(exc).__name__}: {self._safe_excerpt(str(exc))})"
             else:
-                status = response.status_code
-                if 300 <= status < 400:
-                    location = self._redact(response.headers.get("location", "?"))
-                    raise LLMError(
-                        f"{what} at {url} was redirected (HTTP {status}) to {location}: check base_url "
-                        "(http vs https, a missing or extra path part)"
-                    )
-                if status < 400:
-                    return self._decode_json(response, what), attempt + 1
-                if status in RETRYABLE_STATUSES or status >= 500:
-                    retry_after_s = _retry_after_seconds(response.headers)
-                    last_problem = f"HTTP {status}{self._server_says(response)}"
-                else:
-                    raise self._status_error(response, what)
+                if isinstance(outcome, dict):
+                    return outcome, attempt + 1
+                last_problem, retry_after_s = outcome
             if attempt + 1 < attempts:
-                delay_s = self._delay_s(attempt, retry_after_s)
+                delay_s = self._delay_s(attempt, retry_after_s, what, url, last_problem)
+                remaining = deadline.remaining_s()
+                if delay_s >= remaining:
+                    raise LLMError(
+                        f"{what} at {url}: attempt {attempt + 1} {last_problem}; the next attempt would start "
+                        f"after the deadline (a {delay_s:.3g} s pause, {max(remaining, 0.0):.3g} s left of "
+                        f"deadline_s={self.deadline_s:g})"
+                    )
                 log.warning(
                     "%s: attempt %d of %d %s; retrying in %.2f s", what, attempt + 1, attempts, last_problem, delay_s
                 )
                 self._sleep(delay_s)
         raise LLMError(f"{what} at {url} failed after {attempts} attempts; last error: {last_problem}")
 
-    def _delay_s(self, attempt: int, retry_after_s: float | None) -> float:
+    def _exchange(self, url: str, content: bytes, what: str, deadline: Deadline) -> dict | tuple[str, float | None]:
+        """One HTTP request: the decoded JSON object, or (problem, Retry-After seconds) for a retryable status.
+
+        Raises ``LLMError`` for answers that retrying cannot fix and lets
+        httpx's timeout and transport errors through (they are retried).
+        """
+        phase_s = max(min(self.timeout_s, deadline.remaining_s()), 1e-3)
+        with self._http.stream(
+            "POST", url, content=content, headers={"Content-Type": "application/json"}, timeout=phase_s
+        ) as response:
+            status = response.status_code
+            if 300 <= status < 400:
+                location = self._safe_excerpt(response.headers.get("location", "?"))
+                raise LLMError(
+                    f"{what} at {url} was redirected (HTTP {status}) to {location}: check base_url "
+                    "(http vs https, a missing or extra path part)"
+                )
+            if status < 400:
+                raw = read_body(response, max_bytes=self.max_response_bytes, deadline=deadline, what=f"{what} reply")
+                return self._decode_json(raw, response, what)
+            raw = read_body(response, max_bytes=_ERROR_BODY_BYTES, deadline=deadline, what="error", stop_at_limit=True)
+            if status in RETRYABLE_STATUSES or status >= 500:
+                return f"HTTP {status}{self._server_says(raw)}", _retry_after_seconds(response.headers)
+            raise self._status_error(status, url, raw, what)
+
+    def _deadline_error(self, what: str, url: str, attempts: int, last_problem: str) -> LLMError:
+        tried = f" after {attempts} attempt{'s' if attempts != 1 else ''}" if attempts else ""
+        last = f"; before that: {last_problem}" if last_problem else ""
+        return LLMError(
+            f"{what} at {url} did not finish within its deadline of {self.deadline_s:g} s (deadline_s){tried}{last}"
+        )
+
+    def _delay_s(
+        self, attempt: int, retry_after_s: float | None, what: str = "", url: str = "", problem: str = ""
+    ) -> float:
         delay = min(self.backoff_base_s * (2.0**attempt), self.backoff_max_s)
         if retry_after_s is not None:
-            delay = max(delay, min(retry_after_s * self.retry_after_scale, self.retry_after_cap_s))
+            asked = retry_after_s * self.retry_after_scale
+            if asked > self.retry_after_cap_s:
+                raise LLMError(
+                    f"{what} at {url}: {problem}, and the server asks to retry after {retry_after_s:.6g} s, more "
+                    f"than retry_after_cap_s={self.retry_after_cap_s:g} s: it is treated as down; try again later"
+                )
+            delay = max(delay, asked)
         return max(delay, 0.0)
 
-    def _status_error(self, response: httpx.Response, what: str) -> LLMError:
-        status = response.status_code
-        url = str(response.request.url)
-        says = self._server_says(response)
+    def _status_error(self, status: int, url: str, raw: bytes, what: str) -> LLMError:
+        says = self._server_says(raw)
         if status in (401, 403):
             return LLMError(
                 f"{what} at {url} was refused with HTTP {status}{says}: check your API key "
@@ -476,48 +597,51 @@ class OpenAICompatible:
             )
         return LLMError(f"{what} at {url} was rejected with HTTP {status}{says}")
 
-    def _server_says(self, response: httpx.Response) -> str:
-        """' (server says: ...)' from an error body, redacted and truncated, or ''."""
+    def _server_says(self, raw: bytes) -> str:
+        """' (server says: ...)' from an error body (at most ``_ERROR_BODY_BYTES`` of it), or ''."""
         try:
-            body = response.json()
-        except (ValueError, UnicodeDecodeError):
+            body = loads_json(raw, where="the error") if raw.strip() else None
+        except LLMError:
             body = None
         message = _error_message(body) if body is not None else None
         if message is None:
-            message = response.text.strip()
+            message = raw.decode("utf-8", errors="replace").strip()
         if not message:
             return ""
         return f" (server says: {self._safe_excerpt(message)})"
 
-    def _decode_json(self, response: httpx.Response, what: str) -> dict:
+    def _decode_json(self, raw: bytes, response: httpx.Response, what: str) -> dict:
+        where = f"{what} at {response.request.url}"
         try:
-            body = response.json()
-        except (ValueError, UnicodeDecodeError):
-            content_type = response.headers.get("content-type", "no content-type")
-            text = response.content.decode("utf-8", errors="replace")
+            body = loads_json(raw, where=where)
+        except NotJSONError:
+            content_type = self._safe_excerpt(response.headers.get("content-type", "no content-type"))
+            text = raw.decode("utf-8", errors="replace")
             raise LLMError(
-                f"{what} at {response.request.url}: the server answered HTTP {response.status_code} "
-                f"({content_type}) with a body that is not JSON: {self._safe_excerpt(text)!r}"
+                f"{where}: the server answered HTTP {response.status_code} ({content_type}) with a body that is "
+                f"not JSON: {self._safe_excerpt(text)!r}"
             ) from None
         if not isinstance(body, dict):
-            raise LLMError(f"{what} at {response.request.url}: expected a JSON object, received {self._excerpt(body)}")
+            raise LLMError(f"{where}: expected a JSON object, received {self._excerpt(body)}")
         return body
 
     def _what_arrived(self, body: dict) -> str:
         """The server's error message in ``body`` if it has one, else an excerpt of ``body``."""
         server_message = _error_message(body)
-        return f"the server's error: {server_message}" if server_message else f"received {self._excerpt(body)}"
+        if server_message:
+            return f"the server's error: {self._safe_excerpt(server_message)}"
+        return f"received {self._excerpt(body)}"
 
     def _excerpt(self, value: Any) -> str:
         try:
             text = json.dumps(value, ensure_ascii=False)
-        except (TypeError, ValueError):
-            text = repr(value)
+        except (TypeError, ValueError, RecursionError):
+            text = repr(value)[: 4 * _EXCERPT_CHARS]
         return self._safe_excerpt(text)
 
     def _safe_excerpt(self, text: str) -> str:
-        """At most ``_EXCERPT_CHARS`` of ``text``, redacted, saying how long the original was."""
-        head = self._redact(text[: 2 * _EXCERPT_CHARS])
+        """At most ``_EXCERPT_CHARS`` of ``text``, redacted and cleaned, saying how long the original was."""
+        head = clean_text(self._redact(text[: 2 * _EXCERPT_CHARS]))
         if len(text) <= _EXCERPT_CHARS and len(head) <= _EXCERPT_CHARS:
             return head
         return head[:_EXCERPT_CHARS] + f"... [{len(text)} chars, truncated]"
@@ -574,10 +698,57 @@ def _normalise_base_url(base_url: str) -> str:
 
 def _check_messages(messages: Sequence[Any]) -> None:
     if isinstance(messages, (str, bytes)) or not isinstance(messages, Sequence) or not messages:
-        raise ValueError("messages must be a non-empty list of {'role': ..., 'content': ...} dicts")
+        raise LLMArgumentError("messages must be a non-empty list of {'role': ..., 'content': ...} dicts")
     for i, message in enumerate(messages):
         if not isinstance(message, Mapping) or "role" not in message:
-            raise ValueError(f"messages[{i}] must be a dict with a 'role' key, got {message!r:.80}")
+            shown = clean_text(repr(message)[:80]) if isinstance(message, (str, bytes, int, float)) else type(message).__name__
+            raise LLMArgumentError(f"messages[{i}] must be a dict with a 'role' key, got {shown}")
+
+
+def _clean_message(message: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of ``message`` whose text (string content, or text parts) is cleaned of lone surrogates."""
+    out = dict(message)
+    content = out.get("content")
+    if isinstance(content, str):
+        out["content"] = clean_text(content)
+    elif isinstance(content, list):
+        out["content"] = [
+            {**p, "text": clean_text(p["text"])} if isinstance(p, Mapping) and isinstance(p.get("text"), str) else p
+            for p in content
+        ]
+    for key in ("role", "name"):
+        if isinstance(out.get(key), str):
+            out[key] = clean_text(out[key])
+    return out
+
+
+def _seconds(name: str, value: Any, *, zero: bool = False) -> float:
+    """``value`` as a finite number of seconds, > 0 (or >= 0 with ``zero``); ``LLMArgumentError`` otherwise."""
+    try:
+        seconds = float(value)
+    except (TypeError, ValueError):
+        raise LLMArgumentError(f"{name} must be a number of seconds, got {value!r:.60}") from None
+    if not math.isfinite(seconds) or seconds < 0 or (seconds == 0 and not zero):
+        bound = ">= 0" if zero else "> 0"
+        raise LLMArgumentError(f"{name} must be a finite number {bound}, got {value!r:.60}")
+    return seconds
+
+
+def _count(name: str, value: Any, *, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise LLMArgumentError(f"{name} must be a whole number >= {minimum}, got {value!r:.60}")
+    return int(value)
+
+
+def _temperature(value: Any) -> float:
+    """A sampling temperature: a finite number from 0 to 2 (the range OpenAI accepts)."""
+    try:
+        t = float(value)
+    except (TypeError, ValueError):
+        raise LLMArgumentError(f"temperature must be a number from 0 to 2, got {value!r:.60}") from None
+    if not (math.isfinite(t) and 0.0 <= t <= 2.0):
+        raise LLMArgumentError(f"temperature must be a number from 0 to 2, got {value!r:.60}")
+    return t
 
 
 def _error_message(body: Any) -> str | None:
