@@ -9,8 +9,10 @@ to ``rate_hz`` (500 Hz: one setpoint per 2 ms control cycle; linear interpolatio
 q and the gripper opening for sources at >= 125 Hz, monotone cubic (PCHIP) below).
 
 **Streaming.** The client holds the first setpoint (sequence counter incrementing
-every period) *before* sending :func:`~robocritics.deploy.urscript.streaming_program`
-(from a helper thread, so holding never pauses), waits until the program reports
+every period) and, once the controller echoes the counter (``input_int_register_24``
+read back as an output, so the program cannot read zeros), sends
+:func:`~robocritics.deploy.urscript.streaming_program` (from a helper thread, so
+holding never pauses); it waits until the program reports
 STREAMING with this deploy's random session id, then streams with absolute
 deadlines ``t0 + k / rate_hz`` (sleep, then spin the last ``spin_s``; a client
 more than 5 periods late shifts its schedule rather than bursting the missed
@@ -56,7 +58,7 @@ import numpy as np
 
 from robocritics.deploy.dashboard import DashboardClient
 from robocritics.deploy.rtde import MessageLevel, RobotMode, RuntimeState, SafetyMode, mode_name
-from robocritics.deploy.urscript import OUTPUT_FIELDS, ProgramState, send_program, setpoint
+from robocritics.deploy.urscript import INPUT_FIELDS, OUTPUT_FIELDS, ProgramState, send_program, setpoint
 from robocritics.errors import DeployError, RTDEError
 from robocritics.trajectory import Trajectory
 
@@ -64,6 +66,9 @@ if TYPE_CHECKING:  # pragma: no cover
     from robocritics.deploy.arm import URArm
 
 __all__ = ["DeployFault", "DeployResult", "StreamPlan", "resample", "STATE_FIELDS", "STILL_RAD_S"]
+
+SEQ_ECHO_FIELD = INPUT_FIELDS[0]
+"""The sequence counter input register, read back as an output: the controller has our setpoint."""
 
 STATE_FIELDS: tuple[str, ...] = (
     "timestamp",
@@ -74,6 +79,7 @@ STATE_FIELDS: tuple[str, ...] = (
     "safety_mode",
     "runtime_state",
     *OUTPUT_FIELDS,
+    SEQ_ECHO_FIELD,
 )
 """The output recipe :class:`~robocritics.deploy.URArm` sets up (at 500 Hz)."""
 
@@ -245,6 +251,13 @@ def resample(trajectory: Trajectory, rate_hz: float = 500.0) -> StreamPlan:
     g[-1] = g_src[-1]
     src = np.searchsorted(t, ts + 1e-9, side="right") - 1
     return StreamPlan(q=q, gripper_opening_m=g, time=ts, source_index=src.astype(np.int64), rate_hz=float(rate_hz), interpolation=how)
+
+
+def _holds_ours(echo: Any, first: int, last: int) -> bool:
+    """Whether the echoed sequence counter is one this run sent (``first`` … ``last``, int32 wrap-around)."""
+    if echo is None:
+        return False
+    return (int(echo) - first) % 2**32 <= (last - first) % 2**32
 
 
 def _percentile(values: Sequence[float], p: float) -> float:
@@ -471,6 +484,7 @@ class _Stream:
             run.rate_t0, run.rate_n0 = time.perf_counter(), rtde.packages_received
             state_before = rtde.latest().get(OUTPUT_FIELDS[1])
             self._send(run, q0, g0)
+            first_hold = self.arm._seq
             sender_error: list[BaseException] = []
 
             def send_it() -> None:
@@ -479,8 +493,7 @@ class _Stream:
                 except BaseException as exc:  # reported by the streaming thread
                     sender_error.append(exc)
 
-            sender = threading.Thread(target=send_it, name="urarm-send-program", daemon=True)
-            sender.start()
+            sender: threading.Thread | None = None
             t_next = time.perf_counter()
             give_up = t_next + start_timeout_s
             while True:
@@ -494,6 +507,10 @@ class _Stream:
                 now = time.perf_counter()
                 check(now)
                 self._collect_messages(run)
+                if sender is None and _holds_ours(run.last_state.get(SEQ_ECHO_FIELD), first_hold, self.arm._seq):
+                    # the controller has our first setpoint in its registers: the program will read it, not zeros
+                    sender = threading.Thread(target=send_it, name="urarm-send-program", daemon=True)
+                    sender.start()
                 if sender_error:
                     raise _Fault("program_not_started", f"sending the program failed: {sender_error[0]}")
                 st = run.last_state
@@ -507,16 +524,25 @@ class _Stream:
                         break
                     if pstate == ProgramState.START_REJECTED and state_before != ProgramState.START_REJECTED:
                         raise _Fault("start_rejected", "the program refused to start: the first setpoint is too far from the actual joint positions")
-                if not sender.is_alive() and run.messages and any(m.startswith(("ERROR", "EXCEPTION")) for m in run.messages):
+                if sender is not None and not sender.is_alive() and run.messages and any(
+                    m.startswith(("ERROR", "EXCEPTION")) for m in run.messages
+                ):
                     raise _Fault("program_not_started", "the controller reported an error after the program was sent")
                 if now > give_up:
+                    if sender is None:
+                        raise _Fault(
+                            "program_not_started",
+                            f"the controller did not echo the held setpoint ({SEQ_ECHO_FIELD}) within start_timeout_s "
+                            f"{start_timeout_s:g} s; the program was not sent",
+                        )
                     raise _Fault(
                         "program_not_started",
                         f"the program did not report STREAMING with session {run.session} within start_timeout_s "
                         f"{start_timeout_s:g} s (last state {st.get(OUTPUT_FIELDS[1]) if st else None}, runtime "
                         f"{st.get('runtime_state') if st else None})",
                     )
-            sender.join(timeout=self.arm.timeout_s)
+            if sender is not None:
+                sender.join(timeout=self.arm.timeout_s)
 
             # ---- stream with absolute deadlines
             run.phase = "streaming"

@@ -1544,6 +1544,8 @@ class URSim:
             if self._program is not None:
                 self._event("program_ended", f"{self._program.name} replaced by a new program")
             self._start_program(_StreamProgram(self, params))
+            # a client that sends a program is active: no idle cycle before its next setpoint is read
+            self._last_input_wall = time.monotonic()
 
 
 def _extra_getter(name: str, t: str) -> _Getter:
