@@ -28,8 +28,9 @@ the arm and raises :class:`DeployFault` (a ``DeployError``) with ``cause``,
 ``protective_stop`` / ``safety_mode`` (safety_mode leaves NORMAL),
 ``robot_mode``, ``connection_drop`` (RTDE connection failed),
 ``controller_silent`` (no data package for ``silence_timeout_s``),
-``controller_slow`` (data rate below ``min_data_rate_fraction`` of the recipe
-frequency over a :data:`STREAM_RATE_WINDOW_S` window while data still arrives), ``program_stalled`` / ``program_stopped`` /
+``controller_slow`` (fewer packages than ``min_data_rate_fraction`` of the recipe
+frequency per second of the controller's own ``timestamp``, over
+:data:`STREAM_RATE_WINDOW_S` windows: packages dropped or throttled), ``program_stalled`` / ``program_stopped`` /
 ``session`` (program state register, runtime_state, session echo),
 ``start_rejected`` / ``program_not_started`` (start-up), ``tracking_error``
 (``actual_q`` farther than ``max_tracking_error_rad`` from every setpoint sent
@@ -334,8 +335,10 @@ class _Run:
     packages: int = 0
     last_state: dict[str, Any] = field(default_factory=dict)
     messages: list[str] = field(default_factory=list)
-    rate_t0: float = 0.0
-    rate_n0: int = 0
+    rate_ts0: float | None = None
+    """Controller timestamp at which the current rate window began [s]."""
+    rate_n: int = 0
+    """Packages received in the current rate window."""
     last_check: float = 0.0
     """perf_counter of the last check [s] (0: none yet)."""
     awake_since: float = 0.0
@@ -397,6 +400,7 @@ class _Stream:
         for st in packages:
             run.packages += 1
             run.last_state = st
+            self._count_rate(run, float(st["timestamp"]), min_rate)
             if st["safety_mode"] != SafetyMode.NORMAL:
                 raise _safety_fault(st["safety_mode"])
             if st["robot_mode"] != RobotMode.RUNNING:
@@ -433,26 +437,32 @@ class _Stream:
                 )
         if run.last_check and now - run.last_check > 0.5 * silence_timeout_s:
             # this process was not running (a loaded host): what did not arrive meanwhile is no verdict on the
-            # controller; it gets silence_timeout_s and a fresh rate window from now
+            # controller; it gets silence_timeout_s from now
             run.awake_since = now
-            run.rate_t0, run.rate_n0 = now, rtde.packages_received
         run.last_check = now
         age = min(rtde.age_s(), now - run.awake_since)
         if age > silence_timeout_s:
             raise _Fault("controller_silent", f"no RTDE data package for {age:.3f} s (> silence_timeout_s {silence_timeout_s:g})")
-        elapsed = now - run.rate_t0
-        if elapsed >= STREAM_RATE_WINDOW_S:
-            n = rtde.packages_received - run.rate_n0
-            expected = self.arm._out_freq * elapsed
-            # a controller that stopped sending altogether is reported as silent once silence_timeout_s passed
-            still_sending = age <= 0.5 * silence_timeout_s
-            if n < min_rate * expected and still_sending:
-                raise _Fault(
-                    "controller_slow",
-                    f"the controller sent {n} data packages in {elapsed:.3f} s ({n / elapsed:.0f} Hz, expected "
-                    f"{self.arm._out_freq:g} Hz; minimum {min_rate:.0%}): it is overloaded or throttled",
-                )
-            run.rate_t0, run.rate_n0 = now, rtde.packages_received
+
+    def _count_rate(self, run: _Run, timestamp_s: float, min_rate: float) -> None:
+        """``controller_slow``: packages per second of the controller's own time (its ``timestamp``), over
+        windows of :data:`STREAM_RATE_WINDOW_S` — packages it dropped or throttled, not a client that was late."""
+        if run.rate_ts0 is None or timestamp_s < run.rate_ts0:
+            run.rate_ts0, run.rate_n = timestamp_s, 0
+            return
+        run.rate_n += 1
+        span = timestamp_s - run.rate_ts0
+        if span < STREAM_RATE_WINDOW_S:
+            return
+        expected = self.arm._out_freq * span
+        if run.rate_n < min_rate * expected:
+            raise _Fault(
+                "controller_slow",
+                f"the controller sent {run.rate_n} data packages in {span:.3f} s of its own time "
+                f"({run.rate_n / span:.0f} Hz, expected {self.arm._out_freq:g} Hz; minimum {min_rate:.0%}): "
+                "it drops packages or is throttled",
+            )
+        run.rate_ts0, run.rate_n = timestamp_s, 0
 
     def run(
         self,
@@ -491,7 +501,6 @@ class _Stream:
         try:
             # ---- hold the first setpoint, send the program, wait until it streams with our session
             q0, g0 = plan.q[0], float(plan.gripper_opening_m[0])
-            run.rate_t0, run.rate_n0 = time.perf_counter(), rtde.packages_received
             state_before = rtde.latest().get(OUTPUT_FIELDS[1])
             self._send(run, q0, g0)
             first_hold = self.arm._seq
