@@ -7,7 +7,7 @@
 ['move_above(green_apple, height=0.1)', 'close_gripper()']
 """
 
-from .budget import Budget
+from .budget import Budget, BudgetError
 from .language import SAFE_BUILTINS
 from .plan import FrozenArgs, Plan, SkillCall
 from .sandbox import check_program, run_program
@@ -18,6 +18,7 @@ __all__ = [
     "SkillCall",
     "FrozenArgs",
     "Budget",
+    "BudgetError",
     "run_program",
     "check_program",
     "SAFE_BUILTINS",

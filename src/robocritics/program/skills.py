@@ -34,9 +34,10 @@ from typing import Any, Callable, Iterator, Mapping
 from .._suggest import did_you_mean
 from ..errors import ProgramError
 from ..scene import Container, Scene, SceneObject
-from .budget import Budget
+from .budget import Budget, BudgetError
 from .language import SAFE_BUILTINS
 from .plan import Plan, SkillCall
+from .render import VALUE_CHARS, bounded_repr, clip
 
 __all__ = [
     "SKILLS",
@@ -74,6 +75,22 @@ _DESCRIBED_STR_CHARS = 40
 def _suggest(name: str, candidates: Any, n: int = 3) -> str:
     """Up to ``n`` close names (:func:`robocritics._suggest.did_you_mean`)."""
     return did_you_mean(name, candidates, n)
+
+
+_MAX_SUGGESTION_CANDIDATES = 300
+"""A did-you-mean compares a name with at most this many candidates (those closest to it in length)."""
+
+
+def _close_names(name: Any, candidates: Any, n: int = 3) -> str:
+    """:func:`_suggest` bounded for untrusted names: names longer than ``VALUE_CHARS`` get no suggestion (nobody
+    mistypes them and comparing them is slow), and at most ``_MAX_SUGGESTION_CANDIDATES`` candidates of a
+    similar length are compared."""
+    if type(name) is not str or len(name) > VALUE_CHARS:
+        return ""
+    near = [c for c in candidates if type(c) is str and len(name) // 2 <= len(c) <= 2 * len(name) + 2]
+    if len(near) > _MAX_SUGGESTION_CANDIDATES:
+        near = sorted(near, key=lambda c: abs(len(c) - len(name)))[:_MAX_SUGGESTION_CANDIDATES]
+    return _suggest(name, near, n)
 
 
 def _plain(value: Any) -> Any:
@@ -166,9 +183,10 @@ class ObjectView:
         if name in self._attrs and not name.startswith("_"):
             return _plain(self._attrs[name])
         names = self._names()
-        hint = _suggest(name, names, 1)
+        hint = _close_names(name, names, 1)
         raise AttributeError(
-            f"{self._fields['kind']} {self._id!r} has no attribute {name!r}{hint or '.'} It has: {', '.join(names)}"
+            f"{self._fields['kind']} {self._id!r} has no attribute {bounded_repr(name)}{hint or '.'} "
+            f"It has: {', '.join(names)}"
         )
 
     def __getattr__(self, name: str) -> Any:
@@ -210,9 +228,9 @@ class Namespace:
     def _lookup(self, name: str) -> Any:
         if name in self._members and not name.startswith("_"):
             return self._members[name]
-        hint = _suggest(name, self._members, 3)
+        hint = _close_names(name, self._members, 3)
         raise AttributeError(
-            f"{self._name} has no {self._what} {name!r}{hint or '.'} "
+            f"{self._name} has no {self._what} {bounded_repr(name)}{hint or '.'} "
             f"{self._name} provides: {', '.join(sorted(self._members))}"
         )
 
@@ -259,15 +277,19 @@ class Recorder:
         self.direct = direct
         self.where: tuple[int, int, tuple[int, ...]] = (0, 0, ())
 
-    def error(self, message: str) -> ProgramError:
+    def error(self, message: str, limit: str = "") -> ProgramError:
+        """The error at the skill call being made (a :class:`BudgetError` when ``limit`` names a Budget field)."""
         line, col, _ = self.where
-        return ProgramError(message, line, col)
+        if limit:
+            return BudgetError(clip(message), line, col, limit=limit)
+        return ProgramError(clip(message), line, col)
 
     def record(self, skill: str, args: dict[str, Any]) -> None:
         if len(self.plan.calls) >= self.max_skill_calls:
             raise self.error(
                 f"the program makes more than {self.max_skill_calls} skill calls; a robot task needs far fewer. "
-                "Is a loop running more often than intended?"
+                "Is a loop running more often than intended?",
+                limit="max_skill_calls",
             )
         line, col, stack = self.where
         self.plan.calls.append(SkillCall(skill, args, line, col, stack))
@@ -275,7 +297,7 @@ class Recorder:
     def add_output(self, text: str) -> None:
         self.output_chars += len(text)
         if self.output_chars > self.max_output_chars:
-            raise self.error(f"the program printed more than {self.max_output_chars} characters")
+            raise self.error(f"the program printed more than {self.max_output_chars} characters", "max_output_chars")
         self.plan.output.append(text)
 
     def object_id(self, value: Any, skill: str, arg: str) -> str:
@@ -287,9 +309,9 @@ class Recorder:
         if isinstance(value, str):
             if value in self.views:
                 return value
-            hint = _suggest(value, self.views)
+            hint = _close_names(value, self.views)
             raise self.error(
-                f"{skill}: unknown object {value!r}{hint or '.'} "
+                f"{skill}: unknown object {bounded_repr(value)}{hint or '.'} "
                 f"Objects and containers: {', '.join(self.views) or '(none)'}"
             )
         raise self.error(f"{skill}: {arg} must be a scene object (e.g. {self._example()}), got {_describe(value)}")
@@ -335,7 +357,7 @@ def _describe(value: Any) -> str:
         text = value if len(value) <= _DESCRIBED_STR_CHARS else value[: _DESCRIBED_STR_CHARS - 3] + "..."
         return f"str {text!r}"
     if isinstance(value, (bool, int, float)):
-        return f"{type(value).__name__} {value!r}"
+        return f"{type(value).__name__} {bounded_repr(value)}"
     name = type(value).__name__
     return {"function": "a function", "Namespace": "a module"}.get(name, f"a {name}")
 
@@ -360,7 +382,7 @@ def _coord(rec: Recorder, value: Any, skill: str, arg: str) -> float:
     v = _number(rec, value, skill, arg, "metres")
     if abs(v) > _MAX_COORD_M:
         raise rec.error(
-            f"{skill}: {arg}={value!r} m is far outside any robot's reach; coordinates are in metres "
+            f"{skill}: {arg}={bounded_repr(value)} m is far outside any robot's reach; coordinates are in metres "
             f"(did you mean {v / 1000:g}?)"
         )
     return v
