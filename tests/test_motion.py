@@ -41,9 +41,10 @@ def test_halving_the_speed_doubles_the_duration(start, goal, fraction):
     assert half == pytest.approx(2 * full, rel=1e-6)
 
 
-def test_speed_fraction_is_validated():
-    with pytest.raises(PlanningError, match=r"\(0, 1\]"):
-        time_joint_move(np.zeros(6), np.ones(6), LIMITS, 1.5, 125.0)
+@pytest.mark.parametrize("fraction", [1.5, 0.0, 0.005, -1.0, float("nan"), float("inf")])
+def test_speed_fraction_is_validated(fraction):
+    with pytest.raises(PlanningError, match=r"speed fraction must lie in \[0\.01, 1\]"):
+        time_joint_move(np.zeros(6), np.ones(6), LIMITS, fraction, 125.0)
 
 
 def _program(speed_line):

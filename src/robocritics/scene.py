@@ -15,29 +15,316 @@ walls are ``wall_m`` thick: its inside is free space, so placing something
 UR3e reach, radius 0.5 m around the shoulder) cut by the table top.
 
 Invalid input raises :class:`~robocritics.errors.SceneError` naming the field
-path (``objects[2].size[0]``) and the problem.
+path (``objects[2].size[0]``) and the problem, or the file and the problem. A
+scene is untrusted input, so everything in it is bounded:
+
+* every number is a finite int or float (not a bool or a string): coordinates
+  (positions, centres, the table top) within :data:`MAX_COORD_M` (10 m) of the
+  base, lengths (sizes, radii, thicknesses) in (0, :data:`MAX_LENGTH_M`] m, angles
+  within :data:`MAX_ANGLE_RAD` (one turn); integers have at most
+  :data:`MAX_INT_DIGITS` digits;
+* ids are Python identifiers (NFKC-normalised, not starting with ``_``, at most
+  :data:`MAX_ID_CHARS` characters) that shadow no name of the program language:
+  not a keyword, a builtin of robot programs
+  (:data:`robocritics.program.language.SAFE_BUILTINS`, e.g. ``print``), a name of
+  the program namespace (:data:`PROGRAM_NAMES`: ``lib``, ``math``, ``objects``,
+  ``containers``, ...) or ``table`` (see :func:`reserved_names`). The skills
+  (``home``, ``wait``, ...) are checked where a scene meets the skill API, by
+  :func:`robocritics.simulate.check_scene_ids` (the skills are built on scenes,
+  so this module cannot import them);
+* at most :data:`MAX_ENTITIES` objects and containers; text fields and free
+  attributes are bounded in length, nesting and count, and are JSON-like text
+  (no unpaired surrogates);
+* a scene file is a regular file of at most :data:`MAX_FILE_BYTES` bytes of UTF-8
+  JSON nested at most :data:`MAX_JSON_DEPTH` deep (checked before parsing).
 """
 
 from __future__ import annotations
 
+import functools
 import json
+import keyword
 import math
+import numbers
 import re
+import stat
+import unicodedata
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from ._suggest import did_you_mean
 from .errors import SceneError
 from .robot.arms import UR3E
 
-__all__ = ["SceneObject", "Container", "Table", "Workspace", "Scene", "Shape", "rpy_matrix"]
+__all__ = [
+    "SceneObject",
+    "Container",
+    "Table",
+    "Workspace",
+    "Scene",
+    "Shape",
+    "rpy_matrix",
+    "parse_json",
+    "reserved_names",
+    "PROGRAM_NAMES",
+    "MAX_COORD_M",
+    "MAX_LENGTH_M",
+    "MAX_ANGLE_RAD",
+    "MAX_ENTITIES",
+    "MAX_FILE_BYTES",
+    "MAX_JSON_DEPTH",
+]
 
-Vec3 = tuple[float, float, float]
+MAX_COORD_M = 10.0
+"""Largest |coordinate| of a scene [m]: ten times a tabletop arm's reach, so millimetres given as metres are caught."""
+MAX_LENGTH_M = 2 * MAX_COORD_M
+"""Largest size, radius or thickness [m]: anything spanning the coordinate bound."""
+MAX_ANGLE_RAD = 2 * math.pi
+"""Largest |angle| (rpy, yaw) [rad]: one turn."""
+MAX_INT_DIGITS = 20
+"""Most digits of an integer anywhere in a scene (a 64-bit integer has 19 or 20)."""
+MAX_ENTITIES = 100
+"""Most objects plus containers in a scene: a tabletop task has a few dozen; each costs proximity work per sample."""
+MAX_ID_CHARS = 64
+"""Longest object or container id."""
+MAX_NAME_CHARS = 200
+"""Longest scene name."""
+MAX_TEXT_CHARS = 10_000
+"""Longest scene description or attribute string."""
+MAX_ATTRIBUTE_DEPTH = 8
+"""Deepest nesting of lists/dicts in an entity's attributes."""
+MAX_ATTRIBUTE_ITEMS = 1_000
+"""Most values (scalars, lists, dicts, dict keys) in one entity's attributes."""
+MAX_FILE_BYTES = 1_000_000
+"""Largest scene file [bytes]: a hundred richly described objects take some 50 kB."""
+MAX_JSON_DEPTH = 32
+"""Deepest nesting of a scene file's JSON (a scene needs 4 plus its attributes' depth)."""
+
+
+class _LongInt:
+    """A JSON integer too long to convert (Python refuses beyond 4300 digits); validation rejects it by field."""
+
+    __slots__ = ("digits",)
+
+    def __init__(self, digits: int):
+        self.digits = digits
+
+    def __repr__(self) -> str:
+        return f"<a {self.digits}-digit integer>"
+
+
+def _parse_int(text: str) -> int | _LongInt:
+    digits = len(text.lstrip("-"))
+    return int(text) if digits <= MAX_INT_DIGITS else _LongInt(digits)
+
+
+def _json_depth(text: str) -> tuple[int, int]:
+    """``(depth, line)``: the deepest nesting of ``[``/``{`` in JSON ``text`` outside strings, and the line where
+    it first exceeds :data:`MAX_JSON_DEPTH` (0 if it does not). Linear time and memory, vectorised, no recursion."""
+    raw = text.encode("utf-8", "surrogatepass")  # multi-byte characters hold no ASCII bytes
+    b = np.frombuffer(raw, dtype=np.uint8)
+    if not b.size:
+        return 0, 0
+    # a quote is escaped when an odd run of backslashes precedes it
+    backslash = b == ord("\\")
+    index = np.arange(b.size)
+    last_other = np.maximum.accumulate(np.where(backslash, -1, index))
+    run_before = np.zeros(b.size, dtype=np.int64)
+    run_before[1:] = index[:-1] - last_other[:-1]
+    quote = (b == ord('"')) & (run_before % 2 == 0)
+    outside = np.cumsum(quote) % 2 == 0  # a quote itself counts as inside: it is no bracket anyway
+    step = ((b == ord("[")) | (b == ord("{"))).astype(np.int64) - ((b == ord("]")) | (b == ord("}")))
+    depth = np.cumsum(step * outside)
+    deepest = int(depth.max())
+    if deepest <= MAX_JSON_DEPTH:
+        return deepest, 0
+    at = int(np.argmax(depth > MAX_JSON_DEPTH))
+    return deepest, raw.count(b"\n", 0, at) + 1
+
+
+def parse_json(text: str, what: str) -> Any:
+    """Parse untrusted JSON ``text`` with the scene's bounds; :class:`SceneError` naming ``what`` otherwise.
+
+    Nesting is checked before parsing (at most :data:`MAX_JSON_DEPTH`), integers of more than
+    :data:`MAX_INT_DIGITS` digits parse to a marker that validation rejects by field, and
+    ``NaN``/``Infinity`` parse to floats that validation rejects by field.
+    """
+    deepest, line = _json_depth(text)
+    if line:
+        raise SceneError(f"{what}: JSON nested {deepest} deep (from line {line}); the limit is {MAX_JSON_DEPTH}")
+    try:
+        return json.loads(text, parse_int=_parse_int)
+    except json.JSONDecodeError as exc:
+        raise SceneError(f"{what}: not valid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+    except (ValueError, RecursionError) as exc:  # a number Python cannot convert; nesting is checked above
+        raise SceneError(f"{what}: not valid JSON: {str(exc)[:200]}") from None
+
+
+_RANGES = {
+    "coordinate": f"coordinates are within {MAX_COORD_M:g} m of the robot base",
+    "length": f"lengths are positive and at most {MAX_LENGTH_M:g} m",
+    "angle": f"angles are within {MAX_ANGLE_RAD:.4g} rad (one turn)",
+}
+
+
+def _number(value: Any, kind: str) -> float:
+    """A scene number of ``kind`` (coordinate, length, angle) as a float; ValueError saying why not."""
+    if isinstance(value, _LongInt):
+        raise ValueError(f"a {value.digits}-digit integer is out of range ({_RANGES[kind]})")
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        shown = repr(value) if isinstance(value, str) and len(value) <= 40 else type(value).__name__
+        raise ValueError(f"{shown} is not a number")
+    if isinstance(value, numbers.Integral) and int(value).bit_length() > 64:
+        raise ValueError(f"an integer of {int(value).bit_length()} bits is out of range ({_RANGES[kind]})")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"{v} is not a finite number")
+    if kind == "length" and not v > 0:
+        raise ValueError(f"{v:g} is not a positive length in metres")
+    bound = {"coordinate": MAX_COORD_M, "length": MAX_LENGTH_M, "angle": MAX_ANGLE_RAD}[kind]
+    if abs(v) > bound:
+        raise ValueError(f"{v:g} is out of range ({_RANGES[kind]})")
+    return v
+
+
+Coordinate = Annotated[float, BeforeValidator(functools.partial(_number, kind="coordinate"))]
+"""A coordinate [m], finite, within MAX_COORD_M of the base."""
+Length = Annotated[float, BeforeValidator(functools.partial(_number, kind="length"))]
+"""A size, radius or thickness [m], in (0, MAX_LENGTH_M]."""
+Angle = Annotated[float, BeforeValidator(functools.partial(_number, kind="angle"))]
+"""An angle [rad], within one turn."""
+Vec3 = tuple[Coordinate, Coordinate, Coordinate]
+Angles3 = tuple[Angle, Angle, Angle]
+
+
+def _text(value: Any, limit: int) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"a {type(value).__name__} is not text")
+    if len(value) > limit:
+        raise ValueError(f"text of {len(value):,} characters is longer than the limit of {limit:,}")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        raise ValueError(f"character {exc.start} is an unpaired surrogate {value[exc.start]!r}, not text") from None
+    return value
+
+
+Name = Annotated[str, BeforeValidator(functools.partial(_text, limit=MAX_NAME_CHARS))]
+Text = Annotated[str, BeforeValidator(functools.partial(_text, limit=MAX_TEXT_CHARS))]
+
+
+PROGRAM_NAMES: tuple[str, ...] = ("lib", "math", "objects", "containers", "robot_lib", "robocritics", "skills")
+"""Names every robot program sees besides the builtins and skills: the ``lib`` and ``math`` namespaces, the
+``objects``/``containers`` lists, and the module names a program may import as ``lib``. (They belong beside
+SAFE_BUILTINS in robocritics.program.language; tests/test_scene_hostile.py checks that programs see each one.)"""
+
+
+@functools.cache
+def reserved_names() -> dict[str, str]:
+    """Names an object or container may not have, each with what it already is in a robot program.
+
+    Python's keywords (soft ones too), the builtins of robot programs
+    (:data:`robocritics.program.language.SAFE_BUILTINS`), :data:`PROGRAM_NAMES` and
+    ``table``. Skill names are checked by :func:`robocritics.simulate.check_scene_ids`.
+    """
+    from .program import language  # the names of the program language (a leaf module: no cycle)
+
+    out: dict[str, str] = {name: "a builtin of robot programs" for name in language.SAFE_BUILTINS}
+    out.update({name: "a name every program sees" for name in PROGRAM_NAMES})
+    out.update({name: "a Python keyword" for name in (*keyword.kwlist, *keyword.softkwlist)})
+    out["table"] = "the table's id"
+    return out
+
+
+def _entity_id(value: Any) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"a {type(value).__name__} is not an id")
+    if not value:
+        raise ValueError("an id cannot be empty")
+    if len(value) > MAX_ID_CHARS:
+        raise ValueError(f"an id of {len(value)} characters is longer than the limit of {MAX_ID_CHARS}")
+    shown = repr(value)
+    if not value.isidentifier() or value.startswith("_"):
+        raise ValueError(
+            f"{shown} must be a Python identifier not starting with '_' (programs refer to objects by name)"
+        )
+    if unicodedata.normalize("NFKC", value) != value:
+        raise ValueError(
+            f"{shown} is not in normal form: Python reads it as {unicodedata.normalize('NFKC', value)!r} in a program"
+        )
+    what = reserved_names().get(value)
+    if what:
+        raise ValueError(f"{shown} is {what}; an object named so would shadow it in programs, choose another id")
+    return value
+
+
+EntityId = Annotated[str, BeforeValidator(_entity_id)]
+
+
+def _attributes(value: Any) -> dict[str, Any]:
+    """Free attributes as JSON-like data (str keys; str, finite numbers, bools, None, lists, dicts), bounded."""
+    if not isinstance(value, dict):
+        raise ValueError(f"a {type(value).__name__} is not an object of attributes")
+    count = 0
+
+    def plain(v: Any, path: str, depth: int) -> Any:
+        nonlocal count
+        count += 1
+        if count > MAX_ATTRIBUTE_ITEMS:
+            raise ValueError(f"{path}: more than {MAX_ATTRIBUTE_ITEMS} attribute values")
+        if v is None or isinstance(v, bool):
+            return v
+        if isinstance(v, _LongInt):
+            raise ValueError(f"{path}: a {v.digits}-digit integer; the limit is {MAX_INT_DIGITS} digits")
+        if isinstance(v, numbers.Integral):
+            if int(v).bit_length() > 64:
+                raise ValueError(f"{path}: an integer of {int(v).bit_length()} bits; the limit is 64")
+            return int(v)
+        if isinstance(v, numbers.Real):
+            if not math.isfinite(float(v)):
+                raise ValueError(f"{path}: {float(v)} is not a finite number")
+            return float(v)
+        if isinstance(v, str):
+            try:
+                return _text(v, MAX_TEXT_CHARS)
+            except ValueError as exc:
+                raise ValueError(f"{path}: {exc}") from None
+        if isinstance(v, (list, tuple, dict)):
+            if depth >= MAX_ATTRIBUTE_DEPTH:
+                raise ValueError(f"{path}: attributes nest deeper than {MAX_ATTRIBUTE_DEPTH} levels")
+            if isinstance(v, dict):
+                out = {}
+                for k, item in v.items():
+                    if not isinstance(k, str):
+                        raise ValueError(f"{path}: key {type(k).__name__} is not text")
+                    count += 1
+                    key = _text(k, MAX_ID_CHARS) if len(k) <= MAX_ID_CHARS else None
+                    if key is None:
+                        raise ValueError(f"{path}: a key of {len(k)} characters is longer than {MAX_ID_CHARS}")
+                    out[key] = plain(item, f"{path}.{key}" if key.isidentifier() else f"{path}[{key!r}]", depth + 1)
+                return out
+            return [plain(item, f"{path}[{i}]", depth + 1) for i, item in enumerate(v)]
+        raise ValueError(f"{path}: a {type(v).__name__} is not JSON-like data")
+
+    for k in value:
+        if not isinstance(k, str):
+            raise ValueError(f"attribute name {type(k).__name__} is not text")
+    out = plain(value, "", 0)
+    return out
+
+
+def _entities(value: Any) -> Any:
+    if isinstance(value, (list, tuple)) and len(value) > MAX_ENTITIES:
+        raise ValueError(f"{len(value)} entries; a scene holds at most {MAX_ENTITIES} objects and containers")
+    return value
+
+
+Attributes = Annotated[dict[str, Any], BeforeValidator(_attributes)]
 
 
 def rpy_matrix(rpy: Vec3) -> np.ndarray:
@@ -51,13 +338,6 @@ def rpy_matrix(rpy: Vec3) -> np.ndarray:
             [-sp, cp * sr, cp * cr],
         ]
     )
-
-
-def _finite(values: Any, what: str) -> Any:
-    for i, v in enumerate(values):
-        if not math.isfinite(v):
-            raise ValueError(f"[{i}]: {v} is not a finite number")
-    return values
 
 
 @dataclass(frozen=True)
@@ -79,22 +359,23 @@ class Shape:
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+    def __init__(self, **data: Any) -> None:
+        try:
+            super().__init__(**data)
+        except ValidationError as exc:
+            raise _scene_error(exc, type(self).__name__) from None
+
 
 class SceneObject(_Model):
     """A movable or fixed object on the table."""
 
-    id: str = Field(min_length=1, description="unique name, usable in programs (e.g. 'green_apple')")
+    id: EntityId = Field(description="unique name, usable in programs (e.g. 'green_apple')")
     shape: Literal["box", "cylinder", "sphere"]
-    size: tuple[float, ...] = Field(description="m; box [x,y,z], cylinder [radius,height], sphere [radius]")
+    size: tuple[Length, ...] = Field(description="m; box [x,y,z], cylinder [radius,height], sphere [radius]")
     position: Vec3 = Field(description="centre of the shape, m, base frame")
-    rpy: Vec3 = (0.0, 0.0, 0.0)
-    graspable: bool = True
-    attributes: dict[str, Any] = Field(default_factory=dict, description="free attributes: colour, ripeness, ...")
-
-    @field_validator("position", "rpy")
-    @classmethod
-    def _check_finite(cls, v: Vec3) -> Vec3:
-        return _finite(v, "value")
+    rpy: Angles3 = (0.0, 0.0, 0.0)
+    graspable: bool = Field(True, strict=True)
+    attributes: Attributes = Field(default_factory=dict, description="free attributes: colour, ripeness, ...")
 
     @model_validator(mode="after")
     def _check_size(self) -> "SceneObject":
@@ -148,25 +429,12 @@ class SceneObject(_Model):
 class Container(_Model):
     """An open-top box: a floor and four walls; the inside is free space."""
 
-    id: str = Field(min_length=1)
-    size: Vec3 = Field(description="outer extents [x, y, z], m")
+    id: EntityId
+    size: tuple[Length, Length, Length] = Field(description="outer extents [x, y, z], m")
     position: Vec3 = Field(description="centre of the outer box, m, base frame")
-    yaw: float = Field(0.0, description="rotation about z, rad")
-    wall_m: float = Field(0.005, gt=0, description="wall and floor thickness, m")
-    attributes: dict[str, Any] = Field(default_factory=dict)
-
-    @field_validator("position")
-    @classmethod
-    def _check_finite(cls, v: Vec3) -> Vec3:
-        return _finite(v, "position")
-
-    @field_validator("size")
-    @classmethod
-    def _check_size(cls, v: Vec3) -> Vec3:
-        for i, s in enumerate(v):
-            if not math.isfinite(s) or s <= 0:
-                raise ValueError(f"[{i}]: {s} is not a positive length in metres")
-        return v
+    yaw: Angle = Field(0.0, description="rotation about z, rad")
+    wall_m: Length = Field(0.005, description="wall and floor thickness, m")
+    attributes: Attributes = Field(default_factory=dict)
 
     @model_validator(mode="after")
     def _check_walls(self) -> "Container":
@@ -222,10 +490,10 @@ class Container(_Model):
 class Table(_Model):
     """The table the robot stands on; its top surface is the plane z = ``top_z``."""
 
-    top_z: float = Field(0.0, description="m")
-    size: tuple[float, float] = Field((1.6, 1.2), description="x, y extents, m")
-    center_xy: tuple[float, float] = (0.0, 0.0)
-    thickness_m: float = Field(0.04, gt=0)
+    top_z: Coordinate = Field(0.0, description="m")
+    size: tuple[Length, Length] = Field((1.6, 1.2), description="x, y extents, m")
+    center_xy: tuple[Coordinate, Coordinate] = (0.0, 0.0)
+    thickness_m: Length = 0.04
 
     def shapes(self) -> list[Shape]:
         pose = np.eye(4)
@@ -237,7 +505,7 @@ class Workspace(_Model):
     """The allowed workspace W_allowed: a sphere (m) above the plane ``min_z``."""
 
     center: Vec3 = Field((0.0, 0.0, UR3E.dh.d1), description="sphere centre, m (default: UR3e shoulder)")
-    radius_m: float = Field(0.5, gt=0, description="sphere radius, m (default: UR3e reach)")
+    radius_m: Length = Field(0.5, description="sphere radius, m (default: UR3e reach)")
 
     @property
     def volume_m3(self) -> float:
@@ -270,25 +538,23 @@ class Workspace(_Model):
 class Scene(_Model):
     """A complete task scene; see the module docstring for conventions."""
 
-    name: str = "scene"
-    description: str = ""
-    objects: list[SceneObject] = Field(default_factory=list)
-    containers: list[Container] = Field(default_factory=list)
+    name: Name = "scene"
+    description: Text = ""
+    objects: Annotated[list[SceneObject], BeforeValidator(_entities)] = Field(default_factory=list)
+    containers: Annotated[list[Container], BeforeValidator(_entities)] = Field(default_factory=list)
     table: Table = Field(default_factory=Table)
     workspace: Workspace = Field(default_factory=Workspace)
 
     @model_validator(mode="after")
     def _check_ids(self) -> "Scene":
-        seen: dict[str, str] = {"table": "table"}
+        count = len(self.objects) + len(self.containers)
+        if count > MAX_ENTITIES:
+            raise ValueError(f"containers: {count} objects and containers; a scene holds at most {MAX_ENTITIES}")
+        seen: dict[str, str] = {}
         for group in ("objects", "containers"):
             for i, item in enumerate(getattr(self, group)):
                 if item.id in seen:
                     raise ValueError(f"{group}[{i}].id: duplicate id {item.id!r} (already used by {seen[item.id]})")
-                if not item.id.isidentifier() or item.id.startswith("_"):
-                    raise ValueError(
-                        f"{group}[{i}].id: {item.id!r} must be a Python identifier not starting with '_' "
-                        "(programs refer to objects by name)"
-                    )
                 seen[item.id] = f"{group}[{i}]"
         return self
 
@@ -304,17 +570,18 @@ class Scene(_Model):
 
     @classmethod
     def load(cls, path: str | Path) -> "Scene":
-        """Load a scene from a JSON file."""
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise SceneError(f"no such scene file {str(path)!r}") from None
-        except json.JSONDecodeError as exc:
-            raise SceneError(f"{path}: not valid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+        """Load a scene from a JSON file (see the module docstring for the bounds); :class:`SceneError` if bad."""
+        text = _read_scene_file(path)
+        shown = str(path)
+        data = parse_json(text, shown)
         if not isinstance(data, dict):
-            raise SceneError(f"{path}: a scene is a JSON object, got {type(data).__name__}")
-        return cls.model_validate(data)
+            raise SceneError(f"{shown}: a scene is a JSON object, got {type(data).__name__}")
+        try:
+            return cls.model_validate(data)
+        except SceneError as exc:
+            located = SceneError(f"{shown}: {exc}")  # the file, then the field and the problem
+            located.path = exc.path
+            raise located from None
 
     @classmethod
     def builtin_names(cls) -> list[str]:
@@ -371,7 +638,36 @@ class Scene(_Model):
         return None
 
 
-def _scene_error(exc: ValidationError) -> SceneError:
+def _read_scene_file(path: str | Path) -> str:
+    """The text of scene file ``path``: a regular file of at most MAX_FILE_BYTES bytes of UTF-8."""
+    shown = repr(str(path))
+    try:
+        p = Path(path)
+        info = p.stat()
+    except FileNotFoundError:
+        raise SceneError(f"no such scene file {shown}") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the path
+        raise SceneError(f"cannot read scene file {shown}: {getattr(exc, 'strerror', None) or exc}") from None
+    except TypeError:
+        raise SceneError(f"a scene file is a path, got {type(path).__name__}") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise SceneError(f"scene file {shown} is a directory, not a file")
+    if not stat.S_ISREG(info.st_mode):
+        raise SceneError(f"scene file {shown} is not a regular file")
+    try:
+        with open(p, "rb") as f:
+            raw = f.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise SceneError(f"cannot read scene file {shown}: {exc.strerror or exc}") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise SceneError(f"scene file {shown} is larger than the limit of {MAX_FILE_BYTES:,} bytes")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"scene file {shown} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+
+
+def _scene_error(exc: ValidationError, model: str = "Scene") -> SceneError:
     err = exc.errors()[0]
     path = ""
     for part in err["loc"]:
@@ -393,4 +689,4 @@ def _scene_error(exc: ValidationError) -> SceneError:
     more = len(exc.errors()) - 1
     if more:
         message += f" (and {more} more problem{'s' if more > 1 else ''})"
-    return SceneError(message, path=path or "scene")
+    return SceneError(message, path=path or model.lower())

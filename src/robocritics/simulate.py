@@ -13,26 +13,25 @@ The pipeline, one stage after another (each a plain function of its inputs):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from .errors import PlanningError, ProgramError
+from .errors import ProgramError, SceneError
 
 if TYPE_CHECKING:  # pragma: no cover
     from .program.plan import Plan
     from .robot.model import Robot
-    from .robot.planner import Event, PlannerSettings
+    from .robot.planner import Event, MotionBudgetError, PlannerSettings
     from .scene import Scene
     from .trajectory import Trajectory
 
-__all__ = ["simulate", "Execution", "Event", "PlannerSettings"]
+__all__ = ["simulate", "check_scene_ids", "Execution", "Event", "PlannerSettings", "MotionBudgetError"]
 
 
 def __getattr__(name: str) -> Any:
     # The planner's types, re-exported without importing the planner (and Pinocchio)
     # when only `robocritics` is imported: `robocritics.simulate` is imported eagerly.
-    if name in ("Event", "PlannerSettings"):
+    if name in ("Event", "PlannerSettings", "MotionBudgetError"):
         from .robot import planner
 
         return getattr(planner, name)
@@ -68,6 +67,26 @@ class Execution:
         holder = self.final_scene.container_holding(obj_id)
         return holder is not None and holder.id == container_id
 
+def check_scene_ids(scene: Scene) -> None:
+    """Refuse a scene whose object or container ids are skill names (``home``, ``wait``, ...).
+
+    In a program an object is a variable named by its id, so an object named ``home``
+    would hide the skill ``home()``. :class:`~robocritics.Scene` itself refuses the
+    names of the program language (:func:`robocritics.scene.reserved_names`); the
+    skills are built on scenes, so their names are checked here, where a scene meets
+    them. Raises :class:`SceneError` naming the field (``objects[2].id``).
+    """
+    from .program.skills import SKILLS
+
+    for group in ("objects", "containers"):
+        for i, item in enumerate(getattr(scene, group)):
+            if item.id in SKILLS:
+                raise SceneError(
+                    f"{item.id!r} is a skill; an object named so would hide it in programs, choose another id",
+                    path=f"{group}[{i}].id",
+                )
+
+
 def simulate(
     program: str | Plan,
     scene: Scene,
@@ -80,19 +99,28 @@ def simulate(
 
     The motion starts at ``start_q`` (joint angles, rad; e.g. where a real arm is
     now, ``URArm.actual_q()``) or, by default, at the robot's home pose
-    ``robot.home_q``. ``sample_rate_hz`` is the trajectory's sample rate [Hz].
+    ``robot.home_q``. ``sample_rate_hz`` is the trajectory's sample rate [Hz], in
+    [25, 500] (:data:`~robocritics.robot.motion.MIN_SAMPLE_RATE_HZ`,
+    :data:`~robocritics.robot.motion.MAX_SAMPLE_RATE_HZ`: sparser sampling hides
+    fast motion from the critics, denser is more than a controller executes).
 
-    Raises :class:`ProgramError` for a program the sandbox rejects and
+    Raises :class:`SceneError` for a scene whose ids hide skills (:func:`check_scene_ids`),
+    :class:`ProgramError` for a program the sandbox rejects and
     :class:`PlanningError` (with the program line) for a motion that cannot be
-    planned, such as an unreachable target.
+    planned, such as an unreachable target, a speed below 1 % or a sample rate
+    out of range. A motion beyond the budget of ``settings`` (5 min, 75,000
+    samples, 400 MB by default; see :class:`PlannerSettings`) raises
+    :class:`MotionBudgetError`, a PlanningError, before its samples are made.
     """
     from .program.plan import Plan
     from .program.sandbox import run_program
     from .robot.model import Robot
+    from .robot.motion import check_sample_rate
     from .robot.planner import Planner, PlannerSettings
 
-    if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-        raise PlanningError(f"sample_rate_hz must be a positive number, got {sample_rate_hz}")
+    sample_rate_hz = check_sample_rate(sample_rate_hz)
+    if not isinstance(program, Plan):  # a program refers to objects by id
+        check_scene_ids(scene)
     robot = robot or Robot.ur3e()
     plan = program if isinstance(program, Plan) else run_program(program, scene)
     planner = Planner(scene, robot, sample_rate_hz, settings or PlannerSettings(), start_q=start_q)

@@ -14,7 +14,19 @@ Each call becomes motion:
   the TCP), ``open_gripper`` releases it and it settles on what is below it
   (a container floor, another object, or the table);
 * ``reduce_speed``/``set_speed`` scale every later move's limits as a time
-  stretch (see :mod:`robocritics.robot.motion`).
+  stretch (see :mod:`robocritics.robot.motion`); the slowest speed is
+  :data:`~robocritics.robot.motion.MIN_SPEED_FRACTION` (1 %).
+
+The motion budget
+-----------------
+A legal program can still ask for impossible motion (``wait(10)`` two thousand
+times, everything at 1 % speed). Every piece of motion is timed first and
+checked against the budget of :class:`PlannerSettings` *before* a sample is
+made: the total duration (``max_motion_s``, 5 min), the sample count
+(``max_samples``) and the estimated memory of the trajectory built from them
+(``max_trajectory_bytes``, see :func:`trajectory_bytes_per_sample`). A limit that
+is hit raises :class:`MotionBudgetError` naming the program line, e.g.
+``line 2: wait(seconds=10): the program's motion lasts 5.6 h; the limit is 5 min``.
 
 Every sample records the index of the step that produced it, and each step its
 source line and its *intended contacts*: the object being grasped or released
@@ -25,19 +37,38 @@ does not count as collisions.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
 from ..errors import PlanningError
 from ..program.plan import Plan, SkillCall
-from ..scene import Container, Scene, SceneObject, rpy_matrix
+from ..scene import MAX_COORD_M, Container, Scene, SceneObject, rpy_matrix
 from ..trajectory import Step
 from .model import LIMIT_TOLERANCE_RAD, Robot, fingers_down
-from .motion import JOINT_SPEED_MARGIN, Limits, Segment, sample_times, time_joint_move, time_path_1d
+from .motion import (
+    JOINT_SPEED_MARGIN,
+    MIN_SPEED_FRACTION,
+    Limits,
+    Segment,
+    check_sample_rate,
+    check_speed_fraction,
+    profile_joint_move,
+    profile_path_1d,
+    sample_count,
+    sample_times,
+)
 
-__all__ = ["Planner", "PlannerSettings", "Event", "plan_approach", "checked_start_q"]
+__all__ = [
+    "Planner",
+    "PlannerSettings",
+    "MotionBudgetError",
+    "Event",
+    "plan_approach",
+    "checked_start_q",
+    "trajectory_bytes_per_sample",
+]
 
 # Numerical tolerances (the physical choices are in PlannerSettings; joint limits use
 # robot.model.LIMIT_TOLERANCE_RAD):
@@ -50,6 +81,64 @@ SAME_POINT_M = 1e-9
 ON_SURFACE_M = 1e-6
 #: |dq/ds| floor [rad/m] on a Cartesian line: a joint that does not move imposes no speed cap.
 _STILL_JOINT_RAD_PER_M = 1e-12
+#: Longest straight line [m] worth solving IK along: the diagonal of the scene's coordinate bound. A longer one
+#: cannot be reached by any arm a scene holds, and its dense-IK grid would be millions of points.
+MAX_LINE_M = 2 * math.sqrt(3) * MAX_COORD_M
+
+# Peak memory of building a trajectory, per sample [bytes] (see trajectory_bytes_per_sample). Measured with
+# tracemalloc on the UR3e in the built-in scenes and in scenes of 0-80 objects, 0-80 containers, carrying or
+# not (4.3 to 23 kB per sample), fitted as fixed + per kernel pair + per reported pair and rounded up, so the
+# estimate stays 15-40 % above every measurement (tests/test_motion_budget.py checks it).
+_BYTES_PER_SAMPLE_FIXED = 2_560  # q, time, opening, step, attached, planner bookkeeping
+_BYTES_PER_FRAME = 16 * 8  # a 4x4 float64 link pose
+_BYTES_PER_KERNEL_PAIR = 20  # the distance of one (capsule or carried object, shape) pair, with its temporaries
+_BYTES_PER_REPORTED_PAIR = 8  # one proximity column (a minimum over an entity's shapes)
+_BYTES_PER_CARRIED_POSE = 2 * 16 * 8  # a carried object's 4x4 pose, and its temporary
+
+
+def trajectory_bytes_per_sample(robot: Robot, scene: Scene, carried: int = 0) -> int:
+    """Upper estimate of the peak memory [bytes] one sample costs while :func:`robocritics.simulate` builds the
+    trajectory: link frames (FK), the proximity kernel's distances of every self pair and (robot capsule, scene
+    shape) pair, those of ``carried`` objects the gripper carries against every shape, the proximity columns
+    (one per pair of entities) and the carried objects' poses.
+    """
+    shapes = len(scene.shapes())
+    entities = len(scene.objects) + len(scene.containers) + 1  # and the table
+    movers = len(robot.capsule_names) + carried
+    return (
+        _BYTES_PER_SAMPLE_FIXED
+        + _BYTES_PER_FRAME * len(robot.frame_names)
+        + _BYTES_PER_KERNEL_PAIR * (len(robot.self_pairs) + movers * shapes)
+        + _BYTES_PER_REPORTED_PAIR * (len(robot.self_pairs) + movers * entities)
+        + _BYTES_PER_CARRIED_POSE * carried
+    )
+
+
+class MotionBudgetError(PlanningError):
+    """A program's motion exceeds the motion budget of :class:`PlannerSettings`.
+
+    ``limit`` names the PlannerSettings field that was exceeded (``"max_motion_s"``,
+    ``"max_samples"`` or ``"max_trajectory_bytes"``); ``line`` is the program line of
+    the call that passed it.
+    """
+
+    def __init__(self, message: str, line: int = 0, limit: str = ""):
+        super().__init__(message, line)
+        self.limit = limit
+
+    def __reduce__(self) -> tuple:
+        return (type(self), (self.reason, self.line, self.limit))
+
+
+def format_duration(seconds: float) -> str:
+    """A duration for people: ``42.5 s``, ``12.5 min``, ``5.6 h``."""
+    if not math.isfinite(seconds):
+        return f"{seconds} s"
+    if seconds >= 7200:
+        return f"{seconds / 3600:.1f} h"
+    if seconds >= 120:
+        return f"{seconds / 60:.3g} min"
+    return f"{seconds:.3g} s"
 
 
 def checked_start_q(robot: Robot, start_q) -> np.ndarray:
@@ -78,21 +167,39 @@ def plan_approach(
     *,
     speed_fraction: float = 0.1,
     sample_rate_hz: float = 125.0,
+    settings: "PlannerSettings | None" = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A slow, jerk-limited joint move from ``start_q`` to ``goal_q`` (rest to rest).
 
     Returns ``(q (T, n) rad, time (T,) s)`` starting at 0 and ending exactly at
     ``goal_q``; the caller builds the trajectory (``robot.trajectory(...)``) and
     critiques it like any other motion. ``speed_fraction`` scales the robot's
-    limits as in ``set_speed`` (velocity by f, acceleration by f², jerk by f³).
+    limits as in ``set_speed`` (velocity by f, acceleration by f², jerk by f³), in
+    [MIN_SPEED_FRACTION, 1]; ``sample_rate_hz`` lies in the range of
+    :func:`~robocritics.robot.motion.check_sample_rate`. The move must fit the
+    motion budget of ``settings`` (default :class:`PlannerSettings`), checked before
+    it is sampled (:class:`MotionBudgetError`).
     """
-    if not (0 < speed_fraction <= 1):
-        raise PlanningError(f"speed_fraction must be in (0, 1], got {speed_fraction}")
-    if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-        raise PlanningError(f"sample_rate_hz must be a positive number, got {sample_rate_hz}")
+    speed_fraction = check_speed_fraction(speed_fraction, "speed_fraction")
+    sample_rate_hz = check_sample_rate(sample_rate_hz)
+    settings = settings or PlannerSettings()
     start, goal = checked_start_q(robot, start_q), checked_start_q(robot, goal_q)
     limits = Limits(robot.velocity_limits, robot.acceleration_limits, robot.jerk_limits)
-    seg = time_joint_move(start, goal, limits, speed_fraction, sample_rate_hz)
+    profile = profile_joint_move(start, goal, limits, speed_fraction)
+    if not profile.duration_s <= settings.max_motion_s:
+        raise MotionBudgetError(
+            f"the approach lasts {format_duration(profile.duration_s)} at {speed_fraction * 100:g} % of full speed; "
+            f"the limit is {format_duration(settings.max_motion_s)} (PlannerSettings.max_motion_s)",
+            limit="max_motion_s",
+        )
+    samples = profile.samples_needed(sample_rate_hz) + 1
+    if samples > settings.max_samples:
+        raise MotionBudgetError(
+            f"the approach needs {samples:,} samples at {sample_rate_hz:g} Hz; the limit is {settings.max_samples:,} "
+            "(PlannerSettings.max_samples)",
+            limit="max_samples",
+        )
+    seg = profile.sample(sample_rate_hz)
     # ruckig samples up to, not always at, the end: close the move on the goal itself
     # (no motion at all: the goal one sample period after the start)
     if seg.duration_s > 0 and seg.duration_s - float(seg.time[-1]) < MIN_SAMPLE_GAP_S:
@@ -121,6 +228,29 @@ class PlannerSettings:
     grasp_tip_gap_m: float = 0.01  # how far short of an object's near face the fingertips may stop and still grasp it
     stack_footprint_fraction: float = 0.9  # a released object rests on another if its centre is within this share of the larger radius
     stack_gap_m: float = 0.02  # ...and the other's top is at most this above the released object's bottom
+    # the motion budget (checked before any sample is made; see the module docstring)
+    max_motion_s: float = 300.0  # total motion of one program: 5 min, five times the longest example program's
+    max_samples: int = 75_000  # samples of one trajectory: 10 min at the default 125 Hz, 2.5 min at 500 Hz
+    max_trajectory_bytes: int = 400_000_000  # estimated peak memory of building the trajectory (400 MB)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
+                raise ValueError(f"PlannerSettings.{f.name} must be a positive finite number, got {value!r}")
+
+
+#: Pieces of motion timed (not sampled) after the motion budget is passed, to say how long the program would
+#: last: each is an IK solve and a ruckig profile or less (~0.1 ms), so the estimate ends well within 1 s.
+_TIMING_WORK = 4_000
+
+
+class _StopTiming(Exception):
+    """The over-budget timing of the rest of a program used up _TIMING_WORK."""
+
+
+#: Skills whose duration does not depend on the arm's pose or speed.
+_FIXED_TIME_SKILLS = frozenset({"wait", "open_gripper", "close_gripper", "set_speed", "reduce_speed", "avoid_collision"})
 
 
 @dataclass(frozen=True)
@@ -146,7 +276,7 @@ class Planner:
     ):
         self.scene = scene
         self.robot = robot
-        self.rate = float(sample_rate_hz)
+        self.rate = check_sample_rate(sample_rate_hz)
         self.settings = settings
         self.limits = Limits(robot.velocity_limits, robot.acceleration_limits, robot.jerk_limits)
         self.q = robot.home_q.copy() if start_q is None else checked_start_q(robot, start_q)
@@ -174,6 +304,87 @@ class Planner:
         self.sample_count = 0
         # poses of objects at rest, changing when released: (object id, first sample, pose)
         self.rest_changes: list[tuple[str, int, np.ndarray]] = []
+        # the call being planned (its line goes into budget errors)
+        self.call: SkillCall | None = None
+        # once the motion passes max_motion_s: (the call that passed it, the motion before it [s]); the rest of
+        # the program is then only timed, not sampled, to say how long it would last
+        self.passed: tuple[SkillCall, float, float] | None = None  # (call, motion before it [s], speed fraction)
+        self.timing_work = 0
+
+    # --- the motion budget --------------------------------------------------------------
+
+    def admit(self, duration_s: float, samples: int) -> bool:
+        """Check the motion budget for ``samples`` more samples spanning ``duration_s`` more seconds.
+
+        Called before those samples are made. Returns whether to make them: ``False`` once the motion is
+        longer than ``max_motion_s`` (the rest of the program is then only timed, and :meth:`run` raises
+        :class:`MotionBudgetError` at the end). The sample and memory limits raise at once, naming the
+        call's line.
+        """
+        s, call = self.settings, self.call
+        where = f"{call.describe()}: " if call else ""
+        line = call.line if call else 0
+        total_s = self.t0 + duration_s
+        if not math.isfinite(total_s):
+            raise MotionBudgetError(f"{where}the motion would last {duration_s} s, not a finite time", line, "max_motion_s")
+        if self.passed is None and total_s > s.max_motion_s and call is not None:
+            self.passed = (call, self.t0, self.speed)
+        if self.passed is not None:
+            self.count_timing_work()
+            return False
+        total_n = self.sample_count + samples + 1  # and the closing sample
+        if total_n > s.max_samples:
+            raise MotionBudgetError(
+                f"{where}the trajectory needs more than {s.max_samples:,} samples ({total_n:,} by the end of this call, "
+                f"{format_duration(total_s)} of motion at {self.rate:g} Hz); the limit is {s.max_samples:,} "
+                "(PlannerSettings.max_samples). Shorten the motion or sample it more sparsely.",
+                line,
+                "max_samples",
+            )
+        carried = len({c[0] for c in self.carry})
+        per_sample = trajectory_bytes_per_sample(self.robot, self.scene, carried)
+        if total_n * per_sample > s.max_trajectory_bytes:
+            raise MotionBudgetError(
+                f"{where}building the trajectory would take about {total_n * per_sample / 1e6:,.0f} MB "
+                f"({total_n:,} samples at {per_sample / 1e3:.1f} kB each for {len(self.scene.shapes())} scene shapes); "
+                f"the limit is {s.max_trajectory_bytes / 1e6:,.0f} MB (PlannerSettings.max_trajectory_bytes). "
+                "Shorten the motion, sample it more sparsely or simplify the scene.",
+                line,
+                "max_trajectory_bytes",
+            )
+        return True
+
+    def count_timing_work(self) -> None:
+        """One unit of over-budget timing work (an IK solve or a timed piece); stop when there was enough."""
+        self.timing_work += 1
+        if self.timing_work > _TIMING_WORK:
+            raise _StopTiming
+
+    def skip(self, duration_s: float) -> None:
+        """Time passes without samples (the motion is over budget and only timed)."""
+        self.t0 += duration_s
+
+    def _too_long(self, plan: Plan, complete: bool) -> MotionBudgetError:
+        """The error for a motion that passed ``max_motion_s``; ``complete``: every call was timed to the end."""
+        call, before, speed = self.passed
+        limit = self.settings.max_motion_s
+        waits = sum(float(c.args["seconds"]) for c in plan.calls if c.skill == "wait")
+        if call.skill not in _FIXED_TIME_SKILLS and speed < 1:
+            hint = (
+                f"The program moves at {speed * 100:.3g} % of full speed here: raise the speed "
+                "(reduce_speed(100) is full speed) or make fewer moves."
+            )
+        elif waits > limit / 2:
+            hint = f"Its waits alone add up to {format_duration(waits)}: wait less."
+        else:
+            hint = "Make fewer moves or waits (a loop that repeats too often?)."
+        return MotionBudgetError(
+            f"{call.describe()}: the program's motion lasts {'' if complete else 'at least '}"
+            f"{format_duration(self.t0)}; the limit is {format_duration(limit)} (PlannerSettings.max_motion_s), "
+            f"passed at this call, {format_duration(before)} into the motion. {hint}",
+            call.line,
+            "max_motion_s",
+        )
 
     # --- geometry helpers ---------------------------------------------------------------
 
@@ -196,6 +407,8 @@ class Planner:
         return np.asarray(call.args["target"], float)
 
     def ik(self, point: np.ndarray, call: SkillCall, yaw: float | None = None, seed=None) -> np.ndarray:
+        if self.passed is not None:
+            self.count_timing_work()
         try:
             return self.robot.ik(point, seed=self.q if seed is None else seed, yaw_rad=self.yaw if yaw is None else yaw)
         except PlanningError as exc:
@@ -298,9 +511,12 @@ class Planner:
     # --- moves ----------------------------------------------------------------------------
 
     def joint_move(self, goal: np.ndarray, step: int) -> None:
-        seg = time_joint_move(self.q, goal, self.limits, self.speed, self.rate)
-        if seg.duration_s > 0:
-            self.emit(seg, step)
+        profile = profile_joint_move(self.q, goal, self.limits, self.speed)
+        if profile.duration_s > 0:
+            if self.admit(profile.duration_s, profile.samples_needed(self.rate)):
+                self.emit(profile.sample(self.rate), step)
+            else:
+                self.skip(profile.duration_s)
         self.q = np.asarray(goal, float)
 
     def routed_points(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
@@ -351,6 +567,11 @@ class Planner:
         length = float(np.linalg.norm(goal - start))
         if length < SAME_POINT_M:
             return
+        if not length <= MAX_LINE_M:
+            raise PlanningError(
+                f"{call.describe()}: a straight line of {length:.4g} m is out of reach (the longest is {MAX_LINE_M:.3g} m)",
+                line=call.line,
+            )
         direction = (goal - start) / length
         # dense IK to bound |dq/ds| so the timed line respects every joint speed limit
         n_grid = max(2, int(math.ceil(length / self.settings.line_step_m)) + 1)
@@ -372,7 +593,13 @@ class Planner:
         v = min(self.settings.linear_speed_mps, joint_cap) * f
         a = self.settings.linear_accel_mps2 * f**2
         j = self.settings.linear_jerk_mps3 * f**3
-        s, times, duration = time_path_1d(length, v, a, j, self.rate)
+        profile = profile_path_1d(length, v, a, j)
+        if not self.admit(profile.duration_s, profile.samples_needed(self.rate)):
+            self.skip(profile.duration_s)
+            self.q = q_grid[-1]
+            return
+        path = profile.sample(self.rate)
+        s, times, duration = path.q[:, 0], path.time, path.duration_s
         # q(s) between the dense-IK grid points by a cubic spline: its deviation from
         # the exact line shrinks as line_step_m^4
         q = CubicSpline(grid, q_grid, axis=0)(s)
@@ -380,13 +607,22 @@ class Planner:
         self.q = q_grid[-1]
 
     def gripper_move(self, target_opening: float, step: int) -> None:
+        if not self.admit(self.settings.gripper_time_s, sample_count(self.settings.gripper_time_s, self.rate)):
+            self.skip(self.settings.gripper_time_s)
+            self.opening = target_opening
+            return
         times = sample_times(self.settings.gripper_time_s, self.rate)
         opening = self.opening + (target_opening - self.opening) * np.clip(times / self.settings.gripper_time_s, 0, 1)
         self.emit(Segment(np.repeat(self.q[None, :], len(times), axis=0), times, self.settings.gripper_time_s), step, opening)
         self.opening = target_opening
 
     def hold(self, seconds: float, step: int) -> None:
-        if seconds <= 0:
+        if not seconds > 0:
+            if seconds <= 0:
+                return
+            raise PlanningError(f"wait: seconds must be a number, got {seconds}", line=self.call.line if self.call else 0)
+        if not self.admit(seconds, sample_count(seconds, self.rate)):
+            self.skip(seconds)
             return
         times = sample_times(seconds, self.rate)
         self.emit(Segment(np.repeat(self.q[None, :], len(times), axis=0), times, seconds), step)
@@ -394,11 +630,23 @@ class Planner:
     # --- the skills ---------------------------------------------------------------------
 
     def run(self, plan: Plan) -> None:
-        for call in plan.calls:
-            handler = getattr(self, f"do_{call.skill}", None)
-            if handler is None:
-                raise PlanningError(f"the planner does not know the skill {call.skill!r}", line=call.line)
-            handler(call)
+        """Plan every call of ``plan``; :class:`MotionBudgetError` if its motion is longer than ``max_motion_s``."""
+        try:
+            for call in plan.calls:
+                handler = getattr(self, f"do_{call.skill}", None)
+                if handler is None:
+                    raise PlanningError(f"the planner does not know the skill {call.skill!r}", line=call.line)
+                self.call = call
+                handler(call)
+        except (_StopTiming, PlanningError) as exc:
+            if self.passed is None:
+                if isinstance(exc, _StopTiming):  # pragma: no cover - only raised once passed
+                    raise PlanningError("the motion budget stopped planning") from None
+                raise
+            # the motion was already over budget: that is the first problem, however much is left
+            raise self._too_long(plan, complete=False) from None
+        if self.passed is not None:
+            raise self._too_long(plan, complete=True)
 
     def _move_contacts(self, goal_point: np.ndarray | None, call: SkillCall) -> set[str]:
         contacts = self.contacts_at(self.tcp())
@@ -455,7 +703,18 @@ class Planner:
         self.hold(float(call.args["seconds"]), step)
 
     def do_set_speed(self, call: SkillCall) -> None:
-        self.speed = float(call.args["fraction"])
+        fraction = call.args["fraction"]
+        try:
+            self.speed = check_speed_fraction(fraction)
+        except PlanningError as exc:
+            if call.skill == "reduce_speed" and isinstance(fraction, (int, float)):
+                reason = (
+                    f"percent must lie in [{MIN_SPEED_FRACTION * 100:g}, 100], got {fraction * 100:g} "
+                    f"(the slowest speed is {MIN_SPEED_FRACTION * 100:g} % of full speed)"
+                )
+            else:
+                reason = exc.reason
+            raise PlanningError(f"{call.describe()}: {reason}", line=call.line) from None
         step = self.add_step(call)
         self.event("speed", step, call, f"speed set to {self.speed * 100:.0f} % of full speed")
 
@@ -515,6 +774,8 @@ class Planner:
     # --- assembly --------------------------------------------------------------------------
 
     def finish(self) -> tuple[np.ndarray, ...]:
+        # every object carried is known now: the whole trajectory against the memory budget
+        self.admit(0.0, 0)
         # the final configuration closes the trajectory
         self.q_parts.append(self.q[None, :])
         self.t_parts.append(np.array([self.t0]))
