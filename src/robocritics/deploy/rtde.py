@@ -49,6 +49,7 @@ from enum import IntEnum
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from robocritics.errors import RTDEError
+from robocritics.robot.arms import UR3E
 
 __all__ = [
     "RTDE_PORT",
@@ -74,8 +75,8 @@ log = logging.getLogger(__name__)
 RTDE_PORT = 30004
 """Default RTDE TCP port of a UR controller."""
 
-MAX_FREQUENCY_HZ = 500.0
-"""Highest output frequency of an e-series controller [Hz] (CB3: 125 Hz)."""
+MAX_FREQUENCY_HZ = UR3E.control_rate_hz
+"""Highest output frequency of an e-series controller [Hz]: one package per control cycle (CB3: 125 Hz)."""
 
 V1_FREQUENCY_HZ = 125.0
 """Output frequency of protocol version 1, which cannot choose one [Hz]."""

@@ -61,6 +61,7 @@ from robocritics.deploy.dashboard import DashboardClient
 from robocritics.deploy.rtde import MessageLevel, RobotMode, RuntimeState, SafetyMode, mode_name
 from robocritics.deploy.urscript import INPUT_FIELDS, OUTPUT_FIELDS, ProgramState, send_program, setpoint
 from robocritics.errors import DeployError, RTDEError
+from robocritics.robot.arms import UR3E
 from robocritics.trajectory import Trajectory
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -210,7 +211,7 @@ class StreamPlan:
 # ---------------------------------------------------------------------------- resampling
 
 
-def resample(trajectory: Trajectory, rate_hz: float = 500.0) -> StreamPlan:
+def resample(trajectory: Trajectory, rate_hz: float = UR3E.control_rate_hz) -> StreamPlan:
     """Resample ``trajectory`` (physical time axis) to ``rate_hz`` setpoints.
 
     Setpoint k is at ``k / rate_hz`` s from the first sample; the last setpoint is
@@ -384,8 +385,8 @@ class _Stream:
             if m.level <= MessageLevel.WARNING:
                 run.messages.append(f"{m.level_name} [{m.source}] {m.message}")
 
-    def _check(self, run: _Run, monitor: _DashboardMonitor | None, now: float, rate_hz: float,
-               silence_timeout_s: float, min_rate: float) -> None:
+    def _check(self, run: _Run, monitor: _DashboardMonitor | None, now: float, silence_timeout_s: float,
+               min_rate: float) -> None:
         """Raise _Fault if anything is wrong; process every data package received since the last check."""
         rtde = self.arm.rtde
         if monitor is not None and monitor.fault is not None:
@@ -400,7 +401,6 @@ class _Stream:
         for st in packages:
             run.packages += 1
             run.last_state = st
-            self._count_rate(run, float(st["timestamp"]), min_rate)
             if st["safety_mode"] != SafetyMode.NORMAL:
                 raise _safety_fault(st["safety_mode"])
             if st["robot_mode"] != RobotMode.RUNNING:
@@ -435,6 +435,7 @@ class _Stream:
                     f"tracking error {err:.4f} rad > max_tracking_error_rad {run.max_tracking_error_rad:g}: actual_q is "
                     f"that far from every setpoint sent in the last {run.window} cycles",
                 )
+            self._count_rate(run, float(st["timestamp"]), min_rate)
         if run.last_check and now - run.last_check > 0.5 * silence_timeout_s:
             # this process was not running (a loaded host): what did not arrive meanwhile is no verdict on the
             # controller; it gets silence_timeout_s from now
@@ -496,7 +497,7 @@ class _Stream:
         resync_after_s = RESYNC_AFTER_PERIODS * period
 
         def check(now: float) -> None:
-            self._check(run, monitor, now, rate, silence_timeout_s, min_data_rate_fraction)
+            self._check(run, monitor, now, silence_timeout_s, min_data_rate_fraction)
 
         try:
             # ---- hold the first setpoint, send the program, wait until it streams with our session
@@ -726,7 +727,7 @@ class _Stream:
                 confirmed = False
                 while time.monotonic() < t_end:
                     self._send(run, q, run.last_opening, done=True)
-                    time.sleep(0.002)
+                    time.sleep(UR3E.control_period_s)
                     if rtde.age_s() > silence_timeout_s:
                         continue
                     st = rtde.latest()

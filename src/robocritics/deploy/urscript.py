@@ -196,7 +196,8 @@ def streaming_program(
     checks = [
         (0.03 <= lookahead_time_s <= 0.2, f"lookahead_time_s must be in [0.03, 0.2] s, got {lookahead_time_s}"),
         (100 <= gain <= 2000, f"gain must be in [100, 2000], got {gain}"),
-        (0.002 <= servo_t_s <= 0.2, f"servo_t_s must be in [0.002, 0.2] s, got {servo_t_s}"),
+        (UR3E.control_period_s <= servo_t_s <= 0.2,
+         f"servo_t_s must be in [{UR3E.control_period_s:g}, 0.2] s, got {servo_t_s}"),
         (0 < watchdog_min_hz <= 1.0 / servo_t_s, f"watchdog_min_hz must be in (0, {1.0 / servo_t_s:g}] Hz, got {watchdog_min_hz}"),
         (0 < stop_deceleration_rad_s2 <= 40, f"stop_deceleration_rad_s2 must be in (0, 40] rad/s², got {stop_deceleration_rad_s2}"),
         (0 < max_start_deviation_rad <= 0.5, f"max_start_deviation_rad must be in (0, 0.5] rad, got {max_start_deviation_rad}"),
