@@ -21,6 +21,7 @@ from llm_server import Fail, hashed_embedding
 
 from robocritics.errors import LLMError, RoboCriticsError
 from robocritics.llm.bm25 import bm25_scores, tokenize
+from robocritics.llm.limits import MAX_STORED_PROGRAM_CHARS
 from robocritics.llm.memory import Interaction, InteractionMemory
 
 pytestmark = pytest.mark.usefixtures("clean_llm_env")
@@ -462,7 +463,7 @@ def test_several_processes_writing_one_file(tmp_path):
 @pytest.mark.parametrize("kill_after_s", [0.0, 0.004, 0.013])
 def test_a_killed_writer_loses_nothing_committed(tmp_path, kill_after_s):
     path = tmp_path / "killed.sqlite"
-    size = 2_000_000  # big rows, so the kill is likely to land inside a write
+    size = MAX_STORED_PROGRAM_CHARS - 20  # big rows (the largest stored whole), so the kill may land inside a write
     writer = run_writer(path, "victim", 10_000, size)
     committed: list[tuple[int, int]] = []
     assert writer.stdout is not None

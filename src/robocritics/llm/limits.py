@@ -52,8 +52,9 @@ MAX_JSON_DEPTH = 64
 #: Arrays and objects in one JSON reply: 64 embeddings need ~200; each empty one costs ~60 bytes of memory.
 MAX_JSON_CONTAINERS = 100_000
 
-#: Characters of one chat reply: about twice the longest program the sandbox accepts, plus prose.
-MAX_REPLY_CHARS = 200_000
+#: Characters of one chat reply: the longest program the sandbox accepts and some prose around it; finding the
+#: program in a reply this long costs at most a few parses of it (about a second of CPU at worst).
+MAX_REPLY_CHARS = 120_000
 
 # --- what the loop sends and stores ------------------------------------------------------------------
 

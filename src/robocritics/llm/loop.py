@@ -41,7 +41,13 @@ History: the loop keeps the whole conversation (:attr:`Loop.history`) but
 sends the model only the system prompt plus the last ``max_history_messages``
 user/assistant messages (always starting at a user message); when the task
 message falls out of that window, the task is restated in the first message
-that is sent. Programs and feedback of older turns remain available to the
+that is sent.
+
+Bounds: a task longer than ``llm.limits.MAX_TASK_CHARS`` is refused
+(:class:`~robocritics.llm.prompts.PromptError`); every message the loop sends
+or keeps in its history is at most ``MAX_MESSAGE_CHARS`` long (a longer reply
+is kept as its program, or cut, saying so); all text is cleaned of lone
+surrogates before it is sent, stored or handed to ``on_attempt``. Programs and feedback of older turns remain available to the
 model through the fix prompt (which quotes the current program) and the memory.
 """
 
@@ -57,9 +63,11 @@ from typing import TYPE_CHECKING, Any, Literal
 from ..errors import CriticError, PlanningError, ProgramError, RoboCriticsError, TrajectoryError
 from ..report import format_score
 from .client import ChatModel
+from .limits import MAX_MESSAGE_CHARS, clean_text, cut_text
 from .memory import Interaction, InteractionMemory
 from .prompts import (
     REVIEW_INSTRUCTION,
+    check_task,
     extract_code,
     fix_prompt,
     request_prompt,
@@ -444,9 +452,7 @@ class Loop:
     # --- turns -----------------------------------------------------------------------------
 
     def _request(self, text: str) -> Attempt:
-        if not isinstance(text, str) or not text.strip():
-            raise ValueError("request needs a task description")
-        text = text.strip()
+        text = check_task(text)  # PromptError (a ValueError) for an empty or overlong task
         examples = self._retrieve(text)
         previous = (self.task, self.examples, self.system, self._task_index)
         self.task = text
@@ -487,11 +493,12 @@ class Loop:
             parts.append(self._pending_error)
         if message:
             parts.append(message)
-        content = "\n\n".join(parts)
+        content = cut_text(clean_text("\n\n".join(parts)), MAX_MESSAGE_CHARS)
         messages = [*self.messages(), {"role": "user", "content": content}]
         reply = self.model.complete(messages, **self.model_options)  # LLMError propagates; nothing changed yet
         if not isinstance(reply, str):
             reply = "" if reply is None else str(reply)
+        reply = clean_text(reply)
         saved = (list(self._notes), self._pending_error, self.current)
         self._notes = []
         self._pending_error = None
@@ -503,6 +510,7 @@ class Loop:
             del self.history[-2:]
             self._notes, self._pending_error, self.current = saved
             raise
+        self.history[-1]["content"] = _kept_reply(reply, attempt.program if attempt.changed else None)
         self.attempts.append(attempt)
         if self.on_attempt is not None:
             self.on_attempt(attempt)
@@ -642,6 +650,18 @@ class Loop:
                 f"(Earlier messages were left out.) The task: {self.task}\n\n" + tail[0]["content"]
             )
         return tail
+
+
+def _kept_reply(reply: str, program: str | None) -> str:
+    """What the history keeps of a model reply: the reply, or for one over ``MAX_MESSAGE_CHARS`` its program
+    (when that fits) or its start, saying what was left out."""
+    if len(reply) <= MAX_MESSAGE_CHARS:
+        return reply
+    if program is not None:
+        kept = f"```python\n{program}```\n[{len(reply):,}-character reply; only its program is repeated here]"
+        if len(kept) <= MAX_MESSAGE_CHARS:
+            return kept
+    return cut_text(reply, MAX_MESSAGE_CHARS)
 
 
 def _better(a: Interaction, b: Interaction) -> bool:

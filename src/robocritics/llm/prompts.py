@@ -22,6 +22,7 @@ the model's "PROGRAM COMPLETE".
 from __future__ import annotations
 
 import ast
+import heapq
 import math
 import re
 import textwrap
@@ -29,8 +30,9 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from ..errors import CriticError, PlanningError, ProgramError, RoboCriticsError
+from ..errors import CriticError, LLMError, PlanningError, ProgramError, RoboCriticsError
 from ..report import format_score
+from .limits import MAX_FEEDBACK_CHARS, MAX_REPLY_CHARS, MAX_TASK_CHARS, clean_text, cut_text
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic import Report
@@ -38,6 +40,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "COMPLETE_MARKER",
+    "PromptError",
     "REVIEW_INSTRUCTION",
     "critic_rules",
     "describe_scene",
@@ -69,6 +72,14 @@ _FULL_LISTING_LINES = 80
 _FLAGGED_CONTEXT_LINES = 2
 # A reply without code is quoted this far back to the model: enough to recognise it, not to re-send it.
 _REPLY_EXCERPT_CHARS = 200
+# Characters of one program line quoted in a prompt: far wider than any sensible line.
+_LISTED_LINE_CHARS = 300
+# Characters of a program listing in a fix prompt: the rest of the message is feedback and instructions.
+_LISTING_CHARS = 16_000
+
+
+class PromptError(RoboCriticsError, ValueError):
+    """A prompt cannot be built within its limits (e.g. a task description that is too long)."""
 
 
 # --- system prompt --------------------------------------------------------------------------
@@ -285,16 +296,34 @@ def system_prompt(
 # --- user turns -------------------------------------------------------------------------------
 
 
+def check_task(text: str) -> str:
+    """``text`` stripped and cleaned of lone surrogates, if it is a usable task description.
+
+    Raises :class:`PromptError` for a task that is empty or longer than
+    ``MAX_TASK_CHARS`` characters.
+    """
+    if not isinstance(text, str) or not text.strip():
+        raise PromptError("the task description is empty: say what the robot should do")
+    text = clean_text(text.strip())
+    if len(text) > MAX_TASK_CHARS:
+        raise PromptError(
+            f"the task description is {len(text):,} characters long; the limit is {MAX_TASK_CHARS:,} "
+            "(llm.limits.MAX_TASK_CHARS): describe the task in a few sentences"
+        )
+    return text
+
+
 def request_prompt(text: str) -> str:
-    """The user's task as the first message of a request."""
-    return f"Task: {text.strip()}\n\nWrite the complete program."
+    """The user's task as the first message of a request (see :func:`check_task` for what is refused)."""
+    return f"Task: {check_task(text)}\n\nWrite the complete program."
 
 
 def numbered_program(program: str, marked: Iterable[int] = (), *, context: int | None = None) -> str:
     """``program`` with right-aligned line numbers; lines in ``marked`` start with ``>>``.
 
     With ``context`` (a number of lines), only the marked lines and that many
-    lines around each are shown; gaps are shown as ``...``.
+    lines around each are shown; gaps are shown as ``...``. Lines longer than
+    ``_LISTED_LINE_CHARS`` are cut, saying so.
     """
     lines = program.rstrip("\n").splitlines()
     marked = {int(n) for n in marked}
@@ -306,7 +335,8 @@ def numbered_program(program: str, marked: Iterable[int] = (), *, context: int |
     for n in sorted(show):
         if previous and n != previous + 1:
             out.append("    ...")
-        out.append(f"{'>>' if n in marked else '  '} {n:>{width}} | {lines[n - 1]}".rstrip())
+        line = cut_text(lines[n - 1], _LISTED_LINE_CHARS, "characters of this line")
+        out.append(f"{'>>' if n in marked else '  '} {n:>{width}} | {line}".rstrip())
         previous = n
     return "\n".join(out)
 
@@ -328,7 +358,7 @@ def fix_prompt(report: "Report", critics: Iterable[str] | str | None = None, *, 
     with line numbers and the lines the selected critics point at marked
     ``>>`` (only those lines and their neighbours for long programs).
     """
-    feedback = report.feedback(critics)
+    feedback = cut_text(clean_text(report.feedback(critics)), MAX_FEEDBACK_CHARS)
     parts = [
         f"The critics checked the simulated motion of your program (quality score "
         f"{_score_text(report.score)}) and report:\n{feedback}"
@@ -337,6 +367,7 @@ def fix_prompt(report: "Report", critics: Iterable[str] | str | None = None, *, 
         marked = [n for n in _flagged_lines(report, critics) if 1 <= n <= len(program.splitlines())]
         long = len(program.splitlines()) > _FULL_LISTING_LINES
         listing = numbered_program(program, marked, context=_FLAGGED_CONTEXT_LINES if long and marked else None)
+        listing = cut_text(clean_text(listing), _LISTING_CHARS)
         note = " (lines the critics point at are marked >>)" if marked else ""
         parts.append(f"Your program{note}:\n{listing}")
     parts.append(
@@ -367,6 +398,17 @@ def runtime_feedback(
     (the source that failed) lets the offending line be quoted.
     """
     resend = "Send the complete corrected program in one ```python block."
+    text = _runtime_feedback(error, program=program, reply=reply, resend=resend)
+    return clean_text(cut_text(text, MAX_FEEDBACK_CHARS))
+
+
+def _reason(error: BaseException) -> str:
+    """The error's own words, bounded: an error may quote a huge value from the program."""
+    reason = getattr(error, "reason", None) or str(error)
+    return cut_text(str(reason), MAX_FEEDBACK_CHARS // 2)
+
+
+def _runtime_feedback(error: BaseException | None, *, program: str | None, reply: str | None, resend: str) -> str:
     if error is None:
         said = ""
         if reply is not None and reply.strip():
@@ -380,7 +422,7 @@ def runtime_feedback(
         line = int(getattr(error, "line", 0) or 0)
         col = int(getattr(error, "col", 0) or 0)
         where = f" at line {line}" + (f", column {col}" if col else "") if line else ""
-        reason = getattr(error, "reason", None) or str(error)
+        reason = _reason(error)
         return (
             f"Your program did not run: the sandbox stopped it{where}, before the robot moved.\n"
             f"Problem: {reason}{_quote_line(program, line)}\n"
@@ -389,7 +431,7 @@ def runtime_feedback(
         )
     if isinstance(error, PlanningError):
         line = int(getattr(error, "line", 0) or 0)
-        reason = getattr(error, "reason", None) or str(error)
+        reason = _reason(error)
         where = f" at line {line}" if line else ""
         return (
             f"Your program ran, but the motion{where} could not be planned, so nothing was checked or "
@@ -399,12 +441,12 @@ def runtime_feedback(
         )
     if isinstance(error, CriticError):
         return (
-            f"Your program ran, but the critics could not check its motion: {error}\n"
+            f"Your program ran, but the critics could not check its motion: {_reason(error)}\n"
             f"Make sure the program moves the robot to do the task. {resend}"
         )
     if isinstance(error, RoboCriticsError):
-        return f"Your program could not be checked: {error}\n{resend}"
-    return f"Your program could not be checked ({type(error).__name__}: {error}).\n{resend}"
+        return f"Your program could not be checked: {_reason(error)}\n{resend}"
+    return f"Your program could not be checked ({type(error).__name__}: {_reason(error)}).\n{resend}"
 
 
 def says_complete(reply: str) -> bool:
@@ -420,6 +462,14 @@ _OPENING = re.compile(r"^(?P<indent>[ \t]*)(?P<fence>`{3,}|~{3,})(?P<info>.*)$")
 
 # With no fences: try the whole reply, then spans that drop up to this many lines of prose at either end.
 _MAX_TRIMMED_LINES = 20
+# Characters the parser may be given while looking for unfenced code, per character of the reply (plus a
+# constant). A failing parse is charged twice what it read (CPython parses again to word the error), so prose
+# at both ends costs about three whole-reply parses; four keep the search linear and short.
+_PARSE_BUDGET_PER_CHAR = 4
+_PARSE_BUDGET_BASE = 10_000
+# Spans looked at in all: each error-guided step drops at least a line from one end, so the search reaches
+# any span in at most 2 * _MAX_TRIMMED_LINES + 1 steps.
+_MAX_SPANS_TRIED = 2 * _MAX_TRIMMED_LINES + 4
 
 
 @dataclass(frozen=True)
@@ -446,13 +496,26 @@ def extract_code(reply: str) -> str | None:
        are never returned.
     4. No fences at all: the whole reply if it parses with ``ast`` and
        contains a call; else the longest span that does after dropping up to
-       20 lines of prose at its start and/or end.
+       20 lines of prose at its start and/or end. The spans tried are guided
+       by where the parser reports the error (a prose line), so the search
+       costs a few parses of the reply, never one per span.
 
     Empty blocks are ignored. The result has its common indentation removed,
-    no leading or trailing blank lines, and ends with one newline.
+    no leading or trailing blank lines, lone surrogates replaced, and ends
+    with one newline.
+
+    Linear in the length of ``reply``; code nested too deeply for Python's
+    parser counts as not parsing. Raises :class:`LLMError` (and nothing else)
+    for a reply longer than ``MAX_REPLY_CHARS``.
     """
     if not isinstance(reply, str) or not reply.strip():
         return None
+    if len(reply) > MAX_REPLY_CHARS:
+        raise LLMError(
+            f"the model's reply is {len(reply):,} characters long; the limit is {MAX_REPLY_CHARS:,} "
+            "(llm.limits.MAX_REPLY_CHARS): a reply that long is not a program"
+        )
+    reply = clean_text(reply)
     blocks, saw_fence = _fenced_blocks(reply)
     if saw_fence:
         python = [b.text for b in blocks if b.language in PYTHON_TAGS]
@@ -503,35 +566,87 @@ def _language(info: str) -> str:
 
 
 def _bare_code(reply: str) -> str | None:
+    """The longest span of ``reply``'s lines, trimmed by at most ``_MAX_TRIMMED_LINES`` at each end, that is code.
+
+    A best-first search over spans (longest first, then earliest). When a
+    span fails to parse at line L, the lines before L were a valid start of
+    a program, so the only spans worth trying next drop line L and what
+    precedes it (L was prose at the start) or L and what follows it (prose at
+    the end). The parser is given at most ``_PARSE_BUDGET_PER_CHAR`` times
+    the reply's characters in all (a failing parse is charged twice what it
+    read, up to its error) and at most ``_MAX_SPANS_TRIED`` spans are looked at, so the
+    search is linear; when either runs out there is no code. A span that
+    parses but calls nothing is not searched further.
+    """
     lines = _tidy(reply).splitlines()
     n = len(lines)
     trim = min(_MAX_TRIMMED_LINES, max(n - 1, 0))
-    spans = sorted(
-        ((start, end) for start in range(trim + 1) for end in range(n - trim, n + 1) if end > start),
-        key=lambda span: (span[0] - span[1], span[0]),  # longest first, then earliest
-    )
-    for start, end in spans:
+    offsets = [0]
+    for line in lines:
+        offsets.append(offsets[-1] + len(line) + 1)
+    budget = _PARSE_BUDGET_PER_CHAR * offsets[-1] + _PARSE_BUDGET_BASE
+    queue: list[tuple[int, int, int]] = [(-n, 0, n)]  # (-length, start, end)
+    seen = {(0, n)}
+
+    def push(start: int, end: int) -> None:
+        if start < end and start <= trim and end >= n - trim and (start, end) not in seen:
+            seen.add((start, end))
+            heapq.heappush(queue, (start - end, start, end))
+
+    tried = 0
+    while queue and budget > 0 and tried < _MAX_SPANS_TRIED:
+        tried += 1
+        _, start, end = heapq.heappop(queue)
         candidate = _tidy("\n".join(lines[start:end]))
-        if candidate and _is_code(candidate):
-            return candidate + "\n"
+        if not candidate:
+            continue
+        outcome, error_line = _try_parse(candidate)
+        if outcome is not None:
+            budget -= len(candidate)
+            if _calls_something(outcome):
+                return candidate + "\n"
+            continue  # parses but calls nothing: neither do its parts (dropping whole lines keeps statements)
+        # The tidied candidate starts at its first non-blank line: map the error back to a line of `lines`.
+        first = start + next(i for i, line in enumerate(lines[start:end]) if line.strip())
+        bad = first + error_line - 1 if error_line else None
+        if bad is None or not start <= bad < end:
+            budget -= 2 * len(candidate)
+            push(start + 1, end)
+            push(start, end - 1)
+            continue
+        budget -= 2 * (offsets[bad + 1] - offsets[start])
+        push(bad + 1, end)  # line `bad` and everything before it were prose
+        push(start, bad)  # line `bad` and everything after it were prose
     return None
 
 
-def _is_code(text: str) -> bool:
-    """Parses as Python and calls something (bare prose like 'Done' parses as a name but calls nothing)."""
+def _try_parse(text: str) -> tuple[ast.Module | None, int | None]:
+    """(tree, None) if ``text`` parses; else (None, the 1-based line of the error if the parser named one).
+
+    Code nested deeper than the parser allows (it raises MemoryError or
+    RecursionError for that) counts as not parsing, with no line.
+    """
     try:
-        tree = ast.parse(text)
-    except (SyntaxError, ValueError):
-        return False
+        return ast.parse(text), None
+    except SyntaxError as exc:  # IndentationError and TabError included
+        return None, exc.lineno if isinstance(exc.lineno, int) and exc.lineno > 0 else None
+    except (ValueError, MemoryError, RecursionError, OverflowError):
+        return None, None
+
+
+def _calls_something(tree: ast.Module) -> bool:
+    """Whether the program calls something (bare prose like 'Done' parses as a name but calls nothing)."""
     return any(isinstance(node, ast.Call) for node in ast.walk(tree))
 
 
+def _is_code(text: str) -> bool:
+    """Parses as Python and calls something."""
+    tree, _ = _try_parse(text)
+    return tree is not None and _calls_something(tree)
+
+
 def _parses(text: str) -> bool:
-    try:
-        ast.parse(text)
-    except (SyntaxError, ValueError):
-        return False
-    return True
+    return _try_parse(text)[0] is not None
 
 
 def _tidy(text: str) -> str:
