@@ -26,12 +26,11 @@ scene is untrusted input, so everything in it is bounded:
 * ids are Python identifiers (NFKC-normalised, not starting with ``_``, at most
   :data:`MAX_ID_CHARS` characters) that shadow no name of the program language:
   not a keyword, a builtin of robot programs
-  (:data:`robocritics.program.language.SAFE_BUILTINS`, e.g. ``print``), a name of
-  the program namespace (:data:`PROGRAM_NAMES`: ``lib``, ``math``, ``objects``,
-  ``containers``, ...) or ``table`` (see :func:`reserved_names`). The skills
-  (``home``, ``wait``, ...) are checked where a scene meets the skill API, by
-  :func:`robocritics.simulate.check_scene_ids` (the skills are built on scenes,
-  so this module cannot import them);
+  (:data:`robocritics.program.language.SAFE_BUILTINS`, e.g. ``print``) or
+  ``table`` (see :func:`reserved_names`). The names of the skill API (``home``,
+  ``lib``, ``objects``, ``open``, ...) are checked where a scene meets it, by
+  :func:`robocritics.simulate.check_scene_ids`: the skills are built on scenes,
+  so this module cannot import them;
 * at most :data:`MAX_ENTITIES` objects and containers; text fields and free
   attributes are bounded in length, nesting and count, and are JSON-like text
   (no unpaired surrogates);
@@ -71,7 +70,6 @@ __all__ = [
     "rpy_matrix",
     "parse_json",
     "reserved_names",
-    "PROGRAM_NAMES",
     "MAX_COORD_M",
     "MAX_LENGTH_M",
     "MAX_ANGLE_RAD",
@@ -218,24 +216,17 @@ Name = Annotated[str, BeforeValidator(functools.partial(_text, limit=MAX_NAME_CH
 Text = Annotated[str, BeforeValidator(functools.partial(_text, limit=MAX_TEXT_CHARS))]
 
 
-PROGRAM_NAMES: tuple[str, ...] = ("lib", "math", "objects", "containers", "robot_lib", "robocritics", "skills")
-"""Names every robot program sees besides the builtins and skills: the ``lib`` and ``math`` namespaces, the
-``objects``/``containers`` lists, and the module names a program may import as ``lib``. (They belong beside
-SAFE_BUILTINS in robocritics.program.language; tests/test_scene_hostile.py checks that programs see each one.)"""
-
-
 @functools.cache
 def reserved_names() -> dict[str, str]:
     """Names an object or container may not have, each with what it already is in a robot program.
 
     Python's keywords (soft ones too), the builtins of robot programs
-    (:data:`robocritics.program.language.SAFE_BUILTINS`), :data:`PROGRAM_NAMES` and
-    ``table``. Skill names are checked by :func:`robocritics.simulate.check_scene_ids`.
+    (:data:`robocritics.program.language.SAFE_BUILTINS`) and ``table``. The names of
+    the skill API are checked by :func:`robocritics.simulate.check_scene_ids`.
     """
-    from .program import language  # the names of the program language (a leaf module: no cycle)
+    from .program import language  # the program language's names (a leaf module: no import cycle)
 
     out: dict[str, str] = {name: "a builtin of robot programs" for name in language.SAFE_BUILTINS}
-    out.update({name: "a name every program sees" for name in PROGRAM_NAMES})
     out.update({name: "a Python keyword" for name in (*keyword.kwlist, *keyword.softkwlist)})
     out["table"] = "the table's id"
     return out

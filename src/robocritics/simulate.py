@@ -67,24 +67,44 @@ class Execution:
         holder = self.final_scene.container_holding(obj_id)
         return holder is not None and holder.id == container_id
 
-def check_scene_ids(scene: Scene) -> None:
-    """Refuse a scene whose object or container ids are skill names (``home``, ``wait``, ...).
+#: Names the interpreter binds in every program besides skills, builtins and modules (it has no public list).
+_PROGRAM_LISTS = {"objects": "the list of the scene's objects", "containers": "the list of its containers"}
 
-    In a program an object is a variable named by its id, so an object named ``home``
-    would hide the skill ``home()``. :class:`~robocritics.Scene` itself refuses the
-    names of the program language (:func:`robocritics.scene.reserved_names`); the
-    skills are built on scenes, so their names are checked here, where a scene meets
-    them. Raises :class:`SceneError` naming the field (``objects[2].id``).
+
+def check_scene_ids(scene: Scene) -> None:
+    """Refuse a scene whose object or container ids are names of the skill API.
+
+    In a program an object is a variable named by its id, so an object named
+    ``home`` would hide the skill ``home()``, one named ``lib`` the ``lib`` module,
+    and one named ``open`` could not be used at all (programs may not say ``open``).
+    :class:`~robocritics.Scene` itself refuses the names of the program language
+    (:func:`robocritics.scene.reserved_names`); the skill API is built on scenes, so
+    its names are checked here, where a scene meets it: the skills
+    (:data:`robocritics.program.skills.SKILLS`), the modules a program can import
+    (:data:`robocritics.program.check.MODULE_ALIASES`), the names programs may not
+    use (:data:`robocritics.program.check.FORBIDDEN_NAMES`) and the ``objects`` and
+    ``containers`` lists. Raises :class:`SceneError` naming the field (``objects[2].id``).
     """
+    from .program.check import FORBIDDEN_NAMES, MODULE_ALIASES
     from .program.skills import SKILLS
 
     for group in ("objects", "containers"):
         for i, item in enumerate(getattr(scene, group)):
-            if item.id in SKILLS:
-                raise SceneError(
-                    f"{item.id!r} is a skill; an object named so would hide it in programs, choose another id",
-                    path=f"{group}[{i}].id",
-                )
+            name = item.id
+            if name in SKILLS:
+                what = "a skill in robot programs; an object named so would hide it"
+            elif name in MODULE_ALIASES:
+                what = f"the module {MODULE_ALIASES[name]!r} of robot programs; an object named so would hide it"
+            elif name in _PROGRAM_LISTS:
+                what = f"{_PROGRAM_LISTS[name]} in robot programs; an object named so would hide it"
+            elif name in FORBIDDEN_NAMES:
+                what = "a name robot programs may not use, so they could not refer to this object"
+            else:
+                continue
+            raise SceneError(
+                f"{name!r} is {what}; choose another id (e.g. '{name}_1')",
+                path=f"{group}[{i}].id",
+            )
 
 
 def simulate(
@@ -104,7 +124,7 @@ def simulate(
     :data:`~robocritics.robot.motion.MAX_SAMPLE_RATE_HZ`: sparser sampling hides
     fast motion from the critics, denser is more than a controller executes).
 
-    Raises :class:`SceneError` for a scene whose ids hide skills (:func:`check_scene_ids`),
+    Raises :class:`SceneError` for a scene whose ids are names of the skill API (:func:`check_scene_ids`),
     :class:`ProgramError` for a program the sandbox rejects and
     :class:`PlanningError` (with the program line) for a motion that cannot be
     planned, such as an unreachable target, a speed below 1 % or a sample rate

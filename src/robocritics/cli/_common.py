@@ -1,10 +1,16 @@
-"""Shared pieces of the ``robocritics`` subcommands: the registry, input readers, argument types."""
+"""Shared pieces of the ``robocritics`` subcommands: the registry, input readers, argument types.
+
+Every reader and argument type turns bad input into a one-line error naming the
+argument or file (:class:`UsageError`, or argparse's ``ArgumentTypeError`` that
+``main`` prints as ``robocritics check: error: argument --rate: ...``), never a
+traceback.
+"""
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
+import stat
 from pathlib import Path
 from typing import Callable
 
@@ -35,13 +41,29 @@ def one_line(text: object) -> str:
     return " ".join(str(text).split())
 
 
+MAX_INPUT_BYTES = 1_000_000
+"""Largest program or params file [bytes]: ten times the sandbox's longest program (100,000 characters), so an
+over-long program still gets the sandbox's own error, and a mistaken path (a log, an image) a short one."""
+
+_SHOWN_CHARS = 60
+"""Arguments quoted in error messages are cut to this length."""
+
+
+def shown(text: object) -> str:
+    """``text`` quoted for an error message, cut to a readable length."""
+    t = str(text)
+    return repr(t) if len(t) <= _SHOWN_CHARS else repr(t[:_SHOWN_CHARS]) + f"... ({len(t):,} characters)"
+
+
 def positive_int(text: str) -> int:
     try:
-        value = int(text)
+        value = int(text) if len(text) <= 20 else None
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        value = None
+    if value is None:
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not a whole number")
     if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
+        raise argparse.ArgumentTypeError(f"{shown(text)} must be at least 1")
     return value
 
 
@@ -49,51 +71,112 @@ def positive_float(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not a number") from None
     if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"{text!r} must be a positive number")
+        raise argparse.ArgumentTypeError(f"{shown(text)} must be a positive number")
     return value
 
 
-def read_text(path: str, what: str) -> str:
-    p = Path(path)
+def sample_rate(text: str) -> float:
+    """A trajectory sample rate [Hz] in the range the critics can trust (robot.motion.check_sample_rate)."""
+    from ..errors import PlanningError
+    from ..robot.motion import check_sample_rate
+
     try:
-        return p.read_text(encoding="utf-8")
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not a number of Hz") from None
+    try:
+        return check_sample_rate(value, "the sample rate")
+    except PlanningError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def port(text: str) -> int:
+    """A TCP port number, 1..65535."""
+    try:
+        value = int(text) if len(text) <= 5 else None
+    except ValueError:
+        value = None
+    if value is None or not 1 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not a TCP port (a whole number from 1 to 65535)")
+    return value
+
+
+def read_text(path: str, what: str, max_bytes: int = MAX_INPUT_BYTES) -> str:
+    """The UTF-8 text of the regular file ``path`` of at most ``max_bytes`` bytes; :class:`UsageError` otherwise."""
+    where = shown(path)
+    if not path:
+        raise UsageError(f"the {what} file name is empty")
+    try:
+        p = Path(path)
+        info = p.stat()
     except FileNotFoundError:
-        raise UsageError(f"no such {what} file {path!r}") from None
-    except IsADirectoryError:
-        raise UsageError(f"{what} {path!r} is a directory, not a file") from None
-    except UnicodeDecodeError as exc:
-        raise UsageError(f"{what} file {path!r} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        raise UsageError(f"no such {what} file {where}") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the name
+        raise UsageError(f"cannot read {what} file {where}: {getattr(exc, 'strerror', None) or exc}") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise UsageError(f"{what} {where} is a directory, not a file")
+    if not stat.S_ISREG(info.st_mode):
+        raise UsageError(f"{what} file {where} is not a regular file")
+    try:
+        with open(p, "rb") as f:
+            raw = f.read(max_bytes + 1)
     except OSError as exc:
-        raise UsageError(f"cannot read {what} file {path!r}: {exc.strerror}") from None
+        raise UsageError(f"cannot read {what} file {where}: {exc.strerror or exc}") from None
+    if len(raw) > max_bytes:
+        raise UsageError(f"{what} file {where} is larger than the limit of {max_bytes:,} bytes")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise UsageError(f"{what} file {where} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
 
 
 def load_params(path: str | None) -> dict:
     if not path:
         return {}
+    from ..errors import SceneError
+    from ..scene import parse_json
+
     text = read_text(path, "params")
     try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise UsageError(f"params file {path!r} is not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
+        data = parse_json(text, f"params file {shown(path)}")  # bounded: nesting, digits
+    except SceneError as exc:
+        raise UsageError(str(exc).replace(": not valid JSON", " is not valid JSON", 1)) from None
     if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
         raise UsageError(
-            f'params file {path!r} must hold a JSON object of critic names to objects, e.g. {{"joint_speed": {{"warn_speed_m_s": 0.8}}}}'
+            f'params file {shown(path)} must hold a JSON object of critic names to objects, e.g. {{"joint_speed": {{"warn_speed_m_s": 0.8}}}}'
         )
     return data
 
 
 def scene_for(program_path: str, scene_arg: str | None):
+    """The scene of ``--scene`` (a built-in name or a file), else the built-in one the program's file name starts
+    with, else an empty table; refused (SceneError naming the field) if its ids are names of the skill API."""
+    from ..errors import SceneError
     from ..scene import Scene
+    from ..simulate import check_scene_ids
 
+    if scene_arg is not None and not scene_arg.strip():
+        raise UsageError("--scene is empty; give a built-in scene name or a scene JSON file")
     if scene_arg:
         looks_like_name = not scene_arg.endswith(".json") and "/" not in scene_arg and "\\" not in scene_arg
-        if looks_like_name and not Path(scene_arg).exists():
-            return Scene.builtin(scene_arg)  # unknown names get a did-you-mean
-        return Scene.resolve(scene_arg)
-    stem = Path(program_path).stem
-    for name in Scene.builtin_names():
-        if stem == name or stem.startswith(name + "_"):
-            return Scene.builtin(name)
-    return Scene()
+        try:
+            exists = Path(scene_arg).exists()
+        except (OSError, ValueError):  # a NUL byte or an over-long name: Scene.resolve says so
+            exists = True
+        scene = Scene.builtin(scene_arg) if looks_like_name and not exists else Scene.resolve(scene_arg)
+    else:
+        stem = Path(program_path).stem
+        scene = next(
+            (Scene.builtin(n) for n in Scene.builtin_names() if stem == n or stem.startswith(n + "_")), Scene()
+        )
+    try:
+        check_scene_ids(scene)
+    except SceneError as exc:
+        if not scene_arg or scene_arg in Scene.builtin_names():
+            raise
+        located = SceneError(f"{shown(scene_arg)[1:-1]}: {exc}")  # the file, then the field
+        located.path = exc.path
+        raise located from None
+    return scene

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import load_params, positive_float, read_text, scene_for, subcommand
+from ._common import load_params, read_text, sample_rate, scene_for, subcommand
 
 
 @subcommand("check")
@@ -30,7 +30,14 @@ def _build_check(sub) -> None:
         help='JSON file of threshold overrides, e.g. {"joint_speed": {"warn_speed_m_s": 0.8}}',
     )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.add_argument("--rate", metavar="HZ", type=positive_float, default=125.0, help="trajectory sample rate, Hz (default 125)")
+    p.add_argument(
+        "--rate",
+        metavar="HZ",
+        type=sample_rate,
+        default=125.0,
+        help="trajectory sample rate, Hz, from 25 (sparser sampling hides fast motion from the critics) to 500 "
+        "(the controller's rate); default 125",
+    )
     p.set_defaults(func=_cmd_check)
 
 

@@ -13,7 +13,8 @@ registers itself with the :func:`subcommand` decorator::
 
 Exit codes: 0 success (``check``: no Error verdict), 1 ``check`` found an Error,
 2 bad input (any :class:`~robocritics.errors.RoboCriticsError`, a missing file,
-bad JSON), with a one-line message on stderr.
+bad JSON, a bad argument), with a one-line message on stderr that names the
+argument or file, never a traceback; 130 interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
@@ -29,8 +30,15 @@ from .ursim import ursim_command
 __all__ = ["main", "build_parser"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors: ``robocritics check: error: argument --rate: ...``."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="robocritics",
         description="LLM robot programming with expert-informed motion critics.",
     )
@@ -60,3 +68,6 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except BrokenPipeError:  # e.g. `robocritics critics | head`
         return 0
+    except KeyboardInterrupt:
+        print("robocritics: interrupted", file=sys.stderr)
+        return 130

@@ -100,11 +100,12 @@ def check_sample_rate(rate_hz, what: str = "sample_rate_hz") -> float:
     except (TypeError, ValueError, OverflowError):
         raise PlanningError(f"{what} must be a number of Hz in {span}, got {rate_hz!r:.40}") from None
     if not MIN_SAMPLE_RATE_HZ <= r <= MAX_SAMPLE_RATE_HZ:
-        why = (
-            "sparser sampling hides fast motion from the critics"
-            if r < MIN_SAMPLE_RATE_HZ
-            else "no controller executes denser setpoints"
-        )
+        if not math.isfinite(r):
+            why = "not a finite number"
+        elif r < MIN_SAMPLE_RATE_HZ:
+            why = "sparser sampling hides fast motion from the critics"
+        else:
+            why = "no controller executes denser setpoints"
         raise PlanningError(f"{what} must lie in {span} ({why}), got {r:g}")
     return r
 
