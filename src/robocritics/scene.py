@@ -202,7 +202,7 @@ Angles3 = tuple[Angle, Angle, Angle]
 
 def _text(value: Any, limit: int) -> str:
     if not isinstance(value, str):
-        raise ValueError(f"a {type(value).__name__} is not text")
+        raise ValueError(f"text expected, got {type(value).__name__}")
     if len(value) > limit:
         raise ValueError(f"text of {len(value):,} characters is longer than the limit of {limit:,}")
     try:
@@ -234,7 +234,7 @@ def reserved_names() -> dict[str, str]:
 
 def _entity_id(value: Any) -> str:
     if not isinstance(value, str):
-        raise ValueError(f"a {type(value).__name__} is not an id")
+        raise ValueError(f"an id is text, got {type(value).__name__}")
     if not value:
         raise ValueError("an id cannot be empty")
     if len(value) > MAX_ID_CHARS:
@@ -260,53 +260,53 @@ EntityId = Annotated[str, BeforeValidator(_entity_id)]
 def _attributes(value: Any) -> dict[str, Any]:
     """Free attributes as JSON-like data (str keys; str, finite numbers, bools, None, lists, dicts), bounded."""
     if not isinstance(value, dict):
-        raise ValueError(f"a {type(value).__name__} is not an object of attributes")
+        raise ValueError(f"attributes are a JSON object of names to values, got {type(value).__name__}")
     count = 0
+
+    def fail(path: str, problem: str) -> ValueError:
+        return ValueError(f"{path}: {problem}" if path else problem)
 
     def plain(v: Any, path: str, depth: int) -> Any:
         nonlocal count
         count += 1
         if count > MAX_ATTRIBUTE_ITEMS:
-            raise ValueError(f"{path}: more than {MAX_ATTRIBUTE_ITEMS} attribute values")
+            raise fail(path, f"more than {MAX_ATTRIBUTE_ITEMS} attribute values")
         if v is None or isinstance(v, bool):
             return v
         if isinstance(v, _LongInt):
-            raise ValueError(f"{path}: a {v.digits}-digit integer; the limit is {MAX_INT_DIGITS} digits")
+            raise fail(path, f"a {v.digits}-digit integer; the limit is {MAX_INT_DIGITS} digits")
         if isinstance(v, numbers.Integral):
             if int(v).bit_length() > 64:
-                raise ValueError(f"{path}: an integer of {int(v).bit_length()} bits; the limit is 64")
+                raise fail(path, f"an integer of {int(v).bit_length()} bits; the limit is 64")
             return int(v)
         if isinstance(v, numbers.Real):
             if not math.isfinite(float(v)):
-                raise ValueError(f"{path}: {float(v)} is not a finite number")
+                raise fail(path, f"{float(v)} is not a finite number")
             return float(v)
         if isinstance(v, str):
             try:
                 return _text(v, MAX_TEXT_CHARS)
             except ValueError as exc:
-                raise ValueError(f"{path}: {exc}") from None
+                raise fail(path, str(exc)) from None
         if isinstance(v, (list, tuple, dict)):
             if depth >= MAX_ATTRIBUTE_DEPTH:
-                raise ValueError(f"{path}: attributes nest deeper than {MAX_ATTRIBUTE_DEPTH} levels")
+                raise fail(path, f"attributes nest deeper than {MAX_ATTRIBUTE_DEPTH} levels")
             if isinstance(v, dict):
                 out = {}
                 for k, item in v.items():
                     if not isinstance(k, str):
-                        raise ValueError(f"{path}: key {type(k).__name__} is not text")
+                        raise fail(path, f"a key is text, got {type(k).__name__}")
+                    if len(k) > MAX_ID_CHARS:
+                        raise fail(path, f"a key of {len(k):,} characters is longer than the limit of {MAX_ID_CHARS}")
                     count += 1
-                    key = _text(k, MAX_ID_CHARS) if len(k) <= MAX_ID_CHARS else None
-                    if key is None:
-                        raise ValueError(f"{path}: a key of {len(k)} characters is longer than {MAX_ID_CHARS}")
-                    out[key] = plain(item, f"{path}.{key}" if key.isidentifier() else f"{path}[{key!r}]", depth + 1)
+                    key = _text(k, MAX_ID_CHARS)
+                    sub = (f"{path}.{key}" if path else key) if key.isidentifier() else f"{path}[{key!r}]"
+                    out[key] = plain(item, sub, depth + 1)
                 return out
             return [plain(item, f"{path}[{i}]", depth + 1) for i, item in enumerate(v)]
-        raise ValueError(f"{path}: a {type(v).__name__} is not JSON-like data")
+        raise fail(path, f"a {type(v).__name__} is not JSON-like data (text, a number, true/false, null, a list or an object)")
 
-    for k in value:
-        if not isinstance(k, str):
-            raise ValueError(f"attribute name {type(k).__name__} is not text")
-    out = plain(value, "", 0)
-    return out
+    return plain(value, "", 0)
 
 
 def _entities(value: Any) -> Any:
@@ -355,6 +355,26 @@ class _Model(BaseModel):
             super().__init__(**data)
         except ValidationError as exc:
             raise _scene_error(exc, type(self).__name__) from None
+
+    @classmethod
+    def model_validate(cls, obj: Any, *args: Any, **kwargs: Any):  # type: ignore[override]
+        """Validate a dict; raise :class:`SceneError` naming the first bad field."""
+        try:
+            return super().model_validate(obj, *args, **kwargs)
+        except ValidationError as exc:
+            raise _scene_error(exc, cls.__name__) from None
+
+    @classmethod
+    def model_validate_json(cls, json_data: str | bytes, *args: Any, **kwargs: Any):  # type: ignore[override]
+        """Validate JSON text with the bounds of :func:`parse_json`; :class:`SceneError` if bad."""
+        if isinstance(json_data, (bytes, bytearray)):
+            try:
+                json_data = bytes(json_data).decode("utf-8-sig")
+            except UnicodeDecodeError as exc:
+                raise SceneError(f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        if len(json_data) > MAX_FILE_BYTES:
+            raise SceneError(f"JSON of {len(json_data):,} characters is longer than the limit of {MAX_FILE_BYTES:,}")
+        return cls.model_validate(parse_json(json_data, f"{cls.__name__} JSON"), *args, **kwargs)
 
 
 class SceneObject(_Model):
@@ -552,18 +572,10 @@ class Scene(_Model):
     # --- construction -----------------------------------------------------------------
 
     @classmethod
-    def model_validate(cls, obj: Any, *args: Any, **kwargs: Any) -> "Scene":  # type: ignore[override]
-        """Validate a dict; raise :class:`SceneError` naming the first bad field."""
-        try:
-            return super().model_validate(obj, *args, **kwargs)
-        except ValidationError as exc:
-            raise _scene_error(exc) from None
-
-    @classmethod
     def load(cls, path: str | Path) -> "Scene":
         """Load a scene from a JSON file (see the module docstring for the bounds); :class:`SceneError` if bad."""
         text = _read_scene_file(path)
-        shown = str(path)
+        shown = str(path) if len(str(path)) <= _QUOTED_CHARS else _quoted(str(path))
         data = parse_json(text, shown)
         if not isinstance(data, dict):
             raise SceneError(f"{shown}: a scene is a JSON object, got {type(data).__name__}")
@@ -583,7 +595,8 @@ class Scene(_Model):
         """One of the paper's task scenes: ``recycling``, ``sorting`` or ``breakfast``."""
         names = cls.builtin_names()
         if name not in names:
-            raise SceneError(f"no built-in scene {name!r} (have {', '.join(names)}){did_you_mean(name, names)}")
+            hint = did_you_mean(name, names) if isinstance(name, str) and len(name) <= _QUOTED_CHARS else ""
+            raise SceneError(f"no built-in scene {_quoted(name)} (have {', '.join(names)}){hint}")
         return cls.model_validate(json.loads(resources.files("robocritics.scenes").joinpath(f"{name}.json").read_text()))
 
     @classmethod
@@ -631,7 +644,7 @@ class Scene(_Model):
 
 def _read_scene_file(path: str | Path) -> str:
     """The text of scene file ``path``: a regular file of at most MAX_FILE_BYTES bytes of UTF-8."""
-    shown = repr(str(path))
+    shown = _quoted(str(path))
     try:
         p = Path(path)
         info = p.stat()
@@ -658,6 +671,15 @@ def _read_scene_file(path: str | Path) -> str:
         raise SceneError(f"scene file {shown} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
 
 
+_QUOTED_CHARS = 60
+"""Input quoted in error messages is cut to this length."""
+
+
+def _quoted(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= _QUOTED_CHARS else text[:_QUOTED_CHARS] + f"... ({len(text):,} characters)"
+
+
 def _scene_error(exc: ValidationError, model: str = "Scene") -> SceneError:
     err = exc.errors()[0]
     path = ""
@@ -665,7 +687,9 @@ def _scene_error(exc: ValidationError, model: str = "Scene") -> SceneError:
         if isinstance(part, int):
             path += f"[{part}]"
         else:
-            path += ("." if path else "") + str(part)
+            text = str(part)  # an unknown key may be anything: quote a readable part of it
+            text = text if len(text) <= _QUOTED_CHARS else repr(text[:_QUOTED_CHARS]) + "..."
+            path += ("." if path else "") + text
     message = err["msg"]
     if message.startswith("Value error, "):
         message = message[len("Value error, ") :]
@@ -676,7 +700,7 @@ def _scene_error(exc: ValidationError, model: str = "Scene") -> SceneError:
         path = field if not path else path + (field if field.startswith("[") else "." + field)
         message = sub.group(2)
     if err["type"] == "literal_error" and path.endswith("shape"):
-        message = f"unknown shape {err.get('input')!r}; use one of box, cylinder, sphere"
+        message = f"unknown shape {_quoted(err.get('input'))}; use one of box, cylinder, sphere"
     more = len(exc.errors()) - 1
     if more:
         message += f" (and {more} more problem{'s' if more > 1 else ''})"

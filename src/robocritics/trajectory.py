@@ -273,11 +273,20 @@ class Trajectory:
         except (TypeError, ValueError) as exc:
             if isinstance(exc, TrajectoryError):
                 raise
-            raise TrajectoryError(f"malformed trajectory data: {exc}") from None
+            raise TrajectoryError(f"malformed trajectory data: {str(exc)[:300]}") from None
 
     @classmethod
     def from_json(cls, text: str) -> "Trajectory":
-        return cls.from_dict(json.loads(text))
+        """The trajectory of :meth:`to_json` text; :class:`TrajectoryError` for text that is not one."""
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise TrajectoryError(f"not valid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+        except (ValueError, RecursionError) as exc:  # a number Python cannot convert, or absurd nesting
+            raise TrajectoryError(f"not trajectory JSON: {str(exc)[:200]}") from None
+        if not isinstance(data, dict):
+            raise TrajectoryError(f"trajectory JSON is an object, got {type(data).__name__}")
+        return cls.from_dict(data)
 
     def content_hash(self) -> str:
         """SHA-256 of the executed content (joint samples, time, gripper, attachment).
