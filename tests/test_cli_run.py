@@ -5,6 +5,8 @@
 from __future__ import annotations
 
 import argparse
+import io
+import time
 from pathlib import Path
 
 import pytest
@@ -155,3 +157,83 @@ def test_defaults_match_the_library():
 
     args = parse(TASK, "--scene", "sorting")
     assert args.max_attempts == DEFAULT_MAX_ATTEMPTS
+
+
+# -- hostile servers and inputs (issue 10): exit 2 with one line, never a traceback or a hang --------
+
+# How late past --timeout a run may end on a loaded machine.
+SLACK_S = 2.5
+
+
+def test_a_dripping_server_ends_the_run_at_the_timeout(llm_server, capsys):
+    from llm_server import chat_body, drip
+
+    llm_server.script(drip(chat_body("x" * 500), interval_s=0.25))  # 2 minutes of reply, a byte at a time
+    started = time.monotonic()
+    code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--timeout", "1.5")
+    elapsed = time.monotonic() - started
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "LLM endpoint failed" in err and "deadline of 1.5 s" in err and "Traceback" not in err
+    assert elapsed < 1.5 + SLACK_S
+
+
+def test_undecodable_text_prints_on_a_strict_ascii_terminal(llm_server):
+    llm_server.reply("```python\nmove_above(green_apple)  # gr\u00fcn \ud800\n```")
+    raw = io.BytesIO()
+    out = io.TextIOWrapper(raw, encoding="ascii", errors="strict")
+    args = parse("put the apple \udcff away", "--scene", "sorting", "--base-url", llm_server.url, "--model", "m",
+                 "--critics", "joint_speed")  # fmt: skip
+    assert run_command(args, stdout=out, stderr=io.StringIO()) == 0
+    out.flush()
+    printed = raw.getvalue().decode("ascii")
+    assert "move_above(green_apple)  # gr?n ?" in printed and "task: put the apple ? away" in printed
+
+
+def test_a_long_program_is_printed_cut(llm_server, capsys):
+    from robocritics.llm.limits import MAX_PRINTED_CHARS
+
+    program = "move_above(green_apple)\n" + "x = 1\n" * 10_000
+    llm_server.reply(f"```python\n{program}```")
+    run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", "joint_speed")
+    out = capsys.readouterr().out
+    assert "more characters of the program not shown" in out
+    assert len(out) < MAX_PRINTED_CHARS + 5_000
+
+
+@pytest.mark.parametrize(
+    ("task", "message"),
+    [("", "the task description is empty"), ("   ", "the task description is empty"),
+     ("t" * 5_000, "is 5,000 characters long; the limit is 4,000")],
+)  # fmt: skip
+def test_an_unusable_task_exits_2_before_any_request(llm_server, capsys, task, message):
+    assert run(task, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m") == 2
+    captured = capsys.readouterr()
+    assert message in captured.err and captured.out == ""
+    assert llm_server.requests == []
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-1", "2.5", "warm"])
+def test_a_bad_temperature_is_a_usage_error(value, capsys):
+    with pytest.raises(SystemExit) as exited:
+        parse(TASK, "--scene", "sorting", "--temperature", value)
+    assert exited.value.code == 2
+    assert "--temperature" in capsys.readouterr().err
+
+
+def test_an_unusable_memory_file_exits_2_before_any_request(llm_server, capsys, tmp_path):
+    (tmp_path / "notes.txt").write_text("a file where a directory should be")
+    code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m",
+               "--memory", str(tmp_path / "notes.txt" / "memory.sqlite"))  # fmt: skip
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "interaction memory" in err and "cannot be created" in err and "Traceback" not in err
+    assert llm_server.requests == []
+
+
+def test_a_damaged_memory_file_exits_2(llm_server, capsys, tmp_path):
+    damaged = tmp_path / "memory.sqlite"
+    damaged.write_bytes(b"SQLite format 3\x00" + b"\xff" * 8000)
+    code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--memory", str(damaged))
+    assert code == 2
+    assert "damaged or not a database" in capsys.readouterr().err

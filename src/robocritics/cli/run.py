@@ -16,9 +16,16 @@ Each attempt's program, critic report and score are printed as they come.
 ``ROBOCRITICS_MODEL``; the API key is read from the variable named by
 ``--api-key-env``, else ``ROBOCRITICS_API_KEY`` / ``OPENAI_API_KEY``.
 
+``--timeout`` is the most one LLM request may take in all (connecting,
+waiting, reading the reply, retries and their pauses): a server that stalls or
+sends a byte at a time ends the run at that deadline with exit status 2.
+Replies, programs and errors are printed cleaned of undecodable characters
+and, past ``llm.limits.MAX_PRINTED_CHARS``, cut.
+
 Exit status: 0 the final attempt has no Error verdict; 1 it has one (or its
 program did not run); 2 configuration errors (no base URL or model, unknown
-scene or critic, unset key variable) and failures of the LLM endpoint.
+scene or critic, unset key variable, an empty or overlong task, an unusable
+memory file) and failures of the LLM endpoint.
 
 """
 
@@ -29,14 +36,19 @@ import os
 import sys
 from typing import TextIO
 
+import math
+
 from ._common import load_params, one_line, positive_float, positive_int, subcommand
 from ..errors import LLMError, RoboCriticsError
 
 __all__ = ["add_run_parser", "run_command"]
 
-# Seconds per HTTP phase; longer than the library's default because an interactive run is often the first
-# request to a local server, which loads the model before it answers.
-_TIMEOUT_S = 120.0
+# Seconds one LLM request may take in all: the library's deadline (llm.limits.DEFAULT_DEADLINE_S, not imported
+# here so that building the parser stays cheap), enough for a local server that loads the model first.
+_TIMEOUT_S = 300.0
+# Seconds one network phase may take within it before the request is retried: a first request to a local
+# server waits while the model loads.
+_PHASE_TIMEOUT_S = 120.0
 # Model replies with --auto: the paper's five attempts per task (llm.loop.DEFAULT_MAX_ATTEMPTS, not imported
 # here so that building the parser stays cheap).
 _MAX_ATTEMPTS = 5
@@ -91,44 +103,69 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         action="store_true",
         help="also paste the critics' rules into the system prompt (the paper's embedded condition)",
     )
-    p.add_argument("--temperature", metavar="T", type=float, default=None, help="sampling temperature (default 0)")
+    p.add_argument(
+        "--temperature", metavar="T", type=_temperature, default=None, help="sampling temperature, 0 to 2 (default 0)"
+    )
     p.add_argument(
         "--timeout",
         metavar="S",
         type=positive_float,
         default=_TIMEOUT_S,
-        help=f"seconds per HTTP phase (default {_TIMEOUT_S:g})",
+        help=f"seconds one LLM request may take in all, retries included (default {_TIMEOUT_S:g})",
     )
     p.set_defaults(func=run_command)
     return p
 
 
+def _temperature(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and 0.0 <= value <= 2.0):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a number from 0 to 2")
+    return value
+
+
+def _say(out: TextIO, text: object = "", *, flush: bool = False) -> None:
+    """Print ``text`` cleaned of lone surrogates, and still print it on a stream that cannot encode all of it."""
+    from ..llm.limits import clean_text
+
+    line = clean_text(str(text))
+    try:
+        print(line, file=out, flush=flush)
+    except UnicodeEncodeError:
+        encoding = getattr(out, "encoding", None) or "ascii"
+        print(line.encode(encoding, errors="replace").decode(encoding, errors="replace"), file=out, flush=flush)
+
+
 def _error(message: str, stream: TextIO) -> int:
-    print(f"robocritics run: error: {one_line(message)}", file=stream)
+    _say(stream, f"robocritics run: error: {one_line(message)}")
     return 2
 
 
 def _print_attempt(attempt, out: TextIO) -> None:
+    from ..llm.limits import MAX_PRINTED_CHARS, cut_text
     from ..report import format_score
 
-    print(f"=== attempt {attempt.index} [{attempt.kind}] ===", file=out)
+    _say(out, f"=== attempt {attempt.index} [{attempt.kind}] ===")
     if attempt.error and attempt.program is None:
-        print("The reply contained no program.", file=out)
+        _say(out, "The reply contained no program.")
     elif attempt.complete:
-        print("The model says the program is complete (no change).", file=out)
+        _say(out, "The model says the program is complete (no change).")
     elif not attempt.changed:
-        print("The model sent the same program again.", file=out)
+        _say(out, "The model sent the same program again.")
     elif attempt.program is not None:
-        print("--- program ---", file=out)
-        print(attempt.program.rstrip("\n"), file=out)
+        _say(out, "--- program ---")
+        _say(out, cut_text(attempt.program.rstrip("\n"), MAX_PRINTED_CHARS, "characters of the program"))
     if attempt.error:
-        print("--- did not run ---", file=out)
-        print(attempt.error, file=out)
+        _say(out, "--- did not run ---")
+        _say(out, cut_text(attempt.error, MAX_PRINTED_CHARS))
     elif attempt.report is not None and (attempt.changed or attempt.index == 1):
-        print("--- critics ---", file=out)
-        print(str(attempt.report), file=out)
-    print(f"score: {format_score(attempt.score)}", file=out)
-    print(file=out, flush=True)
+        _say(out, "--- critics ---")
+        _say(out, cut_text(str(attempt.report), MAX_PRINTED_CHARS))
+    _say(out, f"score: {format_score(attempt.score)}")
+    _say(out, flush=True)
 
 
 def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
@@ -138,6 +175,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     from ..llm.client import OpenAICompatible
     from ..llm.loop import Loop
     from ..llm.memory import InteractionMemory
+    from ..llm.prompts import check_task
     from ..report import format_score
 
     out = stdout or sys.stdout
@@ -150,6 +188,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         if not api_key:
             return _error(f"the environment variable {args.api_key_env} (from --api-key-env) is not set", err)
     try:
+        task = check_task(args.task)
         scene = Scene.resolve(args.scene)
         params = load_params(getattr(args, "params", None)) or None
         critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
@@ -162,10 +201,11 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
             model=args.model,
             api_key=api_key,
             embedding_model=args.embedding_model,
-            timeout_s=args.timeout,
+            timeout_s=min(args.timeout, _PHASE_TIMEOUT_S),
+            deadline_s=args.timeout,
         )
     except LLMError as exc:
-        return _error(f"{exc} (or use --base-url / --model)", err)
+        return _error(f"{exc} (or use --base-url / --model)" if "configured" in str(exc) else str(exc), err)
 
     memory = None
     try:
@@ -187,11 +227,11 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
             on_attempt=lambda attempt: _print_attempt(attempt, out),
             model_options=options,
         )
-        print(f"robocritics run: {client.model} at {client.base_url}, scene {scene.name!r}", file=out)
-        print(f"task: {args.task}", file=out)
-        print(file=out)
+        _say(out, f"robocritics run: {client.model} at {client.base_url}, scene {scene.name!r}")
+        _say(out, f"task: {task}")
+        _say(out)
         try:
-            final = loop.request(args.task)
+            final = loop.request(task)
         except LLMError as exc:
             return _error(f"the LLM endpoint failed: {exc}", err)
         except RoboCriticsError as exc:
@@ -204,7 +244,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         else:
             verdict = "no Error"
         which = f"attempt {final.index} of {n}" if n > 1 else "attempt 1"
-        print(f"final: {which}, score {format_score(final.score)}, {verdict}", file=out, flush=True)
+        _say(out, f"final: {which}, score {format_score(final.score)}, {verdict}", flush=True)
         return 1 if final.has_errors else 0
     finally:
         if memory is not None:
