@@ -564,7 +564,7 @@ class Planner:
 
     def line_move(self, goal: np.ndarray, call: SkillCall, step: int) -> None:
         start = self.tcp()[:3, 3]
-        length = float(np.linalg.norm(goal - start))
+        length = math.hypot(*(goal - start))  # no overflow for absurd targets
         if length < SAME_POINT_M:
             return
         if not length <= MAX_LINE_M:
