@@ -575,7 +575,7 @@ class Scene(_Model):
     def load(cls, path: str | Path) -> "Scene":
         """Load a scene from a JSON file (see the module docstring for the bounds); :class:`SceneError` if bad."""
         text = _read_scene_file(path)
-        shown = str(path) if len(str(path)) <= _QUOTED_CHARS else _quoted(str(path))
+        shown = _path_label(path)
         data = parse_json(text, shown)
         if not isinstance(data, dict):
             raise SceneError(f"{shown}: a scene is a JSON object, got {type(data).__name__}")
@@ -644,7 +644,7 @@ class Scene(_Model):
 
 def _read_scene_file(path: str | Path) -> str:
     """The text of scene file ``path``: a regular file of at most MAX_FILE_BYTES bytes of UTF-8."""
-    shown = _quoted(str(path))
+    shown = repr(_path_label(path))
     try:
         p = Path(path)
         info = p.stat()
@@ -673,6 +673,16 @@ def _read_scene_file(path: str | Path) -> str:
 
 _QUOTED_CHARS = 60
 """Input quoted in error messages is cut to this length."""
+
+
+_PATH_CHARS = 200
+"""File names longer than this are shown as their start and end (the end names the file)."""
+
+
+def _path_label(path: Any) -> str:
+    """A file name for an error message: whole if readable, else its start and its end."""
+    text = str(path)
+    return text if len(text) <= _PATH_CHARS else f"{text[:60]}...{text[-120:]} ({len(text):,} characters)"
 
 
 def _quoted(value: Any) -> str:

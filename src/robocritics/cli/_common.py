@@ -55,6 +55,18 @@ def shown(text: object) -> str:
     return repr(t) if len(t) <= _SHOWN_CHARS else repr(t[:_SHOWN_CHARS]) + f"... ({len(t):,} characters)"
 
 
+def path_label(path: object) -> str:
+    """A file name for an error message: whole if readable, else its start and its end (which names the file)."""
+    t = str(path)
+    return t if len(t) <= 200 else f"{t[:60]}...{t[-120:]} ({len(t):,} characters)"
+
+
+def shown_path(path: object) -> str:
+    """:func:`path_label`, quoted."""
+    t = str(path)
+    return repr(t) if len(t) <= 200 else repr(f"{t[:60]}...{t[-120:]}") + f" ({len(t):,} characters)"
+
+
 def positive_int(text: str) -> int:
     try:
         value = int(text) if len(text) <= 20 else None
@@ -105,7 +117,7 @@ def port(text: str) -> int:
 
 def read_text(path: str, what: str, max_bytes: int = MAX_INPUT_BYTES) -> str:
     """The UTF-8 text of the regular file ``path`` of at most ``max_bytes`` bytes; :class:`UsageError` otherwise."""
-    where = shown(path)
+    where = shown_path(path)
     if not path:
         raise UsageError(f"the {what} file name is empty")
     try:
@@ -140,12 +152,12 @@ def load_params(path: str | None) -> dict:
 
     text = read_text(path, "params")
     try:
-        data = parse_json(text, f"params file {shown(path)}")  # bounded: nesting, digits
+        data = parse_json(text, f"params file {shown_path(path)}")  # bounded: nesting, digits
     except SceneError as exc:
         raise UsageError(str(exc).replace(": not valid JSON", " is not valid JSON", 1)) from None
     if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
         raise UsageError(
-            f'params file {shown(path)} must hold a JSON object of critic names to objects, e.g. {{"joint_speed": {{"warn_speed_m_s": 0.8}}}}'
+            f'params file {shown_path(path)} must hold a JSON object of critic names to objects, e.g. {{"joint_speed": {{"warn_speed_m_s": 0.8}}}}'
         )
     return data
 
@@ -176,7 +188,7 @@ def scene_for(program_path: str, scene_arg: str | None):
     except SceneError as exc:
         if not scene_arg or scene_arg in Scene.builtin_names():
             raise
-        located = SceneError(f"{shown(scene_arg)[1:-1]}: {exc}")  # the file, then the field
+        located = SceneError(f"{path_label(scene_arg)}: {exc}")  # the file, then the field
         located.path = exc.path
         raise located from None
     return scene
