@@ -1,18 +1,32 @@
-"""Hostile programs: every one must end in ProgramError, stopped by a limit that counts work, without touching
-anything outside the skill API; the wall-clock limit is tested on a simulated clock."""
+"""Hostile programs: every one must end in ProgramError without touching anything outside the skill API.
+
+Two corpora. ``ESCAPES`` (below) tries to reach Python itself (imports, dunder walks,
+forbidden builtins and statements) or to make huge values; each must be refused
+with the right message while a tripwire watches the dangerous callables.
+:mod:`hostile_corpus` attacks the budgets class by class (work inside one
+statement, builtins' work, hash collisions, amplified error messages, memory,
+stack); each case must hit exactly its limit at its line, end within a second of
+CPU time with the default Budget, and all of them together must grow the
+process's memory by less than 500 MB. The wall-clock limit is tested on a
+simulated clock.
+"""
 
 from __future__ import annotations
 
 import ast
 import builtins
+import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
+from hostile_corpus import AMPLIFICATION, BUILTIN_WORK, CORPUS, MEMORY, ONE_STATEMENT, STACK, Hostile
 
 from robocritics.errors import ProgramError
-from robocritics.program import Budget, run_program
+from robocritics.program import Budget, BudgetError, run_program
+from robocritics.program.render import MESSAGE_CHARS
 from robocritics.scene import Scene
 
 SCENE = Scene.builtin("sorting")
@@ -29,7 +43,7 @@ WORK_LIMITS_ONLY = Budget(clock=stopped_clock)
 
 
 class SteppingClock:
-    """A simulated clock that advances ``step_s`` seconds every time it is read (once per program step)."""
+    """A simulated clock that advances ``step_s`` seconds every time it is read (every few hundred work units)."""
 
     def __init__(self, step_s: float):
         self.step_s = step_s
@@ -41,7 +55,7 @@ class SteppingClock:
 
 
 # (id, program source, a substring the error message must contain)
-HOSTILE: list[tuple[str, str, str]] = [
+ESCAPES: list[tuple[str, str, str]] = [
     # ---- imports ------------------------------------------------------------------------
     ("import_os", "import os\nos.system('touch " + CANARY_FILE + "')", "import of 'os' is not allowed"),
     ("from_os_system", "from os import system\nsystem('id')", "import of 'os' is not allowed"),
@@ -179,7 +193,7 @@ HOSTILE: list[tuple[str, str, str]] = [
 
 
 def _ids() -> list[str]:
-    return [case[0] for case in HOSTILE]
+    return [case[0] for case in ESCAPES]
 
 
 GOOD_PROGRAM = "for a in objects:\n    if a.ripeness == 'ripe':\n        move_above(a)\nhome()\n"
@@ -211,11 +225,11 @@ class _Tripwire:
 
 
 def test_corpus_is_large_and_unique():
-    assert len(HOSTILE) >= 40
-    assert len(set(_ids())) == len(HOSTILE)
+    assert len(ESCAPES) >= 40
+    assert len(set(_ids())) == len(ESCAPES)
 
 
-@pytest.mark.parametrize("name,source,expected", HOSTILE, ids=_ids())
+@pytest.mark.parametrize("name,source,expected", ESCAPES, ids=_ids())
 def test_hostile_program_is_stopped(name, source, expected, monkeypatch):
     modules_before = set(sys.modules)
     if os.path.exists(CANARY_FILE):
@@ -336,3 +350,60 @@ def test_real_stdout_untouched(capsys):
     plan = run_program("print('hello', green_apple)\n", SCENE)
     assert plan.output == ["hello green_apple"]
     assert capsys.readouterr().out == ""
+
+
+# ---- the budget corpus (tests/hostile_corpus.py), run in a fresh process -----------------------------------
+
+CPU_LIMIT_S = 1.0
+"""CPU time a hostile program may take with the default Budget (its 0.5 s clock stops it; CPU time, not wall
+time, so a loaded machine does not matter)."""
+MEMORY_GROWTH_LIMIT_BYTES = 500_000_000
+"""Peak memory the whole corpus, each case run twice, may add to a fresh process."""
+
+
+@pytest.fixture(scope="module")
+def corpus_run() -> dict:
+    """What stopped each case, its CPU time, the memory growth and the audit events, from a fresh process."""
+    script = Path(__file__).with_name("hostile_corpus.py")
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600, check=True)
+    return json.loads(done.stdout)
+
+
+def test_budget_corpus_covers_every_class():
+    assert len(CORPUS) >= 40
+    assert len({c.name for c in CORPUS}) == len(CORPUS)
+    for section in (ONE_STATEMENT, BUILTIN_WORK, AMPLIFICATION, MEMORY, STACK):
+        assert section
+    limits = {c.limit for c in CORPUS}
+    assert {"max_work", "max_nodes", "max_len", "max_str_len", "max_alloc_bytes", "max_call_depth"} <= limits
+
+
+@pytest.mark.parametrize("case", CORPUS, ids=[c.name for c in CORPUS])
+def test_budget_corpus_case_stops_at_its_limit_and_line(case: Hostile, corpus_run):
+    outcome = corpus_run["cases"][case.name]["work_only"]
+    assert outcome["error"] == ("BudgetError" if case.limit else "ProgramError"), outcome
+    assert outcome["limit"] == case.limit, outcome["reason"]
+    assert outcome["line"] == case.line, outcome["reason"]
+    assert case.message in outcome["reason"]
+    assert len(outcome["reason"]) <= MESSAGE_CHARS + 100  # every value in it bounded, the message clipped
+
+
+@pytest.mark.parametrize("case", CORPUS, ids=[c.name for c in CORPUS])
+def test_budget_corpus_case_ends_within_a_second(case: Hostile, corpus_run):
+    outcome = corpus_run["cases"][case.name]["default"]
+    assert outcome["error"] in ("BudgetError", "ProgramError"), outcome
+    assert outcome["line"] > 0
+    assert outcome["cpu_s"] < CPU_LIMIT_S
+
+
+def test_budget_corpus_memory_and_escapes(corpus_run):
+    assert corpus_run["peak_growth_bytes"] < MEMORY_GROWTH_LIMIT_BYTES
+    assert corpus_run["audited"] == {}  # no import, open, exec, os, subprocess... during any run
+
+
+def test_default_budget_stops_a_time_hog_with_the_real_clock():
+    # the work limits are generous enough that the 0.5 s clock may end a run first; either way it ends soon
+    with pytest.raises(BudgetError) as info:
+        run_program("a = [[[0] * 30] * 30] * 30\nwhile True:\n    x = a == a[:]\n", SCENE)
+    assert info.value.limit in ("max_seconds", "max_work")
+    assert info.value.line == 3

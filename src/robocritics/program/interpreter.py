@@ -18,6 +18,7 @@ from __future__ import annotations
 import ast
 import math
 import sys
+import traceback
 from itertools import islice
 from typing import Any, Callable, Iterator
 
@@ -29,9 +30,9 @@ from .builtins import _Builtins
 from .check import MATH_ALL, MODULE_ALIASES, Source, quote
 from .keys import KeyGuard
 from .language import MATH_NAMES, SAFE_BUILTINS, SAFE_METHODS
-from .meter import SLOT_BYTES, LimitReached, Meter
+from .meter import MAKE_OPS, SLOT_BYTES, LimitReached, Meter
 from .methods import _Methods
-from .operations import _Operations
+from .operations import TUPLE_ITERATORS, _Operations, produced_size
 from .plan import Plan
 from .render import bounded_repr, clip
 from .skills import SKILLS, Namespace, ObjectView, Recorder, _close_names, _CURRENT
@@ -96,6 +97,18 @@ def _stack_depth() -> int:
     return depth
 
 
+def _released(error: ProgramError) -> ProgramError:
+    """``error`` cut loose from the interpreter's frames, so the program's values are freed now, not at the
+    next garbage collection (each frame of the traceback holds the exception it caught, a reference cycle)."""
+    seen: BaseException | None = error
+    while seen is not None:
+        traceback.clear_frames(seen.__traceback__)
+        seen = seen.__context__
+    error.__context__ = error.__cause__ = None
+    error.__suppress_context__ = True
+    return error.with_traceback(None)
+
+
 def _attr_message(obj: Any, name: str) -> str:
     t = type(obj)
     if t is str and name in ("format", "format_map"):
@@ -157,21 +170,22 @@ class _Interpreter(_Builtins, _Methods, _Operations):
 
     def run(self) -> Plan:
         token = _CURRENT.set(self.rec)
+        error: ProgramError | None = None
         try:
             self.frame_room = min(_MAX_INTERPRETER_FRAMES, sys.getrecursionlimit() - _stack_depth() - _RESERVED_FRAMES)
             self.frame_marks = [(sys._getframe(), 0)]
             self.meter.start()
             self._exec_block(self.tree.body, _Scope({}, None, None, "<module>"))
+        except ProgramError as exc:
+            error = exc
         except RecursionError:  # a backstop: _enter_call stops calls well before the recursion limit
-            raise BudgetError(
-                "the program nests too deeply (deep recursion or nested expressions)", limit="max_call_depth"
-            ) from None
+            error = BudgetError("the program nests too deeply (deep recursion or nested expressions)", limit="max_call_depth")
         except MemoryError:
-            raise BudgetError(
-                "the program ran out of memory; keep lists and strings small", limit="max_alloc_bytes"
-            ) from None
+            error = BudgetError("the program ran out of memory; keep lists and strings small", limit="max_alloc_bytes")
         finally:
             _CURRENT.reset(token)
+        if error is not None:
+            raise _released(error)
         return self.plan
 
     # ---- errors -----------------------------------------------------------------------
@@ -221,6 +235,13 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         except LimitReached as hit:
             where = self.loops[-1] if self.loops and hit.limit == "max_steps" else node
             raise self._limit_error(hit, where) from None
+
+    def _charge_produced(self, item: Any, node: Any) -> None:
+        """Pay for the tuple a zip(), enumerate() or items() iterator just made for one loop iteration."""
+        try:
+            self.meter.spend_ops(MAKE_OPS * produced_size(item, self.b.max_nodes))
+        except LimitReached as hit:
+            raise self._limit_error(hit, node) from None
 
     # ---- statements -------------------------------------------------------------------
 
@@ -300,9 +321,13 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         except TypeError as exc:
             raise self._convert(exc, node.iter) from None
 
+        makes_tuples = type(it) in TUPLE_ITERATORS
+
         def iterations() -> Iterator[None]:
             for item in it:
                 self._tick(node)
+                if makes_tuples:
+                    self._charge_produced(item, node)
                 self._assign(node.target, item, scope)
                 yield
 
@@ -908,8 +933,11 @@ class _Interpreter(_Builtins, _Methods, _Operations):
                 it = self._iter(iterable, g.iter)
             except TypeError as exc:
                 raise self._convert(exc, g.iter) from None
+            makes_tuples = type(it) in TUPLE_ITERATORS
             for item in it:
                 self._tick(node)
+                if makes_tuples:
+                    self._charge_produced(item, node)
                 self._assign(g.target, item, inner)
                 ok = True
                 for cond in g.ifs:

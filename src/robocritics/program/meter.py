@@ -167,12 +167,14 @@ class Meter:
         walks them. The walk stops as soon as the weight passes ``cap``
         (default ``max_nodes``) and returns that partial weight, above ``cap``.
         Data nested deeper than ``max_nesting`` raises :class:`LimitReached`:
-        C would recurse that deep.
+        C would recurse that deep. The walk never does more work than the budget
+        has left (it stops with ``max_work``).
         """
         if type(value) not in _CONTAINERS:
             return scalar_weight(value)
         cap = self.budget.max_nodes if cap is None else cap
         max_depth = self.budget.max_nesting
+        affordable_ops = (self.max_work - self.work) * OPS_PER_UNIT
         weight = 0
         visited = 0
         containers = 0
@@ -182,6 +184,8 @@ class Meter:
             if depth >= max_depth:
                 self.spend_ops(WALK_OPS_PER_ELEMENT * visited + WALK_OPS_PER_CONTAINER * containers)
                 raise self.too_deep()
+            if WALK_OPS_PER_ELEMENT * visited + WALK_OPS_PER_CONTAINER * containers > affordable_ops:
+                raise self._out_of_work()
             elements: Any = [*v.keys(), *v.values()] if type(v) is dict else v
             containers += 1
             visited += len(elements)

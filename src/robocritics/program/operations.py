@@ -30,7 +30,7 @@ from operator import itemgetter
 from typing import Any, Callable
 
 from .keys import MAX_KEYS_PER_HASH
-from .meter import MAKE_OPS, OPS_PER_UNIT, SLOT_BYTES, scalar_weight
+from .meter import MAKE_OPS, SLOT_BYTES, scalar_weight
 from .render import TooDeep, bounded_repr, render
 from .skills import ObjectView
 from .values import NOVALUE, check_callable, tname
@@ -42,7 +42,10 @@ SET_SLOT_BYTES = 40
 _DICT_SLOT_BYTES = 50
 """Bytes one more dict entry takes (a 24-byte entry plus its index slot, at a fill of at most 2/3)."""
 _PAIR_BYTES = 64
-"""Bytes of one (key, value) or (index, value) tuple made while iterating items(), zip() or enumerate()."""
+"""Bytes of one (key, value) tuple made while iterating items()."""
+_MADE_ELEMENT_BYTES = 32
+"""Bytes per element of what an iterator makes: a new int of a range (28), a slot of a new tuple (8, plus 48 per
+tuple of a few elements)."""
 _SEARCH_WINDOW_CHARS = 100
 """Substring search in C compares at most this many needle characters per haystack position (longer needles
 switch to a linear-time algorithm)."""
@@ -108,7 +111,8 @@ ITERATORS = frozenset(
     }
 )
 ITERABLE = SIZED | ITERATORS
-_PAIR_ITERATORS = frozenset({enumerate, zip, type(iter({}.items())), type(reversed({}.items()))})
+TUPLE_ITERATORS = frozenset({enumerate, zip, type(iter({}.items())), type(reversed({}.items()))})
+"""Iterators that make a new tuple for every element (zip's tuples are as wide as its arguments are many)."""
 
 
 def not_iterable(value: Any) -> TypeError:
@@ -118,6 +122,19 @@ def not_iterable(value: Any) -> TypeError:
     elif type(value) is int:
         hint = "; to count use range(n)"
     return TypeError(f"'{tname(value)}' object is not iterable{hint}")
+
+
+def produced_size(item: Any, cap: int) -> int:
+    """Elements of ``item`` and of the tuples nested in it (what an iterator of tuples made), up to past ``cap``."""
+    if type(item) is not tuple:
+        return 1
+    size = 0
+    stack = [item]
+    while stack and size <= cap:
+        t = stack.pop()
+        size += 1 + len(t)
+        stack.extend(e for e in t if type(e) is tuple)
+    return size
 
 
 def search_chars(haystack: str, needle: str) -> int:
@@ -186,18 +203,36 @@ class _Operations:
                 raise self._limit(f"{what} would have {n} elements; the limit is {self.b.max_len}", node, "max_len")
             if t is ITEMS_VIEW:
                 self.meter.allocate(_PAIR_BYTES * n)  # the (key, value) tuples the consumer will make
+            elif t is range:
+                self.meter.allocate(_MADE_ELEMENT_BYTES * n)  # the ints the consumer will make
             return value
         if t in ITERATORS:
-            limit = self.b.max_len
-            out = list(islice(value, limit + 1))  # every iterator a program has takes O(1) per element
-            if len(out) > limit:
-                raise self._limit(f"{what} has more than {limit} elements; the limit is {limit}", node, "max_len")
-            self.meter.spend_ops(MAKE_OPS * len(out))
-            self._made(out)
-            if t in _PAIR_ITERATORS:
-                self.meter.allocate(_PAIR_BYTES * len(out))
-            return out
+            return self._run_iterator(value, node, what)
         raise not_iterable(value)
+
+    def _run_iterator(self, iterator: Any, node: Any, what: str) -> list:
+        """The elements of an iterator as a new list of at most ``max_len``; the tuples zip(), enumerate() and
+        items() make are counted one by one, so together they hold at most ``max_nodes`` elements."""
+        limit = self.b.max_len
+        if type(iterator) not in TUPLE_ITERATORS:  # each element costs O(1) to make
+            out = list(islice(iterator, limit + 1))
+            made = len(out)
+        else:
+            out = []
+            made = 0
+            max_nodes = self.b.max_nodes
+            for item in iterator:
+                out.append(item)
+                made += produced_size(item, max_nodes)
+                if made > max_nodes or len(out) > limit:
+                    break
+            if made > max_nodes and len(out) <= limit:
+                raise self.meter.too_large()
+        if len(out) > limit:
+            raise self._limit(f"{what} has more than {limit} elements; the limit is {limit}", node, "max_len")
+        self.meter.spend_ops(MAKE_OPS * made)
+        self.meter.allocate(_MADE_ELEMENT_BYTES * made)
+        return self._made(out)
 
     def _iter(self, value: Any, node: Any) -> Any:
         if type(value) in ITERABLE:
@@ -266,16 +301,13 @@ class _Operations:
         max_nodes = self.b.max_nodes
         weight_x = self.meter.weigh(x)
         ops = n * weight_x
-        if weight_x > 1:
-            weight_seq = self.meter.weigh(seq, cap=min(ops, self._affordable_ops()))
-            if weight_x > max_nodes and weight_seq > max_nodes:
+        if weight_x > 1:  # the elements may be lighter than x: weigh them, as far as that can lower the price
+            too_heavy = weight_x > max_nodes  # x was not walked to the end: the elements must be
+            weight_seq = self.meter.weigh(seq, cap=max_nodes if too_heavy else ops)
+            if too_heavy and weight_seq > max_nodes:
                 raise self.meter.too_large()
             ops = min(ops, weight_seq)
         self.meter.spend_ops((1 + MAX_KEYS_PER_HASH) * ops + n)
-
-    def _affordable_ops(self) -> int:
-        """Element comparisons the work budget can still pay for."""
-        return (self.meter.max_work - self.meter.work) * OPS_PER_UNIT // (1 + MAX_KEYS_PER_HASH)
 
     def _index_of(self, seq: Any, x: Any, start: Any, stop: Any, what: str) -> int:
         """``seq.index(x, start, stop)`` without the C message that quotes ``x`` in full."""
