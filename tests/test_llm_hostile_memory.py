@@ -331,7 +331,7 @@ def reference_ranking(requests: dict[int, str], query: str, k: int) -> list[tupl
     """The plain BM25 ranking over every candidate: best score first, ties to the newest, only > 0."""
     ids = list(requests)
     scores = bm25_scores(query, [requests[i] for i in ids])
-    ranked = sorted(((round(float(s), 9), i, float(s)) for i, s in zip(ids, scores) if s > 0), key=lambda x: (-x[0], -x[1]))
+    ranked = sorted(((round(float(s), 9), i, float(s)) for i, s in zip(ids, scores, strict=True) if s > 0), key=lambda x: (-x[0], -x[1]))
     return [(i, s) for _, i, s in ranked[:k]]
 
 

@@ -631,7 +631,7 @@ class InteractionMemory:
             keep = np.lexsort((-ids, -sims))[:k]  # best similarity first, then newest
             best_ids, best_sims = ids[keep], sims[keep]
             last = int(rows[-1][0])
-        return [(int(i), float(s)) for i, s in zip(best_ids, best_sims)]
+        return [(int(i), float(s)) for i, s in zip(best_ids, best_sims, strict=True)]
 
     def embed_missing(self, session: str | None = None) -> int:
         """Embed and store every interaction (of ``session``) that has no vector from the current embedder.
@@ -688,7 +688,7 @@ class InteractionMemory:
                 "SELECT ?, ?, ?, ?, ? WHERE EXISTS (SELECT 1 FROM interactions WHERE id = ?)",
                 [
                     (i, name, dim, np.asarray(v, dtype="<f8").tobytes(), now, i)
-                    for (i, _), v in zip(batch, vectors)
+                    for (i, _), v in zip(batch, vectors, strict=True)
                 ],
             )
         return dim
