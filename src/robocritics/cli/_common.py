@@ -115,6 +115,42 @@ def port(text: str) -> int:
     return value
 
 
+def bounded_float(low: float, high: float, unit: str = "") -> Callable[[str], float]:
+    """An argument type for a finite number in ``[low, high]`` (``unit`` names it in messages)."""
+    suffix = f" {unit}" if unit else ""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{shown(text)} is not a number") from None
+        if not (math.isfinite(value) and low <= value <= high):
+            raise argparse.ArgumentTypeError(f"{shown(text)} must be a number from {low:g} to {high:g}{suffix}")
+        return value
+
+    return parse
+
+
+def host(text: str) -> str:
+    """A host name or IP address: non-empty, at most 253 characters of labels of at most 63, IDNA-encodable."""
+    name = text.strip()
+    problem = ""
+    if not name:
+        problem = "is empty"
+    elif len(name) > 253 or any(c.isspace() or c in "\x00/" for c in name):
+        problem = "is not a host name"
+    else:
+        try:
+            labels = name.encode("idna").split(b".")
+        except UnicodeError:
+            labels = None
+        if labels is None or any(len(label) > 63 for label in labels):
+            problem = "is not a host name (labels are at most 63 characters)"
+    if problem:
+        raise argparse.ArgumentTypeError(f"{shown(text)} {problem}; give a host name or IP address, e.g. 192.168.1.10")
+    return name
+
+
 def read_text(path: str, what: str, max_bytes: int = MAX_INPUT_BYTES) -> str:
     """The UTF-8 text of the regular file ``path`` of at most ``max_bytes`` bytes; :class:`UsageError` otherwise."""
     where = shown_path(path)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ._common import one_line, port, read_text, scene_for, subcommand
+from ._common import host, one_line, port, read_text, scene_for, subcommand
 
 
 @subcommand("deploy")
@@ -21,7 +21,7 @@ def _build_deploy(sub) -> None:
     )
     p.add_argument("program", metavar="PROGRAM", help="robot program file (Python using the skill API)")
     p.add_argument("--scene", metavar="NAME|PATH", help="scene name or JSON file (default as for `check`)")
-    p.add_argument("--host", default="127.0.0.1", help="controller address (default 127.0.0.1)")
+    p.add_argument("--host", type=host, default="127.0.0.1", help="controller address (default 127.0.0.1)")
     p.add_argument("--rtde-port", type=port, default=30004)
     p.add_argument("--dashboard-port", type=port, default=29999)
     p.add_argument("--secondary-port", type=port, default=30002)
