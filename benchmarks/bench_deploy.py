@@ -52,13 +52,14 @@ def _controller(conn, initial_q) -> None:
 
 def run(program: str, scene_name: str, spin_us: float, lookahead_s: float, gain: float) -> dict:
     import robocritics as rc
+    from robocritics.critic import BUILTIN_CRITICS
     from robocritics.deploy import URArm
 
     scene = rc.Scene.builtin(scene_name)
     source = SHORT if program == "short" else Path(program).read_text()
     t = time.perf_counter()
     execution = rc.simulate(source, scene)
-    report = rc.critique(execution.trajectory, scene)
+    report = rc.critique(execution, critics=BUILTIN_CRITICS)
     prep_s = time.perf_counter() - t
     home = tuple(float(v) for v in execution.robot.home_q)
     ctx = mp.get_context("spawn")

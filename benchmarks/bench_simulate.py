@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+from robocritics.critic import BUILTIN_CRITICS
 from robocritics import Robot, Scene, critique, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,7 +28,7 @@ def main(repeats: int = 15) -> None:
             t0 = time.perf_counter()
             execution = simulate(source, scene, robot)
             t1 = time.perf_counter()
-            critique(execution.trajectory, scene)
+            critique(execution, critics=BUILTIN_CRITICS)
             times.append(t1 - t0)
             crit.append(time.perf_counter() - t1)
         traj = execution.trajectory

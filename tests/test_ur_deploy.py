@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from robocritics.critic import BUILTIN_CRITICS
 import robocritics as rc
 from robocritics.errors import DeployError, RTDEError
 from robocritics.testing.ursim import URSim
@@ -59,7 +60,7 @@ def scene():
 def motion(scene):
     """(execution, report) of the short program; the report has no Errors."""
     execution = rc.simulate(SHORT_PROGRAM, scene)
-    report = rc.critique(execution.trajectory, scene)
+    report = rc.critique(execution, critics=BUILTIN_CRITICS)
     assert not report.has_errors, report.summary()
     assert 1.5 < execution.trajectory.duration_s < 3.0
     return execution, report
@@ -241,7 +242,7 @@ def test_fieldbus_on_registers_0_to_23_does_not_stop_a_deployment(motion, home):
 def test_gate_refuses_a_report_with_errors_and_names_the_critics(scene, home):
     naive = Path(__file__).resolve().parent.parent / "examples" / "programs" / "sorting_naive.py"
     execution = rc.simulate(naive.read_text(), scene)
-    report = rc.critique(execution.trajectory, scene)
+    report = rc.critique(execution, critics=BUILTIN_CRITICS)
     assert report.has_errors
     with controller(home) as sim:
         with arm_for(sim) as arm:
@@ -277,7 +278,7 @@ def test_gate_refuses_setpoints_faster_than_the_joint_limits_even_with_allow_err
     q = traj.q.copy()
     q[len(q) // 2 :, 0] += 0.05  # one 8 ms step of 0.05 rad: 6.25 rad/s on the base
     jumpy = execution.robot.trajectory(q, traj.time, scene, gripper_opening_m=traj.gripper_opening_m)
-    report = rc.critique(jumpy, scene)
+    report = rc.critique(jumpy, scene, critics=BUILTIN_CRITICS)
     with controller(home) as sim:
         with arm_for(sim) as arm:
             with pytest.raises(DeployRefused) as info:
@@ -301,7 +302,7 @@ def test_gate_refuses_a_start_far_from_the_arm_and_offers_an_approach(motion, sc
             assert "start_q=arm.actual_q()" in text and "arm.approach(execution)" in text
             assert_nothing_sent(sim, q0)
             approach = arm.approach(execution, speed_fraction=0.1)
-            approach_report = rc.critique(approach, scene)  # the caller judges the approach like any motion
+            approach_report = rc.critique(approach, scene, critics=BUILTIN_CRITICS)  # the caller judges the approach like any motion
             assert not approach_report.has_errors
             assert np.allclose(approach.q[0], q0) and np.array_equal(approach.q[-1], execution.trajectory.q[0])
             assert np.all(np.diff(approach.time) > 0)
@@ -321,7 +322,7 @@ def test_a_motion_planned_from_the_arms_joints_passes_the_gate(scene, home):
     with controller(tuple(q0)) as sim:
         with arm_for(sim) as arm:
             execution = rc.simulate(SHORT_PROGRAM, scene, start_q=arm.actual_q())
-            report = rc.critique(execution.trajectory, scene)
+            report = rc.critique(execution, critics=BUILTIN_CRITICS)
             assert np.array_equal(execution.trajectory.q[0], q0) and not report.has_errors
             result = arm.deploy(execution, report)
         assert result.final_error_rad < 1e-3 and not sim.events("start_rejected")
@@ -335,7 +336,7 @@ def test_an_approach_must_pass_the_gate_too(motion, scene, home):
     with controller(tuple(q0)) as sim:
         with arm_for(sim) as arm:
             approach = arm.approach(execution)
-            approach_report = rc.critique(approach, scene)
+            approach_report = rc.critique(approach, scene, critics=BUILTIN_CRITICS)
             assert approach_report.has_errors
             with pytest.raises(DeployRefused) as info:
                 arm.deploy(approach, approach_report)
@@ -651,7 +652,7 @@ def test_a_fresh_deploy_after_a_fault_works(motion, home):
             sim.step(round(0.3 / DT))  # the unlock delay, in controller time
             arm.dashboard.unlock_protective_stop()
             approach = arm.approach(execution, speed_fraction=0.5)
-            arm.deploy(approach, rc.critique(approach, execution.scene))
+            arm.deploy(approach, rc.critique(approach, execution.scene, critics=BUILTIN_CRITICS))
             arm.deploy(execution, report)
         assert max(abs(a - b) for a, b in zip(sim.q, execution.trajectory.q[-1])) < 1e-3
 

@@ -44,7 +44,7 @@ def _cmd_deploy(args: argparse.Namespace) -> int:
         ) as arm:
             start_q = arm.actual_q()
             execution = simulate(plan, scene, start_q=start_q)
-            report = critique(execution.trajectory, execution.scene)
+            report = critique(execution)  # every installed critic: all of them gate the deploy
             print(f"planned from the arm's joints [{', '.join(f'{v:.4f}' for v in start_q)}] rad")
             print(report.to_text())
             result = arm.deploy(execution, report, dry_run=args.dry_run)
