@@ -190,6 +190,7 @@ def test_an_error_page_is_read_only_as_far_as_it_is_quoted(llm_server, make_clie
         ({"Content-Encoding": "gzip"}, b"definitely not gzip", "not valid gzip data"),
         ({"Content-Encoding": "gzip, gzip"}, b"", "Content-Encoding 'gzip, gzip'"),
     ],
+    ids=["brotli", "not-gzip", "double-gzip"],
 )
 def test_bodies_that_cannot_be_decoded_are_llm_errors(llm_server, make_client, headers, body, message):
     llm_server.script(Garbage(body, content_type="application/json", headers=headers))
@@ -217,6 +218,7 @@ def test_a_gzipped_reply_is_read_normally(llm_server, make_client):
         (b'{"choices": ' + b'{"a": ' * 50_000 + b"1" + b"}" * 50_001, "nests 50,001 levels deep"),
         (b"[" + b"[]," * 200_000 + b"[]]", "holds 200,002 arrays and objects"),
     ],
+    ids=["100k-deep-arrays", "50k-deep-objects", "200k-empty-arrays"],
 )
 def test_deep_or_huge_json_is_refused_before_decoding(llm_server, make_client, body, message):
     llm_server.script(Garbage(body, content_type="application/json"))
@@ -316,3 +318,36 @@ def test_a_nan_temperature_per_call_is_refused_before_sending(llm_server, make_c
     with pytest.raises(LLMArgumentError, match="temperature"):
         make_client().complete(USER, temperature=float("nan"))
     assert llm_server.requests == []
+
+
+def test_deadlines_are_per_call_when_threads_share_a_client(llm_server, make_client):
+    import threading
+
+    def responder(request):
+        text = request["messages"][-1]["content"]
+        return drip(chat_body("x" * 200), interval_s=0.25) if text.startswith("slow") else f"done {text}"
+
+    llm_server.responder = responder
+    client = make_client(timeout_s=2.0, deadline_s=1.5)
+    outcomes: dict[str, object] = {}
+
+    def call(text: str) -> None:
+        started = time.monotonic()
+        try:
+            outcomes[text] = (client.complete([{"role": "user", "content": text}]), time.monotonic() - started)
+        except LLMError as exc:
+            outcomes[text] = (exc, time.monotonic() - started)
+
+    names = [f"{kind} {i}" for i in range(4) for kind in ("slow", "fast")]
+    threads = [threading.Thread(target=call, args=(name,)) for name in names]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=30)
+    assert len(outcomes) == 8
+    for name, (result, elapsed) in outcomes.items():
+        if name.startswith("slow"):
+            assert isinstance(result, LLMError) and "deadline of 1.5 s" in str(result), name
+            assert elapsed < 1.5 + SLACK_S
+        else:
+            assert result == f"done {name}"  # the slow calls' deadlines never touched these

@@ -13,8 +13,11 @@ _EXPORTS = {
     "ChatModel": "robocritics.llm.client",
     "EmbeddingModel": "robocritics.llm.client",
     "OpenAICompatible": "robocritics.llm.client",
+    "LLMArgumentError": "robocritics.llm.client",
     "InteractionMemory": "robocritics.llm.memory",
     "Interaction": "robocritics.llm.memory",
+    "InteractionMemoryError": "robocritics.llm.memory",
+    "PromptError": "robocritics.llm.prompts",
     "extract_code": "robocritics.llm.prompts",
     "system_prompt": "robocritics.llm.prompts",
     "fix_prompt": "robocritics.llm.prompts",
@@ -31,7 +34,7 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .client import ChatModel, EmbeddingModel, OpenAICompatible
+    from .client import ChatModel, EmbeddingModel, LLMArgumentError, OpenAICompatible
     from .loop import Attempt, Loop, NothingToFixError
-    from .memory import Interaction, InteractionMemory
-    from .prompts import extract_code, fix_prompt, runtime_feedback, system_prompt
+    from .memory import Interaction, InteractionMemory, InteractionMemoryError
+    from .prompts import PromptError, extract_code, fix_prompt, runtime_feedback, system_prompt

@@ -234,8 +234,10 @@ class OpenAICompatible:
     and their reasons).
 
     ``transport`` replaces the HTTP transport (by default a
-    ``llm.transport.DeadlineTransport``); with another transport the deadline
-    is checked between reads, each of which may take up to ``timeout_s``.
+    ``llm.transport.DeadlineTransport``); with another transport, or through a
+    proxy that httpx takes from the environment (``HTTPS_PROXY`` ...), the
+    deadline is checked between reads, each of which may take up to
+    ``timeout_s``.
 
     ``name`` is the chat model; ``embedding_name`` the embedding model.
     """
@@ -554,7 +556,7 @@ class OpenAICompatible:
                     "(http vs https, a missing or extra path part)"
                 )
             if status < 400:
-                raw = read_body(response, max_bytes=self.max_response_bytes, deadline=deadline, what=f"{what} reply")
+                raw = read_body(response, max_bytes=self.max_response_bytes, deadline=deadline, what="reply")
                 return self._decode_json(raw, response, what)
             raw = read_body(response, max_bytes=_ERROR_BODY_BYTES, deadline=deadline, what="error", stop_at_limit=True)
             if status in RETRYABLE_STATUSES or status >= 500:

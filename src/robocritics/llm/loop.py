@@ -64,7 +64,7 @@ from ..errors import CriticError, PlanningError, ProgramError, RoboCriticsError,
 from ..report import format_score
 from .client import ChatModel
 from .limits import MAX_MESSAGE_CHARS, clean_text, cut_text
-from .memory import Interaction, InteractionMemory
+from .memory import MAX_SEARCH_K, Interaction, InteractionMemory
 from .prompts import (
     REVIEW_INSTRUCTION,
     check_task,
@@ -613,7 +613,8 @@ class Loop:
         """The ``memory_k`` most relevant past interactions other than this loop's own, one per request text."""
         if self.memory is None or self.memory_k == 0:
             return []
-        hits = self.memory.search(text, k=self.memory_k * _HITS_PER_EXAMPLE + len(self._memory_ids))
+        wanted = self.memory_k * _HITS_PER_EXAMPLE + len(self._memory_ids)
+        hits = self.memory.search(text, k=min(wanted, MAX_SEARCH_K))
         by_request: dict[str, Interaction] = {}
         for hit in hits:  # best similarity first
             if hit.id in self._memory_ids or not hit.program.strip():
