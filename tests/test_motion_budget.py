@@ -198,15 +198,33 @@ def test_a_program_far_over_budget_is_timed_within_a_bounded_amount_of_work(monk
     seen = []
     original = Planner.count_timing_work
 
-    def counting(self):
-        seen.append(self.timing_work)
-        original(self)
+    def counting(self, units=1):
+        seen.append(units)
+        original(self, units)
 
     monkeypatch.setattr(Planner, "count_timing_work", counting)
     error = pytest.raises(MotionBudgetError, simulate, program, SORTING).value
     assert error.limit == "max_motion_s" and error.line in (3, 4)
     assert "the program's motion lasts at least " in str(error)
-    assert len(seen) == 301  # the 301st unit stops the timing
+    assert 300 < sum(seen) <= 300 + max(seen)  # the work that passes 300 units stops the timing
+
+
+def test_ik_work_is_capped_before_solving(monkeypatch):
+    # a straight line is solved every 5 mm: the count is checked before a line's grid is solved
+    solves = []
+    original = Robot.ik
+
+    def counting(self, *args, **kwargs):
+        solves.append(1)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Robot, "ik", counting)
+    program = "move_to(0.3, 0.1, 0.2)\nmove_linear(0.3, -0.1, 0.2)\nmove_linear(0.3, 0.1, 0.2)\n"
+    error = pytest.raises(MotionBudgetError, simulate, program, SORTING, settings=PlannerSettings(max_ik_solves=60)).value
+    assert error.limit == "max_ik_solves" and error.line == 3
+    assert "needs more than 60 inverse-kinematics solutions by this call (84; straight lines are solved every 5 mm)" in str(error)
+    assert len(solves) == 43  # the move_to and the first line's 42 grid points; the second line's were never solved
+    assert PlannerSettings().max_ik_solves == 5_000
 
 
 def test_motion_budget_errors_survive_a_process_boundary():

@@ -232,6 +232,7 @@ class PlannerSettings:
     max_motion_s: float = 300.0  # total motion of one program: 5 min, five times the longest example program's
     max_samples: int = 75_000  # samples of one trajectory: 10 min at the default 125 Hz, 2.5 min at 500 Hz
     max_trajectory_bytes: int = 400_000_000  # estimated peak memory of building the trajectory (400 MB)
+    max_ik_solves: int = 5_000  # IK solutions planning may use: 15x the example programs' most (335); 25 m of lines
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -241,8 +242,8 @@ class PlannerSettings:
 
 
 #: Pieces of motion timed (not sampled) after the motion budget is passed, to say how long the program would
-#: last: each is an IK solve and a ruckig profile or less (~0.1 ms), so the estimate ends well within 1 s.
-_TIMING_WORK = 4_000
+#: last: each is an IK solve or a ruckig profile (~0.05 ms), so the estimate takes a fraction of a second.
+_TIMING_WORK = 2_000
 
 
 class _StopTiming(Exception):
@@ -310,6 +311,8 @@ class Planner:
         # the program is then only timed, not sampled, to say how long it would last
         self.passed: tuple[SkillCall, float, float] | None = None  # (call, motion before it [s], speed fraction)
         self.timing_work = 0
+        self.ik_solves = 0
+        self.bytes_per_sample: dict[int, int] = {}  # by the number of objects carried so far
 
     # --- the motion budget --------------------------------------------------------------
 
@@ -342,7 +345,9 @@ class Planner:
                 "max_samples",
             )
         carried = len({c[0] for c in self.carry})
-        per_sample = trajectory_bytes_per_sample(self.robot, self.scene, carried)
+        if carried not in self.bytes_per_sample:
+            self.bytes_per_sample[carried] = trajectory_bytes_per_sample(self.robot, self.scene, carried)
+        per_sample = self.bytes_per_sample[carried]
         if total_n * per_sample > s.max_trajectory_bytes:
             raise MotionBudgetError(
                 f"{where}building the trajectory would take about {total_n * per_sample / 1e6:,.0f} MB "
@@ -354,9 +359,9 @@ class Planner:
             )
         return True
 
-    def count_timing_work(self) -> None:
-        """One unit of over-budget timing work (an IK solve or a timed piece); stop when there was enough."""
-        self.timing_work += 1
+    def count_timing_work(self, units: int = 1) -> None:
+        """Units of over-budget timing work (IK solves, timed pieces); stop when there was enough."""
+        self.timing_work += units
         if self.timing_work > _TIMING_WORK:
             raise _StopTiming
 
@@ -406,9 +411,26 @@ class Planner:
             return np.asarray(self.scene.entity(oid).position, float)
         return np.asarray(call.args["target"], float)
 
-    def ik(self, point: np.ndarray, call: SkillCall, yaw: float | None = None, seed=None) -> np.ndarray:
-        if self.passed is not None:
-            self.count_timing_work()
+    def count_ik(self, call: SkillCall, solves: int = 1) -> None:
+        """Count ``solves`` IK solutions against ``max_ik_solves`` (before solving them)."""
+        if self.passed is not None:  # only timing the rest of an over-budget program
+            self.count_timing_work(solves)
+            return
+        limit = self.settings.max_ik_solves
+        if self.ik_solves + solves > limit:
+            raise MotionBudgetError(
+                f"{call.describe()}: planning the program's moves needs more than {limit:,} inverse-kinematics "
+                f"solutions by this call ({self.ik_solves + solves:,}; straight lines are solved every "
+                f"{self.settings.line_step_m * 1000:g} mm); the limit is {limit:,} (PlannerSettings.max_ik_solves). "
+                "Make fewer or shorter straight-line moves (move_to is solved once per move).",
+                call.line,
+                "max_ik_solves",
+            )
+        self.ik_solves += solves
+
+    def ik(self, point: np.ndarray, call: SkillCall, yaw: float | None = None, seed=None, counted: bool = False) -> np.ndarray:
+        if not counted:
+            self.count_ik(call)
         try:
             return self.robot.ik(point, seed=self.q if seed is None else seed, yaw_rad=self.yaw if yaw is None else yaw)
         except PlanningError as exc:
@@ -575,11 +597,12 @@ class Planner:
         direction = (goal - start) / length
         # dense IK to bound |dq/ds| so the timed line respects every joint speed limit
         n_grid = max(2, int(math.ceil(length / self.settings.line_step_m)) + 1)
+        self.count_ik(call, n_grid)  # before solving any of them
         grid = np.linspace(0.0, length, n_grid)
         q_grid = np.empty((n_grid, self.robot.n))
         seed = self.q
         for i, s in enumerate(grid):
-            seed = q_grid[i] = self.ik(start + s * direction, call, seed=seed)
+            seed = q_grid[i] = self.ik(start + s * direction, call, seed=seed, counted=True)
             if i and np.max(np.abs(q_grid[i] - q_grid[i - 1])) > self.settings.line_max_joint_step_rad:
                 raise PlanningError(
                     f"{call.describe()}: the straight line passes a singularity or a joint limit near "
