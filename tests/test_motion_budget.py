@@ -283,3 +283,29 @@ def test_the_approach_move_has_the_same_ranges_and_budget():
     assert error.limit == "max_motion_s" and "the approach lasts" in str(error) and "at 1 % of full speed" in str(error)
     q, t = plan_approach(robot, robot.home_q, goal)
     assert np.allclose(q[-1], goal) and np.all(np.diff(t) > 0)
+
+
+def test_budget_checks_hold_in_eight_threads_at_once():
+    # the planner keeps no global state: concurrent runs each get their own verdict
+    from concurrent.futures import ThreadPoolExecutor
+
+    programs = [
+        ("for i in range(2000):\n    wait(10)\n", "max_motion_s"),
+        ("set_speed(1e-9)\nmove_to(0.3, 0.1, 0.2)\n", "speed"),
+        ("move_to(0.3, 0.1, 0.2)\nmove_to(0.3, -0.1, 0.2)\n", None),
+        ("reduce_speed(1)\nfor i in range(20):\n    move_to(0.3, 0.1, 0.2)\n    move_to(0.3, -0.1, 0.2)\n", "max_motion_s"),
+    ] * 2
+
+    def one(case):
+        program, expected = case
+        try:
+            return len(simulate(program, SORTING).trajectory) > 1, expected
+        except MotionBudgetError as exc:
+            return exc.limit, expected
+        except PlanningError as exc:
+            return "speed" if "speed fraction" in str(exc) else str(exc), expected
+
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        results = list(pool.map(one, programs))
+    for got, expected in results:
+        assert got == (True if expected is None else expected)
