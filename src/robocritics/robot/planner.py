@@ -24,9 +24,13 @@ times, everything at 1 % speed). Every piece of motion is timed first and
 checked against the budget of :class:`PlannerSettings` *before* a sample is
 made: the total duration (``max_motion_s``, 5 min), the sample count
 (``max_samples``) and the estimated memory of the trajectory built from them
-(``max_trajectory_bytes``, see :func:`trajectory_bytes_per_sample`). A limit that
-is hit raises :class:`MotionBudgetError` naming the program line, e.g.
-``line 2: wait(seconds=10): the program's motion lasts 5.6 h; the limit is 5 min``.
+(``max_trajectory_bytes``, see :func:`trajectory_bytes_per_sample`); the planning
+work is capped too (``max_ik_solves``, counted before a straight line's grid is
+solved). A limit that is hit raises :class:`MotionBudgetError` naming the program
+line, e.g. ``line 2: wait(seconds=10): the program's motion lasts 5.6 h; the
+limit is 5 min``. Past ``max_motion_s`` the rest of the program is only timed (no
+samples, at most ``_TIMING_WORK`` IK solves and profiles), so the message says
+how long the whole motion would last ("at least ..." when timing stopped early).
 
 Every sample records the index of the step that produced it, and each step its
 source line and its *intended contacts*: the object being grasped or released
@@ -118,8 +122,8 @@ class MotionBudgetError(PlanningError):
     """A program's motion exceeds the motion budget of :class:`PlannerSettings`.
 
     ``limit`` names the PlannerSettings field that was exceeded (``"max_motion_s"``,
-    ``"max_samples"`` or ``"max_trajectory_bytes"``); ``line`` is the program line of
-    the call that passed it.
+    ``"max_samples"``, ``"max_trajectory_bytes"`` or ``"max_ik_solves"``); ``line`` is
+    the program line of the call that passed it.
     """
 
     def __init__(self, message: str, line: int = 0, limit: str = ""):
@@ -307,9 +311,9 @@ class Planner:
         self.rest_changes: list[tuple[str, int, np.ndarray]] = []
         # the call being planned (its line goes into budget errors)
         self.call: SkillCall | None = None
-        # once the motion passes max_motion_s: (the call that passed it, the motion before it [s]); the rest of
-        # the program is then only timed, not sampled, to say how long it would last
-        self.passed: tuple[SkillCall, float, float] | None = None  # (call, motion before it [s], speed fraction)
+        # once the motion passes max_motion_s: (the call that passed it, the motion before it [s], the speed
+        # fraction then); the rest of the program is then only timed, not sampled, to say how long it would last
+        self.passed: tuple[SkillCall, float, float] | None = None
         self.timing_work = 0
         self.ik_solves = 0
         self.bytes_per_sample: dict[int, int] = {}  # by the number of objects carried so far
@@ -640,10 +644,10 @@ class Planner:
         self.opening = target_opening
 
     def hold(self, seconds: float, step: int) -> None:
-        if not seconds > 0:
-            if seconds <= 0:
-                return
+        if math.isnan(seconds):
             raise PlanningError(f"wait: seconds must be a number, got {seconds}", line=self.call.line if self.call else 0)
+        if seconds <= 0:
+            return
         if not self.admit(seconds, sample_count(seconds, self.rate)):
             self.skip(seconds)
             return
@@ -661,10 +665,8 @@ class Planner:
                     raise PlanningError(f"the planner does not know the skill {call.skill!r}", line=call.line)
                 self.call = call
                 handler(call)
-        except (_StopTiming, PlanningError) as exc:
+        except (_StopTiming, PlanningError):  # _StopTiming only comes once the budget was passed
             if self.passed is None:
-                if isinstance(exc, _StopTiming):  # pragma: no cover - only raised once passed
-                    raise PlanningError("the motion budget stopped planning") from None
                 raise
             # the motion was already over budget: that is the first problem, however much is left
             raise self._too_long(plan, complete=False) from None
