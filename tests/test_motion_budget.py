@@ -184,7 +184,7 @@ def test_the_memory_estimate_is_above_the_measured_peak():
     )
     for scene, program, carried in ((SORTING, carry, 1), (boxes, "move_to(0.3, 0.1, 0.2)\nwait(10)\nwait(10)\n", 0)):
         simulate("move_to(0.3, 0.1, 0.2)\n", scene)  # imports and caches outside the measurement
-        execution, peak = peak_bytes(lambda: simulate(program, scene))
+        execution, peak = peak_bytes(lambda program=program, scene=scene: simulate(program, scene))
         assert not isinstance(execution, Exception), execution
         estimate = trajectory_bytes_per_sample(robot, scene, carried) * len(execution.trajectory)
         assert peak < estimate < 1.6 * peak, (scene.name, peak, estimate)
