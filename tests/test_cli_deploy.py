@@ -1,8 +1,10 @@
 """`robocritics deploy` end to end against the loopback UR controller on 127.0.0.1.
 
 The first test is the user's story: `robocritics ursim` in one process, then `robocritics deploy
-examples/programs/sorting_careful.py --host 127.0.0.1` with nothing but the ports — the whole
-59 s program streams in real time. The others run the controller in-process on simulated time.
+PROGRAM --host 127.0.0.1` with nothing but the ports, streamed in real time. Its program is the
+careful sorting program cut after the first apple is placed (about 17 s of motion instead of 59 s, to keep
+the suite short); the whole program is the same code path. The others run the controller in-process
+on simulated time.
 """
 
 import socket
@@ -24,8 +26,17 @@ def ports(sim):
     return ["--rtde-port", str(sim.rtde_port), "--dashboard-port", str(sim.dashboard_port), "--secondary-port", str(sim.secondary_port)]
 
 
-def test_a_first_deploy_to_a_fresh_ursim_needs_no_flags(capsys):
-    careful = ROOT / "examples" / "programs" / "sorting_careful.py"
+def first_apple_of(careful_source: str) -> str:
+    """The careful sorting program, placing only the first apple."""
+    head, loop = careful_source.split("for apple in objects:")
+    assert "pick(apple)" in loop
+    return head + "apple = objects[0]\npick(apple)\nbox = brown_box if apple.ripeness == 'ripe' else white_box\n" \
+        "place_in(box, spots[box.id].pop())\n"
+
+
+def test_a_first_deploy_to_a_fresh_ursim_needs_no_flags(tmp_path, capsys):
+    careful = tmp_path / "sorting_first_apple.py"  # the file name picks the sorting scene, as for `check`
+    careful.write_text(first_apple_of((ROOT / "examples" / "programs" / "sorting_careful.py").read_text()))
     expected = simulate(careful.read_text(), Scene.builtin("sorting"))  # a fresh ursim is at the model's home pose
     with controller_process() as ctl:
         start = ctl.state()

@@ -159,7 +159,7 @@ class Attempt:
     @property
     def passed(self) -> bool:
         """Whether the program ran and every critic was OK."""
-        return self.report is not None and all(v.ok for v in self.report.verdicts)
+        return self.report is not None and self.report.passed
 
     @property
     def has_errors(self) -> bool:
@@ -419,14 +419,17 @@ class Loop:
 
     @staticmethod
     def best(attempts: Iterable[Attempt]) -> Attempt:
-        """The attempt with the highest score (latest of equal ones); the last one if none has a report."""
+        """The best attempt: no Error first (plugin critics count), then the highest score, then the latest.
+
+        The last attempt if none has a report.
+        """
         attempts = list(attempts)
         if not attempts:
             raise ValueError("no attempts")
         scored = [a for a in attempts if a.report is not None and a.approved is not False]
         if not scored:
             return attempts[-1]
-        return max(scored, key=lambda a: (a.score if a.score is not None else -1.0, a.index))
+        return max(scored, key=lambda a: (not a.report.has_errors, a.score if a.score is not None else -1.0, a.index))
 
     def messages(self) -> list[dict[str, str]]:
         """The messages the next model call would send before its new user message: system + trimmed history."""

@@ -193,7 +193,9 @@ def critic_rules(critics: Iterable[Any] | str | None = None, params: Mapping[str
     out = [
         "# Safety and quality rules",
         "Expert critics will check the simulated motion of the program against these rules. Each "
-        "critic rates it OK (2 points), Warning (1) or Error (0); the quality score is the sum, 0-10.",
+        "critic rates it OK (2 points), Warning (1) or Error (0); the quality score (0-10) is the sum over "
+        "the five motion critics (space_usage, collision, joint_speed, end_effector_pose, pinch_point); "
+        "any other critic is reported beside it and must pass too.",
     ]
     for critic, p in select_critics(critics, params):
         out.append(f"- {critic.name}: {critic.description}")
