@@ -334,7 +334,7 @@ class URArm:
         try:
             with socket.create_connection((self.host, self.secondary_port), timeout=self.timeout_s):
                 pass
-        except OSError as exc:
+        except (OSError, UnicodeError, OverflowError) as exc:  # also a bad host label or port number
             raise DeployRefused([(
                 "secondary_interface",
                 f"cannot connect to the secondary interface at {self.host}:{self.secondary_port}: {exc}",

@@ -64,8 +64,8 @@ class DashboardClient:
             self._sock = socket.create_connection((self.host, self.port), timeout=self.timeout_s)
         except socket.timeout:
             raise RTDEError(f"cannot connect to the dashboard server at {self.address}: no answer within {self.timeout_s:g} s") from None
-        except OSError as exc:
-            raise RTDEError(f"cannot connect to the dashboard server at {self.address}: {exc.strerror or exc}") from None
+        except (OSError, UnicodeError, OverflowError) as exc:  # also a bad host label or port number
+            raise RTDEError(f"cannot connect to the dashboard server at {self.address}: {getattr(exc, 'strerror', None) or exc}") from None
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._buf = b""
         try:
@@ -114,7 +114,7 @@ class DashboardClient:
             raise RTDEError(f"dashboard {self.address}: sending {text!r} timed out") from None
         except OSError as exc:
             self._drop()
-            raise RTDEError(f"dashboard connection to {self.address} failed while sending {text!r}: {exc.strerror or exc}") from None
+            raise RTDEError(f"dashboard connection to {self.address} failed while sending {text!r}: {getattr(exc, 'strerror', None) or exc}") from None
         return self._read_line(f"waiting for the reply to {text!r}", timeout_s)
 
     def _read_line(self, doing: str, timeout_s: float | None = None) -> str:
@@ -132,7 +132,7 @@ class DashboardClient:
                 continue
             except OSError as exc:
                 self._drop()
-                raise RTDEError(f"dashboard connection to {self.address} failed while {doing}: {exc.strerror or exc}") from None
+                raise RTDEError(f"dashboard connection to {self.address} failed while {doing}: {getattr(exc, 'strerror', None) or exc}") from None
             if not chunk:
                 self._drop()
                 raise RTDEError(f"dashboard server at {self.address} closed the connection while {doing}")

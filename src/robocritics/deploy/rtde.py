@@ -459,9 +459,9 @@ class RTDEClient:
                 f"cannot connect to RTDE at {self.address}: no answer within {self.timeout_s:g} s "
                 "(controller off, wrong address, or a firewall?)"
             ) from None
-        except OSError as exc:
+        except (OSError, UnicodeError, OverflowError) as exc:  # also a bad host label or port number
             raise RTDEError(
-                f"cannot connect to RTDE at {self.address}: {exc.strerror or exc} "
+                f"cannot connect to RTDE at {self.address}: {getattr(exc, 'strerror', None) or exc} "
                 "(is the controller on and the RTDE interface enabled?)"
             ) from None
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -783,7 +783,7 @@ class RTDEClient:
             ) from None
         except OSError as exc:
             msg = self._error or (
-                f"RTDE connection to {self.address} failed while {doing}: {exc.strerror or exc} "
+                f"RTDE connection to {self.address} failed while {doing}: {getattr(exc, 'strerror', None) or exc} "
                 f"(after {self._count} data packages; last package {self._age_text()})"
             )
             self._fail(msg)
@@ -863,7 +863,7 @@ class RTDEClient:
         except OSError as exc:
             if not self._closing:
                 self._fail(
-                    f"RTDE connection to {self.address} failed while {self._activity}: {exc.strerror or exc} "
+                    f"RTDE connection to {self.address} failed while {self._activity}: {getattr(exc, 'strerror', None) or exc} "
                     f"(after {self._count} data packages; last package {self._age_text()})"
                 )
         except Exception as exc:  # a parse bug must not die silently

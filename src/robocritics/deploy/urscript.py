@@ -415,8 +415,8 @@ def send_program(host: str, program: str, port: int = SECONDARY_PORT, timeout_s:
         sock = socket.create_connection((host, port), timeout=timeout_s)
     except socket.timeout:
         raise RTDEError(f"cannot connect to the secondary interface at {where}: no answer within {timeout_s:g} s") from None
-    except OSError as exc:
-        raise RTDEError(f"cannot connect to the secondary interface at {where}: {exc.strerror or exc}") from None
+    except (OSError, UnicodeError, OverflowError) as exc:  # also a bad host label or port number
+        raise RTDEError(f"cannot connect to the secondary interface at {where}: {getattr(exc, 'strerror', None) or exc}") from None
     try:
         sock.sendall(data)
         sock.shutdown(socket.SHUT_WR)
@@ -433,6 +433,6 @@ def send_program(host: str, program: str, port: int = SECONDARY_PORT, timeout_s:
     except socket.timeout:
         raise RTDEError(f"sending the program to {where} timed out after {timeout_s:g} s") from None
     except OSError as exc:
-        raise RTDEError(f"sending the program to {where} failed: {exc.strerror or exc}") from None
+        raise RTDEError(f"sending the program to {where} failed: {getattr(exc, 'strerror', None) or exc}") from None
     finally:
         sock.close()
