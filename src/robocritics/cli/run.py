@@ -38,7 +38,7 @@ from typing import TextIO
 
 import math
 
-from ._common import load_params, one_line, positive_float, positive_int, subcommand
+from ._common import bounded_float, load_params, one_line, positive_int, subcommand
 from ..errors import LLMError, RoboCriticsError
 
 __all__ = ["add_run_parser", "run_command"]
@@ -109,7 +109,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     p.add_argument(
         "--timeout",
         metavar="S",
-        type=positive_float,
+        type=bounded_float(0.1, 24 * 3600.0, "s"),
         default=_TIMEOUT_S,
         help=f"seconds one LLM request may take in all, retries included (default {_TIMEOUT_S:g})",
     )
@@ -172,6 +172,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     """Handle ``robocritics run`` (see the module docstring); returns the exit status."""
     from ..critic import select_critics
     from ..scene import Scene
+    from ..simulate import check_scene_ids
     from ..llm.client import OpenAICompatible
     from ..llm.loop import Loop
     from ..llm.memory import InteractionMemory
@@ -190,6 +191,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     try:
         task = check_task(args.task)
         scene = Scene.resolve(args.scene)
+        check_scene_ids(scene)  # an id that shadows a skill would only fail after the LLM was asked
         params = load_params(getattr(args, "params", None)) or None
         critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
         select_critics(critics, params)
