@@ -16,6 +16,27 @@ keep-alive) and answers ``POST /v1/chat/completions`` and ``POST
   ``request_json -> str | Action``; by default it echoes the last user message)
   and embedding requests get ``hashed_embedding`` vectors.
 
+Real-server behaviour, switched by attributes (any time):
+
+* Streaming: a chat request with ``"stream": true`` is answered with
+  server-sent events (``data: {chunk}\n\n`` per token, then ``data: [DONE]``),
+  one token every ``token_interval_s`` seconds; ``stream_mode = "ignore"``
+  answers plain JSON instead (servers that do not stream), ``"refuse"`` answers
+  400 "stream is not supported". A client that hangs up mid-stream is noticed
+  at the next token: ``tokens_sent`` stops growing and ``cancelled`` is set.
+* ``max_tokens`` is honoured: a reply longer than that many tokens (``tokens``:
+  a word with its following whitespace) is cut there with ``finish_reason:
+  "length"``.
+* ``context_tokens``: a prompt (``count_tokens``, words and punctuation) plus
+  ``max_tokens`` over it gets llama-cpp-python's HTTP 400 "Requested tokens (N)
+  exceed context window of M" (``context_style = "llama.cpp"``: llama.cpp's
+  "exceeds the available context size" with ``n_ctx``); ``GET /props`` answers
+  llama.cpp's ``default_generation_settings.n_ctx`` when ``props`` is set.
+* ``embedding_mode``: ``"ok"``; ``"no-embedding"`` (llama-cpp-python without
+  ``embedding=True``: HTTP 500 "Llama model must be created with embedding=True
+  to call this method"); ``"not-implemented"`` (llama.cpp without
+  ``--embeddings``: HTTP 501); ``"per-token"`` (no pooling: one vector per token).
+
 Every request is recorded (``server.requests``: path, headers, raw body,
 decoded JSON, arrival time) so a test can assert what the client really sent.
 ``require_api_key`` makes the server answer 401 to any other key, echoing the
@@ -189,6 +210,20 @@ def hashed_embedding(text: str, dim: int, model: str = "") -> list[float]:
     return [v / norm for v in vector] if norm else vector
 
 
+_PROMPT_TOKEN = re.compile(r"\w+|[^\w\s]")
+_REPLY_TOKEN = re.compile(r"\s*\S+\s*|\s+")
+
+
+def count_tokens(messages: list[dict]) -> int:
+    """The server's prompt length: words and punctuation marks of every message, plus 4 per message."""
+    return sum(len(_PROMPT_TOKEN.findall(str(m.get("content", "")))) + 4 for m in messages)
+
+
+def tokens(text: str) -> list[str]:
+    """A reply as the server generates it: pieces of one word each with its surrounding whitespace."""
+    return _REPLY_TOKEN.findall(text)
+
+
 def echo_last_user_message(request: dict) -> str:
     """Default chat responder: the content of the last user message."""
     for message in reversed(request.get("messages", [])):
@@ -221,6 +256,14 @@ class LLMServer:
         self.models = models
         self.responder = responder
         self.requests: list[RecordedRequest] = []
+        self.stream_mode = "sse"  # "sse" | "ignore" | "refuse"
+        self.token_interval_s = 0.0
+        self.context_tokens: int | None = None
+        self.context_style = "llama-cpp-python"  # or "llama.cpp"
+        self.props = False
+        self.embedding_mode = "ok"  # "ok" | "no-embedding" | "not-implemented" | "per-token"
+        self.tokens_sent = 0
+        self.cancelled = threading.Event()
         self._actions: deque[Action] = deque()
         self._lock = threading.Lock()
         self._stopping = threading.Event()  # ends every Delay, so stopping never waits for one
@@ -307,7 +350,13 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
             pass
 
         def do_GET(self) -> None:
-            if self.path.rstrip("/") == "/v1/models":
+            if self.path.rstrip("/") == "/props" and server.props and server.context_tokens:
+                self._send_json(
+                    200,
+                    {"default_generation_settings": {"n_ctx": server.context_tokens}, "total_slots": 1,
+                     "chat_template": "{{ messages }}"},
+                )  # fmt: skip
+            elif self.path.rstrip("/") == "/v1/models":
                 self._send_json(
                     200, {"object": "list", "data": [{"id": m, "object": "model"} for m in sorted(server.models or [])]}
                 )
@@ -414,8 +463,42 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
                 self._send_json(404, {"error": {"message": f"no route {self.path}"}})
 
         def _send_chat(self, request: dict, reply: Reply) -> None:
-            prompt_words = sum(len(str(m.get("content", "")).split()) for m in request.get("messages", []))
-            completion_words = len(reply.content.split())
+            messages = request.get("messages", [])
+            max_tokens = request.get("max_tokens")
+            if server.context_tokens is not None:
+                prompt = count_tokens(messages)
+                wanted = prompt + (max_tokens if isinstance(max_tokens, int) else 0)
+                if wanted > server.context_tokens:
+                    if server.context_style == "llama.cpp":
+                        error = {
+                            "code": 400,
+                            "message": "the request exceeds the available context size, try increasing it",
+                            "type": "exceed_context_size_error",
+                            "n_prompt_tokens": prompt,
+                            "n_ctx": server.context_tokens,
+                        }
+                    else:  # llama-cpp-python's server
+                        error = {
+                            "message": f"Requested tokens ({wanted}) exceed context window of {server.context_tokens}",
+                            "type": "invalid_request_error",
+                            "param": "messages",
+                            "code": "context_length_exceeded",
+                        }
+                    self._send_json(400, {"error": error})
+                    return
+            pieces = tokens(reply.content)
+            finish = reply.finish_reason
+            if isinstance(max_tokens, int) and max_tokens >= 0 and len(pieces) > max_tokens:
+                pieces, finish = pieces[:max_tokens], "length"
+            reply = Reply("".join(pieces), finish)
+            if request.get("stream") is True and server.stream_mode == "refuse":
+                self._send_json(400, {"error": {"message": "stream is not supported by this server"}})
+                return
+            if request.get("stream") is True and server.stream_mode == "sse":
+                self._send_events(request, pieces, finish, count_tokens(messages))
+                return
+            prompt_words = sum(len(str(m.get("content", "")).split()) for m in messages)
+            completion_words = len(pieces)
             self._send_json(
                 200,
                 {
@@ -438,7 +521,66 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
                 },
             )
 
+        def _send_events(self, request: dict, pieces: list[str], finish: str, prompt_tokens: int) -> None:
+            """The reply as server-sent events, one token each, as llama.cpp and OpenAI stream them."""
+            self.send_response(200)
+            self.send_header("Content-Type", "text/event-stream")
+            self.send_header("Cache-Control", "no-cache")
+            self.send_header("Transfer-Encoding", "chunked")
+            self.end_headers()
+            self.close_connection = True
+            ident = f"chatcmpl-{len(server.requests)}"
+
+            def event(obj: Any) -> None:
+                data = b"data: " + (obj if isinstance(obj, bytes) else json.dumps(obj).encode()) + b"\n\n"
+                self.wfile.write(b"%x\r\n%s\r\n" % (len(data), data))
+                self.wfile.flush()
+
+            def chunk(delta: dict, finish_reason: str | None) -> dict:
+                return {
+                    "id": ident,
+                    "object": "chat.completion.chunk",
+                    "created": int(time.time()),
+                    "model": request.get("model"),
+                    "choices": [{"index": 0, "delta": delta, "finish_reason": finish_reason}],
+                }
+
+            try:
+                event(chunk({"role": "assistant", "content": ""}, None))
+                for piece in pieces:
+                    if server.token_interval_s and server._stopping.wait(server.token_interval_s):
+                        return
+                    event(chunk({"content": piece}, None))
+                    with server._lock:
+                        server.tokens_sent += 1
+                last = chunk({}, finish)
+                last["usage"] = {
+                    "prompt_tokens": prompt_tokens,
+                    "completion_tokens": len(pieces),
+                    "total_tokens": prompt_tokens + len(pieces),
+                }
+                event(last)
+                event(b"[DONE]")
+                self.wfile.write(b"0\r\n\r\n")
+                self.wfile.flush()
+            except (BrokenPipeError, ConnectionResetError, ConnectionAbortedError):
+                server.cancelled.set()  # the client hung up: stop generating
+
         def _send_embeddings(self, request: dict) -> None:
+            if server.embedding_mode == "no-embedding":
+                self._send_json(
+                    500,
+                    {"error": {"message": "Llama model must be created with embedding=True to call this method",
+                               "type": "internal_server_error"}},
+                )  # fmt: skip
+                return
+            if server.embedding_mode == "not-implemented":
+                self._send_json(
+                    501,
+                    {"error": {"code": 501, "message": "This server does not support embeddings. Start it with "
+                               "`--embeddings`", "type": "not_supported_error"}},
+                )  # fmt: skip
+                return
             inputs = request.get("input")
             if isinstance(inputs, str):
                 inputs = [inputs]
@@ -446,10 +588,17 @@ def _make_handler(server: LLMServer) -> type[BaseHTTPRequestHandler]:
                 self._send_json(400, {"error": {"message": "'input' must be a string or a list of strings"}})
                 return
             model = str(request.get("model"))
-            data = [
-                {"object": "embedding", "index": i, "embedding": hashed_embedding(t, server.embedding_dim, model)}
-                for i, t in enumerate(inputs)
-            ]
+            if server.embedding_mode == "per-token":  # no pooling: one vector per token of each text
+                data = [
+                    {"object": "embedding", "index": i,
+                     "embedding": [hashed_embedding(w, server.embedding_dim, model) for w in (t.split() or [t])]}
+                    for i, t in enumerate(inputs)
+                ]  # fmt: skip
+            else:
+                data = [
+                    {"object": "embedding", "index": i, "embedding": hashed_embedding(t, server.embedding_dim, model)}
+                    for i, t in enumerate(inputs)
+                ]
             tokens = sum(len(t.split()) for t in inputs)
             self._send_json(
                 200,

@@ -195,7 +195,8 @@ def test_a_long_program_is_printed_cut(llm_server, capsys):
 
     program = "move_above(green_apple)\n" + "x = 1\n" * 10_000
     llm_server.reply(f"```python\n{program}```")
-    run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", "joint_speed")
+    run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", "joint_speed",
+        "--max-tokens", "100000")  # fmt: skip
     out = capsys.readouterr().out
     assert "more characters of the program not shown" in out
     assert len(out) < MAX_PRINTED_CHARS + 5_000

@@ -271,15 +271,26 @@ def test_transient_statuses_are_retried(llm_server, make_client, status):
     assert reply.content == "ok" and reply.attempts == 2
 
 
-def test_a_timeout_is_retried(llm_server, make_client):
-    llm_server.script(Delay(STALL_S), Reply("ok"))
+def test_an_embedding_timeout_is_retried(llm_server, make_client):
+    llm_server.script(Delay(STALL_S))
     client = make_client(timeout_s=1.0)  # the retry's answer must come within it, also on a loaded machine
     started = time.monotonic()
-    reply = client.chat(USER)
-    assert reply.content == "ok" and reply.attempts == 2
+    vectors = client.embed(["hello"])
+    assert vectors.shape == (1, llm_server.embedding_dim)
     assert time.monotonic() - started >= 1.0  # the real timeout ran out (a lower bound)
-    assert len(llm_server.chat_requests()) == 2
+    assert len(llm_server.embedding_requests()) == 2
     assert make_client.sleeps == [0.01]
+
+
+def test_a_chat_that_times_out_generating_is_not_retried(llm_server, make_client):
+    from robocritics.llm.client import GenerationTimeoutError
+
+    llm_server.script(Delay(STALL_S), Reply("never asked for"))
+    client = make_client(timeout_s=0.5)
+    with pytest.raises(GenerationTimeoutError, match="not retried"):
+        client.chat(USER)
+    assert len(llm_server.chat_requests()) == 1  # the server is not asked to generate twice
+    assert make_client.sleeps == []
 
 
 def test_a_dropped_connection_is_retried(llm_server, make_client):
@@ -311,7 +322,7 @@ def test_gives_up_after_repeated_timeouts(llm_server, make_client):
     llm_server.script(Delay(STALL_S), Delay(STALL_S))
     client = make_client(timeout_s=0.2, max_retries=1)
     with pytest.raises(LLMError, match="2 attempts.*timed out"):
-        client.complete(USER)
+        client.embed(["hello"])
 
 
 def test_max_retries_zero_sends_one_request(llm_server, make_client):

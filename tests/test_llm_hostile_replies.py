@@ -85,7 +85,8 @@ def test_headers_dripping_one_byte_at_a_time_end_at_the_deadline(llm_server, mak
 def test_stalls_and_retries_together_end_at_the_deadline(llm_server, make_client):
     llm_server.script(*[Delay(STALL_S)] * 20)
     client = make_client(timeout_s=0.6, deadline_s=1.5, max_retries=20)
-    error, elapsed = timed_failure(lambda: client.complete(USER))
+    # embeddings: a stalled chat is never retried (the server may still be generating), an embedding call is
+    error, elapsed = timed_failure(lambda: client.embed(["hello"]))
     assert "did not finish within its deadline of 1.5 s" in str(error) and "timed out" in str(error)
     assert elapsed < 1.5 + SLACK_S
     assert 2 <= len(llm_server.requests) <= 3  # 0.6 s + 0.6 s + what is left; never 21
@@ -169,7 +170,14 @@ def test_the_body_limit_is_configurable_and_counts_wire_bytes(llm_server, make_c
 def test_a_reply_text_over_the_character_limit_is_refused(llm_server, make_client):
     llm_server.script(Reply("z" * (MAX_REPLY_CHARS + 1)))
     with pytest.raises(LLMError, match=f"is {MAX_REPLY_CHARS + 1:,} characters long; the limit is"):
-        make_client().complete(USER)
+        make_client(stream=False).complete(USER)
+
+
+def test_a_streamed_reply_over_the_character_limit_is_refused_while_it_arrives(llm_server, make_client):
+    llm_server.script(Reply("zz " * MAX_REPLY_CHARS))
+    with pytest.raises(LLMError, match=f"longer than {MAX_REPLY_CHARS:,} characters"):
+        make_client(max_tokens=None).complete(USER)
+    assert llm_server.cancelled.wait(5.0)  # the client hung up instead of reading the rest
 
 
 def test_an_error_page_is_read_only_as_far_as_it_is_quoted(llm_server, make_client):

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import base64
 import email.utils
+import re
 import json
 import logging
 import math
@@ -59,13 +60,33 @@ import numpy as np
 
 from robocritics.errors import LLMError
 
-from .limits import DEFAULT_DEADLINE_S, MAX_REPLY_CHARS, MAX_REQUEST_BYTES, MAX_RESPONSE_BYTES, clean_text
-from .transport import ACCEPT_ENCODING, Deadline, DeadlineTransport, NotJSONError, deadline_scope, loads_json, read_body
+from .limits import (
+    DEFAULT_DEADLINE_S,
+    DEFAULT_MAX_TOKENS,
+    MAX_REPLY_CHARS,
+    MAX_REQUEST_BYTES,
+    MAX_RESPONSE_BYTES,
+    clean_text,
+)
+from .transport import (
+    ACCEPT_ENCODING,
+    Deadline,
+    DeadlineTransport,
+    NotJSONError,
+    deadline_scope,
+    iter_body,
+    loads_json,
+    read_body,
+)
 
 __all__ = [
     "ChatModel",
+    "ChatProgress",
     "ChatReply",
+    "ContextLengthError",
     "EmbeddingModel",
+    "EmbeddingsUnavailableError",
+    "GenerationTimeoutError",
     "LLMArgumentError",
     "OpenAICompatible",
     "embedding_space_name",
@@ -102,6 +123,46 @@ _MIN_REDACTED_RUN = 8
 
 class LLMArgumentError(LLMError, ValueError):
     """A bad argument to the client: malformed messages, an out-of-range limit or option, a request too large."""
+
+
+class ContextLengthError(LLMError):
+    """The server refused the request as longer than the model's context window (final: not retried).
+
+    ``context_tokens`` is the context the server reported (e.g. llama-cpp-python's "Requested tokens (2764)
+    exceed context window of 2048", llama.cpp's ``n_ctx``, vLLM's "maximum context length is 2048 tokens"),
+    ``requested_tokens`` what it counted for the request; either is None when the server did not say.
+    """
+
+    def __init__(self, message: str, *, context_tokens: int | None = None, requested_tokens: int | None = None):
+        super().__init__(message)
+        self.context_tokens = context_tokens
+        self.requested_tokens = requested_tokens
+
+
+class EmbeddingsUnavailableError(LLMError):
+    """The server cannot embed at all (HTTP 501, or 500 "must be created with embedding=True"): final, not retried."""
+
+
+class GenerationTimeoutError(LLMError):
+    """The server stopped sending (or never answered) while it was generating: final, never retried.
+
+    Retrying would leave the abandoned generation running on the server and start another one.
+    """
+
+
+@dataclass(frozen=True)
+class ChatProgress:
+    """What a chat request is doing, for a progress line (``OpenAICompatible(on_progress=...)``).
+
+    ``phase`` is ``"waiting"`` (the request was sent; no token yet), ``"receiving"`` (a streamed token arrived)
+    or ``"done"``. ``tokens`` counts the reply's tokens so far (streamed chunks, or the server's
+    ``completion_tokens``), ``chars`` its characters, ``elapsed_s`` the seconds since the call began.
+    """
+
+    phase: str
+    tokens: int
+    chars: int
+    elapsed_s: float
 
 
 @runtime_checkable
@@ -170,6 +231,19 @@ class ChatReply:
     finish_reason: str | None = None
     usage: Mapping[str, Any] = field(default_factory=dict)
     attempts: int = 1
+    max_tokens: int | None = None
+    streamed: bool = False
+
+    @property
+    def truncated(self) -> bool:
+        """Whether the server cut the reply at its token limit (``finish_reason == "length"``)."""
+        return self.finish_reason == "length"
+
+    @property
+    def completion_tokens(self) -> int | None:
+        """The reply's length in tokens, as the server counted it (or streamed chunks), or None."""
+        value = self.usage.get("completion_tokens") if isinstance(self.usage, Mapping) else None
+        return int(value) if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 0 else None
 
 
 class _Secret:
@@ -239,6 +313,21 @@ class OpenAICompatible:
     deadline is checked between reads, each of which may take up to
     ``timeout_s``.
 
+    Generation: ``max_tokens`` (default ``llm.limits.DEFAULT_MAX_TOKENS``; None sends none) caps every
+    reply; a reply cut there has ``finish_reason == "length"``. With ``stream=True`` (default) the reply is
+    requested as server-sent events and read token by token; ``idle_timeout_s`` (default ``timeout_s``) is
+    then the longest silence between two pieces of it, and the total ``deadline_s`` still holds. A server
+    that answers a streamed request with plain JSON is read as such; one that refuses ``stream`` (HTTP
+    400/422 naming it) is asked again without, and the client stops streaming. A chat request that times
+    out reading (the server was generating) raises ``GenerationTimeoutError`` and is never retried; leaving
+    the call for any reason (deadline, size limit, Ctrl-C) closes its connection, so the server stops
+    generating. ``on_progress(ChatProgress)`` is called when a request is sent, for each streamed token,
+    and at the end.
+
+    Final errors (never retried): a prompt over the model's context (``ContextLengthError``, with the
+    context the server named), a server that cannot embed (``EmbeddingsUnavailableError``: HTTP 501, or
+    500 saying the model "must be created with embedding=True" or that embeddings are not supported).
+
     ``name`` is the chat model; ``embedding_name`` the embedding model.
     """
 
@@ -264,6 +353,10 @@ class OpenAICompatible:
         max_request_bytes: int = MAX_REQUEST_BYTES,
         sleep: Callable[[float], None] = time.sleep,
         clock: Callable[[], float] = time.monotonic,
+        max_tokens: int | None = DEFAULT_MAX_TOKENS,
+        stream: bool = True,
+        idle_timeout_s: float | None = None,
+        on_progress: Callable[[ChatProgress], None] | None = None,
     ):
         base_url = base_url or os.environ.get(ENV_BASE_URL) or None
         model = model or os.environ.get(ENV_MODEL) or None
@@ -295,6 +388,11 @@ class OpenAICompatible:
         self.max_reply_chars = _count("max_reply_chars", max_reply_chars)
         self.max_request_bytes = _count("max_request_bytes", max_request_bytes)
         self.temperature = _temperature(temperature)
+        self.max_tokens = None if max_tokens is None else _count("max_tokens", max_tokens)
+        self.stream = bool(stream)
+        self.idle_timeout_s = self.timeout_s if idle_timeout_s is None else _seconds("idle_timeout_s", idle_timeout_s)
+        self.on_progress = on_progress
+        self._warned_pooling = False
         self._sleep = sleep
         self._clock = clock
 
@@ -353,33 +451,105 @@ class OpenAICompatible:
 
         Keyword arguments go into the request body as they are (``max_tokens``,
         ``seed``, ``stop``, ``response_format`` ...); ``temperature`` defaults to
-        the client's. Message texts are cleaned of lone surrogates. Raises
-        ``LLMArgumentError`` (a ``ValueError``) for malformed ``messages`` or
-        options and ``LLMError`` for everything the server does wrong.
+        the client's, ``max_tokens`` to the client's (``max_tokens=None`` sends
+        none) and ``stream`` to the client's. Message texts are cleaned of lone
+        surrogates. Raises ``LLMArgumentError`` (a ``ValueError``) for malformed
+        ``messages`` or options and ``LLMError`` for everything the server does
+        wrong (``GenerationTimeoutError``, ``ContextLengthError`` among them).
         """
         _check_messages(messages)
         if "temperature" in kw:
             kw["temperature"] = _temperature(kw["temperature"])
+        stream = bool(kw.pop("stream", self.stream))
         payload: dict[str, Any] = {
             "model": self.model,
             "messages": [_clean_message(m) for m in messages],
             "temperature": self.temperature,
         }
+        if self.max_tokens is not None:
+            payload["max_tokens"] = self.max_tokens
         payload.update(kw)
-        body, attempts = self._post("/chat/completions", payload, what=f"chat completion with model {self.model!r}")
+        if payload.get("max_tokens") is None:
+            payload.pop("max_tokens", None)
+        else:
+            payload["max_tokens"] = _count("max_tokens", payload["max_tokens"])
+        what = f"chat completion with model {self.model!r}"
+        started = self._clock()
+        self._progress("waiting", 0, 0, started)
+        if stream:
+            payload["stream"] = True
+            try:
+                body, attempts = self._post("/chat/completions", payload, what, chat=True, started=started)
+            except _StreamRefused as refused:
+                log.warning("%s: the server refuses streaming (%s); asking without it from now on", what, refused)
+                self.stream = False
+                del payload["stream"]
+                body, attempts = self._post("/chat/completions", payload, what, chat=True, started=started)
+        else:
+            body, attempts = self._post("/chat/completions", payload, what, chat=True, started=started)
+        streamed = bool(body.pop(_STREAMED, False))
         content, finish_reason = self._parse_choice(body)
         if finish_reason == "length":
-            log.warning("model %s stopped at its token limit; the reply is truncated", self.model)
+            log.warning(
+                "model %s stopped at its token limit (max_tokens=%s); the reply is truncated",
+                self.model,
+                payload.get("max_tokens"),
+            )
         raw_usage = body.get("usage")
         usage: dict[str, Any] = raw_usage if isinstance(raw_usage, dict) else {}
         model = body.get("model")
-        return ChatReply(
+        reply = ChatReply(
             content=content,
             model=clean_text(model[:_NAME_CHARS]) if isinstance(model, str) and model else self.model,
             finish_reason=finish_reason,
             usage=usage,
             attempts=attempts,
+            max_tokens=payload.get("max_tokens"),
+            streamed=streamed,
         )
+        self._progress("done", reply.completion_tokens or 0, len(content), started)
+        return reply
+
+    def _progress(self, phase: str, tokens: int, chars: int, started: float) -> None:
+        if self.on_progress is not None:
+            self.on_progress(ChatProgress(phase, tokens, chars, max(self._clock() - started, 0.0)))
+
+    # -- the model's context ------------------------------------------------
+
+    def server_context_tokens(self) -> int | None:
+        """The model's context window in tokens, if the server says (else None); never raises for the server.
+
+        Asks llama.cpp's ``GET /props`` (``n_ctx``, at the server's root, beside ``/v1``) and then
+        ``GET {base_url}/models`` (vLLM's ``max_model_len``, llama.cpp's ``meta.n_ctx_train`` is not the
+        context and is not used). Each request has at most ``min(timeout_s, 10)`` seconds and is not retried.
+        """
+        root = self.base_url[: -len("/v1")] if self.base_url.endswith("/v1") else self.base_url
+        for url, pick in ((root + "/props", _props_context), (self._url("/models"), self._models_context)):
+            body = self._get_json(url, min(self.timeout_s, 10.0))
+            value = pick(body) if body is not None else None
+            if value is not None:
+                return value
+        return None
+
+    def _models_context(self, body: Any) -> int | None:
+        data = body.get("data") if isinstance(body, dict) else None
+        if not isinstance(data, list):
+            return None
+        for entry in data:
+            if isinstance(entry, dict) and entry.get("id") == self.model:
+                return _positive_int(entry.get("max_model_len"))
+        return None
+
+    def _get_json(self, url: str, seconds: float) -> Any:
+        deadline = Deadline.after(seconds, self._clock)
+        try:
+            with deadline_scope(deadline), self._http.stream("GET", url, timeout=seconds) as response:
+                if response.status_code != 200:
+                    return None
+                raw = read_body(response, max_bytes=_PROPS_BYTES, deadline=deadline, what="reply")
+            return loads_json(raw, where=url)
+        except (httpx.HTTPError, LLMError):
+            return None
 
     def _parse_choice(self, body: dict) -> tuple[str, str | None]:
         if "choices" not in body:
@@ -436,7 +606,9 @@ class OpenAICompatible:
         for start in range(0, len(texts), self.embedding_batch_size):
             batch = texts[start : start + self.embedding_batch_size]
             payload = {"model": self.embedding_model, "input": batch}
-            body, _ = self._post("/embeddings", payload, what=f"embeddings with model {self.embedding_model!r}")
+            body, _ = self._post(
+                "/embeddings", payload, what=f"embeddings with model {self.embedding_model!r}", embeddings=True
+            )
             rows.extend(self._parse_embeddings(body, len(batch)))
         dims = {r.shape[0] for r in rows}
         if len(dims) != 1:
@@ -475,6 +647,16 @@ class OpenAICompatible:
                 raise LLMError(
                     f"embeddings reply holds a vector that is not numbers; received {self._excerpt(body)}"
                 ) from exc
+            if vector.ndim == 2 and vector.shape[0] > 0 and vector.shape[1] > 0:
+                # One vector per token (llama.cpp with --pooling none, a model without pooling): mean-pool them.
+                if not self._warned_pooling:
+                    log.warning(
+                        "embeddings with model %r: the server returned one vector per token; they are mean-pooled "
+                        "into one vector per text (start the server with pooling, e.g. llama.cpp --pooling mean)",
+                        self.embedding_model,
+                    )
+                    self._warned_pooling = True
+                vector = vector.mean(axis=0)
             if vector.ndim != 1 or vector.size == 0 or not np.all(np.isfinite(vector)):
                 raise LLMError(
                     f"embeddings reply holds an empty, nested or non-finite vector; received {self._excerpt(body)}"
@@ -499,11 +681,26 @@ class OpenAICompatible:
             )
         return content
 
-    def _post(self, path: str, payload: dict, what: str) -> tuple[dict, int]:
-        """POST JSON with retries, all within one deadline; return (decoded JSON object, attempts used)."""
+    def _post(
+        self,
+        path: str,
+        payload: dict,
+        what: str,
+        *,
+        chat: bool = False,
+        embeddings: bool = False,
+        started: float | None = None,
+    ) -> tuple[dict, int]:
+        """POST JSON with retries, all within one deadline; return (decoded JSON object, attempts used).
+
+        ``chat``: a read timeout (the server was generating) is final (``GenerationTimeoutError``).
+        ``embeddings``: a server that cannot embed is final (``EmbeddingsUnavailableError``).
+        """
         url = self._url(path)
         content = self._encode(payload, what)
         deadline = Deadline.after(self.deadline_s, self._clock)
+        stream = bool(payload.get("stream"))
+        started = self._clock() if started is None else started
         attempts = self.max_retries + 1
         last_problem = ""
         for attempt in range(attempts):
@@ -512,10 +709,18 @@ class OpenAICompatible:
             retry_after_s: float | None = None
             try:
                 with deadline_scope(deadline):
-                    outcome = self._exchange(url, content, what, deadline)
-            except httpx.TimeoutException:
+                    outcome = self._exchange(url, content, what, deadline, stream=stream, embeddings=embeddings,
+                                             started=started)  # fmt: skip
+            except httpx.TimeoutException as exc:
                 if deadline.passed():
                     raise self._deadline_error(what, url, attempt + 1, last_problem) from None
+                if chat and isinstance(exc, httpx.ReadTimeout):
+                    wait_s = self.idle_timeout_s if stream else self.timeout_s
+                    raise GenerationTimeoutError(
+                        f"{what} at {url}: the server sent nothing for {wait_s:g} s while generating "
+                        f"(attempt {attempt + 1}); not retried, since the server may still be generating: the "
+                        "connection was closed so that it stops. Raise the timeout, or lower max_tokens"
+                    ) from None
                 last_problem = f"timed out (timeout_s={self.timeout_s:g})"
             except httpx.TransportError as exc:
                 last_problem = f"connection failed ({type(exc).__name__}: {self._safe_excerpt(str(exc))})"
@@ -538,16 +743,31 @@ class OpenAICompatible:
                 self._sleep(delay_s)
         raise LLMError(f"{what} at {url} failed after {attempts} attempts; last error: {last_problem}")
 
-    def _exchange(self, url: str, content: bytes, what: str, deadline: Deadline) -> dict | tuple[str, float | None]:
+    def _exchange(
+        self,
+        url: str,
+        content: bytes,
+        what: str,
+        deadline: Deadline,
+        *,
+        stream: bool = False,
+        embeddings: bool = False,
+        started: float = 0.0,
+    ) -> dict | tuple[str, float | None]:
         """One HTTP request: the decoded JSON object, or (problem, Retry-After seconds) for a retryable status.
 
         Raises ``LLMError`` for answers that retrying cannot fix and lets
-        httpx's timeout and transport errors through (they are retried).
+        httpx's timeout and transport errors through (the caller decides).
+        Leaving the block for any reason closes the response; a response not
+        read to its end closes its connection, so the server stops sending.
         """
         phase_s = max(min(self.timeout_s, deadline.remaining_s()), 1e-3)
-        with self._http.stream(
-            "POST", url, content=content, headers={"Content-Type": "application/json"}, timeout=phase_s
-        ) as response:
+        timeout: float | httpx.Timeout = phase_s
+        headers = {"Content-Type": "application/json"}
+        if stream:
+            timeout = httpx.Timeout(phase_s, read=max(min(self.idle_timeout_s, deadline.remaining_s()), 1e-3))
+            headers["Accept"] = "text/event-stream, application/json"
+        with self._http.stream("POST", url, content=content, headers=headers, timeout=timeout) as response:
             status = response.status_code
             if 300 <= status < 400:
                 location = self._safe_excerpt(response.headers.get("location", "?"))
@@ -556,12 +776,144 @@ class OpenAICompatible:
                     "(http vs https, a missing or extra path part)"
                 )
             if status < 400:
+                kind = response.headers.get("content-type", "").split(";")[0].strip().lower()
+                if stream and kind == "text/event-stream":
+                    return self._read_events(response, deadline, what, started)
                 raw = read_body(response, max_bytes=self.max_response_bytes, deadline=deadline, what="reply")
                 return self._decode_json(raw, response, what)
             raw = read_body(response, max_bytes=_ERROR_BODY_BYTES, deadline=deadline, what="error", stop_at_limit=True)
+            message = self._server_message(raw)
+            context = _context_error(message, raw)
+            if context is not None:
+                n_ctx, requested = context
+                raise ContextLengthError(
+                    f"{what} at {url} was rejected with HTTP {status}: the prompt is longer than the model's "
+                    f"context{f' of {n_ctx} tokens' if n_ctx else ''}"
+                    f"{self._server_says(raw)}: shorten the prompt (robocritics fits it when it knows the "
+                    "context: --context-tokens), lower max_tokens, or give the model a larger context",
+                    context_tokens=n_ctx,
+                    requested_tokens=requested,
+                )
+            if stream and status in (400, 422) and "stream" in message.lower():
+                raise _StreamRefused(f"HTTP {status}{self._server_says(raw)}")
+            if status == 501 or (status == 500 and _NO_EMBEDDINGS.search(message)):
+                error = EmbeddingsUnavailableError if embeddings else LLMError
+                raise error(
+                    f"{what} at {url} failed with HTTP {status}{self._server_says(raw)}: the server cannot do "
+                    "this (not retried)"
+                    + (": start it with embeddings enabled (llama.cpp --embeddings, llama-cpp-python "
+                       "--embedding true) or use keyword (BM25) memory" if embeddings else "")
+                )  # fmt: skip
             if status in RETRYABLE_STATUSES or status >= 500:
                 return f"HTTP {status}{self._server_says(raw)}", _retry_after_seconds(response.headers)
             raise self._status_error(status, url, raw, what)
+
+    def _read_events(self, response: httpx.Response, deadline: Deadline, what: str, started: float) -> dict:
+        """A streamed (server-sent events) chat reply, read as it arrives, as the body a plain reply would have.
+
+        Each ``data:`` event is a JSON chunk whose ``choices[0].delta.content``
+        is the next piece of text; ``data: [DONE]`` ends the stream (reading
+        stops there). Comments (``: ping``) count as activity. An ``error``
+        event raises ``LLMError`` with the server's words.
+        """
+        url = response.request.url
+        parts: list[str] = []
+        chars = tokens = 0
+        finish: str | None = None
+        usage: dict[str, Any] = {}
+        model: Any = None
+        data: list[bytes] = []
+        buffer = bytearray()
+        events = 0
+
+        def dispatch(event: bytes) -> bool:  # True: [DONE]
+            nonlocal chars, tokens, finish, usage, model, events
+            if event.strip() == b"[DONE]":
+                return True
+            chunk = loads_json(event, where=f"{what} at {url} (a streamed event)")
+            if not isinstance(chunk, dict):
+                raise LLMError(f"{what} at {url}: a streamed event is not a JSON object: {self._excerpt(chunk)}")
+            events += 1
+            message = _error_message(chunk)
+            if message is not None and "choices" not in chunk:
+                context = _context_error(message, event)
+                if context is not None:
+                    raise ContextLengthError(
+                        f"{what} at {url}: the server stopped the stream: {self._safe_excerpt(message)}",
+                        context_tokens=context[0],
+                        requested_tokens=context[1],
+                    )
+                raise LLMError(f"{what} at {url}: the server stopped the stream with an error: "
+                               f"{self._safe_excerpt(message)}")  # fmt: skip
+            if isinstance(chunk.get("model"), str):
+                model = chunk["model"]
+            if isinstance(chunk.get("usage"), dict):
+                usage = chunk["usage"]
+            choices = chunk.get("choices")
+            if isinstance(choices, list) and choices and isinstance(choices[0], dict):
+                choice = choices[0]
+                delta = choice.get("delta")
+                if not isinstance(delta, dict):
+                    delta = choice.get("message") if isinstance(choice.get("message"), dict) else {}
+                piece = delta.get("content")
+                if isinstance(piece, str) and piece:
+                    parts.append(piece)
+                    chars += len(piece)
+                    tokens += 1
+                    if chars > self.max_reply_chars:
+                        raise LLMError(
+                            f"chat reply from {url} is longer than {self.max_reply_chars:,} characters "
+                            "(max_reply_chars); stopped reading: a reply that long is not a program"
+                        )
+                    self._progress("receiving", tokens, chars, started)
+                if isinstance(choice.get("finish_reason"), str):
+                    finish = choice["finish_reason"]
+            return False
+
+        done = False
+        for piece in iter_body(response, max_bytes=self.max_response_bytes, deadline=deadline, what="streamed reply"):
+            start = len(buffer)
+            buffer += piece
+            scan = max(start - 1, 0)
+            cut = 0
+            while True:
+                end = buffer.find(b"\n", scan)
+                if end < 0:
+                    break
+                line = bytes(buffer[cut:end]).rstrip(b"\r")
+                cut = scan = end + 1
+                if not line:
+                    if data and dispatch(b"\n".join(data)):
+                        done = True
+                        break
+                    data = []
+                elif line.startswith(b":"):
+                    continue
+                else:
+                    name, _, value = line.partition(b":")
+                    if name == b"data":
+                        data.append(value[1:] if value.startswith(b" ") else value)
+            del buffer[:cut]
+            if done:
+                break
+        if not done and data:
+            done = dispatch(b"\n".join(data))
+        if not events:
+            raise LLMError(f"{what} at {url}: the streamed reply ended before any data arrived")
+        if finish is None and not done:
+            raise LLMError(
+                f"{what} at {url}: the streamed reply ended after {tokens} tokens without a finish reason or "
+                "[DONE]: the server stopped in the middle"
+            )
+        if not usage.get("completion_tokens"):
+            usage = {**usage, "completion_tokens": tokens}
+        return {
+            "model": model,
+            "choices": [{"index": 0, "message": {"role": "assistant", "content": "".join(parts)},
+                         "finish_reason": finish}],
+            "usage": usage,
+            _STREAMED: True,
+        }  # fmt: skip
 
     def _deadline_error(self, what: str, url: str, attempts: int, last_problem: str) -> LLMError:
         tried = f" after {attempts} attempt{'s' if attempts != 1 else ''}" if attempts else ""
@@ -598,6 +950,15 @@ class OpenAICompatible:
                 f"embedding_model={self.embedding_model!r})"
             )
         return LLMError(f"{what} at {url} was rejected with HTTP {status}{says}")
+
+    def _server_message(self, raw: bytes) -> str:
+        """The server's error message in an error body (the raw text when it is not an OpenAI-style error)."""
+        try:
+            body = loads_json(raw, where="the error") if raw.strip() else None
+        except LLMError:
+            body = None
+        message = _error_message(body) if body is not None else None
+        return message if message is not None else raw.decode("utf-8", errors="replace").strip()
 
     def _server_says(self, raw: bytes) -> str:
         """' (server says: ...)' from an error body (at most ``_ERROR_BODY_BYTES`` of it), or ''."""
@@ -653,6 +1014,78 @@ class OpenAICompatible:
         if not self._api_key or not text:
             return text
         return _redact_secret(text, self._api_key.reveal())
+
+
+class _StreamRefused(LLMError):
+    """The server refused ``stream: true`` (the client asks again without)."""
+
+
+# Marks a reply body that was assembled from a stream.
+_STREAMED = "__robocritics_streamed__"
+# Bytes of a /props or /models answer read: llama.cpp's /props carries the chat template (a few KB).
+_PROPS_BYTES = 1 << 20
+
+# The server cannot embed: llama-cpp-python "Llama model must be created with embedding=True to call this method";
+# llama.cpp "This server does not support embeddings. Start it with `--embeddings`"; vLLM / Ollama wordings.
+_NO_EMBEDDINGS = re.compile(
+    r"embedding\s*=\s*true|does not support embeddings?|embeddings? (?:are |is )?not (?:supported|enabled)"
+    r"|--embeddings?\b",
+    re.IGNORECASE,
+)
+# Context-window errors: (pattern, group of the context size, group of the requested tokens).
+_CONTEXT_ERRORS = (
+    # llama-cpp-python: "Requested tokens (2764) exceed context window of 2048"
+    (re.compile(r"requested tokens \((\d+)\) exceed context window of (\d+)", re.IGNORECASE), 2, 1),
+    # vLLM / OpenAI: "This model's maximum context length is 2048 tokens. However, you requested 2764 tokens"
+    (re.compile(r"maximum context length is (\d+) tokens(?:.*?(?:requested|resulted in) (\d+) tokens)?",
+                re.IGNORECASE | re.DOTALL), 1, 2),  # fmt: skip
+    # llama.cpp: "the request exceeds the available context size, try increasing it" (+ n_ctx in the body)
+    (re.compile(r"exceeds? the available context size", re.IGNORECASE), 0, 0),
+    # Ollama / others: "input length exceeds the context length", "context length exceeded"
+    (re.compile(r"exceeds? (?:the |its )?(?:maximum )?context (?:length|window)|context length exceeded",
+                re.IGNORECASE), 0, 0),  # fmt: skip
+)
+
+
+def _context_error(message: str, raw: bytes) -> tuple[int | None, int | None] | None:
+    """(context tokens, requested tokens) if an error says the prompt is over the context, else None."""
+    for pattern, ctx_group, req_group in _CONTEXT_ERRORS:
+        found = pattern.search(message or "")
+        if found is None:
+            continue
+        n_ctx = _positive_int(found.group(ctx_group)) if ctx_group else None
+        requested = _positive_int(found.group(req_group)) if req_group and found.group(req_group) else None
+        if n_ctx is None or requested is None:  # llama.cpp puts the numbers beside the message
+            try:
+                body = loads_json(raw, where="the error") if raw.strip() else None
+            except LLMError:
+                body = None
+            error = body.get("error") if isinstance(body, dict) else None
+            if isinstance(error, dict):
+                n_ctx = n_ctx or _positive_int(error.get("n_ctx"))
+                requested = requested or _positive_int(error.get("n_prompt_tokens"))
+        return n_ctx, requested
+    return None
+
+
+def _positive_int(value: Any) -> int | None:
+    if isinstance(value, bool):
+        return None
+    try:
+        number = int(value)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return number if 0 < number < 1 << 40 else None
+
+
+def _props_context(body: Any) -> int | None:
+    """llama.cpp's ``/props``: ``default_generation_settings.n_ctx`` (or a top-level ``n_ctx``)."""
+    if not isinstance(body, dict):
+        return None
+    settings = body.get("default_generation_settings")
+    if isinstance(settings, dict) and _positive_int(settings.get("n_ctx")):
+        return _positive_int(settings.get("n_ctx"))
+    return _positive_int(body.get("n_ctx"))
 
 
 def _redact_secret(text: str, secret: str) -> str:

@@ -17,6 +17,9 @@ import re
 
 __all__ = [
     "DEFAULT_DEADLINE_S",
+    "DEFAULT_MAX_TOKENS",
+    "MIN_REPLY_TOKENS",
+    "CHARS_PER_TOKEN",
     "MAX_FEEDBACK_CHARS",
     "MAX_JSON_CONTAINERS",
     "MAX_JSON_DEPTH",
@@ -55,6 +58,18 @@ MAX_JSON_CONTAINERS = 100_000
 #: Characters of one chat reply: the longest program the sandbox accepts and some prose around it; finding the
 #: program in a reply this long costs at most a few parses of it (about a second of CPU at worst).
 MAX_REPLY_CHARS = 120_000
+
+#: Tokens a chat reply may have (``max_tokens`` sent with every request): the longest example program
+#: (breakfast, careful: 40 lines) is about 450 tokens; twice that plus some prose fits. Without a cap a small
+#: model can generate until the deadline, and the server keeps generating for a request nobody waits for.
+DEFAULT_MAX_TOKENS = 1024
+
+#: Fewest reply tokens a prompt is fitted to leave free in a small context: a short program and no prose.
+MIN_REPLY_TOKENS = 256
+
+#: Characters per token of the cheap prompt-size estimate: BPE tokenizers of small open models give 3.2-4
+#: characters per token on the system prompt (code, numbers, English); 3 over-estimates, so a fitted prompt fits.
+CHARS_PER_TOKEN = 3.0
 
 # --- what the loop sends and stores ------------------------------------------------------------------
 
