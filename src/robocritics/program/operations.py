@@ -568,15 +568,16 @@ class _Operations:
         return [self._call(key, [x], {}, node) for x in items]
 
     def _charge_sort(self, keys: list, comparisons: int) -> None:
-        """Pay for ``comparisons`` comparisons among ``keys``: each costs at most the second heaviest key."""
+        """Pay for ``comparisons`` comparisons among ``keys``: each costs at most the second heaviest key
+        (the lighter of the two compared)."""
         kinds = set(map(type, keys))
         if kinds <= _NUMBERS_AND_NONE:
-            second = 1
+            per_comparison = 2
         elif kinds == {str}:
-            second = 1 + (sorted(map(len, keys))[-2] if len(keys) > 1 else 0) // 64
-        else:
-            second = self._second_weight(keys)
-        self.meter.spend_ops(comparisons * (1 + (1 + MAX_KEYS_PER_HASH) * second))
+            per_comparison = 2 + (sorted(map(len, keys))[-2] if len(keys) > 1 else 0) // 64
+        else:  # containers: their comparisons may meet sets or dicts, each element a lookup
+            per_comparison = 1 + (1 + MAX_KEYS_PER_HASH) * self._second_weight(keys)
+        self.meter.spend_ops(comparisons * per_comparison)
 
     def _second_weight(self, values: list) -> int:
         """The second largest weight of ``values``; refused when they weigh more than ``max_nodes`` together."""
