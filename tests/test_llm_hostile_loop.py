@@ -152,7 +152,7 @@ def test_unusable_tasks_are_prompt_errors(task, message):
 def test_a_long_reply_is_not_re_sent_in_full(llm_server, make_client, sorting, tmp_path):
     rejected = "x = 1\n" * 10_000 + "import os\n"  # 60 kB; the sandbox stops it at the import
     llm_server.reply(f"```python\n{rejected}```", "```python\nmove_above(green_apple)\nhome()\n```")
-    with Loop(make_client(), sorting, critics=["joint_speed"], memory=tmp_path / "m.sqlite") as loop:
+    with Loop(make_client(max_tokens=None), sorting, critics=["joint_speed"], memory=tmp_path / "m.sqlite") as loop:
         first = loop.request("put the green apple in the white box")
         assert first.error is not None and first.report is None
         loop.fix()

@@ -19,6 +19,15 @@ Each attempt's program, critic report and score are printed as they come.
 ``--timeout`` is the most one LLM request may take in all (connecting,
 waiting, reading the reply, retries and their pauses): a server that stalls or
 sends a byte at a time ends the run at that deadline with exit status 2.
+Replies are streamed (``--no-stream`` to ask for whole replies) and capped at
+``--max-tokens`` (default 1024); a stream silent for ``--idle-timeout`` seconds
+ends the request, which is not retried (the connection is closed, so the
+server stops generating). ``--context-tokens`` is the model's context window
+(default: what the server says: llama.cpp ``/props``, vLLM ``/v1/models``, or
+its error when a prompt is too long); every prompt is fitted to it. While a
+reply is awaited a line says so, and with ``--verbose`` the tokens are counted
+as they arrive. A memory whose embedding server fails falls back, with one
+warning, to keyword (BM25) retrieval.
 Replies, programs and errors are printed cleaned of undecodable characters
 and, past ``llm.limits.MAX_PRINTED_CHARS``, cut.
 
@@ -32,6 +41,7 @@ memory file) and failures of the LLM endpoint.
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 from typing import TextIO
@@ -49,6 +59,10 @@ _TIMEOUT_S = 300.0
 # Seconds one network phase may take within it before the request is retried: a first request to a local
 # server waits while the model loads.
 _PHASE_TIMEOUT_S = 120.0
+# Tokens per reply: llm.limits.DEFAULT_MAX_TOKENS (not imported here, to keep building the parser cheap).
+_MAX_TOKENS = 1024
+# Seconds between two progress lines while tokens arrive (--verbose).
+_PROGRESS_EVERY_S = 2.0
 # Model replies with --auto: the paper's five attempts per task (llm.loop.DEFAULT_MAX_ATTEMPTS, not imported
 # here so that building the parser stays cheap).
 _MAX_ATTEMPTS = 5
@@ -113,8 +127,73 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         default=_TIMEOUT_S,
         help=f"seconds one LLM request may take in all, retries included (default {_TIMEOUT_S:g})",
     )
+    p.add_argument(
+        "--max-tokens",
+        metavar="N",
+        type=positive_int,
+        default=_MAX_TOKENS,
+        help=f"most tokens per model reply (default {_MAX_TOKENS}); a reply cut there is sent back as "
+        "'your reply was cut; send a shorter program'",
+    )
+    p.add_argument(
+        "--context-tokens",
+        metavar="N",
+        type=positive_int,
+        default=None,
+        help="the model's context window in tokens, to fit the prompt to (default: what the server says, "
+        "e.g. llama.cpp's n_ctx; see docs/llm.md)",
+    )
+    p.add_argument(
+        "--idle-timeout",
+        metavar="S",
+        type=bounded_float(0.1, 24 * 3600.0, "s"),
+        default=None,
+        help="seconds a streamed reply may stay silent before the request ends (default: min(--timeout, 120))",
+    )
+    p.add_argument("--no-stream", action="store_true", help="ask for whole replies instead of streamed ones")
+    p.add_argument("-v", "--verbose", action="store_true", help="show tokens arriving and prompt sizes (stderr)")
     p.set_defaults(func=run_command)
     return p
+
+
+class _Progress:
+    """Progress lines on ``stream`` while the model is asked: one when a request is sent, the token count
+    every ``_PROGRESS_EVERY_S`` seconds (``verbose``), and the total when the reply is in."""
+
+    def __init__(self, stream: TextIO, model: str, verbose: bool):
+        self.stream = stream
+        self.model = model
+        self.verbose = verbose
+        self._last_s = 0.0
+        self.loop = None
+
+    def __call__(self, progress) -> None:
+        if progress.phase == "waiting":
+            self._last_s = 0.0
+            tokens = getattr(self.loop, "last_prompt_tokens", None)
+            size = f" (prompt ~{tokens:,} tokens)" if self.verbose and tokens else ""
+            _say(self.stream, f"robocritics run: asking {self.model}{size} ...", flush=True)
+        elif progress.phase == "receiving":
+            if self.verbose and progress.elapsed_s - self._last_s >= _PROGRESS_EVERY_S:
+                self._last_s = progress.elapsed_s
+                _say(self.stream, f"  ... {progress.tokens} tokens, {progress.elapsed_s:.1f} s", flush=True)
+        elif progress.phase == "done":
+            rate = f", {progress.tokens / progress.elapsed_s:.1f} tokens/s" if progress.elapsed_s > 0 else ""
+            _say(self.stream, f"  reply: {progress.tokens} tokens in {progress.elapsed_s:.1f} s{rate}", flush=True)
+
+
+class _WarningLines(logging.Handler):
+    """Prints the library's warnings as ``robocritics run: warning: ...`` lines."""
+
+    def __init__(self, stream: TextIO):
+        super().__init__(logging.WARNING)
+        self.stream = stream
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            _say(self.stream, f"robocritics run: warning: {one_line(record.getMessage())}", flush=True)
+        except Exception:  # never let a warning line end the run
+            self.handleError(record)
 
 
 def _temperature(text: str) -> float:
@@ -205,9 +284,18 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
             embedding_model=args.embedding_model,
             timeout_s=min(args.timeout, _PHASE_TIMEOUT_S),
             deadline_s=args.timeout,
+            max_tokens=getattr(args, "max_tokens", _MAX_TOKENS),
+            stream=not getattr(args, "no_stream", False),
+            idle_timeout_s=min(args.idle_timeout, args.timeout) if getattr(args, "idle_timeout", None) else None,
         )
     except LLMError as exc:
         return _error(f"{exc} (or use --base-url / --model)" if "configured" in str(exc) else str(exc), err)
+    verbose = bool(getattr(args, "verbose", False))
+    progress = _Progress(err, client.model, verbose)
+    client.on_progress = progress
+    warnings = _WarningLines(err)
+    library_log = logging.getLogger("robocritics.llm")
+    library_log.addHandler(warnings)
 
     memory = None
     try:
@@ -217,6 +305,12 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
             except RoboCriticsError as exc:
                 return _error(str(exc), err)
         options = {} if args.temperature is None else {"temperature": args.temperature}
+        context = getattr(args, "context_tokens", None)
+        where = "--context-tokens"
+        if context is None:
+            context, where = client.server_context_tokens(), "from the server"
+        if context is not None and context < 512:
+            return _error(f"--context-tokens {context}: a context under 512 tokens cannot hold the prompt", err)
         loop = Loop(
             client,
             scene,
@@ -228,8 +322,12 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
             embedded_rules=args.embedded_rules,
             on_attempt=lambda attempt: _print_attempt(attempt, out),
             model_options=options,
+            context_tokens=context,
         )
+        progress.loop = loop  # the prompt size of each call, for the progress line
         _say(out, f"robocritics run: {client.model} at {client.base_url}, scene {scene.name!r}")
+        if context is not None:
+            _say(out, f"context: {context:,} tokens ({where}); replies up to {client.max_tokens or 'any'} tokens")
         _say(out, f"task: {task}")
         _say(out)
         try:
@@ -249,6 +347,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         _say(out, f"final: {which}, score {format_score(final.score)}, {verdict}", flush=True)
         return 1 if final.has_errors else 0
     finally:
+        library_log.removeHandler(warnings)
         if memory is not None:
             memory.close()
         client.close()

@@ -49,6 +49,26 @@ or keeps in its history is at most ``MAX_MESSAGE_CHARS`` long (a longer reply
 is kept as its program, or cut, saying so); all text is cleaned of lone
 surrogates before it is sent, stored or handed to ``on_attempt``. Programs and feedback of older turns remain available to the
 model through the fix prompt (which quotes the current program) and the memory.
+
+Context: with ``context_tokens`` (the model's context window; learnt from the
+server's error when it refuses a prompt as too long, and then the turn is sent
+again once) every call is fitted to it by :func:`~robocritics.llm.prompts.estimate_tokens`,
+leaving room for the reply (``max_tokens``). In order, until it fits: fewer
+memory examples, the compact skill reference, the minimal one (signatures and
+short rules), fewer history messages (the task is restated), the new message's
+feedback cut, a smaller reply (down to ``llm.limits.MIN_REPLY_TOKENS``). The
+task, the skill API and the scene always survive; when even that does not fit,
+:class:`~robocritics.llm.prompts.PromptError` says how many tokens are needed.
+``last_prompt_tokens`` is the estimate of the latest call.
+
+Truncated replies: a reply the server cut at its token limit (``finish_reason
+"length"``, from a model with a ``chat`` method returning a ``ChatReply``) whose
+program is unfinished is not run; the model is told its reply was cut at N
+tokens and asked for a shorter program (:func:`~robocritics.llm.prompts.truncated_feedback`).
+
+Memory: when the memory's embedder fails (a server without embeddings), the
+loop warns once and retrieves by keywords (BM25) for the rest of its life.
+Past programs that never ran (score None) are not shown as examples.
 """
 
 from __future__ import annotations
@@ -62,18 +82,23 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from ..errors import CriticError, PlanningError, ProgramError, RoboCriticsError, TrajectoryError
 from ..report import format_score
-from .client import ChatModel
-from .limits import MAX_MESSAGE_CHARS, clean_text, cut_text
+from ..errors import LLMError
+from .client import ChatModel, ContextLengthError
+from .limits import DEFAULT_MAX_TOKENS, MAX_MESSAGE_CHARS, MIN_REPLY_TOKENS, clean_text, cut_text
 from .memory import MAX_SEARCH_K, Interaction, InteractionMemory
 from .prompts import (
     REVIEW_INSTRUCTION,
+    PromptError,
     check_task,
+    estimate_tokens,
     extract_code,
     fix_prompt,
+    has_unclosed_fence,
     request_prompt,
     runtime_feedback,
     says_complete,
     system_prompt,
+    truncated_feedback,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -99,6 +124,14 @@ DEFAULT_MAX_HISTORY_MESSAGES = 12
 DEFAULT_MAX_ATTEMPTS = 5
 # Memory hits fetched per example wanted: attempts at the same request share a text, only the best one is kept.
 _HITS_PER_EXAMPLE = 4
+#: Tokens of the context left unused by a fitted prompt: the estimate's error on short texts, chat-template tokens.
+CONTEXT_MARGIN_TOKENS = 64
+#: Smallest context a loop accepts, tokens: the minimal prompt of a built-in scene is ~1,000 tokens plus a reply.
+MIN_CONTEXT_TOKENS = 512
+# History lengths tried, in messages, when the prompt does not fit (0: only the new message, the task restated).
+_FITTING_HISTORY = (8, 4, 2, 0)
+# Characters of the new message's feedback always kept when it is cut to fit.
+_MIN_FEEDBACK_CHARS = 600
 
 
 class NothingToFixError(RoboCriticsError):
@@ -238,6 +271,8 @@ class Loop:
     * ``model_options`` — keyword arguments for ``model.complete`` (temperature, seed ...).
     * ``sample_rate_hz`` — trajectory sample rate for simulation, Hz (default:
       :func:`~robocritics.simulate.simulate`'s).
+    * ``context_tokens`` — the model's context window in tokens, to fit every
+      prompt to (module docstring); None: unknown until the server refuses one.
     """
 
     def __init__(
@@ -259,6 +294,7 @@ class Loop:
         on_attempt: Callable[[Attempt], None] | None = None,
         model_options: Mapping[str, Any] | None = None,
         sample_rate_hz: float | None = None,
+        context_tokens: int | None = None,
     ):
         from ..critic import select_critics
 
@@ -272,6 +308,8 @@ class Loop:
             raise ValueError(f"max_attempts must be at least 1, got {max_attempts}")
         if int(memory_k) < 0:
             raise ValueError(f"memory_k must be >= 0, got {memory_k}")
+        if context_tokens is not None and int(context_tokens) < MIN_CONTEXT_TOKENS:
+            raise ValueError(f"context_tokens must be at least {MIN_CONTEXT_TOKENS}, got {context_tokens}")
         if approve is not None and not callable(approve):
             raise TypeError("approve must be a callable approve(program, diff) -> bool")
         if isinstance(critics, str):
@@ -297,6 +335,9 @@ class Loop:
         self.on_attempt = on_attempt
         self.model_options = dict(model_options or {})
         self.sample_rate_hz = None if sample_rate_hz is None else float(sample_rate_hz)
+        self.context_tokens: int | None = None if context_tokens is None else int(context_tokens)
+        self.last_prompt_tokens: int | None = None
+        self.keyword_memory_reason: str | None = None  # why retrieval fell back to BM25, once it did
 
         self.attempts: list[Attempt] = []
         self.history: list[dict[str, str]] = []  # user/assistant turns, never trimmed
@@ -497,8 +538,7 @@ class Loop:
         if message:
             parts.append(message)
         content = cut_text(clean_text("\n\n".join(parts)), MAX_MESSAGE_CHARS)
-        messages = [*self.messages(), {"role": "user", "content": content}]
-        reply = self.model.complete(messages, **self.model_options)  # LLMError propagates; nothing changed yet
+        reply, details = self._ask(content)  # LLMError propagates; nothing changed yet
         if not isinstance(reply, str):
             reply = "" if reply is None else str(reply)
         reply = clean_text(reply)
@@ -508,7 +548,7 @@ class Loop:
         self.history.append({"role": "user", "content": content})
         self.history.append({"role": "assistant", "content": reply})
         try:
-            attempt = self._interpret(kind, content, reply)
+            attempt = self._interpret(kind, content, reply, details)
         except BaseException:  # approve() or a critic raised: leave the conversation as it was
             del self.history[-2:]
             self._notes, self._pending_error, self.current = saved
@@ -519,13 +559,118 @@ class Loop:
             self.on_attempt(attempt)
         return attempt
 
-    def _interpret(self, kind: str, prompt: str, reply: str) -> Attempt:
+    def _ask(self, content: str) -> tuple[str, Any]:
+        """Send the fitted messages with ``content`` as the new user message; (reply text, ChatReply or None).
+
+        A model with a ``chat`` method (``OpenAICompatible``) is asked through
+        it, so that a reply cut at the token limit is known. When the server
+        refuses the prompt as over its context and names the context, the
+        prompt is fitted to it and sent once more.
+        """
+        for again in (False, True):
+            messages, options = self._fitted(content)
+            try:
+                chat = getattr(self.model, "chat", None)
+                if callable(chat):
+                    result = chat(messages, **options)
+                    text = getattr(result, "content", result)
+                    return text, result if hasattr(result, "finish_reason") else None
+                return self.model.complete(messages, **options), None
+            except ContextLengthError as exc:
+                known = exc.context_tokens
+                if again or known is None or (self.context_tokens is not None and known >= self.context_tokens):
+                    raise
+                log.warning(
+                    "the server says the model's context is %d tokens; fitting the prompt to it and asking again",
+                    known,
+                )
+                self.context_tokens = max(int(known), MIN_CONTEXT_TOKENS)
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    def _reply_tokens(self, options: Mapping[str, Any]) -> int:
+        """Tokens to leave for the reply: the call's ``max_tokens``, else the model's, else the default."""
+        for value in (options.get("max_tokens"), getattr(self.model, "max_tokens", None)):
+            if isinstance(value, int) and not isinstance(value, bool) and value > 0:
+                return value
+        return DEFAULT_MAX_TOKENS
+
+    def _fitted(self, content: str) -> tuple[list[dict[str, str]], dict[str, Any]]:
+        """The messages and model options of the next call, fitted to ``context_tokens`` (module docstring)."""
+        options = dict(self.model_options)
+        user = {"role": "user", "content": content}
+        if self.context_tokens is None:
+            messages = [*self.messages(), user]
+            self.last_prompt_tokens = estimate_tokens(messages)
+            return messages, options
+        budget = self.context_tokens - CONTEXT_MARGIN_TOKENS
+        reply_tokens = self._reply_tokens(options)
+        keep_all = self.max_history_messages - 1
+
+        def build(n_examples: int, api: bool | str, keep: int, text: str) -> list[dict[str, str]]:
+            system = system_prompt(
+                self.scene,
+                embedded_rules=self.embedded_rules,
+                memory_examples=self.examples[:n_examples],
+                critics=self._selection,
+                params=self.params or None,
+                compact_api=api,
+            )
+            history = self._trimmed_history(keep)
+            if not history and self.task is not None and not text.startswith("Task:"):
+                text = f"The task: {self.task}\n\n{text}"  # the task always survives
+            return [{"role": "system", "content": system}, *history, {"role": "user", "content": text}]
+
+        candidates = [(n, False, keep_all) for n in range(len(self.examples), -1, -1)]
+        candidates += [(0, "compact", keep_all), (0, "minimal", keep_all)]
+        candidates += [(0, "minimal", k) for k in _FITTING_HISTORY if k < keep_all]
+        messages: list[dict[str, str]] = []
+        for n, api, keep in candidates:
+            messages = build(n, api, keep, content)
+            if estimate_tokens(messages) + reply_tokens <= budget:
+                self.last_prompt_tokens = estimate_tokens(messages)
+                return messages, options
+        # The smallest prompt still does not fit with a full reply: cut the new message, then the reply.
+        _, api, keep = candidates[-1]
+        fixed = estimate_tokens(messages) - estimate_tokens(content)
+        room_chars = int((budget - reply_tokens - fixed) * 3.0)
+        if room_chars >= _MIN_FEEDBACK_CHARS and room_chars < len(content):
+            messages = build(0, api, keep, cut_text(content, room_chars))
+        elif room_chars < len(content):
+            messages = build(0, api, keep, cut_text(content, max(_MIN_FEEDBACK_CHARS, 80)))
+        prompt = estimate_tokens(messages)
+        room = budget - prompt
+        if room >= reply_tokens:
+            self.last_prompt_tokens = prompt
+            return messages, options
+        if room >= MIN_REPLY_TOKENS:
+            log.warning(
+                "the prompt (~%d tokens) leaves %d of the %d context tokens for the reply; max_tokens lowered "
+                "from %d", prompt, room, self.context_tokens, reply_tokens,
+            )  # fmt: skip
+            options["max_tokens"] = room
+            self.last_prompt_tokens = prompt
+            return messages, options
+        raise PromptError(
+            f"the smallest prompt for this task and scene (task, short skill API, scene) is about {prompt:,} "
+            f"tokens; with {MIN_REPLY_TOKENS} tokens for the reply it needs a context of at least "
+            f"{prompt + MIN_REPLY_TOKENS + CONTEXT_MARGIN_TOKENS:,} tokens, and the model has "
+            f"{self.context_tokens:,} (context_tokens): use a model or server setting with a larger context"
+        )
+
+    def _interpret(self, kind: str, prompt: str, reply: str, details: Any = None) -> Attempt:
         index = len(self.attempts) + 1
         assert self.task is not None
         attempt = Attempt(index=index, kind=kind, request=self.task, prompt=prompt, reply=reply)
         code = extract_code(reply)
         current = self.current
         complete = says_complete(reply)
+
+        if getattr(details, "finish_reason", None) == "length" and (code is None or has_unclosed_fence(reply)):
+            # Cut at the token limit in the middle of its program: not the model's broken code, a short budget.
+            attempt.error = truncated_feedback(getattr(details, "completion_tokens", None),
+                                               getattr(details, "max_tokens", None))  # fmt: skip
+            self._pending_error = attempt.error
+            return attempt  # nothing to store: the program never ran
 
         if code is None:
             if complete and current is not None and current.report is not None:
@@ -617,11 +762,22 @@ class Loop:
         if self.memory is None or self.memory_k == 0:
             return []
         wanted = self.memory_k * _HITS_PER_EXAMPLE + len(self._memory_ids)
-        hits = self.memory.search(text, k=min(wanted, MAX_SEARCH_K))
+        try:
+            hits = self.memory.search(text, k=min(wanted, MAX_SEARCH_K))
+        except LLMError as exc:
+            if self.memory.embedder is None:
+                raise
+            # The embedding server failed (it cannot embed, or is down): keyword memory, for the whole run.
+            self.keyword_memory_reason = str(exc)
+            log.warning(
+                "memory retrieval by embeddings failed, so this run retrieves by keywords (BM25) instead: %s", exc
+            )
+            self.memory.embedder = None
+            hits = self.memory.search(text, k=min(wanted, MAX_SEARCH_K))
         by_request: dict[str, Interaction] = {}
         for hit in hits:  # best similarity first
-            if hit.id in self._memory_ids or not hit.program.strip():
-                continue
+            if hit.id in self._memory_ids or not hit.program.strip() or hit.score is None:
+                continue  # this loop's own, empty, or never ran (nothing to learn from)
             key = " ".join(hit.request.split()).lower()
             kept = by_request.get(key)
             if kept is None or _better(hit, kept):
@@ -636,13 +792,16 @@ class Loop:
 
     # --- history --------------------------------------------------------------------------------
 
-    def _trimmed_history(self) -> list[dict[str, str]]:
-        """The last ``max_history_messages - 1`` messages (room for the new user message), starting at a user turn.
+    def _trimmed_history(self, keep: int | None = None) -> list[dict[str, str]]:
+        """The last ``keep`` (default ``max_history_messages - 1``, room for the new user message) messages,
+        starting at a user turn.
 
         When the current task's first message is cut off, the task is restated
         at the start of the first message kept.
         """
-        keep = self.max_history_messages - 1
+        keep = self.max_history_messages - 1 if keep is None else keep
+        if keep <= 0:
+            return []
         if len(self.history) <= keep:
             return [dict(m) for m in self.history]
         start = len(self.history) - keep

@@ -13,7 +13,13 @@ What the model is told, turn by turn (the RoboCritics workflow, Fig. 2):
   plus the program with the lines the critics point at marked;
 * :func:`runtime_feedback` — a program the sandbox rejected, a motion that
   could not be planned, or a reply without code, as a message the model can act on;
-* :data:`REVIEW_INSTRUCTION` — the embedded condition's self-review turn.
+* :data:`REVIEW_INSTRUCTION` — the embedded condition's self-review turn;
+* :func:`truncated_feedback` — a reply the server cut at its token limit.
+
+Size: :func:`estimate_tokens` is the cheap prompt-size estimate (characters /
+``llm.limits.CHARS_PER_TOKEN``, plus 4 tokens per message: an over-estimate for
+the BPE tokenizers of small open models); ``system_prompt(compact_api=True)``
+uses :func:`compact_api_reference` (one line per skill) for small contexts.
 
 Reading replies: :func:`extract_code` finds the program, :func:`says_complete`
 the model's "PROGRAM COMPLETE".
@@ -23,6 +29,7 @@ from __future__ import annotations
 
 import ast
 import heapq
+import inspect
 import math
 import re
 import textwrap
@@ -32,7 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import CriticError, LLMError, PlanningError, ProgramError, RoboCriticsError
 from ..report import format_score
-from .limits import MAX_FEEDBACK_CHARS, MAX_REPLY_CHARS, MAX_TASK_CHARS, clean_text, cut_text
+from .limits import CHARS_PER_TOKEN, MAX_FEEDBACK_CHARS, MAX_REPLY_CHARS, MAX_TASK_CHARS, clean_text, cut_text
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic import Report
@@ -41,6 +48,9 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "COMPLETE_MARKER",
     "PromptError",
+    "compact_api_reference",
+    "estimate_tokens",
+    "truncated_feedback",
     "REVIEW_INSTRUCTION",
     "critic_rules",
     "describe_scene",
@@ -264,6 +274,68 @@ def format_memory_examples(examples: Iterable[Any]) -> str:
     return "\n\n".join([head, *parts])
 
 
+def compact_api_reference(level: str = "compact") -> str:
+    """The skill API in fewer tokens than ``api_reference()``, for models with a small context.
+
+    ``"compact"`` (about half): the conventions and language rules without the
+    example, then one line per skill (signature and the first sentence of its
+    docstring). ``"minimal"`` (about a fifth): the conventions in a few lines
+    and the signatures alone.
+    """
+    from ..program.skills import SKILLS, api_reference, usage
+
+    if level not in ("compact", "minimal"):
+        raise ValueError(f"level must be 'compact' or 'minimal', got {level!r}")
+    if level == "minimal":
+        return "\n".join(
+            [
+                "# Robot program API (short form)",
+                "Python calling the skills below. Metres, radians, seconds; base frame x forward, y left, z up; "
+                "table top z = 0; fingertips point down. `math`, helper functions, loops and `if` are allowed; "
+                "no other imports, classes, try/except or files.",
+                "Scene objects and containers are variables named by their id, with fields x, y, z (centre), "
+                "top, bottom, size, floor (containers) and every attribute by name (e.g. green_apple.ripeness); "
+                "`objects` and `containers` list them.",
+                "Skills:",
+                *(f"- {usage(name)}" for name in SKILLS),
+            ]
+        )
+    head = api_reference().split("## Skills", 1)[0]
+    head = head.split("\nExample:", 1)[0].rstrip()
+    lines = [head, "", "## Skills (signature - what it does)"]
+    for name, fn in SKILLS.items():
+        doc = inspect.cleandoc(fn.__doc__ or "").split("\n\n", 1)[0]
+        first = " ".join(doc.split())
+        first = first.split(". ", 1)[0].rstrip(".")
+        lines.append(f"- {usage(name)} - {first}.")
+    lines.append("- print(*values) - Show values in the program's output (for debugging).")
+    return "\n".join(lines)
+
+
+_SHORT_RULES = f"""\
+# Rules
+Use only the API's skills and the scene variables. Answer with the complete program in one ```python
+block; every revision is the whole program again. It is simulated and checked first; you will be told
+what failed. When asked to revise and the program needs no change, answer "{COMPLETE_MARKER}"."""
+
+
+def estimate_tokens(messages: str | Iterable[Mapping[str, Any]]) -> int:
+    """A cheap, deliberately high estimate of the tokens of a text or a list of chat messages.
+
+    ``ceil(characters / CHARS_PER_TOKEN)`` per text, plus 4 tokens per message
+    (role and chat-template markers). Real BPE tokenizers of small open models
+    (SmolLM2, Llama, Qwen) give 3.2-4 characters per token on these prompts,
+    so a prompt fitted with this estimate fits.
+    """
+    if isinstance(messages, str):
+        return math.ceil(len(messages) / CHARS_PER_TOKEN)
+    total = 0
+    for message in messages:
+        content = message.get("content", "")
+        total += math.ceil(len(content if isinstance(content, str) else str(content)) / CHARS_PER_TOKEN) + 4
+    return total
+
+
 def system_prompt(
     scene: "Scene",
     *,
@@ -271,21 +343,26 @@ def system_prompt(
     memory_examples: Iterable[Any] = (),
     critics: Iterable[Any] | str | None = None,
     params: Mapping[str, Any] | None = None,
+    compact_api: bool | str = False,
 ) -> str:
     """The system message: role, skill API, scene, rules; optionally critic rules and memory examples.
 
     ``embedded_rules=True`` pastes in :func:`critic_rules` for ``critics`` /
     ``params`` (the paper's *embedded* condition). ``memory_examples`` are past
-    interactions (see :func:`format_memory_examples`).
+    interactions (see :func:`format_memory_examples`). ``compact_api=True``
+    (or ``"compact"``) gives the skill API in one line per skill, ``"minimal"``
+    its signatures alone and the rules in brief (:func:`compact_api_reference`),
+    for models with a small context.
     """
+    level = "compact" if compact_api is True else (compact_api or "")
     from ..program.skills import api_reference
 
     parts = [
         "You write programs for a UR3e robot arm with a two-finger gripper, standing on a table. "
         "Each program is simulated and checked for safety before the robot runs it.",
-        api_reference().strip(),
+        (compact_api_reference(level) if level else api_reference()).strip(),
         describe_scene(scene),
-        _RULES,
+        _SHORT_RULES if level == "minimal" else _RULES,
     ]
     if embedded_rules:
         parts.append(critic_rules(critics, params))
@@ -449,6 +526,29 @@ def _runtime_feedback(error: BaseException | None, *, program: str | None, reply
     if isinstance(error, RoboCriticsError):
         return f"Your program could not be checked: {_reason(error)}\n{resend}"
     return f"Your program could not be checked ({type(error).__name__}: {_reason(error)}).\n{resend}"
+
+
+def truncated_feedback(tokens: int | None, max_tokens: int | None = None) -> str:
+    """The message for a reply the server cut at its token limit (``finish_reason == "length"``).
+
+    The program in such a reply is incomplete, so it is not run; the model is
+    told why and asked for a shorter one (instead of being blamed for the
+    broken last line of a program it never finished).
+    """
+    count = tokens if tokens else max_tokens
+    at = f" at {count} tokens" if count else ""
+    limit = f" (the reply limit, max_tokens={max_tokens})" if max_tokens else " (the reply limit)"
+    return (
+        f"Your reply was cut{at}{limit} before it was finished, so its program is incomplete and was not "
+        "run. Send a shorter program: the complete program in one ```python block with no explanation "
+        "before or after it, few comments, and a loop or a helper function for steps that repeat."
+    )
+
+
+def has_unclosed_fence(reply: str) -> bool:
+    """Whether ``reply`` opens a fenced block it never closes (a reply cut in the middle of its code)."""
+    fences = [line for line in reply.splitlines() if _OPENING.match(line)]
+    return len(fences) % 2 == 1
 
 
 def says_complete(reply: str) -> bool:
