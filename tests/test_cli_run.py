@@ -238,3 +238,112 @@ def test_a_damaged_memory_file_exits_2(llm_server, capsys, tmp_path):
     code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--memory", str(damaged))
     assert code == 2
     assert "damaged or not a database" in capsys.readouterr().err
+
+
+# --- real servers: bounded generation, progress, small contexts, no embeddings (issue 11) ---------------------
+
+
+def _endless_tokens():
+    """A streamed reply that never ends: a server that ignores max_tokens and the model never stops."""
+    import json as _json
+
+    yield b"data: " + _json.dumps({"choices": [{"index": 0, "delta": {"role": "assistant"}}]}).encode() + b"\n\n"
+    while True:
+        chunk = {"choices": [{"index": 0, "delta": {"content": "move_up(0.01)\n"}, "finish_reason": None}]}
+        yield b"data: " + _json.dumps(chunk).encode() + b"\n\n"
+
+
+def test_auto_against_an_uncapped_server_that_never_stops_ends_at_the_deadline(llm_server, capsys):
+    from llm_server import Stream
+
+    llm_server.script(Stream(_endless_tokens, interval_s=0.02, content_type="text/event-stream"))
+    started = time.monotonic()
+    code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--auto", "--timeout", "1.5")
+    elapsed = time.monotonic() - started
+    captured = capsys.readouterr()
+    assert code == 2
+    assert "deadline of 1.5 s" in captured.err
+    assert elapsed < 1.5 + 3.0  # the deadline and the scene set-up, on a loaded machine
+    assert llm_server.cancelled.wait(2.0) or len(llm_server.chat_requests()) == 1
+    assert len(llm_server.chat_requests()) == 1  # a timed-out generation is not retried
+
+
+def test_auto_against_a_slow_capped_server_finishes_with_a_result(llm_server, capsys):
+    llm_server.token_interval_s = 0.002
+    long_reply = fenced(NAIVE) + "\nNow let me explain every line in detail. " * 200
+    llm_server.reply(fenced("# a very long preamble\n" * 400 + NAIVE), long_reply, "PROGRAM COMPLETE")
+    code = run(
+        TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--auto", "--max-attempts", "3",
+        "--critics", SPEED_CRITICS, "--max-tokens", "400", "--timeout", "60",
+    )  # fmt: skip
+    out = capsys.readouterr().out
+    assert code in (0, 1)
+    assert {r.json["max_tokens"] for r in llm_server.chat_requests()} == {400}
+    assert "Your reply was cut at 400 tokens" in llm_server.chat_requests()[1].text  # said so to the model
+    assert "final: attempt" in out
+
+
+def test_progress_lines_show_the_wait_and_the_tokens(llm_server, capsys, monkeypatch):
+    import robocritics.cli.run as run_module
+
+    monkeypatch.setattr(run_module, "_PROGRESS_EVERY_S", 0.0)  # a line per token: the test does not wait
+    llm_server.reply(fenced(NAIVE))
+    run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", SPEED_CRITICS,
+        "--verbose")  # fmt: skip
+    err = capsys.readouterr().err
+    assert "robocritics run: asking m (prompt ~" in err
+    assert "  ... 1 tokens," in err and "  ... 2 tokens," in err
+    assert "  reply: " in err and " tokens in " in err
+
+
+def test_without_verbose_one_line_per_request(llm_server, capsys):
+    llm_server.reply(fenced(NAIVE))
+    run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", SPEED_CRITICS)
+    err = capsys.readouterr().err
+    assert err.count("asking m ...") == 1 and err.count("  reply: ") == 1 and "  ... " not in err
+
+
+def test_the_context_comes_from_the_server_and_the_prompt_fits(llm_server, capsys):
+    from llm_server import count_tokens
+
+    llm_server.context_tokens = 2048
+    llm_server.props = True
+    llm_server.reply(fenced(NAIVE))
+    code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", SPEED_CRITICS)
+    out = capsys.readouterr().out
+    assert code == 0 or "final:" in out
+    assert "context: 2,048 tokens (from the server)" in out
+    (request,) = llm_server.chat_requests()
+    assert count_tokens(request.messages) + request.json["max_tokens"] <= 2048
+
+
+def test_context_tokens_option_wins_over_the_server(llm_server, capsys):
+    llm_server.context_tokens = 100_000
+    llm_server.props = True
+    llm_server.reply(fenced(NAIVE))
+    run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", SPEED_CRITICS,
+        "--context-tokens", "3000")  # fmt: skip
+    assert "context: 3,000 tokens (--context-tokens)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("mode", ["no-embedding", "not-implemented"])
+def test_a_server_without_embeddings_warns_once_and_the_run_goes_on(llm_server, capsys, tmp_path, mode):
+    memory = tmp_path / "memory.sqlite"
+    with InteractionMemory(memory) as stored:
+        stored.add("s", "sort the apples by ripeness, carefully", CAREFUL, "all OK", 10.0)
+    llm_server.embedding_mode = mode
+    llm_server.reply(fenced(NAIVE))
+    code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", SPEED_CRITICS,
+               "--memory", str(memory), "--embedding-model", "e")  # fmt: skip
+    captured = capsys.readouterr()
+    assert "final: attempt 1" in captured.out and code in (0, 1)
+    assert captured.err.count("warning: memory retrieval by embeddings failed") == 1
+    assert "keywords (BM25)" in captured.err
+    assert len(llm_server.embedding_requests()) == 1
+
+
+def test_no_stream_asks_for_whole_replies(llm_server, capsys):
+    llm_server.reply(fenced(NAIVE))
+    run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--critics", SPEED_CRITICS,
+        "--no-stream")  # fmt: skip
+    assert "stream" not in llm_server.chat_requests()[0].json
