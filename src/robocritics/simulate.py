@@ -146,7 +146,11 @@ def simulate(
     planner = Planner(scene, robot, sample_rate_hz, settings or PlannerSettings(), start_q=start_q)
     planner.run(plan)
     if not planner.steps:
-        raise ProgramError("the program made no skill calls, so there is no motion to check", line=1)
+        first_code_line = next(  # not a comment or blank line at the top of the program
+            (i for i, text in enumerate(program.splitlines(), 1) if text.strip() and not text.lstrip().startswith("#")),
+            1,
+        ) if isinstance(program, str) else 1  # fmt: skip
+        raise ProgramError("the program made no skill calls, so there is no motion to check", line=first_code_line)
     q, t, opening, attached, step = planner.finish()
     frames = robot.forward(q, opening)
     object_poses = planner.object_poses(frames[:, robot.tcp_index])
