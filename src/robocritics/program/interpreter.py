@@ -623,13 +623,13 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         self._tick(node)
         try:
             self.meter.spend(_CALL_UNITS)
+            self.meter.allocate(_CALL_SCOPE_BYTES)
             values = self._bind(fn, args, kwargs)
         except LimitReached as hit:
             raise self._limit_error(hit, node) from None
         except TypeError as exc:
             raise self._convert(exc, node) from None
         self._enter_call(node)
-        self.meter.allocate(_CALL_SCOPE_BYTES)
         scope = _Scope(values, fn.locals, fn.closure, fn.name)
         line = getattr(node, "lineno", 0) or 0
         self.depth += 1

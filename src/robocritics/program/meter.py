@@ -74,12 +74,15 @@ class Meter:
     :meth:`spend_ops`, :meth:`spend_chars` and :meth:`allocate`.
     """
 
-    __slots__ = ("budget", "max_work", "max_steps", "steps", "work", "memory", "alarm", "deadline", "clock")
+    __slots__ = (
+        "budget", "max_work", "max_steps", "max_memory", "steps", "work", "memory", "alarm", "deadline", "clock"
+    )  # fmt: skip
 
     def __init__(self, budget: Budget):
         self.budget = budget
         self.max_work = budget.max_work
         self.max_steps = budget.max_steps
+        self.max_memory = budget.max_alloc_bytes
         self.steps = 0
         self.work = 0
         self.memory = 0
@@ -98,7 +101,7 @@ class Meter:
     def check(self) -> None:
         """Refuse to go on past the work budget or the deadline; schedule the next check."""
         if self.work > self.max_work:
-            raise self._out_of_work()
+            raise self.out_of_work()
         if self.clock() > self.deadline:
             raise LimitReached(
                 "max_seconds",
@@ -111,7 +114,7 @@ class Meter:
         """Pay ``units`` of work before doing it; :class:`LimitReached` (and nothing done) if they do not fit."""
         work = self.work + units
         if work > self.max_work:
-            raise self._out_of_work()
+            raise self.out_of_work()
         self.work = work
         if work >= self.alarm:
             self.check()
@@ -137,7 +140,7 @@ class Meter:
         if self.work >= self.alarm:
             self.check()
 
-    def _out_of_work(self) -> LimitReached:
+    def out_of_work(self) -> LimitReached:
         return LimitReached(
             "max_work",
             f"the program did more than {self.max_work} units of work (expressions evaluated and elements "
@@ -149,7 +152,7 @@ class Meter:
     def allocate(self, nbytes: int) -> None:
         """Count ``nbytes`` of new values; :class:`LimitReached` past the memory budget."""
         memory = self.memory + nbytes
-        if memory > self.budget.max_alloc_bytes:
+        if memory > self.max_memory:
             raise LimitReached(
                 "max_alloc_bytes",
                 f"the program created more than {self.budget.max_alloc_bytes // 1_000_000} MB of values in "
@@ -185,7 +188,7 @@ class Meter:
                 self.spend_ops(WALK_OPS_PER_ELEMENT * visited + WALK_OPS_PER_CONTAINER * containers)
                 raise self.too_deep()
             if WALK_OPS_PER_ELEMENT * visited + WALK_OPS_PER_CONTAINER * containers > affordable_ops:
-                raise self._out_of_work()
+                raise self.out_of_work()
             elements: Any = [*v.keys(), *v.values()] if type(v) is dict else v
             containers += 1
             visited += len(elements)

@@ -51,6 +51,10 @@ _SEARCH_WINDOW_CHARS = 100
 switch to a linear-time algorithm)."""
 _INT_OP_BITS = 64
 """Integer arithmetic costs one element operation per pair of this many bits of its operands (schoolbook)."""
+_SMALL_INT = 2**64
+"""Integers smaller than this in size cost one work unit per operation and a fixed size in bytes."""
+_NUMBER_BYTES = 32
+"""Bytes of a float (24) or of an integer smaller than ``_SMALL_INT`` (28 to 36), rounded up."""
 _INT_TEXT_BITS = 128
 """Writing an integer in decimal costs one element operation per pair of this many bits (quadratic)."""
 _MAX_FORMAT_WIDTH = 1_000
@@ -155,6 +159,12 @@ class _Operations:
     def _new_value(self, value: Any, node: Any) -> Any:
         """Check a new value against the size limits, charge its bytes and return it."""
         t = type(value)
+        if t is float or (t is int and -_SMALL_INT < value < _SMALL_INT):  # the common case, without calls
+            meter = self.meter
+            meter.memory += _NUMBER_BYTES
+            if meter.memory > meter.max_memory:
+                meter.allocate(0)  # raises
+            return value
         if t is int:
             if value.bit_length() > self.b.max_int_bits:
                 raise self._int_error(node)
@@ -431,7 +441,8 @@ class _Operations:
     def _binop(self, op: type, a: Any, b: Any, node: Any, inplace: bool = False) -> Any:
         ta, tb = type(a), type(b)
         if ta in _INTS and tb in _INTS:
-            self._charge_int_operation(op, a, b, node)
+            if op is ast.Pow or op is ast.LShift or not (-_SMALL_INT < a < _SMALL_INT and -_SMALL_INT < b < _SMALL_INT):
+                self._charge_int_operation(op, a, b, node)
         elif op in _SET_OPS and (ta in _SET_LIKE or tb in _SET_LIKE or ta is dict):
             return self._set_binop(op, a, b, node, inplace)
         elif op is ast.Add:
@@ -527,8 +538,8 @@ class _Operations:
             raise self.meter.too_deep() from None
         self.meter.spend(steps)
         if not complete:
-            if affordable < max_chars:
-                self.meter.spend(affordable + 1)  # out of work
+            if affordable < max_chars:  # cut short by the work budget, not by the length limit
+                raise self.meter.out_of_work()
             raise self._limit(
                 f"printing this value would produce more than {max_chars} characters; the limit is {max_chars}",
                 node,
