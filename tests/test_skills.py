@@ -309,3 +309,21 @@ def test_recording_takes_the_sandbox_budget():
     with pytest.raises(ProgramError, match="more than 2 skill calls"), recording(SORTING, budget=two_calls):
         for _ in range(3):
             skills.home()
+
+
+def test_skill_limits_are_budget_errors_naming_the_field():
+    from robocritics.program import BudgetError
+
+    with pytest.raises(BudgetError) as info:
+        run_program("for i in range(3000):\n    wait(0)\n", SORTING)
+    assert (info.value.limit, info.value.line) == ("max_skill_calls", 2)
+    with pytest.raises(BudgetError) as info:
+        run_program("for i in range(100):\n    print('x' * 5000)\n", SORTING)
+    assert (info.value.limit, info.value.line) == ("max_output_chars", 2)
+
+
+def test_skill_errors_quote_huge_values_briefly():
+    for call in ("move_to('x' * 100000)", "move_to(2 ** 4000, 0, 0)", "move_above(green_apple, height=10 ** 300)"):
+        with pytest.raises(ProgramError) as info:
+            run_program(call + "\n", SORTING)
+        assert len(info.value.reason) < 400, call
