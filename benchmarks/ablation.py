@@ -23,13 +23,25 @@ conditions (it is not critic feedback) and counts as an attempt.
 Columns: ``attempts`` = model replies used; ``final`` = score of the last
 program that ran (0 if none ran); ``best`` = best score of the run; ``goal`` =
 whether the final program's simulated end state does the task (objects in the
-right containers / on the plate). Paper averages: embedded 2.3 attempts, score
-6.3; external 5.0 attempts, score 7.7.
+right containers / on the plate); ``runtime errors`` = attempts whose program
+did not run (no code, sandbox, planning, a reply cut at ``--max-tokens``);
+``stopped`` = why the run ended ("llm error" when the endpoint failed). Paper
+averages: embedded 2.3 attempts, score 6.3; external 5.0 attempts, score 7.7.
+
+Results are kept cell by cell: each finished run (one task, condition and
+repeat) is appended to ``--results`` (JSON lines, flushed and synced) at
+once, with the configuration it was run with. Running the same command again
+resumes: cells already in the file with the same configuration are not run
+again (``--fresh`` starts over). One LLM error ends only its cell (recorded
+with the error, and run again on resume); Ctrl-C stops after printing the
+table of the cells done so far.
 
 Usage::
 
     python benchmarks/ablation.py --base-url https://api.openai.com/v1 --model gpt-4o-mini \\
-        --api-key-env OPENAI_API_KEY [--max-attempts 5] [--repeats 3] [--json results.json]
+        --api-key-env OPENAI_API_KEY [--max-attempts 5] [--repeats 3] [--results ablation.jsonl]
+    python benchmarks/ablation.py --base-url http://127.0.0.1:8080/v1 --model smollm2 \\
+        --context-tokens 2048 --max-tokens 512 --timeout 120     # a local llama.cpp server
     python benchmarks/ablation.py --selftest     # offline, against the scripted loopback server
 
 ``--selftest`` starts ``tests/llm_server.LLMServer`` on 127.0.0.1 with a
@@ -50,7 +62,7 @@ import shlex
 import statistics
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +74,7 @@ except ImportError:  # run from a checkout without installing
 
 from robocritics.errors import LLMError, RoboCriticsError  # noqa: E402
 from robocritics.llm.client import OpenAICompatible  # noqa: E402
+from robocritics.llm.limits import DEFAULT_MAX_TOKENS  # noqa: E402
 from robocritics.llm.loop import Attempt, Loop  # noqa: E402
 from robocritics.llm.prompts import REVIEW_INSTRUCTION  # noqa: E402
 from robocritics.scene import Scene  # noqa: E402
@@ -76,6 +89,8 @@ TASKS: dict[str, str] = {
     "cupcake on the plate. The cupcake sits on top of the apple inside the brown box.",
 }
 CONDITIONS = ("embedded", "external")
+#: Where results are kept (and resumed from) unless --results says otherwise.
+DEFAULT_RESULTS = "ablation-results.jsonl"
 #: Paper, Table 1 averages: (attempts, final score).
 PAPER = {"embedded": (2.3, 6.3), "external": (5.0, 7.7)}
 
@@ -136,6 +151,7 @@ class Result:
     seconds: float
     runtime_errors: int
     scores: list[float | None] = field(default_factory=list)
+    llm_error: str | None = None  # the endpoint's error when the cell ended with one
 
 
 def run_one(
@@ -147,6 +163,7 @@ def run_one(
     repeat: int = 0,
     model_options: dict | None = None,
     verbose: bool = False,
+    context_tokens: int | None = None,
 ) -> Result:
     """Run one task under one condition with a fresh conversation (no memory) and summarise it."""
     scene = Scene.builtin(task)
@@ -162,6 +179,7 @@ def run_one(
         max_attempts=max_attempts,
         on_attempt=show,
         model_options=model_options,
+        context_tokens=context_tokens,
     )
     started = time.monotonic()
     best = loop.run(TASKS[task], feedback="review" if condition == "embedded" else "critics")
@@ -195,7 +213,7 @@ def run_one(
 # --- the table ---------------------------------------------------------------------------------
 
 
-def _num(values: list[float], digits: int = 1) -> str:
+def _num(values: list[float], digits: int = 1) -> str:  # "-" for no values
     if not values:
         return "-"
     mean = statistics.fmean(values)
@@ -216,14 +234,15 @@ def _goal(values: list[bool | None]) -> str:
 
 def format_table(results: list[Result], tasks: list[str], conditions: list[str]) -> str:
     """Task × condition rows (attempts, final score, best, goal), averages, and the paper's averages."""
-    header = ("task", "condition", "attempts", "final score", "best score", "goal", "stopped")
+    header = ("task", "condition", "attempts", "final score", "best score", "goal", "runtime errors", "stopped")
     rows: list[tuple[str, ...]] = []
     for task in tasks:
         for condition in conditions:
-            cell = [r for r in results if r.task == task and r.condition == condition]
-            if not cell:
+            every = [r for r in results if r.task == task and r.condition == condition]
+            if not every:
                 continue
-            stops = sorted({r.stopped for r in cell})
+            stops = sorted({r.stopped for r in every})
+            cell = [r for r in every if r.llm_error is None]  # a cell the endpoint ended has no scores
             rows.append(
                 (
                     task,
@@ -232,12 +251,13 @@ def format_table(results: list[Result], tasks: list[str], conditions: list[str])
                     _num([r.final_score for r in cell]),
                     _num([r.best_score for r in cell]),
                     _goal([r.goal for r in cell]),
+                    _num([r.runtime_errors for r in cell]),
                     "/".join(stops),
                 )
             )
     rows.append(("",) * len(header))
     for condition in conditions:
-        cell = [r for r in results if r.condition == condition]
+        cell = [r for r in results if r.condition == condition and r.llm_error is None]
         if cell:
             # average over tasks of the per-task means, as in the paper
             per_task = [[r for r in cell if r.task == t] for t in tasks]
@@ -253,13 +273,14 @@ def format_table(results: list[Result], tasks: list[str], conditions: list[str])
                     f"{statistics.fmean(scores):.1f}",
                     f"{statistics.fmean(best):.1f}",
                     _goal([r.goal for r in cell]),
+                    f"{statistics.fmean(r.runtime_errors for r in cell):.1f}",
                     "",
                 )
             )
     for condition in conditions:
         if condition in PAPER:
             attempts, score = PAPER[condition]
-            rows.append(("paper", condition, f"{attempts:.1f}", f"{score:.1f}", "", "", ""))
+            rows.append(("paper", condition, f"{attempts:.1f}", f"{score:.1f}", "", "", "", ""))
     widths = [max(len(header[i]), *(len(row[i]) for row in rows)) for i in range(len(header))]
     lines = [
         "  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip(),
@@ -385,8 +406,18 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--repeats", type=int, default=1, help="runs per task and condition (LLMs are stochastic)")
     p.add_argument("--temperature", type=float, default=None, help="sampling temperature (client default 0)")
     p.add_argument("--seed", type=int, default=None, help="sampling seed, for servers that honour it")
-    p.add_argument("--timeout", type=float, default=300.0, help="seconds per HTTP phase (default 300)")
-    p.add_argument("--json", metavar="FILE", help="also write every run's results as JSON")
+    p.add_argument("--timeout", type=float, default=300.0,
+                   help="seconds one LLM request may take in all, retries included (default 300)")
+    p.add_argument("--max-tokens", type=int, default=DEFAULT_MAX_TOKENS,
+                   help=f"most tokens per model reply (default {DEFAULT_MAX_TOKENS})")
+    p.add_argument("--context-tokens", type=int, default=None,
+                   help="the model's context window, to fit prompts to (default: what the server says)")
+    p.add_argument("--no-stream", action="store_true", help="ask for whole replies instead of streamed ones")
+    p.add_argument("--results", metavar="FILE", default=None,
+                   help="JSON-lines file each finished cell is appended to, and resumed from (default "
+                   f"{DEFAULT_RESULTS}; none with --selftest)")
+    p.add_argument("--fresh", action="store_true", help="ignore (and replace) the cells already in --results")
+    p.add_argument("--json", metavar="FILE", help="also write every run's results as one JSON list")
     p.add_argument("-v", "--verbose", action="store_true", help="print each attempt as it happens (stderr)")
     return p
 
@@ -403,6 +434,13 @@ def _reproduce(args: argparse.Namespace, model_name: str, base_url: str) -> str:
     if args.conditions != ",".join(CONDITIONS):
         parts += ["--conditions", args.conditions]
     parts += ["--max-attempts", str(args.max_attempts), "--repeats", str(args.repeats)]
+    parts += ["--timeout", f"{args.timeout:g}", "--max-tokens", str(args.max_tokens)]
+    if args.context_tokens is not None:
+        parts += ["--context-tokens", str(args.context_tokens)]
+    if args.no_stream:
+        parts.append("--no-stream")
+    if args.results:
+        parts += ["--results", args.results]
     if args.temperature is not None:
         parts += ["--temperature", str(args.temperature)]
     if args.seed is not None:
@@ -448,32 +486,79 @@ def main(argv: list[str] | None = None) -> int:
     if args.seed is not None:
         options["seed"] = args.seed
 
-    results: list[Result] = []
-    try:
-        with OpenAICompatible(base_url=base_url, model=model_name, api_key=api_key, timeout_s=args.timeout) as client:
-            for repeat in range(args.repeats):
-                for task in tasks:
-                    for condition in conditions:
-                        result = run_one(
-                            client,
-                            task,
-                            condition,
-                            max_attempts=args.max_attempts,
-                            repeat=repeat,
-                            model_options=options,
-                            verbose=args.verbose,
-                        )
-                        results.append(result)
-                        if args.verbose:
-                            print(
-                                f"  [{task}/{condition}] {result.attempts} attempts, final score "
-                                f"{result.final_score:g}, stopped: {result.stopped}",
-                                file=sys.stderr,
-                                flush=True,
-                            )
-    except LLMError as exc:
-        print(f"ablation: the LLM endpoint failed: {exc}", file=sys.stderr)
+    if args.max_tokens < 1 or (args.context_tokens is not None and args.context_tokens < 512):
+        print("ablation: --max-tokens must be at least 1 and --context-tokens at least 512", file=sys.stderr)
         return 2
+    results_path = Path(args.results) if args.results else (None if args.selftest else Path(DEFAULT_RESULTS))
+    if args.results is None and results_path is not None:
+        args.results = str(results_path)
+    config = {
+        "model": model_name,
+        "base_url": "(self-test)" if args.selftest else base_url,  # the self-test's port changes every run
+        "max_attempts": args.max_attempts,
+        "max_tokens": args.max_tokens,
+        "context_tokens": args.context_tokens,
+        "temperature": args.temperature,
+        "seed": args.seed,
+    }
+    results = [] if results_path is None or args.fresh else load_results(results_path, config)
+    if results_path is not None and args.fresh and results_path.exists():
+        results_path.unlink()
+    done = {(r.task, r.condition, r.repeat) for r in results if r.llm_error is None}
+    results = [r for r in results if r.llm_error is None]  # failed cells are run again
+    cells = [(repeat, task, condition) for repeat in range(args.repeats) for task in tasks for condition in conditions]
+    todo = [c for c in cells if (c[1], c[2], c[0]) not in done]
+    if done:
+        print(f"ablation: resuming from {results_path}: {len(cells) - len(todo)} of {len(cells)} cells already done",
+              file=sys.stderr)  # fmt: skip
+
+    interrupted = False
+    failed = 0
+    try:
+        with OpenAICompatible(
+            base_url=base_url,
+            model=model_name,
+            api_key=api_key,
+            timeout_s=min(args.timeout, 120.0),
+            deadline_s=args.timeout,
+            max_tokens=args.max_tokens,
+            stream=not args.no_stream,
+        ) as client:
+            context = args.context_tokens if args.context_tokens is not None else client.server_context_tokens()
+            for repeat, task, condition in todo:
+                started = time.monotonic()
+                try:
+                    result = run_one(
+                        client,
+                        task,
+                        condition,
+                        max_attempts=args.max_attempts,
+                        repeat=repeat,
+                        model_options=options,
+                        verbose=args.verbose,
+                        context_tokens=context,
+                    )
+                except (LLMError, RoboCriticsError) as exc:  # the endpoint failed, or no prompt fits: this cell only
+                    failed += 1
+                    print(f"  [{task}/{condition}] failed: {exc}", file=sys.stderr, flush=True)
+                    result = Result(
+                        task=task, condition=condition, repeat=repeat, attempts=0, final_score=0.0, best_score=0.0,
+                        final_has_error=True, goal=None, stopped="llm error", seconds=time.monotonic() - started,
+                        runtime_errors=0, llm_error=str(exc),
+                    )  # fmt: skip
+                else:
+                    results.append(result)
+                if results_path is not None:
+                    append_result(results_path, result, config)
+                if args.verbose:
+                    print(
+                        f"  [{task}/{condition}] {result.attempts} attempts, final score "
+                        f"{result.final_score:g}, stopped: {result.stopped}",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+    except KeyboardInterrupt:
+        interrupted = True
     finally:
         if server is not None:
             server.stop()
@@ -487,10 +572,63 @@ def main(argv: list[str] | None = None) -> int:
     print(format_table(results, tasks, conditions))
     print()
     print(f"Reproduce: {_reproduce(args, model_name, base_url)}")
+    if results_path is not None:
+        print(f"Results (one JSON line per cell, resumable): {results_path}")
     if args.json:
         Path(args.json).write_text(json.dumps([asdict(r) for r in results], indent=2))
         print(f"Results written to {args.json}")
+    if interrupted:
+        kept = f"; they are in {results_path}: run the same command to resume" if results_path else ""
+        print(f"Interrupted: {len(results)} of {len(cells)} cells done{kept}", file=sys.stderr)
+        return 130
+    if failed:
+        print(f"ablation: {failed} cell(s) ended with an LLM error; run the same command again to retry them",
+              file=sys.stderr)  # fmt: skip
+        return 1
     return 0
+
+
+# --- the results file -----------------------------------------------------------------------------
+
+
+def append_result(path: Path, result: Result, config: dict) -> None:
+    """Append one cell to the JSON-lines file ``path``, flushed and synced before returning."""
+    line = json.dumps({"config": config, **asdict(result)}, allow_nan=False) + "\n"
+    with open(path, "a", encoding="utf-8") as f:
+        f.write(line)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def load_results(path: Path, config: dict) -> list[Result]:
+    """The cells of ``path`` run with ``config`` (the last one of each task/condition/repeat).
+
+    A line that is not a whole JSON record (the process died while writing
+    it) and cells of another configuration are skipped, saying so.
+    """
+    if not path.exists():
+        return []
+    names = {f.name for f in fields(Result)}
+    found: dict[tuple, Result] = {}
+    broken = other = 0
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+            if record.pop("config", None) != config:
+                other += 1
+                continue
+            result = Result(**{k: v for k, v in record.items() if k in names})
+        except (ValueError, TypeError, AttributeError):
+            broken += 1
+            continue
+        found[(result.task, result.condition, result.repeat)] = result
+    if broken:
+        print(f"ablation: {broken} unreadable line(s) in {path} skipped", file=sys.stderr)
+    if other:
+        print(f"ablation: {other} cell(s) in {path} were run with another configuration; not reused", file=sys.stderr)
+    return list(found.values())
 
 
 if __name__ == "__main__":

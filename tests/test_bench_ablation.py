@@ -1,0 +1,152 @@
+"""benchmarks/ablation.py keeps every finished cell: JSON lines written as cells complete, resumed, an LLM error
+ends only its cell, Ctrl-C loses nothing done; a runtime-error column; a reproduce line with every option."""
+
+# ruff: noqa: F811  (pytest fixtures imported from llm_fixtures are parameters here)
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import signal
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+from llm_fixtures import clean_llm_env, llm_server  # noqa: F401
+from llm_server import Fail
+
+pytestmark = pytest.mark.usefixtures("clean_llm_env")
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def ablation():
+    path = ROOT / "benchmarks" / "ablation.py"
+    spec = importlib.util.spec_from_file_location("robocritics_ablation_cells", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    yield module
+    sys.modules.pop(spec.name, None)
+
+
+def lines(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def args(server_url: str, results: Path, *extra: str) -> list[str]:
+    return ["--base-url", server_url, "--model", "scripted", "--tasks", "recycling,sorting", "--conditions",
+            "external", "--max-attempts", "2", "--results", str(results), "--timeout", "30", *extra]  # fmt: skip
+
+
+def scene_of(request: dict) -> str:
+    return "sorting" if "# Scene: sorting" in request["messages"][0]["content"] else "other"
+
+
+def test_cells_are_written_as_they_finish_and_a_second_run_resumes(ablation, llm_server, tmp_path, capsys):
+    results = tmp_path / "cells.jsonl"
+    seen_when_sorting_starts: list[int] = []
+
+    def responder(request):
+        if scene_of(request) == "sorting" and not seen_when_sorting_starts:
+            seen_when_sorting_starts.append(len(lines(results)) if results.exists() else 0)
+        return ablation.scripted_responder(request)
+
+    llm_server.responder = responder
+    assert ablation.main(args(llm_server.url, results)) == 0
+    assert seen_when_sorting_starts == [1]  # the recycling cell was on disk before the sorting cell began
+    cells = lines(results)
+    assert [(c["task"], c["condition"], c["repeat"]) for c in cells] == [("recycling", "external", 0),
+                                                                         ("sorting", "external", 0)]  # fmt: skip
+    assert all(c["config"]["model"] == "scripted" and c["llm_error"] is None for c in cells)
+    first_out = capsys.readouterr().out
+    asked = len(llm_server.chat_requests())
+
+    assert ablation.main(args(llm_server.url, results)) == 0
+    captured = capsys.readouterr()
+    assert "2 of 2 cells already done" in captured.err
+    assert len(llm_server.chat_requests()) == asked  # nothing was asked again
+    assert len(lines(results)) == 2
+    table = lambda out: out.split("Reproduce:")[0].split("\n", 1)[1]  # noqa: E731
+    assert table(captured.out) == table(first_out)  # the same table, from the file
+
+
+def test_one_llm_error_ends_only_its_cell_and_is_retried_on_resume(ablation, llm_server, tmp_path, capsys):
+    results = tmp_path / "cells.jsonl"
+    broken = {"on": True}
+
+    def responder(request):
+        if broken["on"] and scene_of(request) == "sorting":
+            return Fail(400, body=json.dumps({"error": {"message": "model crashed on this prompt"}}))
+        return ablation.scripted_responder(request)
+
+    llm_server.responder = responder
+    assert ablation.main(args(llm_server.url, results)) == 1
+    captured = capsys.readouterr()
+    assert "model crashed on this prompt" in captured.err and "1 cell(s) ended with an LLM error" in captured.err
+    cells = lines(results)
+    assert [c["stopped"] for c in cells] == ["all OK", "llm error"]
+    assert "model crashed" in cells[1]["llm_error"]
+
+    broken["on"] = False
+    assert ablation.main(args(llm_server.url, results)) == 0
+    captured = capsys.readouterr()
+    assert "1 of 2 cells already done" in captured.err
+    assert [c["stopped"] for c in lines(results)] == ["all OK", "llm error", "all OK"]
+    assert "llm error" not in captured.out  # the table has the finished cell
+
+
+def test_ctrl_c_keeps_the_finished_cells(ablation, llm_server, tmp_path, capsys):
+    results = tmp_path / "cells.jsonl"
+
+    def responder(request):
+        if scene_of(request) == "sorting":  # Ctrl-C while the second cell waits for the model
+            threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
+            return Fail(503, retry_after=5)  # keeps the client busy until the interrupt arrives
+        return ablation.scripted_responder(request)
+
+    llm_server.responder = responder
+    code = ablation.main(args(llm_server.url, results))
+    captured = capsys.readouterr()
+    assert code == 130
+    assert "Interrupted: 1 of 2 cells done" in captured.err and "resume" in captured.err
+    assert [c["task"] for c in lines(results)] == ["recycling"]
+    assert "recycling  external" in captured.out  # the table of what was done is still printed
+
+
+def test_a_line_cut_by_a_crash_and_cells_of_another_configuration_are_not_reused(ablation, llm_server, tmp_path,
+                                                                                 capsys):  # fmt: skip
+    results = tmp_path / "cells.jsonl"
+    llm_server.responder = ablation.scripted_responder
+    assert ablation.main(args(llm_server.url, results)) == 0
+    with open(results, "a") as f:
+        f.write('{"config": {"model": "scripted"}, "task": "sor')  # the process died while writing
+    capsys.readouterr()
+    assert ablation.main(args(llm_server.url, results, "--max-tokens", "900")) == 0
+    err = capsys.readouterr().err
+    assert "1 unreadable line(s)" in err and "2 cell(s) in" in err and "another configuration" in err
+
+
+def test_the_table_has_a_runtime_error_column_and_the_reproduce_line_every_option(ablation, llm_server, tmp_path,
+                                                                                  capsys):  # fmt: skip
+    results = tmp_path / "cells.jsonl"
+    replies = iter(["no code here, sorry", None])
+
+    def responder(request):
+        reply = next(replies, None)
+        return reply if reply is not None else ablation.scripted_responder(request)
+
+    llm_server.responder = responder
+    assert ablation.main(args(llm_server.url, results, "--max-tokens", "700", "--context-tokens", "8192")) == 0
+    out = capsys.readouterr().out
+    header = out.splitlines()[2]
+    assert "runtime errors" in header
+    row = next(line for line in out.splitlines() if line.startswith("recycling"))
+    assert row.split()[-3] == "1.0" and row.endswith("all OK")  # the reply without code
+    reproduce = next(line for line in out.splitlines() if line.startswith("Reproduce:"))
+    for option in ("--timeout 30", "--max-tokens 700", "--context-tokens 8192", f"--results {results}",
+                   "--max-attempts 2", "--conditions external"):  # fmt: skip
+        assert option in reproduce
