@@ -403,3 +403,22 @@ def test_eight_threads_run_programs_at_once():
         t.join(timeout=120)
     assert results == ["ok"] * 8
     assert sys.getrecursionlimit() == limit_before
+
+
+def test_a_finished_program_frees_its_values_at_once():
+    gc.collect()
+    gc.disable()
+    try:
+        tracemalloc.start()
+        source = (  # values in a dict, kept by a closure, appended to a list the program was given
+            "d = {str(i): [str(i) * 100] for i in range(2000)}\n"
+            "def keep():\n    return d\n"
+            "objects.append(d)\n"
+        )
+        run_program(source, SCENE, WORK_ONLY)
+        current, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+    finally:
+        gc.enable()
+    assert peak > 1_000_000
+    assert current < 100_000  # (Python keeps a few thousand freed small tuples for reuse: none made here)

@@ -140,6 +140,9 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         self.frame_marks: list[tuple[Any, int]] = []
         """(frame of a running call, interpreter frames in use up to it), innermost last."""
         self.frame_room = 0
+        self.module_scope = _Scope({}, None, None, "<module>")
+        self.closure_scopes: list[_Scope] = []
+        """Scopes in which the program made a function: the function and the scope refer to each other."""
         self._call_node: Any = None
         self._locals_cache: dict[int, frozenset] = {}
         self._exec_table = {t: getattr(self, "_exec_" + t.__name__) for t in _STMT_TYPES}
@@ -175,7 +178,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             self.frame_room = min(_MAX_INTERPRETER_FRAMES, sys.getrecursionlimit() - _stack_depth() - _RESERVED_FRAMES)
             self.frame_marks = [(sys._getframe(), 0)]
             self.meter.start()
-            self._exec_block(self.tree.body, _Scope({}, None, None, "<module>"))
+            self._exec_block(self.tree.body, self.module_scope)
         except ProgramError as exc:
             error = exc
         except RecursionError:  # a backstop: _enter_call stops calls well before the recursion limit
@@ -184,9 +187,21 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             error = BudgetError("the program ran out of memory; keep lists and strings small", limit="max_alloc_bytes")
         finally:
             _CURRENT.reset(token)
+            self._forget()
         if error is not None:
             raise _released(error)
         return self.plan
+
+    def _forget(self) -> None:
+        """Drop what ties the interpreter to itself and to the program's values (its builtins are its own bound
+        methods, a reference cycle), so everything the run made is freed when the run ends, not at the next
+        garbage collection. The plan and the meter stay."""
+        self.base, self.modules, self._exec_table, self._eval_table = {}, {}, {}, {}
+        self.keys = KeyGuard(self.meter)
+        self.frame_marks = []
+        for scope in (self.module_scope, *self.closure_scopes):
+            scope.vars.clear()
+        self.closure_scopes = []
 
     # ---- errors -----------------------------------------------------------------------
 
@@ -537,6 +552,8 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         local_names = self._function_locals(node, args, body, is_lambda)
         self.meter.spend(_FUNCTION_UNITS)
         self.meter.allocate(_FUNCTION_BYTES)
+        if scope is not self.module_scope and (not self.closure_scopes or self.closure_scopes[-1] is not scope):
+            self.closure_scopes.append(scope)
         return _SandboxFunction(name, params, kwonly, defaults, scope, local_names, body, is_lambda)
 
     def _function_locals(self, node: Any, args: ast.arguments, body: Any, is_lambda: bool) -> frozenset:
@@ -955,6 +972,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             loop(0)
         finally:
             self.loops.pop()
+            loop = None  # noqa: F841 - the function refers to itself through this variable: break the cycle
 
     def _eval_ListComp(self, node: ast.ListComp, scope: _Scope) -> Any:
         out: list[Any] = []
