@@ -1,7 +1,7 @@
 """benchmarks/ablation.py keeps every finished cell: JSON lines written as cells complete, resumed, an LLM error
 ends only its cell, Ctrl-C loses nothing done; a runtime-error column; a reproduce line with every option."""
 
-# ruff: noqa: F811  (pytest fixtures imported from llm_fixtures are parameters here)
+
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import threading
 from pathlib import Path
 
 import pytest
-from llm_fixtures import clean_llm_env, llm_server  # noqa: F401
+from llm_fixtures import clean_llm_env, llm_server
 from llm_server import Fail
 
 pytestmark = pytest.mark.usefixtures("clean_llm_env")
@@ -70,7 +70,7 @@ def test_cells_are_written_as_they_finish_and_a_second_run_resumes(ablation, llm
     assert "2 of 2 cells already done" in captured.err
     assert len(llm_server.chat_requests()) == asked  # nothing was asked again
     assert len(lines(results)) == 2
-    table = lambda out: out.split("Reproduce:")[0].split("\n", 1)[1]  # noqa: E731
+    table = lambda out: out.split("Reproduce:")[0].split("\n", 1)[1]
     assert table(captured.out) == table(first_out)  # the same table, from the file
 
 

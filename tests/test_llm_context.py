@@ -1,19 +1,24 @@
 """The loop against real-server behaviour: small contexts, replies cut at the token limit, servers that cannot
 embed, and which past interactions come back as examples."""
 
-# ruff: noqa: F811  (pytest fixtures imported from llm_fixtures are parameters here)
+
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
-from llm_fixtures import clean_llm_env, llm_server, make_client  # noqa: F401
+from llm_fixtures import clean_llm_env, llm_server, make_client
 from llm_server import count_tokens
 
 from robocritics.llm.loop import CONTEXT_MARGIN_TOKENS, Loop
 from robocritics.llm.memory import InteractionMemory
-from robocritics.llm.prompts import PromptError, compact_api_reference, estimate_tokens, system_prompt
+from robocritics.llm.prompts import (
+    PromptError,
+    compact_api_reference,
+    estimate_tokens,
+    system_prompt,
+)
 from robocritics.program.skills import SKILLS
 from robocritics.scene import Scene
 

@@ -5,7 +5,7 @@ total deadline of a stream, hanging up (the server sees it), the fallback for se
 context-window errors and the server's context size, and embedding servers that cannot embed.
 """
 
-# ruff: noqa: F811  (pytest fixtures imported from llm_fixtures are parameters here)
+
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 import pytest
-from llm_fixtures import clean_llm_env, llm_server, make_client  # noqa: F401
+from llm_fixtures import clean_llm_env, llm_server, make_client
 from llm_server import Delay, Reply, Stream, hashed_embedding, tokens
 
 from robocritics.errors import LLMError
@@ -233,3 +233,16 @@ def test_per_token_vectors_are_mean_pooled(llm_server, make_client, caplog):
     assert vectors.shape == (2, llm_server.embedding_dim)
     np.testing.assert_allclose(vectors[0], expected)
     assert sum("mean-pooled" in r.getMessage() for r in caplog.records) == 1
+
+
+def test_vllms_context_error_is_read_too(llm_server, make_client):
+    from llm_server import Fail
+
+    message = (
+        "This model's maximum context length is 2048 tokens. However, you requested 2764 tokens "
+        "(1740 in the messages, 1024 in the completion). Please reduce the length of the messages or completion."
+    )
+    llm_server.script(Fail(400, body=json.dumps({"object": "error", "message": message, "type": "BadRequestError"})))
+    with pytest.raises(ContextLengthError) as caught:
+        make_client().complete(USER)
+    assert (caught.value.context_tokens, caught.value.requested_tokens) == (2048, 2764)

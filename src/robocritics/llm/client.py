@@ -523,7 +523,7 @@ class OpenAICompatible:
         ``GET {base_url}/models`` (vLLM's ``max_model_len``, llama.cpp's ``meta.n_ctx_train`` is not the
         context and is not used). Each request has at most ``min(timeout_s, 10)`` seconds and is not retried.
         """
-        root = self.base_url[: -len("/v1")] if self.base_url.endswith("/v1") else self.base_url
+        root = self.base_url.removesuffix("/v1")
         for url, pick in ((root + "/props", _props_context), (self._url("/models"), self._models_context)):
             body = self._get_json(url, min(self.timeout_s, 10.0))
             value = pick(body) if body is not None else None
@@ -1037,13 +1037,24 @@ _CONTEXT_ERRORS = (
     # llama-cpp-python: "Requested tokens (2764) exceed context window of 2048"
     (re.compile(r"requested tokens \((\d+)\) exceed context window of (\d+)", re.IGNORECASE), 2, 1),
     # vLLM / OpenAI: "This model's maximum context length is 2048 tokens. However, you requested 2764 tokens"
-    (re.compile(r"maximum context length is (\d+) tokens(?:.*?(?:requested|resulted in) (\d+) tokens)?",
-                re.IGNORECASE | re.DOTALL), 1, 2),  # fmt: skip
+    (
+        re.compile(
+            r"maximum context length is (\d+) tokens(?:.*?(?:requested|resulted in) (\d+) tokens)?",
+            re.IGNORECASE | re.DOTALL,
+        ),
+        1,
+        2,
+    ),
     # llama.cpp: "the request exceeds the available context size, try increasing it" (+ n_ctx in the body)
     (re.compile(r"exceeds? the available context size", re.IGNORECASE), 0, 0),
     # Ollama / others: "input length exceeds the context length", "context length exceeded"
-    (re.compile(r"exceeds? (?:the |its )?(?:maximum )?context (?:length|window)|context length exceeded",
-                re.IGNORECASE), 0, 0),  # fmt: skip
+    (
+        re.compile(
+            r"exceeds? (?:the |its )?(?:maximum )?context (?:length|window)|context length exceeded", re.IGNORECASE
+        ),
+        0,
+        0,
+    ),
 )
 
 
