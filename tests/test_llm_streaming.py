@@ -246,3 +246,8 @@ def test_vllms_context_error_is_read_too(llm_server, make_client):
     with pytest.raises(ContextLengthError) as caught:
         make_client().complete(USER)
     assert (caught.value.context_tokens, caught.value.requested_tokens) == (2048, 2764)
+
+
+def test_a_last_event_without_its_blank_line_is_read(llm_server, make_client):
+    llm_server.script(events(sse(delta("home()")) + b"data: " + json.dumps(delta(None, "stop")).encode()))
+    assert make_client().complete(USER) == "home()"

@@ -896,6 +896,9 @@ class OpenAICompatible:
             del buffer[:cut]
             if done:
                 break
+        tail = bytes(buffer).rstrip(b"\r")
+        if not done and tail.startswith(b"data:"):  # a last line without its newline
+            data.append(tail[5:].lstrip(b" ") if tail[5:6] == b" " else tail[5:])
         if not done and data:
             done = dispatch(b"\n".join(data))
         if not events:
