@@ -15,7 +15,17 @@ Failure policy of ``OpenAICompatible``:
   between retries must fit in it. Each socket operation waits at most until
   the deadline (``llm.transport.DeadlineTransport``), so a server that sends
   one byte a second ends the call at the deadline with an ``LLMError``.
-* HTTP 408, 409, 429 and every 5xx, timeouts and connection errors (refused,
+* Generation is bounded: ``max_tokens`` (default ``llm.limits.DEFAULT_MAX_TOKENS``)
+  is sent with every chat request, replies are streamed (server-sent events)
+  with an inactivity timeout ``idle_timeout_s`` inside the deadline, and
+  servers that do not stream are read (or asked again) without it.
+* Final, never retried: a chat request that times out reading (the server
+  was generating: ``GenerationTimeoutError``; the connection is closed so
+  that it stops), a prompt over the context (``ContextLengthError``), a
+  server that cannot embed (``EmbeddingsUnavailableError``: HTTP 501, or 500
+  "must be created with embedding=True") and HTTP 501 in general.
+* HTTP 408, 409, 429 and every other 5xx, other timeouts (connect, write, an
+  embedding request's read) and connection errors (refused,
   reset, dropped before the response) are retried up to ``max_retries`` times
   with exponential backoff ``backoff_base_s * 2**attempt`` (capped at
   ``backoff_max_s``). A ``Retry-After`` header (seconds or HTTP date; or
