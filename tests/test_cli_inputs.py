@@ -94,7 +94,7 @@ def run(capsys, argv):
         (["check", ""], "the program file name is empty"),
         (["check", "n\x00.py"], "cannot read program file"),
         # legal programs, impossible motions: the planner's typed errors, with the line
-        (["check", "slow.py"], "PlanningError: line 1: reduce_speed(percent=0.01): percent must lie in [1, 100]"),
+        (["check", "slow.py"], "ProgramError: line 1, column 1: reduce_speed: percent must be in 1 <= percent <= 100, got 0.01"),
         (["check", "waits.py"], "MotionBudgetError: line 2: wait(seconds=10): the program's motion lasts 5.6 h; the limit is 5 min"),
         # --params and --critics
         (["check", "prog.py", "--params", "params_deep.json"], "params file 'params_deep.json': JSON nested 51 deep"),

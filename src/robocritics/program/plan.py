@@ -36,6 +36,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+MIN_SPEED_FRACTION = 0.01
+"""Slowest speed fraction (1 % of full speed): slower moves stretch a 1 s move past a minute, and far below it
+ruckig's profiles leave their numerical range (at 1e-5 a short UR3e move can no longer be timed)."""
+
 __all__ = ["SkillCall", "Plan", "FrozenArgs"]
 
 

@@ -33,10 +33,10 @@ from typing import Any, Callable, Iterator, Mapping
 
 from .._suggest import did_you_mean
 from ..errors import ProgramError
-from ..scene import Container, Scene, SceneObject
+from ..scene import MAX_COORD_M, Container, Scene, SceneObject
 from .budget import Budget, BudgetError
 from .language import SAFE_BUILTINS
-from .plan import Plan, SkillCall
+from .plan import MIN_SPEED_FRACTION, Plan, SkillCall
 from .render import VALUE_CHARS, bounded_repr, clip
 
 __all__ = [
@@ -62,7 +62,6 @@ __all__ = [
     "print",
 ]
 
-_MAX_COORD_M = 10.0
 """Largest |coordinate| accepted, m: ten times any tabletop arm's reach, so millimetres given as metres are caught."""
 _MAX_MOVE_M = 1.0
 """Largest relative move or clearance (move_up/move_down dz, move_above height), m: more than a UR3e's reach."""
@@ -380,7 +379,7 @@ def _number(rec: Recorder, value: Any, skill: str, arg: str, unit: str) -> float
 
 def _coord(rec: Recorder, value: Any, skill: str, arg: str) -> float:
     v = _number(rec, value, skill, arg, "metres")
-    if abs(v) > _MAX_COORD_M:
+    if abs(v) > MAX_COORD_M:
         raise rec.error(
             f"{skill}: {arg}={bounded_repr(value)} m is far outside any robot's reach; coordinates are in metres "
             f"(did you mean {v / 1000:g}?)"
@@ -556,14 +555,14 @@ def reduce_speed(percent):
     """Set the speed of the following moves to `percent` % of full speed (absolute, not cumulative).
 
     Args:
-        percent: 0 < percent <= 100. reduce_speed(100) restores full speed.
+        percent: 1 <= percent <= 100. reduce_speed(100) restores full speed.
     Example:
         reduce_speed(30)    # careful moves near people or fragile objects
     """
     rec = _rec()
     p = _number(rec, percent, "reduce_speed", "percent", "percent of full speed")
-    if not 0 < p <= 100:
-        raise rec.error(f"reduce_speed: percent must be in 0 < percent <= 100, got {p:g}")
+    if not MIN_SPEED_FRACTION * 100 <= p <= 100:
+        raise rec.error(f"reduce_speed: percent must be in {MIN_SPEED_FRACTION * 100:g} <= percent <= 100, got {p:g}")
     rec.record("reduce_speed", {"fraction": p / 100.0})
 
 
@@ -571,15 +570,15 @@ def set_speed(fraction):
     """Set the speed of the following moves as a fraction of full speed (absolute).
 
     Args:
-        fraction: 0 < fraction <= 1 (1 = full speed).
+        fraction: 0.01 <= fraction <= 1 (1 = full speed).
     Example:
         set_speed(0.5)    # half speed
     """
     rec = _rec()
     f = _number(rec, fraction, "set_speed", "fraction", "fraction of full speed")
-    if not 0 < f <= 1:
+    if not MIN_SPEED_FRACTION <= f <= 1:
         hint = f"; for percent use reduce_speed({f:g})" if 1 < f <= 100 else ""
-        raise rec.error(f"set_speed: fraction must be in 0 < fraction <= 1, got {f:g}{hint}")
+        raise rec.error(f"set_speed: fraction must be in {MIN_SPEED_FRACTION:g} <= fraction <= 1, got {f:g}{hint}")
     rec.record("set_speed", {"fraction": f})
 
 

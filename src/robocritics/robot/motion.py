@@ -59,9 +59,9 @@ __all__ = [
 #: between the dense-IK grid points cannot exceed the limit.
 JOINT_SPEED_MARGIN = 0.95
 
-MIN_SPEED_FRACTION = 0.01
-"""Slowest speed fraction (1 % of full speed): slower moves stretch a 1 s move past a minute, and far below it
-ruckig's profiles leave their numerical range (at 1e-5 a short UR3e move can no longer be timed)."""
+# The slowest speed fraction is part of the skill API's contract (set_speed/reduce_speed refuse below it):
+# defined with the Plan, re-exported here for the timing code.
+from ..program.plan import MIN_SPEED_FRACTION  # noqa: E402
 
 MIN_SAMPLE_RATE_HZ = 25.0
 """Sparsest sampling the critics can trust [Hz]. They read speeds as finite differences, and the shortest
