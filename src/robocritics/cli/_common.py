@@ -104,6 +104,20 @@ def sample_rate(text: str) -> float:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+_MAX_CRITIC_NAME_CHARS = 100
+"""Longest critic name ``--critics`` accepts (so an unknown one is quoted briefly in the error)."""
+
+
+def critic_names(text: str) -> str:
+    """A ``--critics`` value: comma-separated names, each at most :data:`_MAX_CRITIC_NAME_CHARS` characters."""
+    for name in text.split(","):
+        if len(name.strip()) > _MAX_CRITIC_NAME_CHARS:
+            raise argparse.ArgumentTypeError(
+                f"critic name {shown(name.strip())} is longer than {_MAX_CRITIC_NAME_CHARS} characters"
+            )
+    return text
+
+
 def port(text: str) -> int:
     """A TCP port number, 1..65535."""
     try:

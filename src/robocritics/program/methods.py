@@ -20,6 +20,8 @@ __all__: list[str] = []
 _STR_LINEAR = frozenset("upper lower strip lstrip rstrip title capitalize isdigit isalpha startswith endswith".split())
 """str methods whose work is one pass over the string."""
 _STR_SEARCH = frozenset("find count index".split())
+_STR_STRIP = frozenset("strip lstrip rstrip".split())
+"""str methods that, given ``chars``, search it once for every character they strip."""
 _SET_WITH_OTHERS = frozenset("union intersection difference issubset issuperset update".split())
 _STR_BYTES = 49
 """Bytes of an empty string object (its characters come on top)."""
@@ -131,7 +133,10 @@ class _Methods:
 
     def _str_method(self, obj: str, name: str, args: tuple, kwargs: dict, node: Any) -> Any:
         meter = self.meter
-        if name in _STR_LINEAR:
+        if name in _STR_STRIP and args and type(args[0]) is str:
+            # C looks every stripped character up in ``chars`` one by one (no fast search for wide strings)
+            meter.spend_chars(len(obj) * max(len(args[0]), 1) + len(args[0]))
+        elif name in _STR_LINEAR:
             meter.spend_chars(len(obj) + sum(len(a) for a in args if type(a) is str))
             if name in ("startswith", "endswith") and args and type(args[0]) is tuple:
                 meter.spend_chars(sum(len(a) for a in args[0] if type(a) is str) + len(args[0]) * 64)
