@@ -181,7 +181,6 @@ def run_corpus() -> dict:
     process's peak memory growth and every audit event the runs raised. Run as a script by
     tests/test_hostile_programs.py, in a fresh process whose memory and audit hooks nothing else has touched."""
     import os
-    import resource
     import sys
     import time
 
@@ -223,8 +222,20 @@ def run_corpus() -> dict:
         running.append(case.name)
         results[case.name] = {"work_only": attempt(case.source, work_only), "default": attempt(case.source, None)}
         running.clear()
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    return {"cases": results, "peak_growth_bytes": peak - resident_before, "audited": audited}
+    return {"cases": results, "peak_growth_bytes": peak_resident_bytes() - resident_before, "audited": audited}
+
+
+def peak_resident_bytes() -> int:
+    """This process's peak resident set size [bytes] since it started (exec'd).
+
+    From /proc's VmHWM, which belongs to the address space and so starts afresh at exec: getrusage's
+    ru_maxrss survives fork and exec, so a child of a large pytest process would report the parent's size.
+    """
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    raise RuntimeError("no VmHWM in /proc/self/status")
 
 
 if __name__ == "__main__":
