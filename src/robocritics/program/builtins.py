@@ -74,6 +74,8 @@ class _Builtins:
             raise TypeError(f"round() ndigits must be a whole number, not {tname(ndigits)}")
         if abs(ndigits) > _MAX_ROUND_DIGITS:
             raise ValueError(f"round() ndigits must be between -{_MAX_ROUND_DIGITS} and {_MAX_ROUND_DIGITS}")
+        if type(number) is int and ndigits < 0:
+            self._charge_int_text(number)  # divides by a power of ten: as costly as writing it in decimal
         return self._new_value(round(number, ndigits), self._call_node)
 
     def _b_enumerate(self, iterable, start=0):

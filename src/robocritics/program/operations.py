@@ -57,6 +57,9 @@ _NUMBER_BYTES = 32
 """Bytes of a float (24) or of an integer smaller than ``_SMALL_INT`` (28 to 36), rounded up."""
 _INT_TEXT_BITS = 128
 """Writing an integer in decimal costs one element operation per pair of this many bits (quadratic)."""
+_FLOAT_DIGIT_CHARS = 16
+"""A float formatted with a spec is paid this many characters per character written: exact decimal expansion
+(``f"{1e-300:.1000e}"``) takes ~40 us for 1000 digits, far more than copying them."""
 _MAX_FORMAT_WIDTH = 1_000
 """Largest width or precision in an f-string format spec: a wider field is only padding, built in C uncounted."""
 
@@ -567,7 +570,10 @@ class _Operations:
             self.meter.spend_chars(len(value))
         elif type(value) is int:
             self._charge_int_text(value)
-        return self._made(format(value, spec))
+        text = format(value, spec)
+        if type(value) is float or type(value) is complex:  # exact decimal digits: ~1 us per 30 digits written
+            self.meter.spend_chars(_FLOAT_DIGIT_CHARS * len(text))
+        return self._made(text)
 
     # ---- sorting -------------------------------------------------------------------------------------------
 

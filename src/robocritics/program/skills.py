@@ -358,7 +358,17 @@ def _describe(value: Any) -> str:
     if isinstance(value, (bool, int, float)):
         return f"{type(value).__name__} {bounded_repr(value)}"
     name = type(value).__name__
-    return {"function": "a function", "Namespace": "a module"}.get(name, f"a {name}")
+    return _DESCRIBED_TYPES.get(name, f"a {name}")
+
+
+_DESCRIBED_TYPES = {
+    "function": "a function",
+    "_SandboxFunction": "a function",
+    "_Builtin": "a builtin function",
+    "_Method": "a method",
+    "Namespace": "a module",
+}
+"""What the interpreter's own types are called in skill messages (their class names are internals)."""
 
 
 def _number(rec: Recorder, value: Any, skill: str, arg: str, unit: str) -> float:
