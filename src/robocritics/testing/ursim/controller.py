@@ -1036,8 +1036,12 @@ class URSim:
             self._tick()
             self._publish()
             self._state.exec_time_ms = (time.perf_counter() - t0) * 1000.0
+        # A drop due at this tick closes the connections before this cycle's package leaves, so the client
+        # sees exactly the packages of the cycles before it (a package sent just before the close may or may
+        # not be read: the close's RST can discard it, depending on scheduling).
+        self._check_drop(at_tick=True)
         self._flush_all()
-        self._check_drop()
+        self._check_drop(at_tick=False)
 
     def _control_loop(self) -> None:
         """``clock="realtime"``: one cycle every 2 ms of wall time."""
@@ -1380,13 +1384,14 @@ class URSim:
         if drop:
             self._close_conn(conn, drop)
 
-    def _check_drop(self) -> None:
+    def _check_drop(self, at_tick: bool) -> None:
+        """Close every RTDE connection if the injected drop is due: by tick (``at_tick``) or by package count."""
         due = False
         with self._lock:
-            if self._drop_after_packages is not None and self._packages_total >= self._drop_after_packages:
-                due = True
-            if self._drop_at_tick is not None and self._state.tick >= self._drop_at_tick:
-                due = True
+            if at_tick:
+                due = self._drop_at_tick is not None and self._state.tick >= self._drop_at_tick
+            else:
+                due = self._drop_after_packages is not None and self._packages_total >= self._drop_after_packages
             if due:
                 self._drop_after_packages = None
                 self._drop_at_tick = None
