@@ -87,7 +87,7 @@ def run(capsys, argv):
         (["check", "prog.py", "--scene", "s" * 100], "no built-in scene 'sssss"),
         (["check", "prog.py", "--scene", "x\x00.json"], "cannot read scene file"),
         # the program file
-        (["check", "folder"], "program 'folder' is a directory, not a file"),
+        (["check", "folder"], "program file 'folder' is a directory, not a file"),
         (["check", "binary.bin"], "program file 'binary.bin' is not UTF-8 text (invalid start byte at byte 128)"),
         (["check", "pipe.py"], "program file 'pipe.py' is not a regular file"),
         (["check", "big.py"], "program file 'big.py' is larger than the limit of 1,000,000 bytes"),
@@ -100,7 +100,7 @@ def run(capsys, argv):
         (["check", "prog.py", "--params", "params_deep.json"], "params file 'params_deep.json': JSON nested 51 deep"),
         (["check", "prog.py", "--params", "params_bigint.json"], "joint_speed"),
         (["check", "prog.py", "--params", "binary.bin"], "params file 'binary.bin' is not UTF-8 text"),
-        (["check", "prog.py", "--params", "folder"], "params 'folder' is a directory, not a file"),
+        (["check", "prog.py", "--params", "folder"], "params file 'folder' is a directory, not a file"),
         (["check", "prog.py", "--critics", ","], "no critics selected"),
         # deploy: ports and hosts are checked before anything connects
         (["deploy", "prog.py", "--rtde-port", "70000"], "argument --rtde-port: '70000' is not a TCP port (a whole number from 1 to 65535)"),

@@ -46,7 +46,6 @@ import keyword
 import math
 import numbers
 import re
-import stat
 import unicodedata
 from dataclasses import dataclass
 from importlib import resources
@@ -57,6 +56,7 @@ import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
 from ._suggest import did_you_mean
+from ._files import read_bounded_text
 from .errors import SceneError
 from .robot.arms import UR3E
 
@@ -644,31 +644,7 @@ class Scene(_Model):
 
 def _read_scene_file(path: str | Path) -> str:
     """The text of scene file ``path``: a regular file of at most MAX_FILE_BYTES bytes of UTF-8."""
-    shown = repr(_path_label(path))
-    try:
-        p = Path(path)
-        info = p.stat()
-    except FileNotFoundError:
-        raise SceneError(f"no such scene file {shown}") from None
-    except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the path
-        raise SceneError(f"cannot read scene file {shown}: {getattr(exc, 'strerror', None) or exc}") from None
-    except TypeError:
-        raise SceneError(f"a scene file is a path, got {type(path).__name__}") from None
-    if stat.S_ISDIR(info.st_mode):
-        raise SceneError(f"scene file {shown} is a directory, not a file")
-    if not stat.S_ISREG(info.st_mode):
-        raise SceneError(f"scene file {shown} is not a regular file")
-    try:
-        with open(p, "rb") as f:
-            raw = f.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise SceneError(f"cannot read scene file {shown}: {exc.strerror or exc}") from None
-    if len(raw) > MAX_FILE_BYTES:
-        raise SceneError(f"scene file {shown} is larger than the limit of {MAX_FILE_BYTES:,} bytes")
-    try:
-        return raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise SceneError(f"scene file {shown} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    return read_bounded_text(path, "scene", repr(_path_label(path)), MAX_FILE_BYTES, SceneError)
 
 
 _QUOTED_CHARS = 60

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import argparse
 import math
-import stat
 from pathlib import Path
 from typing import Callable
 
+from .._files import read_bounded_text
 from ..errors import RoboCriticsError
 
 Builder = Callable[["argparse._SubParsersAction"], None]
@@ -167,31 +167,7 @@ def host(text: str) -> str:
 
 def read_text(path: str, what: str, max_bytes: int = MAX_INPUT_BYTES) -> str:
     """The UTF-8 text of the regular file ``path`` of at most ``max_bytes`` bytes; :class:`UsageError` otherwise."""
-    where = shown_path(path)
-    if not path:
-        raise UsageError(f"the {what} file name is empty")
-    try:
-        p = Path(path)
-        info = p.stat()
-    except FileNotFoundError:
-        raise UsageError(f"no such {what} file {where}") from None
-    except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the name
-        raise UsageError(f"cannot read {what} file {where}: {getattr(exc, 'strerror', None) or exc}") from None
-    if stat.S_ISDIR(info.st_mode):
-        raise UsageError(f"{what} {where} is a directory, not a file")
-    if not stat.S_ISREG(info.st_mode):
-        raise UsageError(f"{what} file {where} is not a regular file")
-    try:
-        with open(p, "rb") as f:
-            raw = f.read(max_bytes + 1)
-    except OSError as exc:
-        raise UsageError(f"cannot read {what} file {where}: {exc.strerror or exc}") from None
-    if len(raw) > max_bytes:
-        raise UsageError(f"{what} file {where} is larger than the limit of {max_bytes:,} bytes")
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise UsageError(f"{what} file {where} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    return read_bounded_text(path, what, shown_path(path), max_bytes, UsageError)
 
 
 def load_params(path: str | None) -> dict:
