@@ -43,6 +43,19 @@ ATTACKS = {
     ),
     # round(big int, -n) divides by a power of ten, once paid as one call
     "round_big_int": ("for i in range(100000):\n    z = round(10 ** 1233, -400)\n", BudgetError, 2, 1.0),  # was 1.3 s
+    # math.gcd/isqrt of 4096-bit integers were paid one op per argument: 2.5 s of CPU on a stopped clock
+    "math_gcd_big_ints": (
+        "import math\nx = 3 ** 2580\ny = 7 ** 1458 + 1\nfor i in range(100000):\n    z = math.gcd(x, y)\n",
+        BudgetError,
+        5,
+        1.0,
+    ),
+    "math_isqrt_big_int": (
+        "import math\nx = 3 ** 2580\nfor i in range(100000):\n    z = math.isqrt(x)\n",
+        BudgetError,
+        4,
+        0.6,  # was 0.73 s
+    ),
 }
 
 

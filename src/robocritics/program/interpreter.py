@@ -87,6 +87,10 @@ _EXPR_TYPES = (
 )  # fmt: skip
 
 
+_BIG_INT_ARG = 2**64
+"""Integers from this size on cost a math function big-int work (paid like writing them in decimal)."""
+
+
 def _stack_depth() -> int:
     """Python frames on the calling thread's stack."""
     depth = 0
@@ -714,6 +718,9 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             self.rec.where = (line, col, tuple(self.call_lines))
         if b.kind == "math":
             self.meter.spend_ops(len(args))
+            for a in args:  # gcd, isqrt, log... of big integers do big-int division: quadratic in their length
+                if type(a) is int and not -_BIG_INT_ARG < a < _BIG_INT_ARG:
+                    self._charge_int_text(a)
             return self._new_value(b.fn(*args, **kwargs), node)
         return b.fn(*args, **kwargs)
 
