@@ -218,3 +218,18 @@ def scene_for(program_path: str, scene_arg: str | None):
         located.path = exc.path
         raise located from None
     return scene
+
+
+def add_critic_options(parser: argparse.ArgumentParser) -> None:
+    """``--critics A,B`` and ``--params FILE``, the critic selection shared by ``check``, ``run`` and ``deploy``."""
+    parser.add_argument(
+        "--critics",
+        metavar="A,B",
+        type=critic_names,
+        help="comma-separated critic names to run (default: all installed)",
+    )
+    parser.add_argument(
+        "--params",
+        metavar="FILE",
+        help='JSON file of threshold overrides, e.g. {"joint_speed": {"warn_speed_m_s": 0.8}}',
+    )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import critic_names, load_params, read_text, sample_rate, scene_for, subcommand
+from ._common import add_critic_options, load_params, read_text, sample_rate, scene_for, subcommand
 
 
 @subcommand("check")
@@ -23,17 +23,7 @@ def _build_check(sub) -> None:
         help="built-in scene name (recycling, sorting, breakfast) or a scene JSON file; default: the built-in "
         "scene the program's file name starts with (sorting_naive.py -> sorting), else an empty table",
     )
-    p.add_argument(
-        "--critics",
-        metavar="A,B",
-        type=critic_names,
-        help="comma-separated critic names to run (default: all installed)",
-    )
-    p.add_argument(
-        "--params",
-        metavar="FILE",
-        help='JSON file of threshold overrides, e.g. {"joint_speed": {"warn_speed_m_s": 0.8}}',
-    )
+    add_critic_options(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument(
         "--rate",

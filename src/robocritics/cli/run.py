@@ -48,7 +48,7 @@ from typing import TextIO
 
 import math
 
-from ._common import bounded_float, critic_names, load_params, one_line, positive_int, subcommand
+from ._common import add_critic_options, bounded_float, load_params, one_line, positive_int, subcommand
 from ..errors import LLMError, RoboCriticsError
 
 __all__ = ["add_run_parser", "run_command"]
@@ -105,14 +105,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         default=_MAX_ATTEMPTS,
         help=f"most model replies with --auto (default {_MAX_ATTEMPTS}, as in the paper)",
     )
-    p.add_argument(
-        "--critics", metavar="A,B", type=critic_names, help="comma-separated critic names (default: all installed)"
-    )
-    p.add_argument(
-        "--params",
-        metavar="FILE",
-        help='JSON file of threshold overrides, e.g. {"joint_speed": {"warn_speed_m_s": 0.8}}',
-    )
+    add_critic_options(p)
     p.add_argument("--memory", metavar="FILE", help="interaction memory (SQLite file, created if missing)")
     p.add_argument(
         "--embedded-rules",
