@@ -386,7 +386,9 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         if not self._eval(node.test, scope):
             message = "assertion failed"
             if node.msg is not None:
-                message += ": " + self._to_str(self._eval(node.msg, scope), node.msg)
+                text = clip(self._to_str(self._eval(node.msg, scope), node.msg))
+                # control characters escaped: the message is printed to terminals and sent to the LLM as is
+                message += ": " + "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
             raise self._error(message, node)
 
     def _exec_Delete(self, node: ast.Delete, scope: _Scope) -> None:
