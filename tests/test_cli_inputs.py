@@ -40,7 +40,7 @@ def files(tmp_path):
         "params_bigint.json": '{"joint_speed": {"warn_speed_m_s": ' + "9" * 5000 + "}}",
         "big.py": "# " + "x" * 1_100_000 + "\n",
         "slow.py": "reduce_speed(0.01)\nmove_to(0.3, 0.1, 0.2)\n",
-        "waits.py": "for i in range(2000):\n    wait(10)\n",
+        "waits.py": "for i in range(200):\n    wait(10)\n",  # 33 min of motion; 200 iterations end fast under load
     }
     for name, content in contents.items():
         (tmp_path / name).write_bytes(content if isinstance(content, bytes) else content.encode())
@@ -95,7 +95,7 @@ def run(capsys, argv):
         (["check", "n\x00.py"], "cannot read program file"),
         # legal programs, impossible motions: the planner's typed errors, with the line
         (["check", "slow.py"], "ProgramError: line 1, column 1: reduce_speed: percent must be in 1 <= percent <= 100, got 0.01"),
-        (["check", "waits.py"], "MotionBudgetError: line 2: wait(seconds=10): the program's motion lasts 5.6 h; the limit is 5 min"),
+        (["check", "waits.py"], "MotionBudgetError: line 2: wait(seconds=10): the program's motion lasts 33.3 min; the limit is 5 min"),
         # --params and --critics
         (["check", "prog.py", "--params", "params_deep.json"], "params file 'params_deep.json': JSON nested 51 deep"),
         (["check", "prog.py", "--params", "params_bigint.json"], "joint_speed"),

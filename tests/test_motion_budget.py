@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from robocritics import PlanningError, ProgramError, Robot, Scene, simulate
+from robocritics.program import Budget, run_program
 from robocritics.critic import BUILTIN_CRITICS, critique
 from robocritics.program.plan import Plan, SkillCall
 from robocritics.robot import planner as planner_module
@@ -57,7 +58,9 @@ def peak_bytes(fn):
 
 
 def test_two_thousand_waits_are_refused_with_the_whole_duration_and_little_memory():
-    program = "for i in range(2000):\n    wait(10)\n"
+    # the sandbox runs on a stopped clock: on a loaded machine its 0.5 s wall-clock budget could end the
+    # 2000-iteration loop first, and this test is about the planner's motion budget
+    program = run_program("for i in range(2000):\n    wait(10)\n", SORTING, Budget(clock=lambda: 0.0))
     error, peak = peak_bytes(lambda: simulate(program, SORTING))
     assert isinstance(error, MotionBudgetError), error
     assert error.limit == "max_motion_s" and error.line == 2

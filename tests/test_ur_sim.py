@@ -323,7 +323,7 @@ def test_cli_runs_until_interrupted():
             assert dash.robot_mode() == "RUNNING"  # the same default as URSim()
         assert ctl.state()["actual_q"] == pytest.approx(tuple(Robot.ur3e().home_q), abs=1e-12)
         ctl.proc.send_signal(signal.SIGINT)
-        assert ctl.proc.wait(timeout=5) == 0
+        assert ctl.proc.wait(timeout=60) == 0  # a clean exit; the bound only has to hold on a loaded machine
 
 
 def test_cli_options_reach_the_controller():
