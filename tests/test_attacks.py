@@ -136,3 +136,20 @@ def test_assert_message_has_no_control_characters(message: str, shown: str) -> N
     text = str(info.value)
     assert text.startswith("line 2, column 1: assertion failed: ") and shown in text
     assert text.isprintable() and len(text) < 4000
+
+
+@pytest.mark.parametrize("call", ["simulate", "run_program"])
+def test_a_scene_name_instead_of_a_scene_is_a_scene_error(call):
+    from robocritics import SceneError, simulate
+    from robocritics.program import run_program
+
+    fn = {"simulate": simulate, "run_program": run_program}[call]
+    with pytest.raises(SceneError, match=rf"{call}\(\) needs a Scene, got str; load one with Scene.builtin"):
+        fn("home()", "sorting")
+
+
+def test_a_robot_that_is_not_a_robot_is_a_robot_model_error():
+    from robocritics import RobotModelError, Scene, simulate
+
+    with pytest.raises(RobotModelError, match=r"simulate\(\) needs a Robot \(e.g. Robot.ur3e\(\)\), got str"):
+        simulate("home()", Scene.builtin("sorting"), robot="ur3e")

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from .errors import ProgramError, SceneError
+from .errors import ProgramError, RobotModelError, SceneError
 
 if TYPE_CHECKING:  # pragma: no cover
     from .program.plan import Plan
@@ -137,7 +137,15 @@ def simulate(
     from .robot.model import Robot
     from .robot.motion import check_sample_rate
     from .robot.planner import Planner, PlannerSettings
+    from .scene import Scene
 
+    if not isinstance(scene, Scene):
+        raise SceneError(
+            f"simulate() needs a Scene, got {type(scene).__name__}; load one with "
+            "Scene.builtin('sorting') or Scene.resolve(name_or_path)"
+        )
+    if robot is not None and not isinstance(robot, Robot):
+        raise RobotModelError(f"simulate() needs a Robot (e.g. Robot.ur3e()), got {type(robot).__name__}")
     sample_rate_hz = check_sample_rate(sample_rate_hz)
     if not isinstance(program, Plan):  # a program refers to objects by id
         check_scene_ids(scene)

@@ -66,6 +66,7 @@ imports, names or attributes starting with ``_``, ``class``, ``try``,
 
 from __future__ import annotations
 
+from ..errors import SceneError
 from ..scene import Scene
 from .budget import Budget, BudgetError
 from .check import FORBIDDEN_NAMES as _FORBIDDEN_NAMES  # noqa: F401  (read here by tests and tools)
@@ -86,5 +87,10 @@ def run_program(source: str, scene: Scene | None = None, budget: Budget | None =
     b = budget or Budget()
     tree = check_program(source, b)
     scene = scene if scene is not None else Scene()
+    if not isinstance(scene, Scene):
+        raise SceneError(
+            f"run_program() needs a Scene, got {type(scene).__name__}; load one with "
+            "Scene.builtin('sorting') or Scene.resolve(name_or_path)"
+        )
     return _Interpreter(source, tree, scene, b).run()
 
