@@ -111,7 +111,13 @@ def test_ctrl_c_keeps_the_finished_cells(ablation, llm_server, tmp_path, capsys)
         return ablation.scripted_responder(request)
 
     llm_server.responder = responder
-    code = ablation.main(args(llm_server.url, results))
+    # Ctrl-C raises KeyboardInterrupt even when the test run itself was started with SIGINT ignored
+    # (a shell's background job), as it does for a user at a terminal
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        code = ablation.main(args(llm_server.url, results))
+    finally:
+        signal.signal(signal.SIGINT, previous)
     captured = capsys.readouterr()
     assert code == 130
     assert "Interrupted: 1 of 2 cells done" in captured.err and "resume" in captured.err

@@ -186,6 +186,9 @@ def controller_process(*args: str, start_timeout_s: float = 30.0) -> Iterator[Co
         [sys.executable, "-m", "robocritics.testing.ursim", "--rtde-port", "0", "--dashboard-port", "0",
          "--secondary-port", "0", *args],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        # Ctrl-C as a user sends it: a shell runs background jobs with SIGINT ignored, and that would be
+        # inherited (Python then installs no KeyboardInterrupt handler)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         line = proc.stdout.readline()  # blocks until the controller listens (or exits)
