@@ -176,19 +176,27 @@ class Robot:
 
     @home_q.setter
     def home_q(self, q) -> None:
+        self._home_q = _read_only(self.joint_vector(q, "home_q"))
+
+    def joint_vector(self, q, what: str, error: type[Exception] = RobotModelError) -> np.ndarray:
+        """``q`` as a float array ``(n,)`` [rad], finite and within the joint limits.
+
+        Anything else raises ``error`` whose message starts with ``what`` (the argument's name)
+        and names the offending joint.
+        """
         try:
-            home = _read_only(np.reshape(q, -1))
+            vector = np.array(q, dtype=float).reshape(-1)
         except (TypeError, ValueError):
-            raise RobotModelError(f"home_q must be {self.n} joint angles in rad, got {q!r}") from None
-        if home.shape != (self.n,):
-            raise RobotModelError(f"home_q must be {self.n} joint angles in rad, got {home.size}")
-        for j, (v, lo, hi) in enumerate(zip(home, self.lower, self.upper)):
+            raise error(f"{what} must be {self.n} joint angles in rad, got {q!r}") from None
+        if vector.shape != (self.n,):
+            raise error(f"{what} must be {self.n} joint angles in rad, got {vector.size}")
+        for j, (v, lo, hi) in enumerate(zip(vector, self.lower, self.upper)):
             if not (math.isfinite(v) and lo - LIMIT_TOLERANCE_RAD <= v <= hi + LIMIT_TOLERANCE_RAD):
-                raise RobotModelError(
-                    f"home_q joint {j} ({self.joint_names[j]}) = {v:.4f} rad is outside its limits "
+                raise error(
+                    f"{what} joint {j} ({self.joint_names[j]}) = {v:.4f} rad is outside its limits "
                     f"[{lo:.4f}, {hi:.4f}] rad"
                 )
-        self._home_q = home
+        return vector
 
     def _parse_urdf_extras(self) -> None:
         root = ET.parse(self.urdf_path).getroot()

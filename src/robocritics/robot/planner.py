@@ -50,7 +50,7 @@ from ..errors import PlanningError
 from ..program.plan import Plan, SkillCall
 from ..scene import MAX_COORD_M, Container, Scene, SceneObject, rpy_matrix
 from ..trajectory import Step
-from .model import LIMIT_TOLERANCE_RAD, Robot, fingers_down
+from .model import Robot, fingers_down
 from .motion import (
     JOINT_SPEED_MARGIN,
     MIN_SPEED_FRACTION,
@@ -148,20 +148,9 @@ def format_duration(seconds: float) -> str:
 def checked_start_q(robot: Robot, start_q) -> np.ndarray:
     """``start_q`` as a float array of the robot's joint count, finite and inside its limits [rad].
 
-    Raises :class:`PlanningError` naming the joint that is wrong.
+    Raises :class:`PlanningError` naming the joint that is wrong (:meth:`Robot.joint_vector`).
     """
-    try:
-        q = np.array(start_q, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise PlanningError(f"start_q must be {robot.n} joint angles in rad, got {start_q!r}") from None
-    if q.shape != (robot.n,):
-        raise PlanningError(f"start_q must be {robot.n} joint angles in rad, got {q.size}")
-    for j, (v, lo, hi) in enumerate(zip(q, robot.lower, robot.upper)):
-        if not (math.isfinite(v) and lo - LIMIT_TOLERANCE_RAD <= v <= hi + LIMIT_TOLERANCE_RAD):
-            raise PlanningError(
-                f"start_q joint {j} ({robot.joint_names[j]}) = {v:.4f} rad is outside its limits [{lo:.4f}, {hi:.4f}] rad"
-            )
-    return q
+    return robot.joint_vector(start_q, "start_q", PlanningError)
 
 
 def plan_approach(
