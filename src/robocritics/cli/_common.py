@@ -79,16 +79,6 @@ def positive_int(text: str) -> int:
     return value
 
 
-def positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{shown(text)} is not a number") from None
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"{shown(text)} must be a positive number")
-    return value
-
-
 def sample_rate(text: str) -> float:
     """A trajectory sample rate [Hz] in the range the critics can trust (robot.motion.check_sample_rate)."""
     from ..errors import PlanningError
