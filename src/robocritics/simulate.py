@@ -16,6 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from .errors import ProgramError, RobotModelError, SceneError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -53,6 +55,8 @@ class Execution:
     scene: Scene
     robot: Robot = field(repr=False)
     resting_on: dict[str, str] = field(default_factory=dict)
+    #: Per-sample pose ``(T, 4, 4)`` (m, base frame) of every object the program moved; the others stay put.
+    object_poses: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
     def duration_s(self) -> float:
@@ -174,5 +178,9 @@ def simulate(
         frames=frames,
     )
     final_scene = scene.model_copy(update={"objects": [planner.objects[o.id] for o in scene.objects]})
-    return Execution(trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.resting_on))
+    for poses in object_poses.values():
+        poses.setflags(write=False)
+    return Execution(
+        trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.resting_on), dict(object_poses)
+    )
 
