@@ -22,6 +22,7 @@ from .errors import ProgramError, RobotModelError, SceneError
 
 if TYPE_CHECKING:  # pragma: no cover
     from .program.plan import Plan
+    from .report import Report
     from .robot.model import Robot
     from .robot.planner import Event, MotionBudgetError, PlannerSettings
     from .scene import Scene
@@ -61,6 +62,16 @@ class Execution:
     @property
     def duration_s(self) -> float:
         return self.trajectory.duration_s
+
+    def show(self, report: Report | None = None, *, title: str | None = None):
+        """The 3-D replay of this run (with ``report``'s verdicts on its timeline), displayed inline in Jupyter.
+
+        Returns a :class:`robocritics.viz.Replay`; its ``save(path)`` writes the same
+        self-contained HTML page that ``robocritics check --html`` writes.
+        """
+        from .viz import Replay
+
+        return Replay(self, report, title=title)
 
     def object_on(self, obj_id: str, support_id: str) -> bool:
         """Whether object ``obj_id`` was last set down on ``support_id`` (an object, container or 'table')."""

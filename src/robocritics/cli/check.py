@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-from ._common import add_critic_options, load_params, read_text, sample_rate, scene_for, subcommand
+from ._common import UsageError, add_critic_options, load_params, read_text, sample_rate, scene_for, subcommand
 
 
 @subcommand("check")
@@ -26,6 +27,12 @@ def _build_check(sub) -> None:
     add_critic_options(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument(
+        "--html",
+        metavar="OUT.html",
+        help="also write the 3-D replay with its critic timeline and the report to one self-contained HTML file "
+        "(no external URLs: it opens from file:// with no server)",
+    )
+    p.add_argument(
         "--rate",
         metavar="HZ",
         type=sample_rate,
@@ -41,6 +48,10 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from ..simulate import simulate
 
     source = read_text(args.program, "program")
+    if args.html:
+        html_dir = Path(args.html).resolve().parent
+        if not html_dir.is_dir():  # checked before simulating, so a typo costs nothing
+            raise UsageError(f"--html {args.html}: the directory {html_dir} does not exist")
     scene = scene_for(args.program, args.scene)
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
@@ -48,4 +59,11 @@ def _cmd_check(args: argparse.Namespace) -> int:
     execution = simulate(source, scene, sample_rate_hz=args.rate)
     report = critique(execution, critics=critics, params=params)
     print(report.to_json() if args.json else report.to_text())
+    if args.html:
+        from ..viz import write_replay_html
+
+        try:
+            write_replay_html(args.html, execution, report, title=f"{args.program} in {scene.name}: {report.score_text}")
+        except OSError as exc:
+            raise UsageError(f"--html {args.html}: cannot write the replay: {exc.strerror or exc}") from None
     return 1 if report.has_errors else 0

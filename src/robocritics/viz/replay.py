@@ -1,0 +1,278 @@
+"""One simulated run as replay data: what the 3-D replay (``static/replay.js``) draws, as plain JSON.
+
+:func:`replay_data` turns an :class:`~robocritics.simulate.Execution` (and the
+:class:`~robocritics.report.Report` of its critics) into a JSON-serialisable dict
+that the replay component renders in a browser, the same for the studio, a
+notebook and an offline HTML file:
+
+* the time axis ``time_s`` [s] of the *frames* drawn: the trajectory's samples
+  thinned to at most :data:`MAX_FRAME_RATE_HZ`, always keeping the first and last
+  sample and every verdict's worst sample and window bounds, so the moment a
+  critic points at is drawn exactly;
+* the robot as capsules: per frame the two end points (m, base frame) of every
+  collision capsule (fingers included, so the gripper opens and closes), and
+  each capsule's radius [m];
+* the scene: table and container boxes (static), objects with their shape, size
+  [m] and colour, and per frame the pose of every object the program moved
+  (carried objects move with the gripper);
+* provenance: per frame the program step, and the steps' skills and source lines;
+* the verdicts: flag, message, hint, measured value and threshold, flagged time
+  windows [s], worst time [s], the links and objects of the evidence, and for
+  collision and pinch-point findings the closest-points segment at the worst
+  sample (m, base frame), computed with coal.
+
+Float arrays are little-endian float32, base64-encoded (``{"dtype", "shape",
+"data"}``): a minute of motion is a few hundred kB.
+"""
+
+from __future__ import annotations
+
+import base64
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..report import Report
+    from ..simulate import Execution
+
+__all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ", "closest_points"]
+
+#: Version tag of the replay data, checked by ``replay.js``.
+REPLAY_FORMAT = "robocritics-replay/1"
+
+#: Frames drawn per second of motion at most [Hz]: smooth playback, small files.
+MAX_FRAME_RATE_HZ = 30.0
+
+# Colours of the scene's `colour` attributes; anything else gets a palette colour.
+_NAMED_COLOURS = {
+    "red": "#d63a2f", "green": "#4caf50", "yellow": "#f2c12e", "blue": "#3b73d9", "white": "#f4f4f0",
+    "black": "#2b2b2b", "silver": "#c0c6cc", "grey": "#9aa0a6", "gray": "#9aa0a6", "brown": "#8d6e4c",
+    "orange": "#f08a24", "purple": "#8e5cc2", "pink": "#e57ea8", "beige": "#e8dcc0",
+}  # fmt: skip
+_PALETTE = ("#5c8fd6", "#d6895c", "#6fbf73", "#c76fbf", "#bfae6f", "#6fbfb4")
+_FLAG_COLOURS = {"OK": "#2e9d4a", "WARNING": "#e0a100", "ERROR": "#d33a2c"}
+
+
+def _f32(array: np.ndarray) -> dict[str, Any]:
+    a = np.ascontiguousarray(array, dtype="<f4")
+    return {"dtype": "float32", "shape": list(a.shape), "data": base64.b64encode(a.tobytes()).decode("ascii")}
+
+
+def _colour(attributes: dict, index: int) -> str:
+    name = str(attributes.get("colour", attributes.get("color", ""))).lower()
+    return _NAMED_COLOURS.get(name, _PALETTE[index % len(_PALETTE)])
+
+
+def _pose12(pose: np.ndarray) -> list[float]:
+    """The top 3x4 of a homogeneous pose, row-major (what three.js ``Matrix4.set`` needs, plus 0 0 0 1)."""
+    return [round(float(v), 6) for v in np.asarray(pose, float)[:3, :4].reshape(-1)]
+
+
+def _frame_samples(time_s: np.ndarray, keep: list[int]) -> np.ndarray:
+    """Sample indices drawn as frames: every k-th sample (at most MAX_FRAME_RATE_HZ) plus ``keep`` and the last."""
+    T = len(time_s)
+    if T == 1:
+        return np.zeros(1, dtype=np.int64)
+    rate_hz = (T - 1) / max(float(time_s[-1] - time_s[0]), 1e-9)
+    stride = max(1, int(math.ceil(rate_hz / MAX_FRAME_RATE_HZ - 1e-9)))
+    picked = np.concatenate([np.arange(0, T, stride), np.asarray(keep, dtype=np.int64), [T - 1]])
+    return np.unique(picked[(picked >= 0) & (picked < T)])
+
+
+def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> tuple[np.ndarray, np.ndarray, float]:
+    """Closest points (m, base frame) between two shapes and their distance [m], with coal.
+
+    Kinds: ``"capsule"`` (size ``(radius, length)``, axis z of its pose), ``"box"``
+    (extents), ``"cylinder"`` (radius, height), ``"sphere"`` (radius). Poses are 4x4.
+    The distance is negative on penetration (coal's signed distance); the points
+    are then the witness points of the penetration.
+    """
+    import coal
+
+    def geometry(kind, size):
+        if kind == "capsule":
+            return coal.Capsule(float(size[0]), float(size[1]))
+        if kind == "box":
+            return coal.Box(*(float(s) for s in size))
+        if kind == "cylinder":
+            return coal.Cylinder(float(size[0]), float(size[1]))
+        if kind == "sphere":
+            return coal.Sphere(float(size[0]))
+        raise ValueError(f"unknown shape kind {kind!r}")
+
+    def transform(pose):
+        pose = np.asarray(pose, float)
+        return coal.Transform3s(pose[:3, :3].copy(), pose[:3, 3].copy())
+
+    request, result = coal.DistanceRequest(), coal.DistanceResult()
+    request.enable_signed_distance = True
+    distance = coal.distance(geometry(a_kind, a_size), transform(a_pose), geometry(b_kind, b_size), transform(b_pose),
+                             request, result)  # fmt: skip
+    return np.array(result.getNearestPoint1()), np.array(result.getNearestPoint2()), float(distance)
+
+
+def _capsule_pose(p0: np.ndarray, p1: np.ndarray) -> tuple[np.ndarray, float]:
+    """A pose whose z axis runs along ``p0 -> p1``, centred between them, and the segment length [m]."""
+    axis = p1 - p0
+    length = float(np.linalg.norm(axis))
+    z = axis / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    pose = np.eye(4)
+    pose[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    pose[:3, 3] = (p0 + p1) / 2
+    return pose, length
+
+
+def _segment(execution: Execution, pair_name: str, sample: int) -> list[list[float]] | None:
+    """The closest-points segment of proximity pair ``pair_name`` at ``sample`` (m, base frame), or None."""
+    trajectory, robot = execution.trajectory, execution.robot
+    pair = next((p for p in trajectory.pairs if p.name == pair_name), None)
+    if pair is None:
+        return None
+    p0, p1 = robot.capsule_segments(trajectory.frames[sample : sample + 1])
+    capsule_index = {name: i for i, name in enumerate(robot.capsule_names)}
+
+    def shapes_of(name: str) -> list[tuple[str, Any, np.ndarray]]:
+        if name in capsule_index:
+            i = capsule_index[name]
+            pose, length = _capsule_pose(p0[0, i], p1[0, i])
+            return [("capsule", (robot.capsule_radii[i], length), pose)]
+        moved = execution.object_poses.get(name)
+        return [
+            (s.kind, s.size, s.pose if moved is None else moved[sample])
+            for s in _entity_shapes(execution.scene)
+            if s.owner == name
+        ]
+
+    best = None
+    for a in shapes_of(pair.a):
+        for b in shapes_of(pair.b_entity or pair.b):
+            pa, pb, d = closest_points(a[0], a[1], a[2], b[0], b[1], b[2])
+            if best is None or d < best[2]:
+                best = (pa, pb, d)
+    if best is None:
+        return None
+    return [[round(float(v), 6) for v in best[0]], [round(float(v), 6) for v in best[1]]]
+
+
+def _entity_shapes(scene) -> list:
+    shapes = []
+    for o in scene.objects:
+        shapes += o.shapes()
+    for c in scene.containers:
+        shapes += c.shapes()
+    shapes += scene.table.shapes()
+    return shapes
+
+
+def _verdicts(execution: Execution, report: Report, time_s: np.ndarray) -> list[dict[str, Any]]:
+    out = []
+    for v in report.verdicts:
+        ev = v.evidence
+        windows = [[float(time_s[a]), float(time_s[b])] for a, b in ev.sample_ranges if 0 <= a <= b < len(time_s)]
+        if not windows and ev.time_window_s is not None:
+            windows = [[float(ev.time_window_s[0]), float(ev.time_window_s[1])]]
+        segment = None
+        pair = v.details.get("closest_pair") if isinstance(v.details, dict) else None
+        if pair and ev.worst_sample is not None and 0 <= ev.worst_sample < len(time_s):
+            segment = _segment(execution, str(pair), int(ev.worst_sample))
+        out.append(
+            {
+                "critic": v.critic,
+                "flag": v.flag.value,
+                "colour": _FLAG_COLOURS[v.flag.value],
+                "message": v.message,
+                "hint": v.hint,
+                "value": v.value,
+                "threshold": v.threshold,
+                "unit": v.unit,
+                "windows_s": [] if v.flag.value == "OK" else windows,
+                "worst_time_s": ev.worst_time_s,
+                "links": list(ev.links),
+                "objects": list(ev.objects),
+                "lines": list(ev.lines),
+                "segment": segment,
+            }
+        )
+    return out
+
+
+def _keep_samples(report: Report | None) -> list[int]:
+    keep: list[int] = []
+    for v in report.verdicts if report is not None else ():
+        ev = v.evidence
+        keep += [s for s in (ev.worst_sample, ev.first_sample, ev.last_sample) if s is not None]
+        for a, b in ev.sample_ranges:
+            keep += [a, b]
+    return keep
+
+
+def replay_data(execution: Execution, report: Report | None = None, *, title: str | None = None) -> dict[str, Any]:
+    """The replay of ``execution`` (with the verdicts of ``report``, if given) as a JSON-serialisable dict.
+
+    See the module docstring for what it holds; ``robocritics.viz.replay_html``
+    and the studio render it with ``static/replay.js``.
+    """
+    from ..simulate import Execution
+
+    if not isinstance(execution, Execution):
+        raise TypeError(f"replay_data() needs the Execution that simulate() returns, got {type(execution).__name__}")
+    trajectory, robot, scene = execution.trajectory, execution.robot, execution.scene
+    time_all = np.asarray(trajectory.time, float)
+    frames = _frame_samples(time_all, _keep_samples(report))
+    p0, p1 = robot.capsule_segments(trajectory.frames[frames])
+    capsule_ends = np.concatenate([p0, p1], axis=2)  # (F, C, 6)
+
+    objects = []
+    for i, o in enumerate(scene.objects):
+        shape = o.shapes()[0]
+        entry = {
+            "id": o.id,
+            "shape": o.shape,
+            "size": [float(s) for s in o.size],
+            "colour": _colour(o.attributes, i),
+            "pose": _pose12(shape.pose),
+        }
+        if o.id in execution.object_poses:
+            entry["poses"] = _f32(execution.object_poses[o.id][frames][:, :3, :4].reshape(len(frames), 12))
+        objects.append(entry)
+    boxes = []
+    for c in scene.containers:
+        colour = _colour(c.attributes, len(boxes)) if c.attributes else "#b08a5a"
+        boxes += [{"owner": c.id, "kind": "container", "size": list(s.size), "pose": _pose12(s.pose), "colour": colour}
+                  for s in c.shapes()]  # fmt: skip
+    boxes += [{"owner": "table", "kind": "table", "size": list(s.size), "pose": _pose12(s.pose), "colour": "#d9cbb3"}
+              for s in scene.table.shapes()]  # fmt: skip
+    attached_ids = sorted({a for a in trajectory.attached[frames] if a})
+    steps = [{"skill": s.skill, "line": s.line, "args": s.args} for s in trajectory.steps]
+    data: dict[str, Any] = {
+        "format": REPLAY_FORMAT,
+        "title": title or f"{scene.name}: {len(trajectory)} samples, {trajectory.duration_s:.2f} s",
+        "robot": trajectory.robot_name or robot.name,
+        "scene": scene.name,
+        "duration_s": float(time_all[-1] - time_all[0]),
+        "time_s": _f32(time_all[frames] - time_all[0]),
+        "capsules": [
+            {"name": c.name, "group": c.group, "radius_m": float(c.radius_m)} for c in robot.capsules
+        ],
+        "capsule_ends": _f32(capsule_ends),
+        "gripper_opening_m": _f32(np.asarray(trajectory.gripper_opening_m)[frames]),
+        "attached": [attached_ids.index(a) if a else -1 for a in trajectory.attached[frames]],
+        "attached_ids": attached_ids,
+        "step": [int(s) for s in trajectory.step[frames]],
+        "steps": steps,
+        "objects": objects,
+        "boxes": boxes,
+        "workspace": {"center": list(scene.workspace.center), "radius_m": float(scene.workspace.radius_m)},
+        "verdicts": [],
+        "score_text": None,
+    }
+    if report is not None:
+        data["verdicts"] = _verdicts(execution, report, time_all - time_all[0])
+        data["score_text"] = report.score_text
+        data["summary"] = report.summary()
+    return data
