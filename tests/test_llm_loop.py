@@ -448,3 +448,30 @@ def test_ablation_selftest_runs_offline(capsys):
     assert float(external[3]) > float(embedded[3])  # critic feedback led to the careful program
     assert ["paper", "embedded", "2.3", "6.3"] in [line.split() for line in out.splitlines()]
     assert "Reproduce: python benchmarks/ablation.py --selftest --tasks sorting" in out
+
+
+# --- a simulate hook (the studio checks programs in a worker process) ---------------------------
+
+
+def test_simulate_hook_checks_every_program_and_its_errors_are_fed_back(llm_server, make_client, sorting):
+    from robocritics.critic import critique
+    from robocritics.simulate import simulate
+
+    unreachable = "move_above(green_apple)\nmove_to(0.95, 0.0, 0.2)\nhome()\n"
+    llm_server.reply(SHORT, fenced(unreachable))
+    checked: list[str] = []
+
+    def check_elsewhere(program):
+        checked.append(program)
+        execution = simulate(program, sorting)
+        return execution, critique(execution.trajectory, sorting, MOTION_CRITICS)
+
+    loop = Loop(make_client(), sorting, critics=MOTION_CRITICS, simulate=check_elsewhere)
+    first = loop.request(TASK)
+    assert first.report is not None and first.execution is not None and first.score == first.report.score
+    second = loop.refine("reach further")
+    assert checked == [first.program, unreachable]
+    assert second.report is None and second.score is None
+    assert "line 2" in second.error and ">> 2 | move_to(0.95, 0.0, 0.2)" in second.error
+    with pytest.raises(TypeError, match="simulate"):
+        Loop(make_client(), sorting, simulate="not callable")

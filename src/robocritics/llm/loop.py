@@ -273,6 +273,13 @@ class Loop:
       :func:`~robocritics.simulate.simulate`'s).
     * ``context_tokens`` — the model's context window in tokens, to fit every
       prompt to (module docstring); None: unknown until the server refuses one.
+    * ``simulate`` — ``simulate(program) -> (Execution, Report)`` to check a
+      program elsewhere (e.g. :meth:`robocritics.viz.studio.worker.Evaluator.loop_simulate`,
+      in a resource-limited process); it raises :class:`ProgramError`,
+      :class:`PlanningError`, :class:`TrajectoryError` or :class:`CriticError`
+      as the in-process check does. None: :func:`~robocritics.simulate.simulate`
+      and :func:`~robocritics.critic.critique` here, with ``robot``,
+      ``critics``, ``params`` and ``sample_rate_hz``.
     """
 
     def __init__(
@@ -295,6 +302,7 @@ class Loop:
         model_options: Mapping[str, Any] | None = None,
         sample_rate_hz: float | None = None,
         context_tokens: int | None = None,
+        simulate: Callable[[str], tuple[Execution, Report]] | None = None,
     ):
         from ..critic import select_critics
 
@@ -312,6 +320,8 @@ class Loop:
             raise ValueError(f"context_tokens must be at least {MIN_CONTEXT_TOKENS}, got {context_tokens}")
         if approve is not None and not callable(approve):
             raise TypeError("approve must be a callable approve(program, diff) -> bool")
+        if simulate is not None and not callable(simulate):
+            raise TypeError("simulate must be a callable simulate(program) -> (Execution, Report)")
         if isinstance(critics, str):
             critics = [c.strip() for c in critics.split(",") if c.strip()]
         selected = select_critics(critics, params)  # fail fast on unknown critics / parameters
@@ -336,6 +346,7 @@ class Loop:
         self.model_options = dict(model_options or {})
         self.sample_rate_hz = None if sample_rate_hz is None else float(sample_rate_hz)
         self.context_tokens: int | None = None if context_tokens is None else int(context_tokens)
+        self._simulate = simulate
         self.last_prompt_tokens: int | None = None
         self.keyword_memory_reason: str | None = None  # why retrieval fell back to BM25, once it did
 
@@ -729,6 +740,15 @@ class Loop:
         from ..simulate import simulate
 
         assert attempt.program is not None
+        if self._simulate is not None:
+            try:
+                attempt.execution, attempt.report = self._simulate(attempt.program)
+            except (ProgramError, PlanningError, TrajectoryError, CriticError) as exc:
+                attempt.error = runtime_feedback(exc, program=attempt.program)
+                self._pending_error = attempt.error
+                return
+            attempt.score = attempt.report.score
+            return
         try:
             rate = {} if self.sample_rate_hz is None else {"sample_rate_hz": self.sample_rate_hz}
             execution = simulate(attempt.program, self.scene, self.robot, **rate)
