@@ -38,6 +38,10 @@ def test_notebook_cells_run(notebook):
     assert {v.critic for v in report.scored_verdicts if v.flag is Flag.ERROR} == {"space_usage", "end_effector_pose"}
     assert report.feedback() in printed
     assert report.feedback().startswith("Error: The robot leaves the allowed workspace")
+    # the replay cell: an inline iframe holding the whole replay page, with the naive run's verdicts on its timeline
+    replay = namespace["replay"]
+    assert replay._repr_html_().startswith('<iframe class="robocritics-replay"')
+    assert all(v.message.split(":")[0] in replay.html for v in report.verdicts)
     # the careful program passes every motion critic and puts the apple in the box
     assert fixed.score == 10 and all(v.flag is Flag.OK for v in fixed.scored_verdicts)
     assert "10/10 True" in printed
