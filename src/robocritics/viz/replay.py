@@ -217,9 +217,8 @@ def replay_data(execution: Execution, report: Report | None = None, *, title: st
     See the module docstring for what it holds; ``robocritics.viz.replay_html``
     and the studio render it with ``static/replay.js``.
     """
-    from ..simulate import Execution
-
-    if not isinstance(execution, Execution):
+    # duck-typed: importing simulate here would make a cycle with Execution.show
+    if not all(hasattr(execution, a) for a in ("trajectory", "robot", "scene", "object_poses")):
         raise TypeError(f"replay_data() needs the Execution that simulate() returns, got {type(execution).__name__}")
     trajectory, robot, scene = execution.trajectory, execution.robot, execution.scene
     time_all = np.asarray(trajectory.time, float)
