@@ -195,3 +195,19 @@ def test_notebook_display_is_an_iframe_holding_the_whole_page():
 
     srcdoc = html_module.unescape(re.search(r'srcdoc="([^"]*)"', html).group(1))
     assert srcdoc == shown.html and "RoboReplay.mount" in srcdoc
+
+
+def test_a_plugin_verdict_with_odd_numbers_still_renders():
+    # a third-party critic may report NaN, infinity or sample ranges beyond the trajectory
+    execution, report = run("sorting_naive")
+    odd = rc.Verdict(
+        critic="odd_plugin", flag=rc.Flag.WARNING, message="<b>odd</b>", value=float("nan"), threshold=float("inf"),
+        evidence={"sample_ranges": [(5, 3), (10**9, 10**9 + 1), (2, 4)], "worst_time_s": float("nan")},
+    )  # fmt: skip
+    data = replay_data(execution, report.model_copy(update={"verdicts": [*report.verdicts, odd]}))
+    shown = data["verdicts"][-1]
+    assert shown["value"] is None and shown["threshold"] is None and shown["worst_time_s"] is None
+    t = execution.trajectory.time
+    assert shown["windows_s"] == [[t[2] - t[0], t[4] - t[0]]]
+    page = script_json(data)
+    assert "<b>" not in page and json.loads(page)["verdicts"][-1]["message"] == "<b>odd</b>"

@@ -169,12 +169,17 @@ def _entity_shapes(scene) -> list:
     return shapes
 
 
+def _finite(x: float | None) -> float | None:
+    """A number JSON can carry: a plugin critic's NaN or infinity is shown as no value."""
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
 def _verdicts(execution: Execution, report: Report, time_s: np.ndarray) -> list[dict[str, Any]]:
     out = []
     for v in report.verdicts:
         ev = v.evidence
         windows = [[float(time_s[a]), float(time_s[b])] for a, b in ev.sample_ranges if 0 <= a <= b < len(time_s)]
-        if not windows and ev.time_window_s is not None:
+        if not windows and ev.time_window_s is not None and all(map(math.isfinite, ev.time_window_s)):
             windows = [[float(ev.time_window_s[0]), float(ev.time_window_s[1])]]
         segment = None
         pair = v.details.get("closest_pair") if isinstance(v.details, dict) else None
@@ -187,11 +192,11 @@ def _verdicts(execution: Execution, report: Report, time_s: np.ndarray) -> list[
                 "colour": _FLAG_COLOURS[v.flag.value],
                 "message": v.message,
                 "hint": v.hint,
-                "value": v.value,
-                "threshold": v.threshold,
+                "value": _finite(v.value),
+                "threshold": _finite(v.threshold),
                 "unit": v.unit,
                 "windows_s": [] if v.flag.value == "OK" else windows,
-                "worst_time_s": ev.worst_time_s,
+                "worst_time_s": _finite(ev.worst_time_s),
                 "links": list(ev.links),
                 "objects": list(ev.objects),
                 "lines": list(ev.lines),
