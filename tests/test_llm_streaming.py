@@ -67,6 +67,26 @@ def test_replies_are_streamed_with_a_token_cap_and_progress(llm_server, make_cli
     assert seen[-1].tokens == len(tokens(reply.content)) and seen[-1].chars == len(reply.content)
 
 
+def test_progress_carries_the_reply_text_as_it_arrives(llm_server, make_client):
+    pieces = ["move_to(0.3, ", "0.0, 0.2)\n", "", "home()", "\n"]
+    body = sse(*(delta(p) for p in pieces), delta(finish="stop"), b"[DONE]")
+    llm_server.script(events(body, piece=7))  # events split across reads, as a real server's are
+    texts: list[str] = []
+    seen: list[ChatProgress] = []
+
+    def show(progress: ChatProgress) -> None:
+        texts.append(progress.text)  # read while the reply arrives, as a UI does
+        seen.append(progress)
+
+    reply = make_client(on_progress=show).chat(USER)
+    assert reply.content == "".join(pieces)
+    received = [text for text, p in zip(texts, seen) if p.phase == "receiving"]
+    assert received == ["move_to(0.3, ", "move_to(0.3, 0.0, 0.2)\n", "move_to(0.3, 0.0, 0.2)\nhome()", reply.content]
+    assert texts[0] == "" and texts[-1] == reply.content and seen[-1].phase == "done"
+    # each progress keeps the text of its moment (read after the whole reply arrived)
+    assert [p.text for p in seen] == texts and all(len(p.text) == p.chars for p in seen)
+
+
 @pytest.mark.parametrize("stream", [True, False])
 def test_a_reply_cut_at_max_tokens_says_so(llm_server, make_client, stream):
     llm_server.reply(LONG)

@@ -167,12 +167,23 @@ class ChatProgress:
     ``phase`` is ``"waiting"`` (the request was sent; no token yet), ``"receiving"`` (a streamed token arrived)
     or ``"done"``. ``tokens`` counts the reply's tokens so far (streamed chunks, or the server's
     ``completion_tokens``), ``chars`` its characters, ``elapsed_s`` the seconds since the call began.
+    :attr:`text` is the reply received so far (``chars`` characters, at most ``max_reply_chars``), so a UI
+    can show it as it arrives.
     """
 
     phase: str
     tokens: int
     chars: int
     elapsed_s: float
+    # The reply's pieces (a list that only grows) and how many of them had arrived: the text is joined
+    # only when read, so reporting every chunk of a long reply does not copy it once per chunk.
+    _parts: Sequence[str] = field(default=(), repr=False, compare=False)
+    _count: int = field(default=0, repr=False, compare=False)
+
+    @property
+    def text(self) -> str:
+        """The reply text received so far ("" while waiting; the whole reply when done)."""
+        return "".join(self._parts[: self._count])
 
 
 @runtime_checkable
@@ -517,12 +528,15 @@ class OpenAICompatible:
             max_tokens=payload.get("max_tokens"),
             streamed=streamed,
         )
-        self._progress("done", reply.completion_tokens or 0, len(content), started)
+        self._progress("done", reply.completion_tokens or 0, len(content), started, [content])
         return reply
 
-    def _progress(self, phase: str, tokens: int, chars: int, started: float) -> None:
+    def _progress(
+        self, phase: str, tokens: int, chars: int, started: float, parts: Sequence[str] = ()
+    ) -> None:
         if self.on_progress is not None:
-            self.on_progress(ChatProgress(phase, tokens, chars, max(self._clock() - started, 0.0)))
+            elapsed_s = max(self._clock() - started, 0.0)
+            self.on_progress(ChatProgress(phase, tokens, chars, elapsed_s, parts, len(parts)))
 
     # -- the model's context ------------------------------------------------
 
@@ -875,7 +889,7 @@ class OpenAICompatible:
                             f"chat reply from {url} is longer than {self.max_reply_chars:,} characters "
                             "(max_reply_chars); stopped reading: a reply that long is not a program"
                         )
-                    self._progress("receiving", tokens, chars, started)
+                    self._progress("receiving", tokens, chars, started, parts)
                 if isinstance(choice.get("finish_reason"), str):
                     finish = choice["finish_reason"]
             return False
