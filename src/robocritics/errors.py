@@ -75,3 +75,7 @@ class DeployError(RoboCriticsError):
 
 class RTDEError(DeployError):
     """The RTDE or Dashboard conversation with the controller failed."""
+
+
+class GoalError(RoboCriticsError, ValueError):
+    """A task goal (``"green_apple in white_box"``) is malformed or names ids the scene does not have."""
