@@ -21,7 +21,7 @@ from typing import Mapping
 
 from ..errors import RobotModelError
 
-__all__ = ["DH", "ArmSpec", "UR3E", "ARMS"]
+__all__ = ["DH", "ArmSpec", "UR3E", "UR5E", "UR10E", "UR16E", "ARMS"]
 
 _HALF_PI = 0.5 * math.pi
 _UR_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
@@ -185,5 +185,64 @@ UR3E = ArmSpec(
 )
 """The UR3e (e-series)."""
 
-ARMS: Mapping[str, ArmSpec] = MappingProxyType({UR3E.name: UR3E})
+def _ur_e_series(name: str, dh: DH, velocity_rad_s, effort_nm, link_masses_kg, velocity_source: str,
+                 effort_source: str) -> ArmSpec:
+    """An e-series arm: the family shares joint names, ranges, acceleration/jerk choices and the 500 Hz cycle."""
+    return ArmSpec(
+        name=name,
+        dh=dh,
+        joint_names=UR3E.joint_names,
+        lower_rad=UR3E.lower_rad,
+        upper_rad=UR3E.upper_rad,
+        velocity_rad_s=velocity_rad_s,
+        acceleration_rad_s2=UR3E.acceleration_rad_s2,
+        jerk_rad_s3=UR3E.jerk_rad_s3,
+        effort_nm=effort_nm,
+        link_masses_kg=link_masses_kg,
+        control_period_s=UR3E.control_period_s,
+        sources={**_UR_E_SERIES_SOURCES, "velocity_rad_s": velocity_source, "effort_nm": effort_source},
+    )
+
+
+_DEG = math.pi / 180.0
+# The speed and torque limits below were checked against UR's e-series user manuals v5.8 as transcribed
+# in Universal Robots' own ROS description (Universal_Robots_ROS2_Description, config/<arm>/joint_limits.yaml,
+# "Universal Robots e-Series, User Manual, <arm>, Version 5.8" and UR's support article "Max. joint torques");
+# e.g. the UR10e's shoulder_pan_joint max_velocity 2.0944 rad/s (120 deg/s), max_effort 330 N m.
+UR5E = _ur_e_series(
+    "ur5e",
+    DH.ur(d1=0.1625, a2=-0.425, a3=-0.3922, d4=0.1333, d5=0.0997, d6=0.0996, name="ur5e"),
+    velocity_rad_s=(180 * _DEG,) * 6,
+    effort_nm=(150.0, 150.0, 150.0, 28.0, 28.0, 28.0),
+    link_masses_kg=(3.761, 8.058, 2.846, 1.37, 1.3, 0.365),
+    velocity_source="UR5e technical specification / user manual v5.8: every joint 180 deg/s",
+    effort_source="UR support article 'Max. joint torques': UR5e 150/150/150/28/28/28 N m",
+)
+"""The UR5e (e-series), 850 mm reach."""
+
+UR10E = _ur_e_series(
+    "ur10e",
+    DH.ur(d1=0.1807, a2=-0.6127, a3=-0.57155, d4=0.17415, d5=0.11985, d6=0.11655, name="ur10e"),
+    velocity_rad_s=(120 * _DEG, 120 * _DEG, 180 * _DEG, 180 * _DEG, 180 * _DEG, 180 * _DEG),
+    effort_nm=(330.0, 330.0, 150.0, 56.0, 56.0, 56.0),
+    link_masses_kg=(7.369, 13.051, 3.989, 2.1, 1.98, 0.615),
+    velocity_source="UR10e technical specification / user manual v5.8: base, shoulder 120 deg/s; elbow, "
+    "wrists 180 deg/s",
+    effort_source="UR support article 'Max. joint torques': UR10e 330/330/150/56/56/56 N m",
+)
+"""The UR10e (e-series), 1300 mm reach."""
+
+UR16E = _ur_e_series(
+    "ur16e",
+    DH.ur(d1=0.1807, a2=-0.4784, a3=-0.36, d4=0.17415, d5=0.11985, d6=0.11655, name="ur16e"),
+    velocity_rad_s=(120 * _DEG, 120 * _DEG, 180 * _DEG, 180 * _DEG, 180 * _DEG, 180 * _DEG),
+    effort_nm=(330.0, 330.0, 150.0, 56.0, 56.0, 56.0),
+    link_masses_kg=(7.369, 10.45, 4.321, 2.18, 2.033, 0.907),
+    velocity_source="UR16e technical specification / user manual v5.8: base, shoulder 120 deg/s; elbow, "
+    "wrists 180 deg/s",
+    effort_source="UR support article 'Max. joint torques': UR16e 330/330/150/56/56/56 N m",
+)
+"""The UR16e (e-series), 900 mm reach."""
+
+ARMS: Mapping[str, ArmSpec] = MappingProxyType({arm.name: arm for arm in (UR3E, UR5E, UR10E, UR16E)})
 """Every arm this module knows, by name."""

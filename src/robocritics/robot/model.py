@@ -9,8 +9,16 @@ Conventions
   "Fingers straight down" is the rotation ``Rz(yaw) @ Rx(pi)``.
 * Collision geometry: each ``<cylinder>`` collision element of the URDF is read
   as the segment of a **capsule** of the same radius (URDF has no capsule
-  primitive). The two finger capsules are declared at full opening and slide
-  along the tcp y axis with the gripper opening.
+  primitive), a ``<sphere>`` as a capsule of zero length; a ``<mesh>`` or
+  ``<box>`` is refused with a :class:`RobotModelError` naming the link. The two
+  finger capsules are declared at full opening and slide along the tcp y axis
+  with the gripper opening.
+* ``continuous`` joints are read as revolute joints limited to +-2 pi rad (one
+  full turn either way, what a UR joint allows too).
+* ``dh=`` is cross-checked against the URDF at load: the ``tool0`` (flange)
+  frame of the URDF must be the DH chain's flange in several configurations.
+
+The whole contract is in docs/robots.md.
 
 Forward kinematics over a whole trajectory is vectorised: with ``oMi`` the joint
 placements, ``oMi[j] = oMi[parent(j)] @ M_j @ X_j(q_j)`` where ``M_j`` is the
@@ -33,7 +41,7 @@ import pinocchio as pin
 from ..errors import PlanningError, RobotModelError
 from ..trajectory import RobotLimits
 
-__all__ = ["Robot", "Capsule", "fingers_down"]
+__all__ = ["Robot", "Capsule", "fingers_down", "DH_TOLERANCE_M"]
 
 
 def fingers_down(yaw_rad: float = 0.0) -> np.ndarray:
@@ -68,6 +76,13 @@ def _read_only(values) -> np.ndarray:
 
 #: Joint angles this far outside a limit [rad] are rounding (IK, a controller's reading), not a violation.
 LIMIT_TOLERANCE_RAD = 1e-9
+
+#: Largest flange position difference [m] (and rotation difference [rad]) between a URDF and the ``dh=``
+#: given with it, over the check configurations, before the robot is refused.
+DH_TOLERANCE_M = 1e-6
+
+#: Limits of a URDF ``continuous`` joint, read as revolute [rad].
+CONTINUOUS_LIMIT_RAD = 2 * math.pi
 
 # Capsule pairs closer than this (m) with the arm stretched out (q = 0) are parts of one
 # housing (the compact UR wrist, base and shoulder column), not a pinch point to check.
@@ -109,12 +124,9 @@ class Robot:
         fixed_links: tuple[str, ...] = ("base_link", "shoulder_link"),
     ):
         self.urdf_path = Path(urdf_path)
-        try:
-            self.model = pin.buildModelFromUrdf(str(self.urdf_path))
-        except (RuntimeError, ValueError, OSError) as exc:
-            raise RobotModelError(f"cannot load URDF {str(self.urdf_path)!r}: {exc}") from None
+        self.model = _load_model(self.urdf_path)
         if self.model.nq != self.model.nv:
-            raise RobotModelError(f"{self.urdf_path}: continuous or spherical joints are not supported")
+            raise RobotModelError(f"{self.urdf_path}: spherical, planar or floating joints are not supported")
         self.name = name or self.model.name
         self.data = self.model.createData()
         self.dh = dh
@@ -131,16 +143,13 @@ class Robot:
             acceleration_limits if acceleration_limits is not None else 1.6 * self.velocity_limits
         )
         self.jerk_limits = _read_only(jerk_limits if jerk_limits is not None else 10.0 * self.acceleration_limits)
-        if not self.model.existFrame(tcp_frame, pin.FrameType.BODY):
-            raise RobotModelError(
-                f"{self.urdf_path}: no link {tcp_frame!r} for the TCP; links are "
-                + ", ".join(f.name for f in self.model.frames if f.type == pin.FrameType.BODY)
-            )
         self.tcp_frame = tcp_frame
-        self._tcp_frame_id = self.model.getFrameId(tcp_frame, pin.FrameType.BODY)
+        self._tcp_frame_id = self._body_frame_id(tcp_frame, "the TCP")
         self._parse_urdf_extras()
         self.fixed_links = tuple(fixed_links)
         self._build_fk_tables()
+        if dh is not None:
+            self._check_dh(dh)
         self.home_q = home if home is not None else np.clip(np.zeros(self.n), self.lower, self.upper)
         self.self_pairs: tuple[tuple[str, str], ...] = (
             self._default_self_pairs() if self_pairs is None else tuple((str(a), str(b)) for a, b in self_pairs)
@@ -155,7 +164,31 @@ class Robot:
         Each call returns an independent robot (the URDF is parsed once and its
         immutable parts shared).
         """
-        return _ur3e_cached().copy()
+        return _ur_cached("ur3e").copy()
+
+    @classmethod
+    def ur5e(cls) -> "Robot":
+        """The bundled UR5e (e-series DH, 850 mm reach), same gripper and TCP as :meth:`ur3e`."""
+        return _ur_cached("ur5e").copy()
+
+    @classmethod
+    def ur10e(cls) -> "Robot":
+        """The bundled UR10e (e-series DH, 1300 mm reach), same gripper and TCP as :meth:`ur3e`."""
+        return _ur_cached("ur10e").copy()
+
+    @classmethod
+    def ur16e(cls) -> "Robot":
+        """The bundled UR16e (e-series DH, 900 mm reach), same gripper and TCP as :meth:`ur3e`."""
+        return _ur_cached("ur16e").copy()
+
+    @classmethod
+    def ur(cls, name: str) -> "Robot":
+        """A bundled UR e-series arm by name: ``"ur3e"``, ``"ur5e"``, ``"ur10e"`` or ``"ur16e"``."""
+        from .arms import ARMS
+
+        if name not in ARMS:
+            raise RobotModelError(f"no bundled arm {name!r}; the bundled arms are {', '.join(ARMS)}")
+        return _ur_cached(name).copy()
 
     @classmethod
     def from_urdf(cls, path: str | Path, tcp_frame: str = "tcp", **kwargs) -> "Robot":
@@ -210,13 +243,21 @@ class Robot:
             lname = link.get("name")
             for k, col in enumerate(link.findall("collision")):
                 cyl = col.find("geometry/cylinder")
-                if cyl is None:
-                    continue
+                sphere = col.find("geometry/sphere")
+                if cyl is None and sphere is None:
+                    shapes = [g.tag for g in col.findall("geometry/*")] or ["no geometry"]
+                    detail = "".join(f" filename={g.get('filename')!r}" for g in col.findall("geometry/mesh"))
+                    raise RobotModelError(
+                        f"{self.urdf_path}: link {lname!r} has a <{shapes[0]}>{detail} collision; robocritics "
+                        "needs capsules: give each link <cylinder> collisions (read as capsules) or <sphere>s "
+                        "(see docs/robots.md, 'Collision geometry')"
+                    )
                 origin = col.find("origin")
                 xyz = np.array([float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()])
                 rpy = [float(v) for v in (origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split()]
                 axis = _rpy(*rpy)[:, 2]
-                half = float(cyl.get("length")) / 2
+                half = float(cyl.get("length")) / 2 if cyl is not None else 0.0
+                shape = cyl if cyl is not None else sphere
                 suffix = f"#{k}" if k else ""
                 capsules.append(
                     Capsule(
@@ -225,11 +266,14 @@ class Robot:
                         group="gripper" if lname in gripper_links else "arm",
                         p0=tuple(xyz - half * axis),
                         p1=tuple(xyz + half * axis),
-                        radius_m=float(cyl.get("radius")),
+                        radius_m=float(shape.get("radius")),
                     )
                 )
         if not capsules:
-            raise RobotModelError(f"{self.urdf_path}: no <cylinder> collision elements (read as capsules) found")
+            raise RobotModelError(
+                f"{self.urdf_path}: no <cylinder> or <sphere> collision elements (read as capsules) found; "
+                "see docs/robots.md, 'Collision geometry'"
+            )
         self.capsules = tuple(capsules)
 
     def _build_fk_tables(self) -> None:
@@ -271,6 +315,49 @@ class Robot:
         self._finger_sign = np.array(
             [(1.0 if c.frame == self.finger_links[0] else -1.0) if c.frame in self.finger_links else 0.0 for c in self.capsules]
         )
+
+    def _body_frame_id(self, name: str, role: str) -> int:
+        """Pinocchio's id of the link ``name`` (``role`` says what it is for in the error)."""
+        if not self.model.existFrame(name, pin.FrameType.BODY):
+            raise RobotModelError(
+                f"{self.urdf_path}: no link {name!r} for {role}; links are "
+                + ", ".join(f.name for f in self.model.frames if f.type == pin.FrameType.BODY)
+            )
+        return int(self.model.getFrameId(name, pin.FrameType.BODY))
+
+    def _check_dh(self, dh) -> None:
+        """Refuse ``dh`` unless the URDF's ``tool0`` is the DH flange (within ``DH_TOLERANCE_M``) at a
+        spread of configurations: a URDF in another base convention (ROS's UR description turns the
+        base 180 deg about z) would otherwise get IK solutions for the wrong arm."""
+        from .ik import dh_forward
+
+        flange = self._body_frame_id("tool0", "the flange that dh= describes")
+        if self.n != 6:
+            raise RobotModelError(f"{self.urdf_path}: dh= describes 6 joints, the URDF has {self.n}")
+        # zero, home-like and two off-axis configurations: each length and each twist shows in one of them
+        checks = np.array([
+            np.zeros(6),
+            [0.3, -1.2, 1.1, -0.7, 0.9, 0.4],
+            [-2.1, -0.4, -1.9, 2.2, -1.3, 2.7],
+            [1.0, 0.8, 0.5, 1.5, 2.0, -1.0],
+        ])
+        checks = np.clip(checks, self.lower, self.upper)
+        worst_m, worst_rad, worst_q = 0.0, 0.0, checks[0]
+        for q in checks:
+            pin.framesForwardKinematics(self.model, self.data, q)
+            urdf = self.data.oMf[flange].homogeneous
+            table = dh_forward(dh, q)
+            dp = float(np.linalg.norm(urdf[:3, 3] - table[:3, 3]))
+            dr = float(np.linalg.norm(pin.log3(urdf[:3, :3].T @ table[:3, :3])))
+            if max(dp, dr) > max(worst_m, worst_rad):
+                worst_m, worst_rad, worst_q = dp, dr, q
+        if worst_m > DH_TOLERANCE_M or worst_rad > DH_TOLERANCE_M:
+            raise RobotModelError(
+                f"{self.urdf_path}: the URDF's tool0 does not follow dh={getattr(dh, 'name', dh)!r}: at q = "
+                f"[{', '.join(f'{v:.2f}' for v in worst_q)}] rad it is {worst_m:.4f} m and {worst_rad:.4f} rad from "
+                "the DH flange. Check the base convention (ROS UR descriptions turn base_link 180 deg about z "
+                "against UR's DH base) and the joint zero offsets, or load it without dh= (numeric IK)"
+            )
 
     def _forward_static(self, q: np.ndarray) -> np.ndarray:
         return self.forward(q[None, :])[0]
@@ -430,25 +517,56 @@ class Robot:
         return f"Robot({self.name!r}, {self.n} joints, tcp={self.tcp_frame!r}, {len(self.capsules)} capsules)"
 
 
-_UR3E: Robot | None = None
+_UR_ROBOTS: dict[str, Robot] = {}
 
 
-def _ur3e_cached() -> Robot:
-    global _UR3E
-    if _UR3E is None:
-        from .arms import UR3E
+def _load_model(path: Path):
+    """The Pinocchio model of the URDF at ``path``; ``continuous`` joints read as revolute +-2 pi rad."""
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError) as exc:
+        raise RobotModelError(f"cannot load URDF {str(path)!r}: {exc}") from None
+    continuous = [j for j in root.iter("joint") if j.get("type") == "continuous"]
+    try:
+        if not continuous:
+            return pin.buildModelFromUrdf(str(path))
+        for joint in continuous:
+            # a continuous joint has no position limits; Pinocchio would model it as (cos, sin), which a
+            # planner over joint angles cannot use, and one turn either way is all any plan needs
+            joint.set("type", "revolute")
+            limit = joint.find("limit")
+            if limit is None:
+                raise RobotModelError(
+                    f"{path}: continuous joint {joint.get('name')!r} needs <limit velocity=... effort=...>"
+                )
+            limit.set("lower", repr(-CONTINUOUS_LIMIT_RAD))
+            limit.set("upper", repr(CONTINUOUS_LIMIT_RAD))
+        return pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
+    except (RuntimeError, ValueError, OSError) as exc:
+        raise RobotModelError(f"cannot load URDF {str(path)!r}: {exc}") from None
 
-        path = resources.files("robocritics.robot") / "models" / "ur3e.urdf"
+
+def _ur_cached(name: str) -> Robot:
+    """The bundled UR e-series arm ``name``, parsed once (callers copy it)."""
+    robot = _UR_ROBOTS.get(name)
+    if robot is None:
+        from .arms import ARMS, UR3E
+        from .ik import ur_reach
+
+        spec = ARMS[name]
+        path = resources.files("robocritics.robot") / "models" / f"{name}.urdf"
         robot = Robot(
             str(path),
             tcp_frame="tcp",
-            name=UR3E.name,
-            dh=UR3E.dh,
-            acceleration_limits=np.array(UR3E.acceleration_rad_s2),
-            jerk_limits=np.array(UR3E.jerk_rad_s3),
+            name=spec.name,
+            dh=spec.dh,
+            acceleration_limits=np.array(spec.acceleration_rad_s2),
+            jerk_limits=np.array(spec.jerk_rad_s3),
         )
-        # home: TCP 0.25 m in front of the base and 0.25 m above the table, fingers down, elbow up
+        # home: TCP in front of the base and above the table, fingers down, elbow up; 0.25 m and 0.25 m on
+        # the UR3e, scaled by reach on the larger arms
+        scale = ur_reach(spec.dh) / ur_reach(UR3E.dh)
         upright = np.array([math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0])
-        robot.home_q = robot.ik((0.25, 0.0, 0.25), seed=upright)
-        _UR3E = robot
-    return _UR3E
+        robot.home_q = robot.ik((0.25 * scale, 0.0, 0.25 * scale), seed=upright)
+        _UR_ROBOTS[name] = robot
+    return robot
