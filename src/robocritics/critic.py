@@ -73,6 +73,7 @@ from .verdict import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
+    from .goals import Goal
     from .scene import Scene
     from .simulate import Execution
     from .trajectory import Trajectory
@@ -230,6 +231,8 @@ def critique(
     scene: "Scene | None" = None,
     critics: Iterable[str | Critic] | str | None = None,
     params: Mapping[str, ParamsArg] | None = None,
+    *,
+    goals: "Iterable[str | Goal] | str | Goal | None" = None,
 ) -> Report:
     """Run critics on a trajectory in a scene and collect their verdicts in a :class:`Report`.
 
@@ -243,13 +246,27 @@ def critique(
     Unknown critic names, unknown or invalid parameters raise :class:`CriticError` naming
     the critic and the field; so does a critic that fails or returns something other than
     a :class:`Verdict`.
+    ``goals``: task goals (``"green_apple in white_box"`` or :class:`~robocritics.goals.Goal`) checked by the
+    ``task_outcome`` critic on an Execution's final scene, together with the program's ``expect(...)`` calls;
+    a bad goal raises :class:`~robocritics.errors.GoalError`. With no goal at all, the default selection skips
+    ``task_outcome`` (naming it in ``critics`` runs it: OK, nothing to check).
     """
     from .simulate import Execution
     from .trajectory import Trajectory
 
+    outcomes: list = []
     if isinstance(trajectory, Execution):
+        from .goals import check_outcomes
+
         scene = trajectory.scene if scene is None else scene
+        outcomes = check_outcomes(trajectory, goals)
         trajectory = trajectory.trajectory
+    elif goals:
+        raise CriticError(
+            "critique(..., goals=...) checks goals on the final scene, which only an Execution has: "
+            "pass the Execution that simulate() returned, not its trajectory"
+        )
+    critics, params = _task_outcome_selection(critics, params, outcomes)
     if not isinstance(trajectory, Trajectory):
         raise CriticError(f"critique() judges a Trajectory or an Execution, got {type(trajectory).__name__}")
     if scene is None:
@@ -278,3 +295,29 @@ def critique(
         duration_s=trajectory.duration_s,
         params=used,
     )
+
+
+def _task_outcome_selection(critics: Any, params: Mapping[str, ParamsArg] | None, outcomes: list) -> tuple[Any, dict]:
+    """The critic selection and params with the ``task_outcome`` critic fed the goals' ``outcomes``.
+
+    It runs in the default selection only when there are goals (installed or not: it ships with robocritics),
+    and whenever it is named; a trajectory carries no object poses, so its params carry the outcomes.
+    """
+    from .critics.task_outcome import NAME, TaskOutcomeCritic
+
+    available = get_critics()
+    builtin = available.get(NAME) or TaskOutcomeCritic()
+    if critics is None:
+        critics = [c for c in available.values() if c.name != NAME] + ([builtin] if outcomes else [])
+    else:
+        if isinstance(critics, str):
+            critics = [c.strip() for c in critics.split(",") if c.strip()]
+        critics = [builtin if c == NAME else c for c in critics]
+    params = dict(params or {})
+    if outcomes or NAME in params:
+        given = params.get(NAME)
+        given = given.model_dump() if isinstance(given, BaseModel) else dict(given or {})
+        params[NAME] = {**given, "outcomes": [o.model_dump() for o in outcomes]}
+        if not any(getattr(c, "name", None) == NAME for c in critics):
+            params.pop(NAME)  # goals given, but the caller chose critics without it
+    return critics, params

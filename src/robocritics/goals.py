@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from .scene import Scene
     from .simulate import Execution
 
-__all__ = ["Goal", "GoalError", "parse_goals"]
+__all__ = ["Goal", "GoalError", "parse_goals", "program_goals", "check_outcomes"]
 
 TABLE = "table"
 """The support id of the table top."""
@@ -154,4 +154,28 @@ def parse_goals(goals: "Iterable[str | Goal] | str | Goal | None", scene: "Scene
             goal.check(scene)
         if goal not in out:
             out.append(goal)
+    return out
+
+
+def program_goals(plan) -> list[tuple[Goal, int]]:
+    """The goals a program stated with ``expect(...)``: ``(goal, line)`` per call of :class:`~robocritics.program.Plan` ``plan``."""
+    return [
+        (Goal(object=c.args["object"], relation=c.args["relation"], target=c.args["target"]), c.line)
+        for c in plan.calls
+        if c.skill == "expect"
+    ]
+
+
+def check_outcomes(execution: "Execution", goals: "Iterable[str | Goal] | str | Goal | None" = None) -> list:
+    """:class:`~robocritics.critics.task_outcome.GoalOutcome` of every goal in ``goals`` and of the program's
+    ``expect(...)`` calls, checked on ``execution``'s final scene (duplicates once, with all their lines)."""
+    from .critics.task_outcome import GoalOutcome
+
+    lines: dict[Goal, list[int]] = {g: [] for g in parse_goals(goals, execution.scene)}
+    for goal, line in program_goals(execution.plan):
+        lines.setdefault(goal, []).append(line)
+    out = []
+    for goal, at in lines.items():
+        met, where = goal.outcome(execution)
+        out.append(GoalOutcome(goal=str(goal), met=met, where=where, object=goal.object, lines=tuple(at)))
     return out

@@ -25,6 +25,7 @@ skill                  args
 ``avoid_collision``    ``{"object": id}``
 ``home``               ``{}``
 ``wait``               ``{"seconds": s}`` (``0 <= s <= 10``)
+``expect``             ``{"object": id, "relation": "in" | "on", "target": id | "table"}`` (no motion)
 =====================  ===========================================================
 
 Numbers are Python ``float``; points are tuples of three floats; object ids

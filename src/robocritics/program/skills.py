@@ -59,6 +59,7 @@ __all__ = [
     "avoid_collision",
     "home",
     "wait",
+    "expect",
     "print",
 ]
 
@@ -604,6 +605,31 @@ def avoid_collision(obj):
     rec.record("avoid_collision", {"object": rec.object_id(obj, "avoid_collision", "obj")})
 
 
+def expect(obj, inside=None, on=None):
+    """State where an object should end up; the task_outcome critic checks it on the final scene. No motion.
+
+    Give exactly one of ``inside`` (a container) or ``on`` (another object, or "table").
+
+    Args:
+        obj: a scene object.
+        inside: the container it should end in.
+        on: the object it should rest on, or "table".
+    Example:
+        expect(green_apple, inside=white_box)
+    """
+    rec = _rec()
+    oid = rec.object_id(obj, "expect", "obj")
+    if (inside is None) == (on is None):
+        raise rec.error("expect: give exactly one of inside=<container> or on=<object or 'table'>")
+    if inside is not None:
+        relation, target = "in", rec.object_id(inside, "expect", "inside")
+    elif isinstance(on, str) and on == "table":
+        relation, target = "on", "table"
+    else:
+        relation, target = "on", rec.object_id(on, "expect", "on")
+    rec.record("expect", {"object": oid, "relation": relation, "target": target})
+
+
 def home():
     """Move back to the robot's home pose (joint-space move).
 
@@ -654,6 +680,7 @@ SKILLS: dict[str, Callable[..., None]] = {
         avoid_collision,
         home,
         wait,
+        expect,
     )
 }
 """The motion skills by name. Every one of them records a SkillCall; ``print`` is separate."""

@@ -741,6 +741,9 @@ class Planner:
         step = self.add_step(call)
         self.event("obstacle", step, call, f"{oid} is an obstacle; later moves cross above it")
 
+    def do_expect(self, call: SkillCall) -> None:
+        """A stated goal (checked by the task_outcome critic on the final scene): no motion, no step."""
+
     def do_close_gripper(self, call: SkillCall) -> None:
         tcp = self.tcp()
         cand = None if self.attached else self.grasp_candidate(tcp)

@@ -1,0 +1,96 @@
+"""Task outcome: did every object end where the task's goals say? (planning level)
+
+Goals (:class:`robocritics.goals.Goal`: ``"green_apple in white_box"``, ``"cupcake on plate"``) come from
+``critique(execution, goals=[...])``, ``--goal`` on the command line, and the program's own
+``expect(obj, inside=container)`` / ``expect(obj, on=support)`` calls. A trajectory carries no object poses,
+so :func:`robocritics.critique` checks the goals on the execution's final scene and hands the outcomes to this
+critic in its params (``outcomes``); the critic turns them into a verdict:
+
+* ERROR when any goal is unmet, naming each object and where it ended (e.g. "green_apple ended on the table
+  at (0.31, -0.12) m, 0.18 m from white_box");
+* OK when all are met;
+* OK with the message "no task goals were given: nothing to check" when there are none (it is not skipped, so
+  a report always says whether the outcome was checked).
+
+It is not part of the 0-10 score (:attr:`robocritics.report.Report.scored_verdicts`: the five motion
+critics), but its Error makes ``Report.has_errors`` true and ``Report.passed`` false.
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from .. import hookimpl
+from ..critic import CriticParams, Evidence, Flag, Verdict
+
+__all__ = ["TaskOutcomeCritic", "GoalOutcome", "register_critics"]
+
+NAME = "task_outcome"
+
+
+class GoalOutcome(BaseModel):
+    """One goal checked on a final scene: the goal's text, whether it holds, where the object ended."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    goal: str
+    met: bool
+    where: str
+    object: str = ""
+    lines: tuple[int, ...] = Field((), description="program lines of the expect() calls that stated it")
+
+
+class Params(CriticParams):
+    outcomes: tuple[GoalOutcome, ...] = Field(
+        (), description="goals checked on the final scene (filled by critique() from its goals and the program's expect())"
+    )
+
+
+class TaskOutcomeCritic:
+    name = NAME
+    description = "Task goals (object in container / on support) checked on the final scene."
+    Params = Params
+
+    def check(self, trajectory, scene, params: Params) -> Verdict:
+        outcomes = params.outcomes
+        if not outcomes:
+            return Verdict(
+                critic=NAME,
+                flag=Flag.OK,
+                message="no task goals were given: nothing to check",
+                hint="state goals with --goal 'obj in container', critique(..., goals=[...]) or expect(obj, inside=box)",
+            )
+        unmet = [o for o in outcomes if not o.met]
+        met = len(outcomes) - len(unmet)
+        details = {"goals": [o.model_dump(mode="json") for o in outcomes]}
+        if not unmet:
+            return Verdict(
+                critic=NAME,
+                flag=Flag.OK,
+                message=f"all {len(outcomes)} task goal{'s' if len(outcomes) > 1 else ''} met: "
+                + "; ".join(o.goal for o in outcomes),
+                value=float(met),
+                threshold=float(len(outcomes)),
+                unit="goals",
+                details=details,
+            )
+        lines = sorted({line for o in unmet for line in o.lines})
+        return Verdict(
+            critic=NAME,
+            flag=Flag.ERROR,
+            message=f"{len(unmet)} of {len(outcomes)} task goals unmet: "
+            + "; ".join(f"'{o.goal}' — {o.where}" for o in unmet),
+            hint="change where the program releases "
+            + ", ".join(dict.fromkeys(o.object for o in unmet if o.object))
+            + " (its last open_gripper), or check that it is grasped at all (a missed grasp leaves it in place)",
+            value=float(met),
+            threshold=float(len(outcomes)),
+            unit="goals",
+            evidence=Evidence(objects=list(dict.fromkeys(o.object for o in unmet if o.object)), lines=lines),
+            details=details,
+        )
+
+
+@hookimpl
+def register_critics(register):
+    register(TaskOutcomeCritic())
