@@ -284,6 +284,8 @@ class Planner:
         self.objects: dict[str, SceneObject] = {o.id: o for o in scene.objects}
         self.obstacles: list[str] = []
         self.resting_on: dict[str, str] = {}
+        # the object just grasped: what rests on it falls at the first sample of the next motion (the lift)
+        self.pending_lift: str = ""
         # accumulated samples
         self.q_parts: list[np.ndarray] = []
         self.t_parts: list[np.ndarray] = []
@@ -477,8 +479,10 @@ class Planner:
                 best, best_d = oid, d
         return best
 
-    def support_below(self, oid: str, position: np.ndarray, half_height: float, radius: float) -> tuple[str, float]:
-        """The entity an object at ``position`` would settle on, and the z of that surface."""
+    def support_below(
+        self, oid: str, position: np.ndarray, half_height: float, radius: float, ignore: str = ""
+    ) -> tuple[str, float]:
+        """The entity an object at ``position`` would settle on (not object ``ignore``), and the z of that surface [m]."""
         best_id, best_z = "table", self.scene.table.top_z
         for c in self.scene.containers:
             on_floor = (position[0], position[1], c.floor_top + ON_SURFACE_M)
@@ -487,7 +491,7 @@ class Planner:
                     best_id, best_z = c.id, c.floor_top
         footprint, gap = self.settings.stack_footprint_fraction, self.settings.stack_gap_m
         for other_id, other in self.objects.items():
-            if other_id == oid:
+            if other_id == oid or other_id == ignore:
                 continue
             horizontal = math.hypot(other.position[0] - position[0], other.position[1] - position[1])
             if horizontal < max(radius, other.width / 2) * footprint and other.top <= position[2] - half_height + gap:
@@ -653,6 +657,8 @@ class Planner:
                 if handler is None:
                     raise PlanningError(f"the planner does not know the skill {call.skill!r}", line=call.line)
                 self.call = call
+                if self.pending_lift and call.skill not in _FIXED_TIME_SKILLS and call.skill != "expect":
+                    self.drop_unsupported(self.pending_lift, call)
                 handler(call)
         except (_StopTiming, PlanningError):  # _StopTiming only comes once the budget was passed
             if self.passed is None:
@@ -741,6 +747,39 @@ class Planner:
         step = self.add_step(call)
         self.event("obstacle", step, call, f"{oid} is an obstacle; later moves cross above it")
 
+    def drop_unsupported(self, lifted: str, call: SkillCall) -> None:
+        """Everything resting on ``lifted`` (transitively) falls to the highest support below its footprint.
+
+        Runs as the lift starts (the first sample of the motion after the grasp), so the fall is instantaneous
+        at that sample; lower objects settle first so that a stack keeps its order.
+        """
+        self.pending_lift = ""
+        others = [oid for oid in self.objects if oid not in (lifted, self.attached)]
+        support = {}
+        for oid in others:
+            o = self.objects[oid]
+            support[oid] = self.resting_on.get(oid) or self.support_below(oid, np.asarray(o.position), o.half_height, o.width / 2)[0]
+        falling: set[str] = set()
+        frontier = [lifted]
+        while frontier:
+            below = frontier.pop()
+            for oid in others:
+                if support[oid] == below and oid not in falling:
+                    falling.add(oid)
+                    frontier.append(oid)
+        step = len(self.steps) - 1
+        for oid in sorted(falling, key=lambda i: self.objects[i].bottom):
+            o = self.objects[oid]
+            below, z = self.support_below(oid, np.asarray(o.position), o.half_height, o.width / 2, ignore=lifted)
+            settled = (o.position[0], o.position[1], z + o.half_height)
+            drop = o.position[2] - settled[2]
+            self.objects[oid] = o.moved_to(settled)
+            self.resting_on[oid] = below
+            pose = np.eye(4)
+            pose[:3, :3], pose[:3, 3] = rpy_matrix(o.rpy), settled
+            self.rest_changes.append((oid, self.sample_count, pose))
+            self.event("fall", step, call, f"{oid} fell onto {below} ({drop * 100:.1f} cm) as {lifted} was lifted")
+
     def do_expect(self, call: SkillCall) -> None:
         """A stated goal (checked by the task_outcome critic on the final scene): no motion, no step."""
 
@@ -760,6 +799,7 @@ class Planner:
         pose[:3, :3], pose[:3, 3] = rpy_matrix(obj.rpy), obj.position
         self.grasp_offset = np.linalg.inv(tcp) @ pose
         self.attached = cand
+        self.pending_lift = cand
         self.carry.append((cand, self.sample_count, -1, self.grasp_offset))
         self.event("grasp", step, call, f"grasped {cand}")
 
@@ -774,6 +814,8 @@ class Planner:
             oid, first, _, offset = self.carry[-1]
             self.carry[-1] = (oid, first, self.sample_count, offset)
             self.attached = ""
+            if self.pending_lift == released:  # let go before lifting: what rests on it stays supported
+                self.pending_lift = ""
         self.gripper_move(self.robot.max_opening_m, step)
         if released:
             obj = self.objects[released]
@@ -814,7 +856,7 @@ class Planner:
     def object_poses(self, tcp: np.ndarray) -> dict[str, np.ndarray]:
         """Per-sample pose ``(T, 4, 4)`` of every object that moves during the program."""
         T = tcp.shape[0]
-        moved = {c[0] for c in self.carry}
+        moved = {c[0] for c in self.carry} | {r[0] for r in self.rest_changes}  # carried or fallen
         out: dict[str, np.ndarray] = {}
         for oid in moved:
             o = next(o for o in self.scene.objects if o.id == oid)
