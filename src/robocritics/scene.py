@@ -513,10 +513,14 @@ class Table(_Model):
 
 
 class Workspace(_Model):
-    """The allowed workspace W_allowed: a sphere (m) above the plane ``min_z``."""
+    """The allowed workspace W_allowed: a sphere (m) above the plane ``min_z``.
+
+    A scene without one follows its robot: ``robot.scene_for(scene)`` puts in ``robot.workspace``, the reach
+    sphere around that robot's shoulder. The field defaults are the UR3e's (the bundled scenes' robot).
+    """
 
     center: Vec3 = Field((0.0, 0.0, UR3E.dh.d1), description="sphere centre, m (default: UR3e shoulder)")
-    radius_m: Length = Field(0.5, description="sphere radius, m (default: UR3e reach)")
+    radius_m: Length = Field(UR3E.reach_m, description="sphere radius, m (default: UR3e reach)")
 
     @property
     def volume_m3(self) -> float:

@@ -135,6 +135,8 @@ class ArmSpec:
     """Masses of the six moving links (shoulder ... wrist 3) [kg]."""
     control_period_s: float
     """Controller cycle: one servo setpoint per period [s]."""
+    reach_m: float
+    """Published reach [m]: the radius of the default workspace sphere around the shoulder."""
     sources: Mapping[str, str] = field(default_factory=dict)
     """Where each group of numbers comes from (field name -> citation or reason)."""
 
@@ -160,6 +162,7 @@ _UR_E_SERIES_SOURCES = {
     "effort_nm": "UR3e technical specification: joint torques 56/56/28/12/12/12 N m",
     "link_masses_kg": "Universal Robots, 'DH parameters for calculations of kinematics and dynamics' (masses)",
     "control_period_s": "UR e-series: 500 Hz controller cycle (RTDE up to 500 Hz, servoj t = 0.002 s)",
+    "reach_m": "UR e-series technical specifications: reach 500 / 850 / 1300 / 900 mm (UR3e / UR5e / UR10e / UR16e)",
 }
 
 UR3E = ArmSpec(
@@ -181,11 +184,12 @@ UR3E = ArmSpec(
     effort_nm=(56.0, 56.0, 28.0, 12.0, 12.0, 12.0),
     link_masses_kg=(1.98, 3.4445, 1.437, 0.871, 0.805, 0.261),
     control_period_s=0.002,
+    reach_m=0.5,
     sources=_UR_E_SERIES_SOURCES,
 )
 """The UR3e (e-series)."""
 
-def _ur_e_series(name: str, dh: DH, velocity_rad_s, effort_nm, link_masses_kg, velocity_source: str,
+def _ur_e_series(name: str, dh: DH, reach_m: float, velocity_rad_s, effort_nm, link_masses_kg, velocity_source: str,
                  effort_source: str) -> ArmSpec:
     """An e-series arm: the family shares joint names, ranges, acceleration/jerk choices and the 500 Hz cycle."""
     return ArmSpec(
@@ -200,6 +204,7 @@ def _ur_e_series(name: str, dh: DH, velocity_rad_s, effort_nm, link_masses_kg, v
         effort_nm=effort_nm,
         link_masses_kg=link_masses_kg,
         control_period_s=UR3E.control_period_s,
+        reach_m=reach_m,
         sources={**_UR_E_SERIES_SOURCES, "velocity_rad_s": velocity_source, "effort_nm": effort_source},
     )
 
@@ -212,6 +217,7 @@ _DEG = math.pi / 180.0
 UR5E = _ur_e_series(
     "ur5e",
     DH.ur(d1=0.1625, a2=-0.425, a3=-0.3922, d4=0.1333, d5=0.0997, d6=0.0996, name="ur5e"),
+    reach_m=0.85,
     velocity_rad_s=(180 * _DEG,) * 6,
     effort_nm=(150.0, 150.0, 150.0, 28.0, 28.0, 28.0),
     link_masses_kg=(3.761, 8.058, 2.846, 1.37, 1.3, 0.365),
@@ -223,6 +229,7 @@ UR5E = _ur_e_series(
 UR10E = _ur_e_series(
     "ur10e",
     DH.ur(d1=0.1807, a2=-0.6127, a3=-0.57155, d4=0.17415, d5=0.11985, d6=0.11655, name="ur10e"),
+    reach_m=1.3,
     velocity_rad_s=(120 * _DEG, 120 * _DEG, 180 * _DEG, 180 * _DEG, 180 * _DEG, 180 * _DEG),
     effort_nm=(330.0, 330.0, 150.0, 56.0, 56.0, 56.0),
     link_masses_kg=(7.369, 13.051, 3.989, 2.1, 1.98, 0.615),
@@ -235,6 +242,7 @@ UR10E = _ur_e_series(
 UR16E = _ur_e_series(
     "ur16e",
     DH.ur(d1=0.1807, a2=-0.4784, a3=-0.36, d4=0.17415, d5=0.11985, d6=0.11655, name="ur16e"),
+    reach_m=0.9,
     velocity_rad_s=(120 * _DEG, 120 * _DEG, 180 * _DEG, 180 * _DEG, 180 * _DEG, 180 * _DEG),
     effort_nm=(330.0, 330.0, 150.0, 56.0, 56.0, 56.0),
     link_masses_kg=(7.369, 10.45, 4.321, 2.18, 2.033, 0.907),

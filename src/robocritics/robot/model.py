@@ -117,6 +117,7 @@ class Robot:
         tcp_frame: str = "tcp",
         name: str | None = None,
         dh=None,
+        reach_m: float | None = None,
         acceleration_limits: np.ndarray | None = None,
         jerk_limits: np.ndarray | None = None,
         home: np.ndarray | None = None,
@@ -150,6 +151,7 @@ class Robot:
         self._build_fk_tables()
         if dh is not None:
             self._check_dh(dh)
+        self._set_reach(reach_m)
         self.home_q = home if home is not None else np.clip(np.zeros(self.n), self.lower, self.upper)
         self.self_pairs: tuple[tuple[str, str], ...] = (
             self._default_self_pairs() if self_pairs is None else tuple((str(a), str(b)) for a, b in self_pairs)
@@ -324,6 +326,42 @@ class Robot:
                 + ", ".join(f.name for f in self.model.frames if f.type == pin.FrameType.BODY)
             )
         return int(self.model.getFrameId(name, pin.FrameType.BODY))
+
+    def _set_reach(self, reach_m: float | None) -> None:
+        """``shoulder_m``: the origin of the second joint at q = 0 (on the base axis for UR-like arms);
+        ``reach_m``: given, else the TCP's distance from it along the stretched-out chain (an upper bound)."""
+        frames = self.forward(np.zeros(self.n))
+        joint_origins = [None] * self.model.njoints
+        for j in range(1, self.model.njoints):
+            parent = self._joint_parents[j]
+            base = np.eye(4) if parent == 0 else joint_origins[parent]
+            joint_origins[j] = base @ self._joint_placements[j]  # q = 0: no joint motion
+        shoulder = joint_origins[min(2, self.model.njoints - 1)][:3, 3]
+        self.shoulder_m = _read_only(shoulder)
+        if reach_m is None:
+            # stretched out: the sum of the joint-to-joint steps from the shoulder to the TCP
+            chain, j = [frames[self.tcp_index][:3, 3]], int(self._frame_parent[self.tcp_index])
+            while j >= 2:
+                chain.append(joint_origins[j][:3, 3])
+                j = self._joint_parents[j]
+            reach_m = float(sum(np.linalg.norm(a - b) for a, b in zip(chain, chain[1:])))
+        if not (math.isfinite(reach_m) and reach_m > 0):
+            raise RobotModelError(f"{self.urdf_path}: reach_m must be a positive length in m, got {reach_m!r}")
+        self.reach_m = float(reach_m)
+
+    @property
+    def workspace(self):
+        """The default allowed workspace for this robot: a :class:`~robocritics.scene.Workspace` sphere of
+        radius ``reach_m`` around the shoulder (for the UR3e exactly the scene default)."""
+        from ..scene import Workspace
+
+        return Workspace(center=tuple(float(v) for v in self.shoulder_m), radius_m=self.reach_m)
+
+    def scene_for(self, scene):
+        """``scene`` with this robot's :attr:`workspace` unless the scene gives its own ``workspace``."""
+        if "workspace" in scene.model_fields_set:
+            return scene
+        return scene.model_copy(update={"workspace": self.workspace})
 
     def _check_dh(self, dh) -> None:
         """Refuse ``dh`` unless the URDF's ``tool0`` is the DH flange (within ``DH_TOLERANCE_M``) at a
@@ -560,6 +598,7 @@ def _ur_cached(name: str) -> Robot:
             tcp_frame="tcp",
             name=spec.name,
             dh=spec.dh,
+            reach_m=spec.reach_m,
             acceleration_limits=np.array(spec.acceleration_rad_s2),
             jerk_limits=np.array(spec.jerk_rad_s3),
         )
