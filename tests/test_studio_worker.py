@@ -192,6 +192,50 @@ def test_the_cpu_limit_is_an_error_naming_it(sorting):
         assert ev.evaluate("home()\n").error is None
 
 
+def status_bytes(pid: int, key: str) -> int:
+    line = next(row for row in Path(f"/proc/{pid}/status").read_text().splitlines() if row.startswith(key + ":"))
+    return int(line.split()[1]) * 1024
+
+
+def test_a_job_past_the_memory_limit_is_an_error_and_the_next_job_works(sorting):
+    with Evaluator(sorting) as probe:  # the address space a warm child needs
+        assert probe.evaluate("home()\n").ok
+        warm = status_bytes(probe.pid, "VmPeak")
+        probe.evaluate(LONG)
+        assert status_bytes(probe.pid, "VmPeak") > warm + 100 * 1024**2  # the long motion needs >100 MB more
+    limit = warm + 50 * 1024**2
+    with Evaluator(sorting, memory_bytes=limit) as ev:
+        assert ev.evaluate("home()\n").ok
+        over = ev.evaluate(LONG)
+        assert over.error["type"] == "EvaluatorError" and over.error["limit"] == "memory_bytes"
+        assert over.error["value"] == limit and f"memory_bytes={limit}" in over.error["message"]
+        assert ev.evaluate("home()\n").ok
+
+
+def test_a_robot_given_is_sent_to_the_child(sorting):
+    from robocritics.robot.model import Robot
+
+    robot = Robot.ur3e()
+    with Evaluator(sorting, robot, critics=["joint_speed"]) as ev:
+        evaluation = ev.evaluate(SHORT)
+    assert evaluation.ok
+    assert evaluation.execution.trajectory.content_hash() == simulate(SHORT, sorting, robot).trajectory.content_hash()
+
+
+def test_close_during_a_job_ends_it_with_an_error(sorting):
+    ev = Evaluator(sorting)
+    assert ev.evaluate("home()\n").ok
+    done: list[Evaluation] = []
+    worker = threading.Thread(target=lambda: done.append(ev.evaluate(LONG)))
+    worker.start()
+    while not ev._lock.locked():
+        threading.Event().wait(0.005)
+    ev.close()
+    worker.join(60)
+    assert done and done[0].error["type"] == "EvaluatorError" and "closed" in done[0].error["message"]
+    assert ev.pid is None and ev.restarts == 0
+
+
 def test_a_child_that_cannot_start_within_its_memory_is_an_error(sorting):
     with Evaluator(sorting, memory_bytes=64 * 1024**2) as ev:
         evaluation = ev.evaluate(SHORT)

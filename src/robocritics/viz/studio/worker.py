@@ -21,6 +21,11 @@ segfault, ``os._exit``, killed), is reported as an :class:`EvaluatorError` in
 :attr:`Evaluation.error` and the child is replaced, so the next job works.
 Jobs run one at a time (a lock): the Evaluator is safe to share between
 threads.
+
+The ``spawn`` child re-imports the main module of a script, as every spawned
+multiprocessing child does: a script that makes an Evaluator at import time
+must do so under ``if __name__ == "__main__":`` (console scripts, notebooks and
+pytest need nothing).
 """
 
 from __future__ import annotations
