@@ -74,6 +74,7 @@ from .verdict import (
 
 if TYPE_CHECKING:  # pragma: no cover
     from .goals import Goal
+    from .program.plan import Plan
     from .scene import Scene
     from .simulate import Execution
     from .trajectory import Trajectory
@@ -87,6 +88,9 @@ __all__ = [
     "Verdict",
     "Report",
     "critique",
+    "check_program",
+    "runtime_report",
+    "RUNTIME",
     "select_critics",
     "get_critics",
     "critic_sources",
@@ -321,3 +325,65 @@ def _task_outcome_selection(critics: Any, params: Mapping[str, ParamsArg] | None
         if not any(getattr(c, "name", None) == NAME for c in critics):
             params.pop(NAME)  # goals given, but the caller chose critics without it
     return critics, params
+
+
+RUNTIME = "runtime"
+"""Critic name of the verdict of a program that does not run (:func:`check_program`)."""
+
+_RUNTIME_HINTS = {
+    "ProgramError": "fix the program at the line named: the sandbox rejected it or it failed while running",
+    "MotionBudgetError": "shorten the motion: fewer or faster moves, shorter waits, fewer loop iterations",
+    "PlanningError": "change the motion at the line named so it can be planned: a reachable target, a hover "
+    "height the arm reaches, a speed of at least 1 %",
+}
+
+
+def runtime_report(error: "RoboCriticsError") -> Report:
+    """The report of a program that did not run: one ERROR verdict of critic ``runtime`` (score 0).
+
+    ``error`` is the :class:`~robocritics.errors.ProgramError` or :class:`~robocritics.errors.PlanningError`
+    it raised; the verdict's message is its text, ``evidence.lines`` its line (when known), ``details`` its type.
+    """
+    line = int(getattr(error, "line", 0) or 0)
+    kind = type(error).__name__
+    hint = next((h for name, h in _RUNTIME_HINTS.items() if name in [c.__name__ for c in type(error).__mro__]), "")
+    verdict = Verdict(
+        critic=RUNTIME,
+        flag=Flag.ERROR,
+        message=f"the program does not run: {kind}: {error}",
+        hint=hint,
+        evidence=Evidence(lines=[line] if line > 0 else []),
+        details={"error": kind, "line": line, "text": str(error), "reason": str(getattr(error, "reason", error))},
+    )
+    return Report(verdicts=[verdict], trajectory_hash="", samples=0, duration_s=0.0, params={})
+
+
+def check_program(
+    program: "str | Plan",
+    scene: "Scene",
+    *,
+    goals: "Iterable[str | Goal] | str | Goal | None" = None,
+    critics: Iterable[str | Critic] | str | None = None,
+    params: Mapping[str, ParamsArg] | None = None,
+    robot: Any = None,
+    sample_rate_hz: float = 125.0,
+) -> "tuple[Execution | None, Report]":
+    """Simulate ``program`` in ``scene`` and critique it: ``(execution, report)``, a report even when it does not run.
+
+    A program the sandbox rejects (:class:`~robocritics.errors.ProgramError`) or whose motion cannot be planned
+    (:class:`~robocritics.errors.PlanningError`, including the motion budget) gives ``(None, report)`` with one
+    ERROR verdict of the ``runtime`` critic naming the line (:func:`runtime_report`; score 0), so callers treat
+    it like any failing report. Bad input of the caller — unknown critics or params (:class:`CriticError`),
+    malformed goals (:class:`~robocritics.errors.GoalError`), a bad scene — still raises, before simulating.
+    """
+    from .errors import PlanningError, ProgramError
+    from .goals import parse_goals
+    from .simulate import simulate
+
+    goals = parse_goals(goals, scene)
+    select_critics(critics, params)  # fail fast, before a slow simulation
+    try:
+        execution = simulate(program, scene, robot=robot, sample_rate_hz=sample_rate_hz)
+    except (ProgramError, PlanningError) as exc:
+        return None, runtime_report(exc)
+    return execution, critique(execution, critics=critics, params=params, goals=goals)

@@ -164,7 +164,11 @@ class Report(BaseModel):
         return (
             f"RoboCritics report: score {self.score_text} ({status})"
             + (f"; beside the score: {beside}" if beside else "")
-            + f"; {self.samples} samples, {self.duration_s:.2f} s, trajectory {self.trajectory_hash[:12]}"
+            + (
+                f"; {self.samples} samples, {self.duration_s:.2f} s, trajectory {self.trajectory_hash[:12]}"
+                if self.trajectory_hash
+                else "; no motion (the program did not run)"  # robocritics.critic.runtime_report
+            )
         )
 
     def to_text(self, width: int = 100) -> str:

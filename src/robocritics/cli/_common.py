@@ -223,3 +223,28 @@ def add_critic_options(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help='JSON file of threshold overrides, e.g. {"joint_speed": {"warn_speed_m_s": 0.8}}',
     )
+
+
+def goal_text(text: str):
+    """A ``--goal`` value: ``'OBJECT in CONTAINER'`` or ``'OBJECT on SUPPORT'`` (:meth:`robocritics.goals.Goal.parse`)."""
+    from ..goals import Goal, GoalError
+
+    try:
+        return Goal.parse(text)
+    except GoalError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_goal_option(parser: argparse.ArgumentParser) -> None:
+    """``--goal 'OBJ in BOX'`` (repeatable): task goals the ``task_outcome`` critic checks on the final scene;
+    shared by ``check``, ``run``, ``fix`` and ``studio``. Parsed values are :class:`~robocritics.goals.Goal`."""
+    parser.add_argument(
+        "--goal",
+        metavar="'OBJ in|on TARGET'",
+        dest="goals",
+        action="append",
+        type=goal_text,
+        default=[],
+        help="a task goal checked on the final scene, e.g. 'green_apple in white_box' or 'cupcake on plate' "
+        "(repeatable); the program's own expect(...) calls are checked too",
+    )

@@ -5,7 +5,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ._common import UsageError, add_critic_options, load_params, read_text, sample_rate, scene_for, subcommand
+from ._common import (
+    UsageError,
+    add_critic_options,
+    add_goal_option,
+    load_params,
+    one_line,
+    read_text,
+    sample_rate,
+    scene_for,
+    subcommand,
+)
 
 
 @subcommand("check")
@@ -15,7 +25,10 @@ def _build_check(sub) -> None:
         help="simulate a robot program and run the critics on its motion",
         description="Simulate PROGRAM in a scene, run the critics on the trajectory and print the report. "
         "The score is the 0-10 index of the five built-in motion critics; other critics are reported beside it. "
-        "Exit status: 0 no Error verdict (from any critic), 1 at least one Error, 2 bad input.",
+        "A program that does not run (rejected by the sandbox, or a motion that cannot be planned) gets a report "
+        "with one 'runtime' Error naming the line. "
+        "Exit status: 0 no Error verdict (from any critic), 1 at least one Error (or the program does not run), "
+        "2 bad input.",
     )
     p.add_argument("program", metavar="PROGRAM", help="robot program file (Python using the skill API)")
     p.add_argument(
@@ -25,6 +38,7 @@ def _build_check(sub) -> None:
         "scene the program's file name starts with (sorting_naive.py -> sorting), else an empty table",
     )
     add_critic_options(p)
+    add_goal_option(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument(
         "--html",
@@ -44,8 +58,10 @@ def _build_check(sub) -> None:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from ..critic import critique, select_critics
-    from ..simulate import simulate
+    import sys
+
+    from ..critic import check_program
+    from ..goals import parse_goals
 
     source = read_text(args.program, "program")
     if args.html:
@@ -55,10 +71,15 @@ def _cmd_check(args: argparse.Namespace) -> int:
     scene = scene_for(args.program, args.scene)
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
-    select_critics(critics, params)  # fail fast on bad names or params, before simulating
-    execution = simulate(source, scene, sample_rate_hz=args.rate)
-    report = critique(execution, critics=critics, params=params)
+    goals = parse_goals(args.goals, scene)  # GoalError naming a wrong id, before simulating
+    execution, report = check_program(source, scene, goals=goals, critics=critics, params=params, sample_rate_hz=args.rate)
     print(report.to_json() if args.json else report.to_text())
+    if execution is None:  # the program did not run: its error, as before, beside the report
+        verdict = report.verdicts[0]
+        print(f"robocritics: error: {verdict.details['error']}: {one_line(verdict.details['text'])}", file=sys.stderr)
+        if args.html:
+            print(f"robocritics: no replay written to {args.html}: the program did not run", file=sys.stderr)
+        return 1
     if args.html:
         from ..viz import write_replay_html
 

@@ -48,7 +48,7 @@ from typing import TextIO
 
 import math
 
-from ._common import add_critic_options, bounded_float, load_params, one_line, positive_int, subcommand
+from ._common import add_critic_options, add_goal_option, bounded_float, load_params, one_line, positive_int, subcommand
 from ..errors import LLMError, RoboCriticsError
 
 __all__ = ["add_run_parser", "run_command"]
@@ -106,6 +106,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         help=f"most model replies with --auto (default {_MAX_ATTEMPTS}, as in the paper)",
     )
     add_critic_options(p)
+    add_goal_option(p)
     p.add_argument("--memory", metavar="FILE", help="interaction memory (SQLite file, created if missing)")
     p.add_argument(
         "--embedded-rules",
@@ -245,6 +246,7 @@ def _print_attempt(attempt, out: TextIO) -> None:
 def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
     """Handle ``robocritics run`` (see the module docstring); returns the exit status."""
     from ..critic import select_critics
+    from ..goals import parse_goals
     from ..scene import Scene
     from ..simulate import check_scene_ids
     from ..llm.client import OpenAICompatible
@@ -269,8 +271,11 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         params = load_params(getattr(args, "params", None)) or None
         critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
         select_critics(critics, params)
+        goals = parse_goals(getattr(args, "goals", None), scene)
     except RoboCriticsError as exc:
         return _error(str(exc), err)
+    if goals:  # the model is asked to state them with expect(...), which the task_outcome critic checks
+        task += "\nGoals (checked on the final scene; state each with expect(...)): " + "; ".join(map(str, goals))
     try:
         client = OpenAICompatible(
             base_url=args.base_url,

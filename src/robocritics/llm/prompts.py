@@ -177,7 +177,9 @@ _RULES = f"""\
 4. The program is simulated before the robot moves. You will be told if it fails to run, if a
    motion cannot be planned, or what expert critics found in the simulated motion; then revise it.
 5. When asked to revise and you are satisfied that the current program needs no change, answer
-   "{COMPLETE_MARKER}" with no code."""
+   "{COMPLETE_MARKER}" with no code.
+6. State where each object you move should end up with `expect(obj, inside=container)` or
+   `expect(obj, on=support)`; the final scene is checked against it."""
 
 
 def _clean_description(text: str) -> str:
@@ -316,7 +318,8 @@ _SHORT_RULES = f"""\
 # Rules
 Use only the API's skills and the scene variables. Answer with the complete program in one ```python
 block; every revision is the whole program again. It is simulated and checked first; you will be told
-what failed. When asked to revise and the program needs no change, answer "{COMPLETE_MARKER}"."""
+what failed. When asked to revise and the program needs no change, answer "{COMPLETE_MARKER}".
+State where each moved object should end with expect(obj, inside=box) or expect(obj, on=support)."""
 
 
 def estimate_tokens(messages: str | Iterable[Mapping[str, Any]]) -> int:
