@@ -160,6 +160,16 @@ def test_a_child_that_dies_during_a_job_is_an_error_and_replaced(evaluator, sig,
     assert evaluator.evaluate(SHORT).ok
 
 
+def test_the_rlimit_cpu_backstop_is_reported_as_the_cpu_limit(evaluator):
+    # SIGXCPU is what the kernel sends at RLIMIT_CPU's soft limit (the backstop behind the parent's watchdog)
+    killer = kill_while_busy(evaluator, signal.SIGXCPU)
+    evaluation = evaluator.evaluate(LONG)
+    killer.join(10)
+    assert evaluation.error["type"] == "EvaluatorError" and evaluation.error["limit"] == "cpu_s"
+    assert "RLIMIT_CPU" in evaluation.error["message"] and f"{evaluator.cpu_s:g} s" in evaluation.error["message"]
+    assert evaluator.evaluate(SHORT).ok
+
+
 def test_a_child_killed_between_jobs_is_replaced_before_the_next(evaluator):
     evaluator.evaluate(SHORT)
     pid = evaluator.pid
