@@ -1,0 +1,276 @@
+"""The local engine: a pool of warm, resource-limited worker processes on this machine.
+
+Each worker is a ``spawn`` child (the caller may have threads; forking them is unsafe) started with
+single-threaded BLAS (:data:`WORKER_ENV`, set in its environment before it imports numpy: with
+several workers, a multi-threaded BLAS in each only fights for the same cores). It loads the robot
+once, then evaluates rows one at a time, keeping the scenes it has loaded. Limits, set per worker:
+
+* address space (``RLIMIT_AS``, ``memory_bytes``): a row that runs out of memory ends its worker;
+* wall-clock time per row (``timeout_s``): the parent kills a worker whose row takes longer.
+
+A worker that dies during a row (out of memory, segfault, ``os._exit``, killed) or exceeds its timeout
+is replaced, and its row is an error row of type ``WorkerDied``/``WorkerTimeout``/``WorkerMemory``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import resource
+import signal
+import threading
+import time
+from collections import deque
+from collections.abc import Iterator
+from multiprocessing.connection import wait
+from typing import Any
+
+from ..errors import RoboCriticsError
+from .rows import Job, SceneCache, error_row, evaluate_job
+
+__all__ = ["LocalEngine", "BatchError", "WORKER_ENV", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_BYTES"]
+
+#: Environment every worker starts with: one BLAS/OpenMP thread each.
+WORKER_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "VECLIB_MAXIMUM_THREADS": "1",
+    "NUMEXPR_NUM_THREADS": "1",
+}
+#: Wall-clock seconds one row may take in a worker.
+DEFAULT_TIMEOUT_S = 60.0
+#: Address-space limit of a worker, bytes (a checked bundled program peaks near 0.5 GB of address space).
+DEFAULT_MEMORY_BYTES = 3 * 1024**3
+#: Wall-clock seconds a worker may take to start (imports, the robot model).
+STARTUP_TIMEOUT_S = 120.0
+#: Workers in a row that may fail to start before the batch stops with a BatchError.
+MAX_START_FAILURES = 3
+# How often the parent wakes to check timeouts when no worker has answered, s.
+_TICK_S = 0.05
+# os.environ is process-wide: starting workers with WORKER_ENV is done under this lock.
+_ENV_LOCK = threading.Lock()
+
+
+class BatchError(RoboCriticsError):
+    """The batch itself cannot run (a worker cannot start, a missing engine): not one row's problem."""
+
+
+def _serve(conn, robot, memory_bytes: int, sample_rate_hz: float) -> None:
+    """A worker's main loop: set the limit, load the robot, then answer Jobs with output rows."""
+    os.environ.update(WORKER_ENV)  # for anything this process starts
+    resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+    try:
+        from ..robot.model import Robot
+
+        robot = robot if robot is not None else Robot.ur3e()
+    except BaseException as exc:  # noqa: BLE001 - the parent raises it as a BatchError
+        conn.send(("failed", f"{type(exc).__name__}: {exc}"))
+        return
+    scenes = SceneCache()
+    conn.send(("ready", os.getpid()))
+    while True:
+        try:
+            job = conn.recv()
+        except EOFError:
+            return
+        try:
+            conn.send(("row", evaluate_job(job, robot, scenes, sample_rate_hz)))
+        except MemoryError:
+            try:
+                conn.send(("memory", None))
+            finally:
+                os._exit(1)
+
+
+class _Worker:
+    """One child process and the row it is working on."""
+
+    def __init__(self, context, robot, memory_bytes: int, sample_rate_hz: float):
+        parent, child = context.Pipe()
+        self.process = context.Process(
+            target=_serve, args=(child, robot, memory_bytes, sample_rate_hz), name="robocritics-batch", daemon=True
+        )
+        with _ENV_LOCK:
+            saved = {k: os.environ.get(k) for k in WORKER_ENV}
+            os.environ.update(WORKER_ENV)
+            try:
+                self.process.start()
+            finally:
+                for k, v in saved.items():
+                    if v is None:
+                        os.environ.pop(k, None)
+                    else:
+                        os.environ[k] = v
+        child.close()
+        self.conn = parent
+        self.ready = False
+        self.started = time.monotonic()
+        self.job: Job | None = None
+        self.job_started = 0.0
+
+    @property
+    def pid(self) -> int | None:
+        return self.process.pid
+
+    def kill(self) -> None:
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join(10.0)
+        self.conn.close()
+
+    def death(self) -> str:
+        self.process.join(5.0)
+        code = self.process.exitcode
+        if code is not None and code < 0:
+            try:
+                return f"signal {signal.Signals(-code).name}"
+            except ValueError:
+                return f"signal {-code}"
+        return f"exit code {code}"
+
+
+class LocalEngine:
+    """A pool of ``workers`` warm processes (default: the CPU count) evaluating Jobs.
+
+    ``robot`` (default the UR3e, loaded in each worker) is pickled to each worker once;
+    ``timeout_s`` is the wall-clock limit per row, s; ``memory_bytes`` a worker's address-space
+    limit, bytes; ``sample_rate_hz`` the trajectories' sample rate, Hz. Use it as a context manager.
+    """
+
+    def __init__(
+        self,
+        workers: int | None = None,
+        *,
+        robot=None,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+        memory_bytes: int = DEFAULT_MEMORY_BYTES,
+        sample_rate_hz: float = 125.0,
+    ):
+        workers = (os.cpu_count() or 1) if workers is None else workers
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+            raise ValueError(f"workers must be a whole number of at least 1, got {workers!r}")
+        if not timeout_s > 0 or not memory_bytes > 0:
+            raise ValueError(f"timeout_s and memory_bytes must be positive, got {timeout_s}, {memory_bytes}")
+        self.workers = workers
+        self.timeout_s = float(timeout_s)
+        self.memory_bytes = int(memory_bytes)
+        self._args = (robot, self.memory_bytes, float(sample_rate_hz))
+        self._context = multiprocessing.get_context("spawn")
+        self._pool: list[_Worker] = []
+        self._start_failures = 0
+        self.restarts = 0  # workers replaced after a death or a limit
+        self._lock = threading.Lock()
+
+    # --- lifetime ---
+
+    def __enter__(self) -> LocalEngine:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop every worker. Idempotent."""
+        pool, self._pool = self._pool, []
+        for w in pool:
+            w.kill()
+
+    def running(self) -> dict[int, Any]:
+        """``{worker pid: id of the row it is evaluating}`` right now (for monitoring)."""
+        with self._lock:
+            return {w.pid: w.job.id for w in self._pool if w.job is not None and w.pid is not None}
+
+    def _spawn(self) -> _Worker:
+        return _Worker(self._context, *self._args)
+
+    def _replace(self, worker: _Worker) -> None:
+        worker.kill()
+        with self._lock:
+            self._pool[self._pool.index(worker)] = self._spawn()
+        self.restarts += 1
+
+    # --- rows ---
+
+    def run(self, jobs: Iterator[Job], side: list[dict] | None = None) -> Iterator[dict]:
+        """Evaluate ``jobs``, yielding one output row per job as each finishes (not in input order), and the
+        rows appended to ``side`` (error rows of bad input) as they appear."""
+        side = [] if side is None else side
+        while len(self._pool) < self.workers:
+            self._pool.append(self._spawn())
+        queue: deque[Job] = deque()
+        exhausted = False
+        while True:
+            while side:
+                yield side.pop(0)
+            for w in self._pool:  # give every idle, ready worker a job
+                if w.ready and w.job is None:
+                    if not queue and not exhausted:
+                        nxt = next(jobs, None)
+                        exhausted = nxt is None
+                        if nxt is not None:
+                            queue.append(nxt)
+                    if queue:
+                        with self._lock:
+                            w.job, w.job_started = queue.popleft(), time.monotonic()
+                        w.conn.send(w.job)
+            if exhausted and not queue and all(w.job is None for w in self._pool):
+                yield from side
+                return
+            ready = set(wait([w.conn for w in self._pool] + [w.process.sentinel for w in self._pool], _TICK_S))
+            now = time.monotonic()
+            for w in list(self._pool):
+                row = self._poll(w, w.conn in ready or w.process.sentinel in ready, now)
+                if row is not None:
+                    yield row
+
+    def _poll(self, w: _Worker, signalled: bool, now: float) -> dict | None:
+        """The row ``w`` finished, or its error row if it died or timed out (then it is replaced)."""
+        job = w.job
+        if signalled:
+            try:
+                message = w.conn.recv() if w.conn.poll() else None
+            except (EOFError, OSError):  # the pipe's end closed: the worker is gone
+                message = ("died", None)
+            if message is None:
+                if w.process.is_alive():
+                    return None
+                message = ("died", None)
+            kind, value = message
+            if kind == "ready":
+                w.ready, self._start_failures = True, 0
+                return None
+            if kind == "row":
+                with self._lock:
+                    w.job = None
+                return value
+            if kind == "failed" or not w.ready:
+                self._start_failure(w, value or f"the worker died while starting ({w.death()})")
+                return None
+            if job is None:  # died between rows
+                self._replace(w)
+                return None
+            duration = now - w.job_started
+            if kind == "memory":
+                text = f"the row ran out of memory (the worker's address-space limit is {self.memory_bytes} bytes)"
+                row = error_row(job.id, "WorkerMemory", text, duration_s=duration)
+            else:
+                row = error_row(job.id, "WorkerDied", f"the worker process died during the row ({w.death()})", duration_s=duration)
+            self._replace(w)
+            return row
+        if not w.ready and now - w.started > STARTUP_TIMEOUT_S:
+            self._start_failure(w, f"the worker did not start within {STARTUP_TIMEOUT_S:g} s")
+        elif job is not None and now - w.job_started > self.timeout_s:
+            duration = now - w.job_started
+            self._replace(w)
+            return error_row(
+                job.id, "WorkerTimeout", f"the row took longer than its timeout of {self.timeout_s:g} s", duration_s=duration
+            )
+        return None
+
+    def _start_failure(self, w: _Worker, why: str) -> None:
+        self._start_failures += 1
+        if self._start_failures >= MAX_START_FAILURES:
+            self.close()
+            raise BatchError(f"a batch worker could not start ({self._start_failures} times): {why}")
+        self._replace(w)

@@ -1,0 +1,169 @@
+"""The Ray engine: the same rows on a Ray cluster (local by default), one warm actor per worker.
+
+Needs the optional extra ``robocritics[ray]``. Each actor loads the robot once (the ``robot`` given is put
+in Ray's object store once and shipped to every actor) and keeps the scenes it has loaded; rows are
+evaluated by the same function as the local engine's (:func:`~robocritics.batch.rows.evaluate_job`), so the
+results are equal. An actor that dies or whose row exceeds ``timeout_s`` is replaced and its row is an
+error row (``WorkerDied``/``WorkerTimeout``; ``WorkerMemory`` for a MemoryError).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+from typing import Any
+
+from .local import DEFAULT_TIMEOUT_S, WORKER_ENV, BatchError
+from .rows import Job, SceneCache, error_row, evaluate_job
+
+__all__ = ["RayEngine", "import_ray"]
+
+_TICK_S = 0.05
+
+
+def import_ray():
+    """The ``ray`` module, or a BatchError naming the extra that installs it."""
+    try:
+        import ray
+    except ImportError:
+        raise BatchError(
+            "the ray engine needs Ray: install the extra with pip install 'robocritics[ray]' (ray>=2.9)"
+        ) from None
+    return ray
+
+
+class _Actor:
+    """A Ray actor: the robot loaded once, scenes cached, rows evaluated one at a time."""
+
+    def __init__(self, robot, sample_rate_hz: float):
+        from ..robot.model import Robot
+
+        self.robot = robot if robot is not None else Robot.ur3e()
+        self.scenes = SceneCache()
+        self.sample_rate_hz = sample_rate_hz
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def evaluate(self, job: Job) -> dict:
+        try:
+            return evaluate_job(job, self.robot, self.scenes, self.sample_rate_hz)
+        except MemoryError:
+            return {"memory": True}
+
+
+class RayEngine:
+    """``workers`` Ray actors (default: the cluster's CPUs) evaluating Jobs; use it as a context manager.
+
+    ``address`` names a running cluster (``"ray://host:10001"`` or ``"auto"``); by default, if Ray is not
+    initialised yet, a local one is started bound to 127.0.0.1 (and shut down on :meth:`close`).
+    """
+
+    def __init__(
+        self,
+        workers: int | None = None,
+        *,
+        robot=None,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+        sample_rate_hz: float = 125.0,
+        address: str | None = None,
+    ):
+        ray = self._ray = import_ray()
+        if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+            raise ValueError(f"workers must be a whole number of at least 1, got {workers!r}")
+        if not timeout_s > 0:
+            raise ValueError(f"timeout_s must be positive, got {timeout_s}")
+        self._owns_ray = not ray.is_initialized()
+        if self._owns_ray:
+            options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
+            if address is None:
+                options.update(_node_ip_address="127.0.0.1", num_cpus=workers)
+            ray.init(address=address, **options)
+        self.workers = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        self.timeout_s = float(timeout_s)
+        self.restarts = 0
+        self._robot_ref = ray.put(robot)
+        self._sample_rate_hz = float(sample_rate_hz)
+        self._remote = ray.remote(num_cpus=1, max_restarts=0)(_Actor)
+        self._actors: list = []
+
+    def _spawn(self):
+        return self._remote.options(runtime_env={"env_vars": dict(WORKER_ENV)}).remote(
+            self._robot_ref, self._sample_rate_hz
+        )
+
+    def __enter__(self) -> RayEngine:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Kill the actors (and shut down the local Ray this engine started). Idempotent."""
+        actors, self._actors = self._actors, []
+        for a in actors:
+            self._ray.kill(a)
+        if self._owns_ray and self._ray.is_initialized():
+            self._ray.shutdown()
+        self._owns_ray = False
+
+    def pids(self) -> list[int]:
+        """The actors' process ids."""
+        return self._ray.get([a.pid.remote() for a in self._actors])
+
+    def run(self, jobs: Iterator[Job], side: list[dict] | None = None) -> Iterator[dict]:
+        """Evaluate ``jobs``, yielding output rows as they finish, and the rows appended to ``side``."""
+        ray = self._ray
+        side = [] if side is None else side
+        while len(self._actors) < self.workers:
+            self._actors.append(self._spawn())
+        idle = list(self._actors)
+        flight: dict[Any, tuple[Any, Job, float]] = {}  # ObjectRef -> (actor, job, started)
+        exhausted = False
+        while True:
+            while side:
+                yield side.pop(0)
+            while idle and not exhausted:
+                job = next(jobs, None)
+                if job is None:
+                    exhausted = True
+                    break
+                actor = idle.pop()
+                flight[actor.evaluate.remote(job)] = (actor, job, time.monotonic())
+            if not flight:
+                if exhausted:
+                    yield from side
+                    return
+                continue
+            done, _ = ray.wait(list(flight), num_returns=1, timeout=_TICK_S)
+            now = time.monotonic()
+            for ref in done:
+                actor, job, started = flight.pop(ref)
+                try:
+                    row = ray.get(ref)
+                except ray.exceptions.RayActorError as exc:
+                    why = " ".join(str(exc).split())[:300]
+                    yield error_row(job.id, "WorkerDied", f"the worker process died during the row: {why}", duration_s=now - started)
+                    idle.append(self._replace(actor))
+                    continue
+                if "memory" in row:
+                    yield error_row(job.id, "WorkerMemory", "the row ran out of memory", duration_s=now - started)
+                    idle.append(self._replace(actor))
+                    continue
+                idle.append(actor)
+                yield row
+            for ref, (actor, job, started) in list(flight.items()):
+                if now - started > self.timeout_s:
+                    flight.pop(ref)
+                    yield error_row(
+                        job.id, "WorkerTimeout", f"the row took longer than its timeout of {self.timeout_s:g} s", duration_s=now - started
+                    )
+                    idle.append(self._replace(actor))
+
+    def _replace(self, actor):
+        self._ray.kill(actor, no_restart=True)
+        fresh = self._spawn()
+        self._actors[self._actors.index(actor)] = fresh
+        self.restarts += 1
+        return fresh

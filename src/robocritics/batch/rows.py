@@ -1,0 +1,176 @@
+"""Batch rows: checking an input row, evaluating one in-process, and the output row.
+
+An input row is a mapping ``{"id", "scene", "program", "goal"?, "critics"?, "params"?}``:
+
+* ``id`` — a non-empty string or an integer, unique within the batch;
+* ``scene`` — a built-in scene name (``"sorting"``), a scene JSON file path, or an inline scene object;
+* ``program`` — the program's source text;
+* ``goal`` — optional: a goal string (``"green_apple in white_box"``) or a list of them, checked by the
+  ``task_outcome`` critic on the final scene;
+* ``critics`` — optional: critic names (a list or a comma-separated string), default every installed critic;
+* ``params`` — optional: ``{critic: {field: value}}`` thresholds.
+
+An output row is ``{"id", "score", "flags", "passed", "duration_s", "samples", "error"}``: ``score`` the
+0-10 program quality index (None on error), ``flags`` ``{critic: "OK"|"WARNING"|"ERROR"}``, ``passed``
+whether every critic gave OK, ``duration_s`` the wall time the row took in its worker, s, ``samples`` the
+trajectory's sample count, ``error`` None or ``{"type", "message", "line"}`` (``line`` the program line,
+None when the error is not in the program).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import OrderedDict
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+__all__ = ["Job", "RowError", "check_row", "error_row", "evaluate_job", "SceneCache", "OUTPUT_KEYS"]
+
+#: The keys of every output row, in this order.
+OUTPUT_KEYS = ("id", "score", "flags", "passed", "duration_s", "samples", "error")
+_INPUT_KEYS = {"id", "scene", "program", "goal", "critics", "params"}
+#: Longest id accepted, characters (ids are echoed in every output row).
+MAX_ID_CHARS = 200
+#: Scenes a worker keeps loaded (most recently used first out last).
+SCENE_CACHE_SIZE = 32
+
+
+class RowError(Exception):
+    """An input row that cannot be evaluated (missing id, wrong types, duplicate id); the message says which field."""
+
+
+@dataclass(frozen=True)
+class Job:
+    """One checked input row, ready to send to a worker (plain data: it pickles)."""
+
+    id: str | int
+    scene: str | dict
+    program: str
+    goals: tuple[str, ...] | None = None
+    critics: tuple[str, ...] | None = None
+    params: dict | None = None
+
+
+def error_row(row_id: Any, kind: str, message: str, line: int | None = None, duration_s: float = 0.0) -> dict:
+    """An output row for a row that could not be evaluated."""
+    return {
+        "id": row_id,
+        "score": None,
+        "flags": {},
+        "passed": False,
+        "duration_s": float(duration_s),
+        "samples": 0,
+        "error": {"type": kind, "message": message, "line": line},
+    }
+
+
+def _strings(value: Any, field: str) -> tuple[str, ...]:
+    if isinstance(value, str):
+        value = [v.strip() for v in value.split(",")] if field == "critics" else [value]
+    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v.strip() for v in value):
+        raise RowError(f"{field!r} must be a string or a list of non-empty strings, got {type(value).__name__}")
+    return tuple(v.strip() for v in value)
+
+
+def check_row(row: Any) -> Job:
+    """The :class:`Job` of input ``row``; :class:`RowError` naming the field if it is not a valid row."""
+    if not isinstance(row, Mapping):
+        raise RowError(f"a row must be an object with 'id', 'scene' and 'program', got {type(row).__name__}")
+    if "id" not in row:
+        raise RowError("the row has no 'id'")
+    row_id = row["id"]
+    if isinstance(row_id, bool) or not isinstance(row_id, (str, int)) or row_id == "":
+        raise RowError(f"'id' must be a non-empty string or an integer, got {json.dumps(row_id, default=repr)[:60]}")
+    if isinstance(row_id, str) and len(row_id) > MAX_ID_CHARS:
+        raise RowError(f"'id' is longer than {MAX_ID_CHARS} characters")
+    unknown = sorted(set(map(str, row)) - _INPUT_KEYS)
+    if unknown:
+        raise RowError(f"unknown field {unknown[0]!r} (a row has {', '.join(sorted(_INPUT_KEYS))})")
+    for field in ("scene", "program"):
+        if field not in row:
+            raise RowError(f"the row has no {field!r}")
+    scene = row["scene"]
+    if not (isinstance(scene, str) and scene.strip()) and not isinstance(scene, Mapping):
+        raise RowError(f"'scene' must be a scene name, a scene file path or a scene object, got {type(scene).__name__}")
+    if not isinstance(row["program"], str):
+        raise RowError(f"'program' must be the program's source text (a string), got {type(row['program']).__name__}")
+    params = row.get("params")
+    if params is not None and not (isinstance(params, Mapping) and all(isinstance(v, Mapping) for v in params.values())):
+        raise RowError("'params' must be an object {critic: {field: value}}")
+    return Job(
+        id=row_id,
+        scene=dict(scene) if isinstance(scene, Mapping) else scene.strip(),
+        program=row["program"],
+        goals=None if row.get("goal") is None else _strings(row["goal"], "goal"),
+        critics=None if row.get("critics") is None else _strings(row["critics"], "critics"),
+        params=None if params is None else {str(k): dict(v) for k, v in params.items()},
+    )
+
+
+class SceneCache:
+    """Scenes loaded by a worker, keyed by their spec (name, path, or the inline object's JSON)."""
+
+    def __init__(self, size: int = SCENE_CACHE_SIZE):
+        self.size = size
+        self._scenes: OrderedDict[str, Any] = OrderedDict()
+
+    def get(self, spec: str | dict):
+        from ..scene import Scene
+
+        key = spec if isinstance(spec, str) else json.dumps(spec, sort_keys=True, default=str)
+        if key in self._scenes:
+            self._scenes.move_to_end(key)
+            return self._scenes[key]
+        if isinstance(spec, dict):
+            scene = Scene.model_validate(spec)
+        elif spec in Scene.builtin_names() or ("/" not in spec and not spec.endswith(".json") and not Path(spec).exists()):
+            scene = Scene.builtin(spec)  # a name: an unknown one's error lists the built-in names
+        else:
+            scene = Scene.resolve(spec)
+        self._scenes[key] = scene
+        if len(self._scenes) > self.size:
+            self._scenes.popitem(last=False)
+        return scene
+
+
+def _error_of(exc: BaseException) -> dict:
+    line = getattr(exc, "line", None)
+    return {
+        "type": type(exc).__name__,
+        "message": str(getattr(exc, "reason", None) or exc),
+        "line": int(line) if isinstance(line, int) and line > 0 else None,
+    }
+
+
+def evaluate_job(job: Job, robot, scenes: SceneCache, sample_rate_hz: float = 125.0) -> dict:
+    """Simulate and critique ``job`` in this process; every library error becomes the row's ``error``."""
+    from ..critic import critique
+    from ..errors import RoboCriticsError
+    from ..simulate import simulate
+
+    started = time.perf_counter()
+    try:
+        scene = scenes.get(job.scene)
+        execution = simulate(job.program, scene, robot, sample_rate_hz=sample_rate_hz)
+        report = critique(execution, critics=list(job.critics) if job.critics else None, params=job.params,
+                          goals=list(job.goals) if job.goals else None)  # fmt: skip
+    except MemoryError:
+        raise  # the worker's heap may be in any state: its engine replaces it
+    except Exception as exc:  # noqa: BLE001 - a library error, or a plugin's bug: the row says which
+        row = error_row(job.id, "", "", duration_s=time.perf_counter() - started)
+        row["error"] = _error_of(exc)
+        if not isinstance(exc, RoboCriticsError):
+            row["error"]["message"] = f"{type(exc).__name__}: {exc}"
+        return row
+    return {
+        "id": job.id,
+        "score": float(report.score),
+        "flags": {v.critic: v.flag.value for v in report.verdicts},
+        "passed": bool(report.passed),
+        "duration_s": time.perf_counter() - started,
+        "samples": int(report.samples),
+        "error": None,
+    }
