@@ -162,14 +162,14 @@ def _serve(conn, scene, robot, critics, params, sample_rate_hz, memory_bytes) ->
         from ...simulate import simulate
 
         robot = robot if robot is not None else Robot.ur3e()
-        rate = {} if sample_rate_hz is None else {"sample_rate_hz": sample_rate_hz}
-        # warm up: the first check builds the scene's collision models and the critics' caches
-        critique(simulate(_WARM_UP, scene, robot, **rate).trajectory, scene, critics, params)
-    except RoboCriticsError:
-        pass  # a scene or critic the warm-up cannot check: each job reports its own error
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which raises it typed
         conn.send(("failed", f"{type(exc).__name__}: {exc}"))
         return
+    rate = {} if sample_rate_hz is None else {"sample_rate_hz": sample_rate_hz}
+    try:  # warm up: the first check builds the scene's collision models and the critics' caches
+        critique(simulate(_WARM_UP, scene, robot, **rate).trajectory, scene, critics, params)
+    except RoboCriticsError:
+        pass  # a scene or critic the warm-up cannot check: each job reports its own error
     conn.send(("ready", os.getpid()))
     hard = resource.getrlimit(resource.RLIMIT_CPU)[1]
     while True:
@@ -184,21 +184,24 @@ def _serve(conn, scene, robot, critics, params, sample_rate_hz, memory_bytes) ->
         try:
             execution = simulate(program, scene, robot, **rate)
             report = critique(execution.trajectory, scene, job_critics, job_params)
-            answer = ("done", execution, report, None)
-        except RoboCriticsError as exc:
-            answer = ("done", None, None, _error_dict(exc))
+            conn.send(("done", execution, report, None, time.process_time() - used))
         except MemoryError:
-            # the heap may be in any state: say why and let the parent start a fresh child
-            conn.send(("memory", time.process_time() - used))
-            os._exit(1)
-        except Exception as exc:  # noqa: BLE001 - a bug in a check; the parent reports it, the child lives on
-            traceback.print_exc()
-            answer = ("done", None, None, _error_dict(exc))
-        try:
-            conn.send((*answer, time.process_time() - used))
-        except MemoryError:
-            conn.send(("memory", time.process_time() - used))
-            os._exit(1)
+            _out_of_memory(conn, time.process_time() - used)
+        except Exception as exc:  # noqa: BLE001 - typed errors, a bug in a check, a result that does not pickle
+            if not isinstance(exc, RoboCriticsError):
+                traceback.print_exc()
+            try:
+                conn.send(("done", None, None, _error_dict(exc), time.process_time() - used))
+            except MemoryError:
+                _out_of_memory(conn, time.process_time() - used)
+
+
+def _out_of_memory(conn, cpu_s: float) -> None:
+    """Tell the parent the job ran out of memory, then exit: the heap may be in any state."""
+    try:
+        conn.send(("memory", cpu_s))
+    finally:
+        os._exit(1)
 
 
 # --- the parent -----------------------------------------------------------------------------------
