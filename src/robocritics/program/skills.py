@@ -627,6 +627,12 @@ def expect(obj, inside=None, on=None):
         relation, target = "on", "table"
     else:
         relation, target = "on", rec.object_id(on, "expect", "on")
+    from ..goals import Goal, GoalError
+
+    try:  # inside= a container, on= an object: the task_outcome critic can only check those
+        Goal(object=oid, relation=relation, target=target).check(rec.scene)
+    except GoalError as exc:
+        raise rec.error(f"expect: {exc}") from None
     rec.record("expect", {"object": oid, "relation": relation, "target": target})
 
 
