@@ -27,6 +27,9 @@ cause                rule
 ``program_running``  ``runtime_state`` is not STOPPED (another program runs)
 ``start_mismatch``   the first sample is farther than ``start_tolerance_rad``
                      from ``actual_q`` on some joint
+``arm_model``        the dashboard's ``get robot model`` is not the arm the
+                     trajectory was planned for (``trajectory.robot_name``,
+                     e.g. a UR10e plan on a UR5e), or cannot be asked
 ``secondary_         (dry run only) the secondary interface does not accept
 interface``          connections
 ===================  ===========================================================
@@ -45,6 +48,7 @@ import numpy as np
 from robocritics.deploy.rtde import RobotMode, RuntimeState, SafetyMode, mode_name
 from robocritics.deploy.stream import StreamPlan
 from robocritics.errors import DeployError
+from robocritics.robot.arms import ARMS
 from robocritics.report import Report
 from robocritics.simulate import Execution
 from robocritics.trajectory import Trajectory
@@ -56,6 +60,7 @@ __all__ = [
     "check_report",
     "check_trajectory",
     "check_robot",
+    "check_model",
     "START_MISMATCH_HINT",
 ]
 
@@ -150,6 +155,33 @@ def check_trajectory(trajectory: Trajectory, plan: StreamPlan) -> list[Reason]:
         f"{j} ({trajectory.limits.joint_names[j]}) at {speed[worst]:.3f} rad/s > its limit {vlim[j]:.3f} rad/s; "
         "the controller would protective-stop",
     )]
+
+
+def check_model(trajectory: Trajectory, reported_model: str | None, *, dashboard_error: str = "") -> list[Reason]:
+    """``arm_model``: the controller is the arm ``trajectory`` was planned for.
+
+    ``reported_model`` is the dashboard's answer to ``get robot model`` (``"UR3"``, ``"UR5"``, ``"UR10"``,
+    ``"UR16"``; None with ``dashboard_error`` when it could not be asked). A trajectory planned for an
+    arm robocritics does not bundle (``Robot.from_urdf``) cannot be matched and is refused too: joint
+    angles mean a pose only on the arm they were planned for.
+    """
+    spec = ARMS.get(trajectory.robot_name)
+    if spec is None:
+        known = ", ".join(ARMS)
+        return [("arm_model", f"the trajectory was planned for {trajectory.robot_name or 'an unnamed robot'!r}, "
+                              f"not one of the UR arms deploy knows ({known}); plan it with Robot.ur5e() etc.")]
+    if reported_model is None:
+        return [("arm_model", f"cannot ask the dashboard which arm this is ('get robot model'): {dashboard_error}")]
+    reported = reported_model.strip().upper()
+    if reported != spec.dashboard_model:
+        return [("arm_model", f"the trajectory was planned for a {spec.name} but the controller reports "
+                              f"{reported_model.strip()!r} (a {spec.name} reports {spec.dashboard_model!r}); plan it "
+                              f"for this arm (e.g. Robot.{ARMS_BY_DASHBOARD.get(reported, 'ur(...)')}())")]
+    return []
+
+
+ARMS_BY_DASHBOARD = {spec.dashboard_model: spec.name for spec in ARMS.values()}
+"""The bundled arm's name for each dashboard ``get robot model`` answer (``"UR5"`` -> ``"ur5e"``)."""
 
 
 def check_robot(

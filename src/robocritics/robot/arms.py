@@ -147,6 +147,12 @@ class ArmSpec:
         object.__setattr__(self, "sources", MappingProxyType(dict(self.sources)))
 
     @property
+    def dashboard_model(self) -> str:
+        """What the controller's dashboard answers to ``get robot model`` for this arm: ``"UR3"`` for the
+        UR3e (the dashboard names the size, not the series)."""
+        return self.name[:-1].upper() if self.name.endswith("e") else self.name.upper()
+
+    @property
     def control_rate_hz(self) -> float:
         """Controller cycles per second [Hz]."""
         return 1.0 / self.control_period_s

@@ -95,7 +95,7 @@ from robocritics.deploy.rtde import (
     pack_package,
 )
 from robocritics.errors import DeployError
-from robocritics.robot.arms import DH, UR3E
+from robocritics.robot.arms import ARMS, DH, UR3E
 from robocritics.robot.ik import dh_forward
 
 __all__ = ["URSim", "SimSnapshot", "SimEvent", "KNOWN_OUTPUTS", "KNOWN_INPUTS", "main"]
@@ -626,7 +626,7 @@ class URSim:
         attributes of the same name after :meth:`start`.
     initial_q:
         Joint positions at start [rad]; default the robot model's home pose
-        (``Robot.ur3e().home_q``, where :func:`robocritics.simulate` starts).
+        (``Robot.ur(model).home_q``, where :func:`robocritics.simulate` starts).
     robot_mode:
         ``"RUNNING"`` (default: powered, brakes released), ``"IDLE"`` or
         ``"POWER_OFF"`` (like a freshly booted controller).
@@ -649,7 +649,7 @@ class URSim:
         Additional fields, name → RTDE type (e.g. a newer firmware's fields); their
         values are in :attr:`extras` (outputs read it, inputs write it).
     speed_limits:
-        Joint speed limits [rad/s], default ``UR3E.velocity_rad_s``.
+        Joint speed limits [rad/s], default the model's (``ARMS[model].velocity_rad_s``).
     clock:
         How controller time advances; it is always control cycles × 2 ms, and every
         rule (watchdog, stall, protective stop, unlock delay, output rates, events)
@@ -666,6 +666,10 @@ class URSim:
         (wall time, s), cycles also run every 2 ms of wall time until one arrives —
         so a client that only reads still gets data, and the RTDE watchdog still
         stops the program of a client that died. None (default): no idle cycles.
+    model:
+        Which arm this controller is (a name in :data:`robocritics.robot.arms.ARMS`, default
+        ``"ur3e"``): its home pose, speed limits and the dashboard's ``get robot model`` answer
+        (``"UR3"``). The simulated TCP pose stays the UR3e's.
     """
 
     def __init__(
@@ -685,14 +689,20 @@ class URSim:
         slow_client_timeout_s: float = 1.0,
         extra_outputs: dict[str, str] | None = None,
         extra_inputs: dict[str, str] | None = None,
-        speed_limits: Sequence[float] = UR3E.velocity_rad_s,
+        speed_limits: Sequence[float] | None = None,
         clock: str = "realtime",
         idle_after_s: float | None = None,
+        model: str = "ur3e",
     ) -> None:
+        if model not in ARMS:
+            raise DeployError(f"URSim model must be one of {', '.join(ARMS)}, got {model!r}")
+        self.model = ARMS[model]
+        if speed_limits is None:
+            speed_limits = self.model.velocity_rad_s
         if initial_q is None:
             from robocritics.robot.model import Robot
 
-            initial_q = tuple(float(v) for v in Robot.ur3e().home_q)
+            initial_q = tuple(float(v) for v in Robot.ur(model).home_q)
         if len(initial_q) != 6:
             raise DeployError(f"URSim initial_q needs 6 joint positions [rad], got {len(initial_q)}")
         if robot_mode.upper() not in ("POWER_OFF", "IDLE", "RUNNING"):
@@ -1443,6 +1453,8 @@ class URSim:
                 return f"{state} {name}", False
             if low == "polyscopeversion":
                 return "URSoftware {}.{}.{}.{} (robocritics URSim)".format(*self.controller_version), False
+            if low == "get robot model":
+                return self.model.dashboard_model, False
             if low == "get loaded program":
                 return (f"Loaded program: {self._loaded_program}" if self._loaded_program else "No program loaded"), False
             if low == "close safety popup":

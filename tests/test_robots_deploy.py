@@ -1,0 +1,89 @@
+"""Deploying the e-series arms: each streams to a loopback controller of its model; the gate's arm-model rule.
+
+Real parts: the loopback UR controller (``robocritics.testing.ursim``, stepped clock on
+127.0.0.1) and the real RTDE/dashboard clients. The arm-model rule is the gate's
+:func:`check_model` on the dashboard's ``get robot model`` answer.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+import robocritics as rc
+from robocritics.critic import BUILTIN_CRITICS
+from robocritics.deploy import URArm
+from robocritics.deploy.dashboard import DashboardClient
+from robocritics.deploy.gate import check_model
+from robocritics.errors import DeployError
+from robocritics.robot.model import Robot
+from robocritics.testing.ursim import URSim
+from test_robots import scaled_sorting
+from ur_support import stepped
+
+SHORT_PROGRAM = """
+lib.set_speed(0.3)  # a fraction of each arm's joint speeds: the UR10e's TCP is 2.6x the UR3e's
+move_above(red_apple_1, 0.12)
+move_above(green_apple, 0.12)
+"""
+DASHBOARD_ANSWER = {"ur3e": "UR3", "ur5e": "UR5", "ur10e": "UR10", "ur16e": "UR16"}
+
+
+@pytest.mark.parametrize("name", list(DASHBOARD_ANSWER))
+def test_the_loopback_controller_answers_its_model(name):
+    with URSim(**stepped(model=name)) as sim:
+        with DashboardClient("127.0.0.1", sim.dashboard_port, timeout_s=1.0) as dash:
+            assert dash.command("get robot model").strip() == DASHBOARD_ANSWER[name]
+        robot = Robot.ur(name)
+        assert sim.snapshot().q == pytest.approx(tuple(robot.home_q), abs=1e-12)
+        assert sim.speed_limits == pytest.approx(tuple(robot.velocity_limits))
+
+
+def test_the_loopback_controller_refuses_an_unknown_model():
+    with pytest.raises(DeployError, match="URSim model must be one of ur3e, ur5e, ur10e, ur16e, got 'ur7e'"):
+        URSim(**stepped(model="ur7e"))
+
+
+@pytest.mark.parametrize("name", ["ur5e", "ur10e", "ur16e"])
+def test_each_arm_deploys_to_a_controller_of_its_model(name):
+    robot = Robot.ur(name)
+    execution = rc.simulate(SHORT_PROGRAM, scaled_sorting(robot), robot=robot)
+    report = rc.critique(execution, critics=BUILTIN_CRITICS)
+    assert not report.has_errors, report.summary()
+    traj = execution.trajectory
+    assert traj.robot_name == name
+    with URSim(**stepped(model=name, idle_after_s=0.05)) as sim:
+        with URArm("127.0.0.1", rtde_port=sim.rtde_port, dashboard_port=sim.dashboard_port,
+                   secondary_port=sim.secondary_port, timeout_s=1.0) as arm:
+            result = arm.deploy(execution, report)
+        snap = sim.snapshot()
+    assert max(abs(a - b) for a, b in zip(snap.q, traj.q[-1])) < 1e-3
+    assert result.final_error_rad < 1e-3
+
+
+@pytest.fixture(scope="module")
+def ur10e_trajectory():
+    robot = Robot.ur10e()
+    return rc.simulate(SHORT_PROGRAM, scaled_sorting(robot), robot=robot).trajectory
+
+
+def test_the_model_rule_passes_for_the_arm_it_was_planned_for(ur10e_trajectory):
+    assert check_model(ur10e_trajectory, "UR10") == []
+    assert check_model(ur10e_trajectory, " ur10\n") == []  # as the dashboard line arrives
+
+
+def test_the_model_rule_refuses_another_arm_naming_both(ur10e_trajectory):
+    [(cause, text)] = check_model(ur10e_trajectory, "UR5")
+    assert cause == "arm_model"
+    assert "planned for a ur10e but the controller reports 'UR5'" in text
+    assert "Robot.ur5e()" in text
+
+
+def test_the_model_rule_refuses_when_the_dashboard_cannot_say(ur10e_trajectory):
+    [(cause, text)] = check_model(ur10e_trajectory, None, dashboard_error="connection reset")
+    assert cause == "arm_model" and "connection reset" in text
+
+
+def test_the_model_rule_refuses_an_arm_deploy_does_not_know(ur10e_trajectory):
+    foreign = rc.Trajectory.from_dict({**ur10e_trajectory.to_dict(), "robot_name": "panda"})
+    [(cause, text)] = check_model(foreign, "UR10")
+    assert cause == "arm_model" and "'panda'" in text
