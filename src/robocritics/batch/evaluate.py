@@ -27,7 +27,8 @@ def jobs_of(rows: Iterable[Any], errors: list[dict]) -> Iterator[Job]:
                 raise RowError(f"duplicate id {job.id!r}: an earlier row has it, so this one is not evaluated")
         except RowError as exc:
             shown = row_id if isinstance(row_id, (str, int)) and not isinstance(row_id, bool) else None
-            errors.append(error_row(shown, "RowError", str(exc)))
+            where = getattr(row, "input_line", 0)  # a reader's line number (robocritics batch)
+            errors.append(error_row(shown, "RowError", f"input line {where}: {exc}" if where else str(exc)))
             continue
         seen.add(job.id)
         yield job
