@@ -71,7 +71,7 @@ class TaskOutcomeCritic:
                 + "; ".join(o.goal for o in outcomes),
                 value=float(met),
                 threshold=float(len(outcomes)),
-                unit="goals",
+                unit="goals met",
                 details=details,
             )
         lines = sorted({line for o in unmet for line in o.lines})
@@ -85,7 +85,7 @@ class TaskOutcomeCritic:
             + " (its last open_gripper), or check that it is grasped at all (a missed grasp leaves it in place)",
             value=float(met),
             threshold=float(len(outcomes)),
-            unit="goals",
+            unit="goals met",
             evidence=Evidence(objects=list(dict.fromkeys(o.object for o in unmet if o.object)), lines=lines),
             details=details,
         )

@@ -1,0 +1,91 @@
+"""The runtime-level critic: a program that does not run gets a report with one Error naming the line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from robocritics.cli import main
+from robocritics.critic import RUNTIME, Flag, check_program
+from robocritics.errors import CriticError, GoalError
+from robocritics.report import Report
+from robocritics.scene import Scene
+
+EXAMPLES = Path(__file__).parent.parent / "examples" / "programs"
+
+
+@pytest.fixture(scope="module")
+def sorting():
+    return Scene.builtin("sorting")
+
+
+@pytest.mark.parametrize(
+    "program, kind, line, words",
+    [
+        ("import os\nos.system('true')\n", "ProgramError", 1, "import of 'os' is not allowed"),
+        ("home()\nmove_to(2.0, 0.0, 0.1)\n", "PlanningError", 2, "out of reach"),
+        ("home()\nfor i in range(40):\n    wait(10)\n", "MotionBudgetError", 3, "the limit is 5 min"),
+        ("# nothing\n\nx = 1\n", "ProgramError", 3, "made no skill calls"),
+    ],
+)
+def test_a_program_that_does_not_run_gets_one_runtime_error(sorting, program, kind, line, words):
+    execution, report = check_program(program, sorting)
+    assert execution is None
+    assert isinstance(report, Report) and len(report.verdicts) == 1
+    verdict = report.verdicts[0]
+    assert verdict.critic == RUNTIME == "runtime" and verdict.flag is Flag.ERROR
+    assert verdict.evidence.lines == [line]
+    assert words in verdict.message and kind in verdict.message
+    assert verdict.details["error"] == kind and verdict.details["line"] == line
+    assert verdict.hint
+    assert report.score == 0.0 and report.has_errors and not report.passed
+    assert Report.model_validate_json(report.to_json()) == report
+    assert "no motion (the program did not run)" in report.to_text()
+
+
+def test_a_program_that_runs_gets_the_critics_and_its_execution(sorting):
+    execution, report = check_program(
+        (EXAMPLES / "sorting_careful.py").read_text(), sorting, goals=["green_apple in white_box"]
+    )
+    assert execution is not None and len(execution.trajectory) == report.samples
+    assert report.critics[-1] == "task_outcome" and report.passed
+
+
+def test_bad_input_of_the_caller_still_raises_before_simulating(sorting):
+    with pytest.raises(CriticError, match="did you mean 'joint_speed'"):
+        check_program("import os\n", sorting, critics=["joint_sped"])
+    with pytest.raises(GoalError):
+        check_program("import os\n", sorting, goals=["green_apple in bin"])
+
+
+def test_check_prints_the_runtime_report_and_exits_1(capsys, tmp_path):
+    program = tmp_path / "prog.py"
+    program.write_text("home()\nmove_to(2.0, 0.0, 0.1)\n")
+    code = main(["check", str(program), "--scene", "sorting"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    assert out.startswith("RoboCritics report: score 0/10 (1 error)")
+    assert "runtime" in out and "line 2" in out
+    # the error line of before, still on stderr
+    assert err.startswith("robocritics: error: PlanningError: line 2: move_to(") and err.count("\n") == 1
+    code = main(["check", str(program), "--scene", "sorting", "--json"])
+    out, _ = capsys.readouterr()
+    assert code == 1 and json.loads(out)["verdicts"][0]["critic"] == "runtime"
+
+
+def test_check_goal_option(capsys):
+    program = str(EXAMPLES / "sorting_careful.py")
+    code = main(["check", program, "--goal", "green_apple in white_box", "--goal", "red_apple_1 in brown_box"])
+    out, _ = capsys.readouterr()
+    assert code == 0 and "task_outcome OK" in out
+    code = main(["check", program, "--goal", "green_apple in brown_box"])
+    out, _ = capsys.readouterr()
+    assert code == 1 and "task_outcome Error" in out and "green_apple ended in white_box" in " ".join(out.split())
+    code = main(["check", program, "--goal", "green_aple in white_box"])
+    _, err = capsys.readouterr()
+    assert code == 2 and "GoalError" in err and "did you mean 'green_apple'" in err
+    code = main(["check", program, "--goal", "green_apple at white_box"])
+    _, err = capsys.readouterr()
+    assert code == 2 and "argument --goal" in err and "use 'in' or 'on'" in err
