@@ -18,7 +18,7 @@ from robocritics.errors import DeployError
 from robocritics.robot.model import Robot
 from robocritics.testing.ursim import URSim
 from test_robots import scaled_sorting
-from ur_support import stepped
+from ur_support import controller_process, stepped
 
 SHORT_PROGRAM = """
 lib.set_speed(0.3)  # a fraction of each arm's joint speeds: the UR10e's TCP is 2.6x the UR3e's
@@ -36,6 +36,12 @@ def test_the_loopback_controller_answers_its_model(name):
         robot = Robot.ur(name)
         assert sim.snapshot().q == pytest.approx(tuple(robot.home_q), abs=1e-12)
         assert sim.speed_limits == pytest.approx(tuple(robot.velocity_limits))
+
+
+def test_the_controller_process_takes_a_model():
+    with controller_process("--model", "ur16e") as ctl:
+        with DashboardClient("127.0.0.1", ctl.dashboard_port, timeout_s=2.0) as dash:
+            assert dash.command("get robot model").strip() == "UR16"
 
 
 def test_the_loopback_controller_refuses_an_unknown_model():

@@ -1608,6 +1608,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--local-control", action="store_true", help="start in local control (programs are refused)")
     ap.add_argument("--fieldbus", action="store_true", help="a fieldbus holds input registers 0-23")
     ap.add_argument("--protocol", type=int, choices=[1, 2], default=2, help="highest RTDE protocol version accepted")
+    ap.add_argument("--model", default="ur3e", choices=list(ARMS),
+                    help="which arm to be: home pose, speed limits, 'get robot model' answer (default ur3e)")
     ap.add_argument("-v", "--verbose", action="store_true", help="log every event")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
@@ -1621,6 +1623,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         remote_control=not args.local_control,
         fieldbus_registers=args.fieldbus,
         protocol_versions=tuple(range(1, args.protocol + 1)),
+        model=args.model,
     )
     try:
         sim.start()
