@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import pluggy
 
-__all__ = ["hookspec", "hookimpl", "register_critics"]
+__all__ = ["hookspec", "hookimpl", "register_critics", "robocritics_repairs"]
 
 hookspec = pluggy.HookspecMarker("robocritics")
 hookimpl = pluggy.HookimplMarker("robocritics")
@@ -37,4 +37,16 @@ def register_critics(register):  # type: ignore[no-untyped-def]
     ``critic`` follows the :class:`robocritics.critic.Critic` protocol: a
     ``name``, a ``description``, a pydantic ``Params`` model whose fields all
     have defaults, and a pure ``check(trajectory, scene, params) -> Verdict``.
+    """
+
+
+@hookspec
+def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
+    """Candidate repairs for one flagged ``verdict``: a list of :class:`robocritics.repair.Edit`.
+
+    ``execution`` is the :class:`~robocritics.simulate.Execution` the verdict judged
+    (its ``plan`` maps skill calls to program lines), ``program`` the source text.
+    Return ``[]`` for verdicts of other critics. Candidates are re-simulated by
+    :func:`robocritics.repair.repair` and kept only when they remove the flag
+    without adding another or breaking a goal.
     """

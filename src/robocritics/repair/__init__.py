@@ -1,0 +1,152 @@
+"""Critic-native repairs: program edits derived from the critics' own evidence, verified by simulation.
+
+``repair(program, scene)`` simulates the program, asks every critic that flags
+an Error for candidate edits (the ``robocritics_repairs`` hook, see
+:mod:`robocritics.hookspecs`; the built-in critics' repairs are in
+:mod:`robocritics.repair.builtin`, registered the same way as a plugin's),
+re-simulates each candidate and keeps it only when it removes its flag
+without worsening any other verdict (or the task goal). It iterates until no
+Error is left or no candidate helps; no LLM is involved.
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Iterable
+
+from ..errors import RoboCriticsError
+from ..verdict import Flag
+from . import builtin
+from .edit import Edit, Insert, ScaleNumbers, apply_edits
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..report import Report
+    from ..scene import Scene
+    from ..simulate import Execution
+
+__all__ = ["repair", "Repair", "Change", "Edit", "Insert", "ScaleNumbers", "apply_edits", "MAX_ROUNDS"]
+
+#: Most accepted edits per repair() call (each one re-simulates the program).
+MAX_ROUNDS = 12
+
+
+@dataclass(frozen=True)
+class Change:
+    """One accepted edit: which critic asked for it, the program line, what changed, why, and its cost.
+
+    ``cost_s`` is the change in cycle time it caused, s (positive = slower).
+    """
+
+    critic: str
+    line: int
+    what: str
+    why: str
+    cost_s: float
+
+    def __str__(self) -> str:
+        return f"{self.critic} (line {self.line}): {self.what} -- {self.why} [{self.cost_s:+.2f} s]"
+
+
+@dataclass
+class Repair:
+    """The result of :func:`repair`: the repaired ``program`` with its ``report`` and ``execution``."""
+
+    original: str
+    program: str
+    report: Report
+    execution: Execution
+    changes: list[Change] = field(default_factory=list)
+
+    @property
+    def diff(self) -> str:
+        """A unified diff from the original program to the repaired one."""
+        return "".join(
+            difflib.unified_diff(
+                self.original.splitlines(keepends=True), self.program.splitlines(keepends=True), "original", "repaired"
+            )
+        )
+
+    @property
+    def errors(self) -> list:
+        """The verdicts still flagged Error."""
+        return [v for v in self.report.verdicts if v.flag == Flag.ERROR]
+
+
+def _manager():
+    from ..plugins import load_plugins, pm
+
+    load_plugins()
+    if not pm.is_registered(builtin):
+        pm.register(builtin, name="robocritics.repair.builtin")
+    return pm
+
+
+def _flags(report: Report) -> dict[str, int]:
+    return {v.critic: v.score for v in report.verdicts}
+
+
+def _acceptable(before: Report, after: Report, critic: str) -> bool:
+    """``after`` lifts ``critic`` out of Error and no verdict scores lower than in ``before``."""
+    old, new = _flags(before), _flags(after)
+    if new.get(critic, 2) == 0:
+        return False
+    return all(new.get(name, 2) >= score for name, score in old.items()) and all(
+        name in old or score > 0 for name, score in new.items()
+    )
+
+
+def repair(
+    program: str,
+    scene: Scene | str,
+    *,
+    goal: str | Iterable[Any] | None = None,
+    critics: Iterable[str] | str | None = None,
+    robot: Any = None,
+) -> Repair:
+    """Repair ``program`` in ``scene`` with the critics' own edits until no Error is left or none helps.
+
+    ``goal``: task goals (``"green_apple in white_box"``, a list of them, or
+    :class:`~robocritics.goals.Goal`) that every kept edit must still meet;
+    ``critics``: the critics to run (default: all installed); ``robot``: a
+    :class:`~robocritics.Robot` (default UR3e). A program that does not run at all
+    raises its :class:`~robocritics.errors.ProgramError` / PlanningError.
+    """
+    from ..critic import critique
+    from ..scene import Scene
+    from ..simulate import simulate
+
+    scene = scene if isinstance(scene, Scene) else Scene.resolve(scene)
+    goals = [goal] if isinstance(goal, str) else (list(goal) if goal is not None else None)
+
+    def evaluate(source: str):
+        execution = simulate(source, scene, robot=robot)
+        return execution, critique(execution, critics=critics, goals=goals)
+
+    hook = _manager().hook
+    source = program
+    execution, report = evaluate(source)
+    changes: list[Change] = []
+    for _ in range(MAX_ROUNDS):
+        errors = [v for v in report.verdicts if v.flag == Flag.ERROR]
+        accepted = False
+        for verdict in errors:
+            candidates = [e for edits in hook.robocritics_repairs(verdict=verdict, execution=execution, program=source) for e in edits or []]
+            for edit in candidates:
+                try:
+                    new_source = apply_edits(source, edit.ops)
+                    new_execution, new_report = evaluate(new_source)
+                except (RoboCriticsError, SyntaxError):
+                    continue  # the edit made a program that does not run: not a repair
+                if not _acceptable(report, new_report, verdict.critic):
+                    continue
+                cost = new_execution.duration_s - execution.duration_s
+                changes.append(Change(edit.critic, edit.line, edit.what, edit.why, cost))
+                source, execution, report = new_source, new_execution, new_report
+                accepted = True
+                break
+            if accepted:
+                break
+        if not accepted:
+            break
+    return Repair(program, source, report, execution, changes)

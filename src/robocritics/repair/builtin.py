@@ -1,0 +1,114 @@
+"""Repairs offered by the built-in critics, registered through the ``robocritics_repairs`` hook.
+
+Each repair is derived from the verdict's evidence (program lines, measured
+value against threshold, objects) and is only a *candidate*: :func:`robocritics.repair.repair`
+re-simulates it and keeps it only when it removes the flag without adding another.
+"""
+
+from __future__ import annotations
+
+from ..hookspecs import hookimpl
+from .edit import Edit, Insert, ScaleNumbers
+
+#: Headroom under a speed threshold a slowdown aims for (fraction of the threshold).
+SPEED_MARGIN = 0.85
+#: Factors tried on hover/transit heights that leave the workspace.
+HEIGHT_FACTORS = (0.5,)
+_MOVES = {"move_to", "move_linear", "move_above", "move_down", "move_up", "home"}
+
+
+def _speed_before(program_plan, line: int) -> float:
+    """The speed fraction in effect at the first call on ``line`` (1 = full speed)."""
+    speed = 1.0
+    for call in program_plan.calls:
+        if call.line == line:
+            return speed
+        if call.skill in ("set_speed", "reduce_speed"):
+            speed = float(call.args["fraction"])
+    return speed
+
+
+def _move_lines(verdict, execution) -> list[int]:
+    skills = {c.line: c.skill for c in execution.plan.calls}
+    return [ln for ln in verdict.evidence.lines if skills.get(ln) in _MOVES]
+
+
+def _slowdowns(verdict, execution) -> list[Edit]:
+    """The smallest speed fraction on the offending moves that brings the peak under the threshold.
+
+    Speed scales linearly with the speed fraction, so ``threshold / value`` (with
+    :data:`SPEED_MARGIN`) of the speed in effect on each line is enough; a second,
+    stronger candidate covers moves whose peak is set by acceleration limits.
+    """
+    if not verdict.value or not verdict.threshold or verdict.value <= verdict.threshold:
+        return []
+    lines = _move_lines(verdict, execution)
+    edits = []
+    for margin in (SPEED_MARGIN, SPEED_MARGIN**2, SPEED_MARGIN**4):
+        ops, parts = [], []
+        for ln in lines:
+            prev = _speed_before(execution.plan, ln)
+            f = max(0.01, round(prev * margin * verdict.threshold / verdict.value, 2))
+            ops.append(Insert(ln, before=(f"set_speed({f:g})",), after=(f"set_speed({prev:g})",)))
+            parts.append(f"line {ln}: speed {prev:g} -> {f:g}")
+        if ops:
+            edits.append(
+                Edit(
+                    verdict.critic,
+                    lines[0],
+                    "; ".join(parts) + " (restored after the move)",
+                    f"peak {verdict.value:.3g} {verdict.unit} over the {verdict.threshold:g} {verdict.unit} limit",
+                    ops,
+                )
+            )
+    return edits
+
+
+def _avoid(verdict, execution) -> list[Edit]:
+    """``avoid_collision(obj)`` before the first offending line for each object the robot hits."""
+    pair = str(verdict.details.get("closest_pair", "")).split("|")
+    ids = {o.id for o in execution.scene.objects} | {c.id for c in execution.scene.containers}
+    names = [n for n in [*pair, *verdict.evidence.objects] if n in ids]
+    first = min((c.line for c in execution.plan.calls), default=1)
+    edits = []
+    for name in dict.fromkeys(reversed(names)):
+        edits.append(
+            Edit(
+                verdict.critic,
+                first,
+                f"avoid_collision({name}) before line {first}",
+                f"the robot comes within {verdict.value:.3g} m of {name}",
+                [Insert(first, before=(f"avoid_collision({name})",))],
+            )
+        )
+    return edits
+
+
+def _lower_heights(verdict, execution) -> list[Edit]:
+    """Lower the hover/transit heights (float literals) on the offending move lines."""
+    lines = [ln for ln in _move_lines(verdict, execution)]
+    return [
+        Edit(
+            verdict.critic,
+            lines[0],
+            f"heights on lines {', '.join(map(str, lines))} scaled by {f:g}",
+            f"the {verdict.evidence.links[0] if verdict.evidence.links else 'robot'} leaves the workspace "
+            f"by {verdict.value:.3g} m",
+            [ScaleNumbers(ln, f) for ln in lines],
+        )
+        for f in HEIGHT_FACTORS
+        if lines
+    ]
+
+
+_BY_CRITIC = {
+    "joint_speed": [_slowdowns],
+    "end_effector_pose": [_slowdowns],
+    "collision": [_avoid, _slowdowns],
+    "space_usage": [_lower_heights],
+}
+
+
+@hookimpl
+def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
+    return [e for make in _BY_CRITIC.get(verdict.critic, []) for e in make(verdict, execution)]
