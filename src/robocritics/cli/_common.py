@@ -248,3 +248,84 @@ def add_goal_option(parser: argparse.ArgumentParser) -> None:
         help="a task goal checked on the final scene, e.g. 'green_apple in white_box' or 'cupcake on plate' "
         "(repeatable); the program's own expect(...) calls are checked too",
     )
+
+
+# --- the LLM endpoint options shared by `run` and `studio` ----------------------------------------------------
+
+# Seconds one LLM request may take in all: the library's deadline (llm.limits.DEFAULT_DEADLINE_S, not imported
+# here so that building the parser stays cheap), enough for a local server that loads the model first.
+_TIMEOUT_S = 300.0
+# Seconds one network phase may take within it before the request is retried: a first request to a local
+# server waits while the model loads.
+_PHASE_TIMEOUT_S = 120.0
+# Tokens per reply: llm.limits.DEFAULT_MAX_TOKENS (not imported here, to keep building the parser cheap).
+_MAX_TOKENS = 1024
+
+
+def add_llm_options(p: argparse.ArgumentParser) -> None:
+    """``--base-url --model --api-key-env --timeout --max-tokens --idle-timeout --no-stream`` (read by
+    :func:`llm_api_key` and :func:`llm_client`)."""
+    p.add_argument("--base-url", metavar="URL", help="OpenAI-compatible endpoint (default: $ROBOCRITICS_BASE_URL)")
+    p.add_argument("--model", metavar="NAME", help="chat model (default: $ROBOCRITICS_MODEL)")
+    p.add_argument(
+        "--api-key-env",
+        metavar="VAR",
+        help="name of the environment variable holding the API key (default: ROBOCRITICS_API_KEY, then OPENAI_API_KEY)",
+    )
+    p.add_argument(
+        "--timeout",
+        metavar="S",
+        type=bounded_float(0.1, 24 * 3600.0, "s"),
+        default=_TIMEOUT_S,
+        help=f"seconds one LLM request may take in all, retries included (default {_TIMEOUT_S:g})",
+    )
+    p.add_argument(
+        "--max-tokens",
+        metavar="N",
+        type=positive_int,
+        default=_MAX_TOKENS,
+        help=f"most tokens per model reply (default {_MAX_TOKENS}); a reply cut there is sent back as "
+        "'your reply was cut; send a shorter program'",
+    )
+    p.add_argument(
+        "--idle-timeout",
+        metavar="S",
+        type=bounded_float(0.1, 24 * 3600.0, "s"),
+        default=None,
+        help="seconds a streamed reply may stay silent before the request ends (default: min(--timeout, 120))",
+    )
+    p.add_argument("--no-stream", action="store_true", help="ask for whole replies instead of streamed ones")
+
+
+def llm_api_key(args: argparse.Namespace) -> str | None:
+    """The API key from the variable ``--api-key-env`` names (None without the option); UsageError if unset."""
+    import os
+
+    if not getattr(args, "api_key_env", None):
+        return None
+    api_key = os.environ.get(args.api_key_env)
+    if not api_key:
+        raise UsageError(f"the environment variable {args.api_key_env} (from --api-key-env) is not set")
+    return api_key
+
+
+def llm_client(args: argparse.Namespace, api_key: str | None, *, embedding_model: str | None = None):
+    """The :class:`~robocritics.llm.client.OpenAICompatible` the options of :func:`add_llm_options` describe;
+    UsageError when no endpoint or model is configured (or the endpoint is unusable)."""
+    from ..errors import LLMError
+    from ..llm.client import OpenAICompatible
+
+    try:
+        return OpenAICompatible(
+            base_url=args.base_url,
+            model=args.model,
+            api_key=api_key,
+            embedding_model=embedding_model,
+            timeout_s=min(args.timeout, _PHASE_TIMEOUT_S),
+            deadline_s=args.timeout,
+            max_tokens=getattr(args, "max_tokens", _MAX_TOKENS),
+            stream=not getattr(args, "no_stream", False),
+            idle_timeout_s=min(args.idle_timeout, args.timeout) if getattr(args, "idle_timeout", None) else None,
+        )
+    except LLMError as exc:
+        raise UsageError(f"{exc} (or use --base-url / --model)" if "configured" in str(exc) else str(exc)) from None

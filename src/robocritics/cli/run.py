@@ -42,25 +42,27 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import sys
 from typing import TextIO
 
 import math
 
-from ._common import add_critic_options, add_goal_option, bounded_float, load_params, one_line, positive_int, subcommand
+from ._common import (
+    UsageError,
+    add_critic_options,
+    add_goal_option,
+    add_llm_options,
+    llm_api_key,
+    llm_client,
+    load_params,
+    one_line,
+    positive_int,
+    subcommand,
+)
 from ..errors import LLMError, RoboCriticsError
 
 __all__ = ["add_run_parser", "run_command"]
 
-# Seconds one LLM request may take in all: the library's deadline (llm.limits.DEFAULT_DEADLINE_S, not imported
-# here so that building the parser stays cheap), enough for a local server that loads the model first.
-_TIMEOUT_S = 300.0
-# Seconds one network phase may take within it before the request is retried: a first request to a local
-# server waits while the model loads.
-_PHASE_TIMEOUT_S = 120.0
-# Tokens per reply: llm.limits.DEFAULT_MAX_TOKENS (not imported here, to keep building the parser cheap).
-_MAX_TOKENS = 1024
 # Seconds between two progress lines while tokens arrive (--verbose).
 _PROGRESS_EVERY_S = 2.0
 # Model replies with --auto: the paper's five attempts per task (llm.loop.DEFAULT_MAX_ATTEMPTS, not imported
@@ -85,13 +87,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         required=True,
         help="built-in scene name (recycling, sorting, breakfast) or a scene JSON file",
     )
-    p.add_argument("--base-url", metavar="URL", help="OpenAI-compatible endpoint (default: $ROBOCRITICS_BASE_URL)")
-    p.add_argument("--model", metavar="NAME", help="chat model (default: $ROBOCRITICS_MODEL)")
-    p.add_argument(
-        "--api-key-env",
-        metavar="VAR",
-        help="name of the environment variable holding the API key (default: ROBOCRITICS_API_KEY, then OPENAI_API_KEY)",
-    )
+    add_llm_options(p)
     p.add_argument(
         "--embedding-model",
         metavar="NAME",
@@ -117,21 +113,6 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         "--temperature", metavar="T", type=_temperature, default=None, help="sampling temperature, 0 to 2 (default 0)"
     )
     p.add_argument(
-        "--timeout",
-        metavar="S",
-        type=bounded_float(0.1, 24 * 3600.0, "s"),
-        default=_TIMEOUT_S,
-        help=f"seconds one LLM request may take in all, retries included (default {_TIMEOUT_S:g})",
-    )
-    p.add_argument(
-        "--max-tokens",
-        metavar="N",
-        type=positive_int,
-        default=_MAX_TOKENS,
-        help=f"most tokens per model reply (default {_MAX_TOKENS}); a reply cut there is sent back as "
-        "'your reply was cut; send a shorter program'",
-    )
-    p.add_argument(
         "--context-tokens",
         metavar="N",
         type=positive_int,
@@ -139,14 +120,6 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         help="the model's context window in tokens, to fit the prompt to (default: what the server says, "
         "e.g. llama.cpp's n_ctx; see docs/llm.md)",
     )
-    p.add_argument(
-        "--idle-timeout",
-        metavar="S",
-        type=bounded_float(0.1, 24 * 3600.0, "s"),
-        default=None,
-        help="seconds a streamed reply may stay silent before the request ends (default: min(--timeout, 120))",
-    )
-    p.add_argument("--no-stream", action="store_true", help="ask for whole replies instead of streamed ones")
     p.add_argument("-v", "--verbose", action="store_true", help="show tokens arriving and prompt sizes (stderr)")
     p.set_defaults(func=run_command)
     return p
@@ -249,7 +222,6 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     from ..goals import parse_goals
     from ..scene import Scene
     from ..simulate import check_scene_ids
-    from ..llm.client import OpenAICompatible
     from ..llm.loop import Loop
     from ..llm.memory import InteractionMemory
     from ..llm.prompts import check_task
@@ -259,11 +231,10 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     err = stderr or sys.stderr
 
     # Configuration: everything is checked before the first request.
-    api_key = None
-    if args.api_key_env:
-        api_key = os.environ.get(args.api_key_env)
-        if not api_key:
-            return _error(f"the environment variable {args.api_key_env} (from --api-key-env) is not set", err)
+    try:
+        api_key = llm_api_key(args)
+    except UsageError as exc:
+        return _error(str(exc), err)
     try:
         task = check_task(args.task)
         scene = Scene.resolve(args.scene)
@@ -277,19 +248,9 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     if goals:  # the model is asked to state them with expect(...), which the task_outcome critic checks
         task += "\nGoals (checked on the final scene; state each with expect(...)): " + "; ".join(map(str, goals))
     try:
-        client = OpenAICompatible(
-            base_url=args.base_url,
-            model=args.model,
-            api_key=api_key,
-            embedding_model=args.embedding_model,
-            timeout_s=min(args.timeout, _PHASE_TIMEOUT_S),
-            deadline_s=args.timeout,
-            max_tokens=getattr(args, "max_tokens", _MAX_TOKENS),
-            stream=not getattr(args, "no_stream", False),
-            idle_timeout_s=min(args.idle_timeout, args.timeout) if getattr(args, "idle_timeout", None) else None,
-        )
-    except LLMError as exc:
-        return _error(f"{exc} (or use --base-url / --model)" if "configured" in str(exc) else str(exc), err)
+        client = llm_client(args, api_key, embedding_model=args.embedding_model)
+    except UsageError as exc:
+        return _error(str(exc), err)
     verbose = bool(getattr(args, "verbose", False))
     progress = _Progress(err, client.model, verbose)
     client.on_progress = progress

@@ -1,1 +1,9 @@
-"""The RoboCritics studio: a local web app to write, check and replay robot programs (issue 12)."""
+"""The RoboCritics studio: a local web app to write, check, fix, replay and deploy robot programs (issue 12).
+
+``Studio(scene, program, ...)`` (:mod:`.server`) serves one inlined page (:mod:`.page`); simulation runs in the
+resource-limited :class:`~robocritics.viz.studio.worker.Evaluator`. See docs/studio.md.
+"""
+
+from .server import Studio, StudioError, is_loopback
+
+__all__ = ["Studio", "StudioError", "is_loopback"]
