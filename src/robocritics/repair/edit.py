@@ -76,11 +76,15 @@ class Edit:
 
 
 def apply_edits(source: str, ops: list) -> str:
-    """``source`` with ``ops`` applied, bottom-most line first so earlier positions stay valid."""
+    """``source`` with ``ops`` applied.
+
+    In-line replacements go first (they move no line), then insertions bottom-most
+    line first, so every position read from the one parse stays valid.
+    """
     tree = ast.parse(source)
     lines = source.splitlines(keepends=True)
     if lines and not lines[-1].endswith("\n"):
         lines[-1] += "\n"
-    for op in sorted(ops, key=lambda o: o.line, reverse=True):
+    for op in sorted(ops, key=lambda o: (isinstance(o, Insert), -o.line)):
         op.apply(lines, tree)
     return "".join(lines)
