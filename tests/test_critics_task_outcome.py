@@ -79,9 +79,10 @@ def test_goals_need_an_execution_and_valid_ids(careful):
         critique(careful["sorting"], goals=["green_apple in whte_box"])
 
 
-def test_a_critic_selection_without_it_ignores_goals(careful):
+def test_goals_are_checked_whichever_critics_were_chosen(careful):
     report = critique(careful["sorting"], critics="joint_speed", goals=["green_apple in brown_box"])
-    assert report.critics == ["joint_speed"]
+    assert report.critics == ["joint_speed", "task_outcome"] and report.has_errors
+    assert report.score == 10.0
 
 
 def test_the_critic_alone_on_outcomes():

@@ -252,8 +252,8 @@ def critique(
     a :class:`Verdict`.
     ``goals``: task goals (``"green_apple in white_box"`` or :class:`~robocritics.goals.Goal`) checked by the
     ``task_outcome`` critic on an Execution's final scene, together with the program's ``expect(...)`` calls;
-    a bad goal raises :class:`~robocritics.errors.GoalError`. With no goal at all, the default selection skips
-    ``task_outcome`` (naming it in ``critics`` runs it: OK, nothing to check).
+    a bad goal raises :class:`~robocritics.errors.GoalError`. With goals, ``task_outcome`` runs whatever
+    ``critics`` says; with none, the default selection skips it (naming it runs it: OK, nothing to check).
     """
     from .simulate import Execution
     from .trajectory import Trajectory
@@ -304,8 +304,9 @@ def critique(
 def _task_outcome_selection(critics: Any, params: Mapping[str, ParamsArg] | None, outcomes: list) -> tuple[Any, dict]:
     """The critic selection and params with the ``task_outcome`` critic fed the goals' ``outcomes``.
 
-    It runs in the default selection only when there are goals (installed or not: it ships with robocritics),
-    and whenever it is named; a trajectory carries no object poses, so its params carry the outcomes.
+    It runs whenever there are goals (added to any selection, installed or not: it ships with robocritics) and
+    whenever it is named; the default selection skips it when there are none. A trajectory carries no object
+    poses, so its params carry the outcomes.
     """
     from .critics.task_outcome import NAME, TaskOutcomeCritic
 
@@ -317,13 +318,13 @@ def _task_outcome_selection(critics: Any, params: Mapping[str, ParamsArg] | None
         if isinstance(critics, str):
             critics = [c.strip() for c in critics.split(",") if c.strip()]
         critics = [builtin if c == NAME else c for c in critics]
+        if outcomes and not any(getattr(c, "name", None) == NAME for c in critics):
+            critics.append(builtin)  # goals are a request to check them, whichever motion critics were chosen
     params = dict(params or {})
     if outcomes or NAME in params:
         given = params.get(NAME)
         given = given.model_dump() if isinstance(given, BaseModel) else dict(given or {})
         params[NAME] = {**given, "outcomes": [o.model_dump() for o in outcomes]}
-        if not any(getattr(c, "name", None) == NAME for c in critics):
-            params.pop(NAME)  # goals given, but the caller chose critics without it
     return critics, params
 
 
