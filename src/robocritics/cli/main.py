@@ -23,7 +23,7 @@ import argparse
 import sys
 
 from ..errors import CriticError, RoboCriticsError
-from . import batch, check, critics, deploy, run, studio, ursim  # noqa: F401  (each registers its subcommand)
+from . import batch, check, critics, deploy, fix, run, studio, ursim  # noqa: F401  (each registers its subcommand)
 from ._common import SUBCOMMANDS, UsageError, one_line
 from .ursim import ursim_command
 

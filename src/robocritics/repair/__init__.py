@@ -103,13 +103,15 @@ def repair(
     goal: str | Iterable[Any] | None = None,
     critics: Iterable[str] | str | None = None,
     robot: Any = None,
+    params: Any = None,
 ) -> Repair:
     """Repair ``program`` in ``scene`` with the critics' own edits until no Error is left or none helps.
 
     ``goal``: task goals (``"green_apple in white_box"``, a list of them, or
     :class:`~robocritics.goals.Goal`) that every kept edit must still meet;
     ``critics``: the critics to run (default: all installed); ``robot``: a
-    :class:`~robocritics.Robot` (default UR3e). A program that does not run at all
+    :class:`~robocritics.Robot` (default UR3e); ``params``: threshold overrides as
+    for :func:`~robocritics.critique`. A bad goal raises :class:`~robocritics.errors.GoalError`; a program that does not run at all
     raises its :class:`~robocritics.errors.ProgramError` / PlanningError.
     """
     from ..critic import critique
@@ -117,11 +119,13 @@ def repair(
     from ..simulate import simulate
 
     scene = scene if isinstance(scene, Scene) else Scene.resolve(scene)
-    goals = [goal] if isinstance(goal, str) else (list(goal) if goal is not None else None)
+    from ..goals import parse_goals
+
+    goals = parse_goals(goal, scene) or None
 
     def evaluate(source: str):
         execution = simulate(source, scene, robot=robot)
-        return execution, critique(execution, critics=critics, goals=goals)
+        return execution, critique(execution, critics=critics, params=params, goals=goals)
 
     hook = _manager().hook
     source = program
