@@ -8,7 +8,7 @@ import pytest
 
 from robocritics import hookimpl
 from robocritics.plugins import pm
-from robocritics.repair import Edit, Insert, ScaleNumbers, apply_edits, repair
+from robocritics.repair import Edit, Insert, MoveBlock, ScaleNumbers, apply_edits, paragraphs, repair
 from robocritics.verdict import Flag
 
 PROGRAMS = Path(__file__).resolve().parents[1] / "examples" / "programs"
@@ -78,3 +78,10 @@ def test_plugin_repair_is_offered_and_one_that_adds_a_flag_is_rejected(spoiler):
     assert _Spoiler.offered >= 1
     assert all(c.critic != "spoiler" for c in r.changes)
     assert "move_to(0.0, 0.6, 0.5)" not in r.program
+
+
+def test_move_block_reorders_paragraphs_and_keeps_home_last():
+    src = "# c\nmove_up(0.1)\nopen_gripper()\n\nmove_down(0.1)\nclose_gripper()\nhome()\n"
+    assert paragraphs(src) == [(2, 3), (5, 7)]
+    out = apply_edits(src, [MoveBlock(2, 5, 6)])
+    assert out == "# c\nmove_down(0.1)\nclose_gripper()\n\nmove_up(0.1)\nopen_gripper()\n\nhome()\n"

@@ -18,14 +18,14 @@ from typing import TYPE_CHECKING, Any, Iterable
 from ..errors import RoboCriticsError
 from ..verdict import Flag
 from . import builtin
-from .edit import Edit, Insert, ScaleNumbers, apply_edits
+from .edit import Edit, Insert, MoveBlock, ScaleNumbers, apply_edits, paragraphs
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..report import Report
     from ..scene import Scene
     from ..simulate import Execution
 
-__all__ = ["repair", "Repair", "Change", "Edit", "Insert", "ScaleNumbers", "apply_edits", "MAX_ROUNDS"]
+__all__ = ["repair", "Repair", "Change", "Edit", "Insert", "ScaleNumbers", "MoveBlock", "apply_edits", "paragraphs", "MAX_ROUNDS"]
 
 #: Most accepted edits per repair() call (each one re-simulates the program).
 MAX_ROUNDS = 12

@@ -8,7 +8,7 @@ re-simulates it and keeps it only when it removes the flag without adding anothe
 from __future__ import annotations
 
 from ..hookspecs import hookimpl
-from .edit import Edit, Insert, ScaleNumbers
+from .edit import Edit, Insert, MoveBlock, ScaleNumbers, paragraphs
 
 #: Headroom under a speed threshold a slowdown aims for (fraction of the threshold).
 SPEED_MARGIN = 0.85
@@ -101,14 +101,48 @@ def _lower_heights(verdict, execution) -> list[Edit]:
     ]
 
 
+def _pick_first(verdict, execution, program) -> list[Edit]:
+    """Pick the object the gripper hits first: move the paragraph that picks it above the offending one.
+
+    E.g. the apple grabbed while the cupcake sits on it: the gripper hits the
+    cupcake, so the cupcake's paragraph goes first (only a forward move of a
+    top-level paragraph that names the object in its first line).
+    """
+    if not verdict.evidence.lines:
+        return []
+    groups = paragraphs(program)
+    text = program.splitlines()
+    line = verdict.evidence.lines[0]
+    here = next((g for g in groups if g[0] <= line <= g[1]), None)
+    edits = []
+    for name in dict.fromkeys([*str(verdict.details.get("closest_pair", "")).split("|"), *verdict.evidence.objects]):
+        if not name or here is None:
+            continue
+        group = next((g for g in groups if g[0] > here[1] and f"{name}." in text[g[0] - 1]), None)
+        if group and text[group[1] - 1].strip() == "home()" and group[1] > group[0]:
+            group = (group[0], group[1] - 1)  # the program still ends at home
+        if group:
+            edits.append(
+                Edit(
+                    verdict.critic,
+                    here[0],
+                    f"lines {group[0]}-{group[1]} (picking {name}) moved above line {here[0]}",
+                    f"the robot hits {name} during lines {', '.join(map(str, verdict.evidence.lines))}",
+                    [MoveBlock(here[0], *group)],
+                )
+            )
+    return edits
+
+
 _BY_CRITIC = {
     "joint_speed": [_slowdowns],
     "end_effector_pose": [_slowdowns],
-    "collision": [_avoid, _slowdowns],
+    "collision": [_avoid, _pick_first, _slowdowns],
     "space_usage": [_lower_heights],
 }
 
 
 @hookimpl
 def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
-    return [e for make in _BY_CRITIC.get(verdict.critic, []) for e in make(verdict, execution)]
+    makers = _BY_CRITIC.get(verdict.critic, [])
+    return [e for make in makers for e in (make(verdict, execution, program) if make is _pick_first else make(verdict, execution))]

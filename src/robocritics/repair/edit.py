@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from ..errors import ProgramError
 
-__all__ = ["Edit", "Insert", "ScaleNumbers", "apply_edits"]
+__all__ = ["Edit", "Insert", "ScaleNumbers", "MoveBlock", "apply_edits", "paragraphs"]
 
 
 def _statement_at(tree: ast.Module, line: int) -> ast.stmt:
@@ -61,6 +61,40 @@ class ScaleNumbers:
             lines[n.lineno - 1] = text[: n.col_offset] + new + text[n.end_col_offset :]
 
 
+def paragraphs(source: str) -> list[tuple[int, int]]:
+    """The top-level statement groups separated by blank lines, as ``(first, last)`` lines (1-based)."""
+    tree = ast.parse(source)
+    text = source.splitlines()
+    groups: list[list[int]] = []
+    for stmt in tree.body:
+        first, last = stmt.lineno, stmt.end_lineno or stmt.lineno
+        if groups and not any(not line.strip() for line in text[groups[-1][1] : first - 1]):
+            groups[-1][1] = last
+        else:
+            groups.append([first, last])
+    return [(a, b) for a, b in groups]
+
+
+@dataclass(frozen=True)
+class MoveBlock:
+    """Move the top-level lines ``first..last`` (a paragraph, with a blank line after it) above line ``line``."""
+
+    line: int
+    first: int
+    last: int
+
+    def apply(self, lines: list[str], tree: ast.Module) -> None:
+        block = lines[self.first - 1 : self.last]
+        if not block[-1].strip() == "":
+            block = [*block, "\n"]
+        del lines[self.first - 1 : self.last]
+        if 0 < self.first - 1 < len(lines) and not lines[self.first - 2].strip() and not lines[self.first - 1].strip():
+            del lines[self.first - 1]  # the blank line that separated the moved paragraph
+        while len(lines) > 1 and not lines[-1].strip():
+            del lines[-1]  # the program still ends at its last statement
+        lines[self.line - 1 : self.line - 1] = block
+
+
 @dataclass
 class Edit:
     """One repair candidate from one critic: program operations plus what they change and why.
@@ -85,6 +119,6 @@ def apply_edits(source: str, ops: list) -> str:
     lines = source.splitlines(keepends=True)
     if lines and not lines[-1].endswith("\n"):
         lines[-1] += "\n"
-    for op in sorted(ops, key=lambda o: (isinstance(o, Insert), -o.line)):
+    for op in sorted(ops, key=lambda o: (not isinstance(o, ScaleNumbers), -o.line)):
         op.apply(lines, tree)
     return "".join(lines)
