@@ -142,7 +142,7 @@
     $("editor-status").textContent = "running…";
     document.body.dataset.running = "1";
     try {
-      show(await api("/api/run", {program: $("editor").value, critics: [...state.enabled]}));
+      show(await api("/api/run", {program: $("editor").value, critics: state.critics.filter((c) => state.enabled.has(c))}));
       $("editor-status").textContent = "";
     } catch (e) {
       term("run failed: " + e.message + "\n", true);

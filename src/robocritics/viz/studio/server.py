@@ -203,7 +203,7 @@ class Studio:
     def installed_critics(self) -> list[str]:
         from ...plugins import get_critics
 
-        return sorted(get_critics())
+        return list(get_critics())
 
     def state(self) -> dict[str, Any]:
         return {
