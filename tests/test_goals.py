@@ -172,3 +172,19 @@ def test_expect_makes_no_motion(breakfast):
     without = simulate("home()\n", breakfast)
     assert len(with_expect.trajectory) == len(without.trajectory)
     assert [s.skill for s in with_expect.trajectory.steps] == ["home"]
+
+
+def test_an_object_stacked_above_the_rim_is_not_in_the_box():
+    # the naive sorting program drops both ripe apples at the box centre: the second rests on the first, its
+    # centre above the rim, so it is not in the box
+    from pathlib import Path
+
+    scene = Scene.builtin("sorting")
+    source = (Path(__file__).parent.parent / "examples/programs/sorting_naive.py").read_text()
+    execution = simulate(source, scene)
+    assert execution.resting_on["red_apple_2"] == "red_apple_1"
+    met, where = Goal.parse("red_apple_2 in brown_box").outcome(execution)
+    z = execution.final_scene.entity("red_apple_2").position[2]
+    assert not met
+    assert where.endswith(f"its centre {z - scene.entity('brown_box').top:.2f} m above the rim of brown_box")
+    assert Goal.parse("red_apple_1 in brown_box").met(execution)

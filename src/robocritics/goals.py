@@ -135,7 +135,11 @@ class Goal(BaseModel):
         if not met and self.target != TABLE:
             target = final.entity(self.target)
             d = math.hypot(x - target.position[0], y - target.position[1])
-            where += f", {d:.2f} m from {self.target}"
+            over_rim = self.relation == "in" and target.contains_point((x, y, target.floor_top + ON_TOLERANCE_M))
+            if over_rim and z > target.top:  # e.g. stacked on another object in the box, sticking out of it
+                where += f", its centre {z - target.top:.2f} m above the rim of {self.target}"
+            else:
+                where += f", {d:.2f} m from {self.target}"
         elif not met:
             where += f", {obj.bottom - final.table.top_z:.2f} m above the table"
         return met, where
