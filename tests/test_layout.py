@@ -156,14 +156,15 @@ def test_data_flows_one_way(module, forbidden):
     assert bad == [], f"{module} reaches {bad}"
 
 
-# UR e-series DH lengths [m], the numbers that must be spelled once in the library (robot/arms.py).
+# UR e-series and Panda DH lengths [m], the numbers that must be spelled once in the library (robot/arms.py).
 # Lengths shared by two arms (UR10e/UR16e d1, d4, d5, d6) are listed once; 0.36 (UR16e a3) is too
 # common a number to search for.
 UR3E_NUMBERS = ("0.15185", "0.24355", "0.2132", "0.13105", "0.08535", "0.0921")
 UR5E_NUMBERS = ("0.1625", "0.425", "0.3922", "0.1333", "0.0997", "0.0996")
 UR10E_NUMBERS = ("0.1807", "0.6127", "0.57155", "0.17415", "0.11985", "0.11655")
 UR16E_NUMBERS = ("0.4784",)
-UR_NUMBERS = UR3E_NUMBERS + UR5E_NUMBERS + UR10E_NUMBERS + UR16E_NUMBERS
+PANDA_NUMBERS = ("0.333", "0.316", "0.0825", "0.384", "0.107")  # Franka's modified DH lengths
+UR_NUMBERS = UR3E_NUMBERS + UR5E_NUMBERS + UR10E_NUMBERS + UR16E_NUMBERS + PANDA_NUMBERS
 
 
 def test_each_ur_dh_number_is_spelled_in_one_source_file():

@@ -137,6 +137,7 @@ def test_the_bundled_urdfs_are_what_the_generator_writes():
     spec.loader.exec_module(tool)  # defines urdf_text; writes nothing unless run as a script
     for name in ARM_NAMES:
         assert tool.urdf_text(name) == (MODELS / f"{name}.urdf").read_text(), name
+    assert tool.panda_urdf_text() == (MODELS / "panda.urdf").read_text()
 
 
 # --- scenes follow the robot -------------------------------------------------------------
@@ -294,3 +295,113 @@ def test_a_generic_urdf_gets_a_reach_from_its_chain(tmp_path):
     # stretched out: upper arm + forearm + wrist offsets + gripper; more than the published 0.85 m reach
     assert 0.85 < robot.reach_m < 1.4
     np.testing.assert_allclose(robot.shoulder_m, (0, 0, 0.1625), atol=1e-12)
+
+
+# --- the Franka Emika Panda ------------------------------------------------------------------
+
+# Franka's published modified-DH table (Craig): a, d [m], alpha [rad]; T_i = Rx(alpha) Tx(a) Rz(q) Tz(d)
+PANDA_MDH = [
+    (0.0, 0.333, 0.0),
+    (0.0, 0.0, -math.pi / 2),
+    (0.0, 0.316, math.pi / 2),
+    (0.0825, 0.0, math.pi / 2),
+    (-0.0825, 0.384, -math.pi / 2),
+    (0.0, 0.0, math.pi / 2),
+    (0.088, 0.0, math.pi / 2),
+]
+PANDA_FLANGE_D_M = 0.107
+PANDA_Q_MIN = (-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973)
+PANDA_Q_MAX = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
+PANDA_DQ_MAX = (2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61)
+HAND_TCP_M = 0.1034
+
+
+def panda_flange(q) -> np.ndarray:
+    T = np.eye(4)
+    for qi, (a, d, alpha) in zip(q, PANDA_MDH):
+        ca, sa, cq, sq = math.cos(alpha), math.sin(alpha), math.cos(qi), math.sin(qi)
+        Rx = np.array([[1, 0, 0, 0], [0, ca, -sa, 0], [0, sa, ca, 0], [0, 0, 0, 1]])
+        Tx = np.eye(4)
+        Tx[0, 3] = a
+        Rz = np.array([[cq, -sq, 0, 0], [sq, cq, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+        Tz = np.eye(4)
+        Tz[2, 3] = d
+        T = T @ Rx @ Tx @ Rz @ Tz
+    flange = np.eye(4)
+    flange[2, 3] = PANDA_FLANGE_D_M
+    return T @ flange
+
+
+@pytest.fixture(scope="module")
+def panda() -> Robot:
+    return Robot.panda()
+
+
+def test_panda_forward_kinematics_follow_franka_s_table(panda):
+    rng = np.random.default_rng(11)
+    q = rng.uniform(PANDA_Q_MIN, PANDA_Q_MAX, size=(20, 7))
+    frames = panda.forward(q)
+    for k in range(len(q)):
+        flange = panda_flange(q[k])
+        np.testing.assert_allclose(frames[k, panda.frame_names.index("link8")], flange, atol=1e-9)
+        tcp = frames[k, panda.tcp_index]
+        np.testing.assert_allclose(tcp[:3, 3], flange[:3, 3] + HAND_TCP_M * flange[:3, 2], atol=1e-9)
+        # the hand is turned -45 deg about the flange z: its closing (y) axis is between the flange's x and y
+        np.testing.assert_allclose(tcp[:3, 1], (flange[:3, 0] + flange[:3, 1]) / math.sqrt(2), atol=1e-9)
+
+
+def test_panda_ready_pose_is_where_franka_says(panda):
+    # Franka's "ready" posture puts the flange 0.307 m in front of the base, 0.59 m up, pointing down
+    ready = (0, -math.pi / 4, 0, -3 * math.pi / 4, 0, math.pi / 2, math.pi / 4)
+    np.testing.assert_allclose(panda_flange(ready)[:3, 3], (0.30689, 0, 0.59028), atol=1e-4)
+    np.testing.assert_allclose(panda.tcp_pose(np.array(ready))[:3, 3], (0.30689, 0, 0.59028 - HAND_TCP_M), atol=1e-4)
+
+
+def test_panda_limits_are_franka_s(panda):
+    assert panda.n == 7
+    np.testing.assert_allclose(panda.lower, PANDA_Q_MIN)
+    np.testing.assert_allclose(panda.upper, PANDA_Q_MAX)
+    np.testing.assert_allclose(panda.velocity_limits, PANDA_DQ_MAX)
+    assert panda.reach_m == 0.855
+    assert panda.max_opening_m == 0.08
+    np.testing.assert_allclose(panda.workspace.center, (0, 0, 0.333))
+
+
+def test_panda_ik_round_trips_near_the_seed(panda):
+    rng = np.random.default_rng(5)
+    for _ in range(15):
+        q = np.clip(panda.home_q + rng.uniform(-0.6, 0.6, size=7), panda.lower + 0.05, panda.upper - 0.05)
+        pose = panda.tcp_pose(q)
+        solution = panda.ik(pose[:3, 3], pose[:3, :3], seed=np.clip(q + 0.05, panda.lower, panda.upper))
+        np.testing.assert_allclose(panda.tcp_pose(solution), pose, atol=1e-7)
+        assert panda.in_limits(solution)
+
+
+def test_panda_home_is_in_front_fingers_down_elbow_up(panda):
+    tcp = panda.tcp_pose(panda.home_q)
+    np.testing.assert_allclose(tcp[:3, 3], (0.25 * 0.855 / 0.5, 0, 0.25 * 0.855 / 0.5), atol=1e-7)
+    np.testing.assert_allclose(tcp[:3, 2], (0, 0, -1), atol=1e-7)
+    elbow = panda.forward(panda.home_q)[panda.frame_names.index("link4")][:3, 3]
+    assert elbow[2] > tcp[2, 3] + 0.1  # the elbow stands above the hand
+
+
+def test_panda_scaled_pick_and_place_puts_every_apple_in_its_box(panda):
+    scene = scaled_sorting(panda)
+    execution = simulate(CAREFUL, scene, robot=panda)
+    boxes = {c.id: c for c in scene.containers}
+    final = {o.id: o.position for o in execution.final_scene.objects}
+    for apple in scene.objects:
+        box = boxes["brown_box"] if apple.attributes["ripeness"] == "ripe" else boxes["white_box"]
+        assert ends_in(final[apple.id], box), (apple.id, final[apple.id])
+    report = critique(execution)
+    assert not report.has_errors, report.summary()
+    naive = critique(simulate((ROOT / "examples" / "programs" / "sorting_naive.py").read_text(), scene, robot=panda))
+    assert naive.score < report.score
+
+
+def test_panda_is_not_deployable_to_a_ur_controller(panda):
+    from robocritics.deploy.gate import check_model
+
+    trajectory = simulate("move_above(red_apple_1, 0.12)\n", scaled_sorting(panda), robot=panda).trajectory
+    [(cause, text)] = check_model(trajectory, "UR5")
+    assert cause == "arm_model" and "'panda'" in text

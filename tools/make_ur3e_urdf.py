@@ -1,4 +1,5 @@
-"""Write src/robocritics/robot/models/<arm>.urdf for each UR e-series arm from UR's published DH parameters.
+"""Write src/robocritics/robot/models/<arm>.urdf for each UR e-series arm from UR's published DH parameters,
+and panda.urdf for the Franka Emika Panda from Franka's published (modified DH) parameters.
 
 Link frames follow the DH chain: link i+1's frame is DH frame i rotated by
 q_{i+1} about its z axis, so joint i+1's origin is Tz(d_i) Tx(a_i) Rx(alpha_i)
@@ -13,6 +14,11 @@ visual meshes); housing radii are the UR3e's (0.09-0.095 m across) scaled by the
 arm's joint size. Every arm carries the same Robotiq 2F-85 gripper on a short
 coupling (TCP 0.15 m from the flange).
 
+The Panda's link frames follow Franka's modified-DH chain (joint i's origin is
+Rx(alpha_i) Tx(a_i) Tz(d_i), as in Franka's own description); its capsules enclose
+the real links (housings 0.11-0.13 m across) and the Franka Hand (0.08 m stroke,
+TCP 0.1034 m from the flange, turned -45 deg about the flange z).
+
 Run: python tools/make_ur3e_urdf.py            (all arms)
      python tools/make_ur3e_urdf.py ur5e       (one)
 """
@@ -21,7 +27,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
-from robocritics.robot.arms import ARMS  # noqa: E402  (the one source of the arms' numbers)
+from robocritics.robot.arms import ARMS, PANDA  # noqa: E402  (the one source of the arms' numbers)
 
 # Per arm: shoulder offset, elbow offset (m), housing scale vs the UR3e, base mass (kg, not published)
 GEOMETRY = {
@@ -145,10 +151,77 @@ def urdf_text(arm: str) -> str:
     return "".join(out)
 
 
+# Panda capsules (p0, p1, radius) in each link frame, m; link0 is the base
+PANDA_CAPSULES = {
+    "link0": ((0, 0, 0.03), (0, 0, 0.14), 0.08),
+    "link1": ((0, 0, -0.19), (0, 0, -0.06), 0.065),
+    "link2": ((0, 0, -0.05), (0, -0.12, 0.0), 0.065),
+    "link3": ((0, 0, -0.22), (0, 0, -0.09), 0.06),
+    "link4": ((0, 0, -0.05), (-0.0825, 0.12, 0.0), 0.065),
+    "link5": ((0, 0, -0.25), (0, 0.06, -0.11), 0.055),
+    "link6": ((0, 0, -0.03), (0.088, 0, 0.0), 0.05),
+    "link7": ((0, 0, -0.02), (0, 0, 0.08), 0.045),
+    "gripper_body": ((0, -0.07, 0.035), (0, 0.07, 0.035), 0.03),  # the hand, across the fingers' stroke
+}
+PANDA_BASE_MASS, PANDA_HAND_MASS, PANDA_FINGER_MASS = 3.0, 0.73, 0.015
+HAND_OPENING, HAND_TCP_Z, HAND_YAW = 0.08, 0.1034, -math.pi / 4
+
+
+def panda_urdf_text() -> str:
+    """The Panda's URDF (Franka Hand, TCP at the fingertip centre)."""
+    mdh = PANDA.modified_dh
+    links = [f"link{i}" for i in range(8)]
+    out = ['<?xml version="1.0"?>\n',
+           "<!-- Franka Emika Panda (Franka's modified DH) with the Franka Hand; written by robocritics'\n"
+           "     tools/make_ur3e_urdf.py. Collision <cylinder>s are capsule segments, see robocritics.robot.model.\n"
+           "     The finger direction is the +z axis of the tcp frame; the fingers close along its y axis. -->\n",
+           '<robot name="panda">\n']
+    for i, name in enumerate(links):
+        p0, p1, r = PANDA_CAPSULES[name]
+        mass = PANDA.link_masses_kg[i - 1] if i else PANDA_BASE_MASS
+        out.append(f'  <link name="{name}">\n' + inertial(mass, p0, p1, r) + capsule_xml(p0, p1, r) + "  </link>\n")
+    p0, p1, r = PANDA_CAPSULES["gripper_body"]
+    out.append('  <link name="link8"/>\n  <link name="tool0"/>\n')
+    out.append('  <link name="gripper_body">\n' + inertial(PANDA_HAND_MASS, p0, p1, r) + capsule_xml(p0, p1, r) + "  </link>\n")
+    finger_y = HAND_OPENING / 2 + FINGER_R
+    finger_z = HAND_TCP_Z - FINGER_R - 0.04
+    for side in ("left_finger", "right_finger"):
+        out.append(f'  <link name="{side}">\n' + inertial(PANDA_FINGER_MASS, *finger_seg, FINGER_R)
+                   + capsule_xml(*finger_seg, FINGER_R) + "  </link>\n")
+    out.append('  <link name="tcp"/>\n')
+    for i, (a, d, alpha) in enumerate(zip(mdh.a, mdh.d, mdh.alpha)):
+        # Rx(alpha) Tx(a) Tz(d): the z step is taken in the twisted frame
+        xyz = (a, -d * math.sin(alpha), d * math.cos(alpha))
+        out.append(
+            f'  <joint name="{PANDA.joint_names[i]}" type="revolute">\n    <parent link="{links[i]}"/>\n'
+            f'    <child link="{links[i + 1]}"/>\n    <origin xyz="{fmt(xyz)}" rpy="{fmt((alpha, 0, 0))}"/>\n'
+            f'    <axis xyz="0 0 1"/>\n    <limit lower="{PANDA.lower_rad[i]:.17g}" upper="{PANDA.upper_rad[i]:.17g}" '
+            f'velocity="{PANDA.velocity_rad_s[i]:.17g}" effort="{PANDA.effort_nm[i]:g}"/>\n  </joint>\n'
+        )
+    fixed = [
+        ("flange_joint", "link7", "link8", (0, 0, mdh.flange_d_m), (0, 0, 0)),
+        ("tool0_joint", "link8", "tool0", (0, 0, 0), (0, 0, HAND_YAW)),
+        ("hand_joint", "tool0", "gripper_body", (0, 0, 0), (0, 0, 0)),
+        ("left_finger_joint", "gripper_body", "left_finger", (0, finger_y, finger_z), (0, 0, 0)),
+        ("right_finger_joint", "gripper_body", "right_finger", (0, -finger_y, finger_z), (0, 0, 0)),
+        ("tcp_joint", "gripper_body", "tcp", (0, 0, HAND_TCP_Z), (0, 0, 0)),
+    ]
+    for name, parent, child, xyz, rpy in fixed:
+        out.append(
+            f'  <joint name="{name}" type="fixed">\n    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
+            f'    <origin xyz="{fmt(xyz)}" rpy="{fmt(rpy)}"/>\n  </joint>\n'
+        )
+    out.append(
+        f'  <gripper name="franka_hand" max_opening="{HAND_OPENING}" finger_axis="0 0 1" closing_axis="0 1 0" '
+        'tcp="tcp" fingers="left_finger right_finger"/>\n</robot>\n'
+    )
+    return "".join(out)
+
+
 def main(argv: list[str]) -> None:
     models = Path(__file__).resolve().parents[1] / "src/robocritics/robot/models"
-    for arm in argv or list(GEOMETRY):
-        models.joinpath(f"{arm}.urdf").write_text(urdf_text(arm))
+    for arm in argv or [*GEOMETRY, "panda"]:
+        models.joinpath(f"{arm}.urdf").write_text(panda_urdf_text() if arm == "panda" else urdf_text(arm))
 
 
 if __name__ == "__main__":

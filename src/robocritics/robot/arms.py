@@ -21,7 +21,7 @@ from typing import Mapping
 
 from ..errors import RobotModelError
 
-__all__ = ["DH", "ArmSpec", "UR3E", "UR5E", "UR10E", "UR16E", "ARMS"]
+__all__ = ["DH", "ModifiedDH", "ArmSpec", "UR3E", "UR5E", "UR10E", "UR16E", "ARMS", "PANDA"]
 
 _HALF_PI = 0.5 * math.pi
 _UR_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
@@ -111,19 +111,38 @@ class DH:
         return (d1, a2, a3, d2 + d3 + d4, d5, d6, a2 * a2 + a3 * a3, 2.0 * a2 * a3)
 
 
-def _six(name: str, values) -> tuple[float, ...]:
+@dataclass(frozen=True)
+class ModifiedDH:
+    """Modified (Craig) Denavit-Hartenberg parameters, as Franka Emika publish the Panda's.
+
+    ``T_i(q_i) = Rx(alpha[i]) Tx(a[i]) Rz(q_i) Tz(d[i])`` per joint (m, rad), then the
+    fixed flange ``Tz(flange_d_m)``: ``T_flange(q) = T_1(q_1) ... T_n(q_n) Tz(flange_d_m)``.
+    """
+
+    a: tuple[float, ...]
+    d: tuple[float, ...]
+    alpha: tuple[float, ...]
+    flange_d_m: float
+    name: str = "arm"
+
+
+def _per_joint(name: str, values, n: int) -> tuple[float, ...]:
     out = tuple(float(v) for v in values)
-    if len(out) != 6 or not all(math.isfinite(v) for v in out):
-        raise RobotModelError(f"arm spec {name}: expected 6 finite numbers, got {values!r}")
+    if len(out) != n or not all(math.isfinite(v) for v in out):
+        raise RobotModelError(f"arm spec {name}: expected {n} finite numbers (one per joint), got {values!r}")
     return out
 
 
 @dataclass(frozen=True)
 class ArmSpec:
-    """Published facts of one arm (per joint, base first). Immutable: share it freely."""
+    """Published facts of one arm (per joint, base first). Immutable: share it freely.
+
+    ``dh`` is the standard-DH table of a UR arm (closed-form IK); other arms give None and
+    their ``modified_dh`` (the Panda).
+    """
 
     name: str
-    dh: DH
+    dh: DH | None
     joint_names: tuple[str, ...]
     lower_rad: tuple[float, ...]
     upper_rad: tuple[float, ...]
@@ -132,18 +151,21 @@ class ArmSpec:
     jerk_rad_s3: tuple[float, ...]
     effort_nm: tuple[float, ...]
     link_masses_kg: tuple[float, ...]
-    """Masses of the six moving links (shoulder ... wrist 3) [kg]."""
+    """Masses of the moving links, base joint's first (shoulder ... wrist 3 on a UR) [kg]."""
     control_period_s: float
     """Controller cycle: one servo setpoint per period [s]."""
     reach_m: float
     """Published reach [m]: the radius of the default workspace sphere around the shoulder."""
     sources: Mapping[str, str] = field(default_factory=dict)
     """Where each group of numbers comes from (field name -> citation or reason)."""
+    modified_dh: ModifiedDH | None = None
+    """The kinematics of an arm published in modified DH (``dh`` is None then)."""
 
     def __post_init__(self) -> None:
+        n = len(self.joint_names)
         for f in ("lower_rad", "upper_rad", "velocity_rad_s", "acceleration_rad_s2", "jerk_rad_s3", "effort_nm",
                   "link_masses_kg"):
-            object.__setattr__(self, f, _six(f, getattr(self, f)))
+            object.__setattr__(self, f, _per_joint(f, getattr(self, f), n))
         object.__setattr__(self, "sources", MappingProxyType(dict(self.sources)))
 
     @property
@@ -259,4 +281,41 @@ UR16E = _ur_e_series(
 """The UR16e (e-series), 900 mm reach."""
 
 ARMS: Mapping[str, ArmSpec] = MappingProxyType({arm.name: arm for arm in (UR3E, UR5E, UR10E, UR16E)})
-"""Every arm this module knows, by name."""
+"""The UR e-series arms, by name: what ``Robot.ur(name)``, deploy and the loopback controller know."""
+
+PANDA = ArmSpec(
+    name="panda",
+    dh=None,
+    modified_dh=ModifiedDH(
+        a=(0.0, 0.0, 0.0, 0.0825, -0.0825, 0.0, 0.088),
+        d=(0.333, 0.0, 0.316, 0.0, 0.384, 0.0, 0.0),
+        alpha=(0.0, -_HALF_PI, _HALF_PI, _HALF_PI, -_HALF_PI, _HALF_PI, _HALF_PI),
+        flange_d_m=0.107,
+        name="panda",
+    ),
+    joint_names=tuple(f"panda_joint{i}" for i in range(1, 8)),
+    lower_rad=(-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973),
+    upper_rad=(2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973),
+    velocity_rad_s=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
+    acceleration_rad_s2=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
+    jerk_rad_s3=(7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0),
+    effort_nm=(87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0),
+    link_masses_kg=(2.74, 2.74, 2.38, 2.38, 2.74, 1.55, 0.54),
+    control_period_s=0.001,
+    reach_m=0.855,
+    sources={
+        "modified_dh": "Franka Control Interface documentation, 'Robot and interface specifications': "
+        "Denavit-Hartenberg parameters (Craig's convention) of the Panda, flange d = 0.107 m",
+        "lower_rad": "Franka FCI documentation, 'Limits for Panda': q_min / q_max per joint",
+        "velocity_rad_s": "Franka FCI documentation, 'Limits for Panda': dq_max 2.175 (joints 1-4), 2.61 rad/s (5-7)",
+        "acceleration_rad_s2": "Franka FCI documentation, 'Limits for Panda': ddq_max",
+        "jerk_rad_s3": "Franka FCI documentation, 'Limits for Panda': dddq_max",
+        "effort_nm": "Franka FCI documentation, 'Limits for Panda': tau_j_max 87 (joints 1-4), 12 N m (5-7)",
+        "link_masses_kg": "not published per link by Franka; rough values (the arm's 18 kg spread by size)",
+        "control_period_s": "Franka FCI: 1 kHz control loop",
+        "reach_m": "Franka Emika Panda datasheet: reach 855 mm",
+        "gripper": "Franka Hand: 0.08 m stroke (0.04 m per finger), TCP 0.1034 m from the flange, the hand turned "
+        "-45 deg about the flange z",
+    },
+)
+"""The Franka Emika Panda (7 joints) with the Franka Hand; not a UR, so not in :data:`ARMS`."""

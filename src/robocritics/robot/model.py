@@ -166,22 +166,33 @@ class Robot:
         Each call returns an independent robot (the URDF is parsed once and its
         immutable parts shared).
         """
-        return _ur_cached("ur3e").copy()
+        return _bundled("ur3e").copy()
 
     @classmethod
     def ur5e(cls) -> "Robot":
         """The bundled UR5e (e-series DH, 850 mm reach), same gripper and TCP as :meth:`ur3e`."""
-        return _ur_cached("ur5e").copy()
+        return _bundled("ur5e").copy()
 
     @classmethod
     def ur10e(cls) -> "Robot":
         """The bundled UR10e (e-series DH, 1300 mm reach), same gripper and TCP as :meth:`ur3e`."""
-        return _ur_cached("ur10e").copy()
+        return _bundled("ur10e").copy()
 
     @classmethod
     def ur16e(cls) -> "Robot":
         """The bundled UR16e (e-series DH, 900 mm reach), same gripper and TCP as :meth:`ur3e`."""
-        return _ur_cached("ur16e").copy()
+        return _bundled("ur16e").copy()
+
+    @classmethod
+    def panda(cls) -> "Robot":
+        """The bundled Franka Emika Panda (7 joints, Franka's published kinematics and limits) with the
+        Franka Hand; TCP at the fingertips, same TCP convention as the UR arms.
+
+        IK is numeric (damped least squares). The one redundant degree of freedom is settled by the
+        seed: the planner seeds every target with the home posture turned to face it
+        (``Planner.posture_seed``), so the elbow stays up and out as at home and the fingers down.
+        """
+        return _bundled("panda").copy()
 
     @classmethod
     def ur(cls, name: str) -> "Robot":
@@ -190,7 +201,7 @@ class Robot:
 
         if name not in ARMS:
             raise RobotModelError(f"no bundled arm {name!r}; the bundled arms are {', '.join(ARMS)}")
-        return _ur_cached(name).copy()
+        return _bundled(name).copy()
 
     @classmethod
     def from_urdf(cls, path: str | Path, tcp_frame: str = "tcp", **kwargs) -> "Robot":
@@ -555,7 +566,28 @@ class Robot:
         return f"Robot({self.name!r}, {self.n} joints, tcp={self.tcp_frame!r}, {len(self.capsules)} capsules)"
 
 
-_UR_ROBOTS: dict[str, Robot] = {}
+_BUNDLED: dict[str, Robot] = {}
+
+
+def _panda() -> Robot:
+    from .arms import PANDA, UR3E
+
+    path = resources.files("robocritics.robot") / "models" / "panda.urdf"
+    robot = Robot(
+        str(path),
+        tcp_frame="tcp",
+        name=PANDA.name,
+        reach_m=PANDA.reach_m,
+        acceleration_limits=np.array(PANDA.acceleration_rad_s2),
+        jerk_limits=np.array(PANDA.jerk_rad_s3),
+        fixed_links=("link0", "link1"),
+    )
+    # home: in front of the base and above the table, fingers down, as the UR arms' (scaled by reach),
+    # reached from Franka's "ready" posture (elbow up, forearm folded, hand down)
+    scale = PANDA.reach_m / UR3E.reach_m
+    ready = np.array([0.0, -math.pi / 4, 0.0, -3 * math.pi / 4, 0.0, math.pi / 2, math.pi / 4])
+    robot.home_q = robot.ik((0.25 * scale, 0.0, 0.25 * scale), seed=ready)
+    return robot
 
 
 def _load_model(path: Path):
@@ -584,9 +616,11 @@ def _load_model(path: Path):
         raise RobotModelError(f"cannot load URDF {str(path)!r}: {exc}") from None
 
 
-def _ur_cached(name: str) -> Robot:
-    """The bundled UR e-series arm ``name``, parsed once (callers copy it)."""
-    robot = _UR_ROBOTS.get(name)
+def _bundled(name: str) -> Robot:
+    """The bundled arm ``name`` (a UR e-series arm or ``"panda"``), parsed once (callers copy it)."""
+    robot = _BUNDLED.get(name)
+    if robot is None and name == "panda":
+        robot = _BUNDLED[name] = _panda()
     if robot is None:
         from .arms import ARMS, UR3E
         from .ik import ur_reach
@@ -607,5 +641,5 @@ def _ur_cached(name: str) -> Robot:
         scale = ur_reach(spec.dh) / ur_reach(UR3E.dh)
         upright = np.array([math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0])
         robot.home_q = robot.ik((0.25 * scale, 0.0, 0.25 * scale), seed=upright)
-        _UR_ROBOTS[name] = robot
+        _BUNDLED[name] = robot
     return robot
