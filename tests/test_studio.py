@@ -112,3 +112,46 @@ def test_chat_and_deploy_are_disabled_with_reasons_when_not_configured(studio):
     assert "LLM endpoint" in state["chat"] and "controller" in state["deploy"]
     assert len(state["critics"]) >= 5
     assert request(studio, "POST", "/api/fix", {}, API)[0] == 409
+
+
+def test_other_requests_are_answered_while_a_run_is_going(studio):
+    import threading
+
+    done = threading.Event()
+    answered_during_run = []
+
+    def run():
+        request(studio, "POST", "/api/run", {"program": NAIVE}, API)
+        done.set()
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    while not done.is_set():
+        status, _ = request(studio, "GET", "/api/state", headers=API)
+        answered_during_run.append((status, done.is_set()))
+    thread.join()
+    assert any(status == 200 and not finished for status, finished in answered_during_run)
+
+
+def test_the_command_serves_until_ctrl_c_and_exits_0(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import urllib.request
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "robocritics", "studio", "--program", str(ROOT / "examples/programs/sorting_naive.py"),
+         "--port", "0", "--no-browser"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, "ROBOCRITICS_BASE_URL": ""},
+    )
+    try:
+        line = proc.stdout.readline()
+        assert line.startswith("robocritics studio: http://127.0.0.1:"), line
+        url = line.split()[2]
+        assert b"RoboReplay" in urllib.request.urlopen(url, timeout=60).read()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=60) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()

@@ -131,6 +131,7 @@ class Studio:
         self._lock = threading.Lock()
         self._run_lock = threading.Lock()  # one simulation / LLM turn at a time
         self._evaluator = None
+        self._evaluator_lock = threading.Lock()
         self._loop = None
         self._approvals: dict[int, dict[str, Any]] = {}
         self._approval_cond = threading.Condition(self._lock)
@@ -147,6 +148,8 @@ class Studio:
         self._server.daemon_threads = True
         self._thread = threading.Thread(target=self._server.serve_forever, name="robocritics-studio", daemon=True)
         self._thread.start()
+        # Warm the worker (imports, robot model) now, so the first Run does not pay for it.
+        threading.Thread(target=lambda: self.evaluator, name="robocritics-studio-warm", daemon=True).start()
         return self
 
     @property
@@ -194,11 +197,13 @@ class Studio:
 
     @property
     def evaluator(self):
-        if self._evaluator is None:
-            from .worker import Evaluator
+        """The worker process (started once; :meth:`start` warms it up in the background)."""
+        with self._evaluator_lock:
+            if self._evaluator is None:
+                from .worker import Evaluator
 
-            self._evaluator = Evaluator(self.scene, critics=self.critics, timeout_s=self.timeout_s)
-        return self._evaluator
+                self._evaluator = Evaluator(self.scene, critics=self.critics, timeout_s=self.timeout_s)
+            return self._evaluator
 
     def installed_critics(self) -> list[str]:
         from ...plugins import get_critics
