@@ -71,7 +71,7 @@ def test_each_arm_has_its_own_constructor():
 
 
 def test_unknown_arm_names_the_bundled_ones():
-    with pytest.raises(RobotModelError, match=r"no bundled arm 'ur7e'.*ur3e, ur5e, ur10e, ur16e"):
+    with pytest.raises(RobotModelError, match=r"no bundled UR arm .ur7e.*ur3e, ur5e, ur10e, ur16e \(and Robot.panda\(\)\)"):
         Robot.ur("ur7e")
 
 

@@ -200,7 +200,9 @@ class Robot:
         from .arms import ARMS
 
         if name not in ARMS:
-            raise RobotModelError(f"no bundled arm {name!r}; the bundled arms are {', '.join(ARMS)}")
+            raise RobotModelError(
+                f"no bundled UR arm {name!r}; the bundled UR arms are {', '.join(ARMS)} (and Robot.panda())"
+            )
         return _bundled(name).copy()
 
     @classmethod
