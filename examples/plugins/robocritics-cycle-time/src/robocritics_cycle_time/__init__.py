@@ -5,6 +5,11 @@ The duration of the trajectory on its physical time axis, ``T = time[-1] - time[
 per program step: the duration of each sample interval ``time[t+1] - time[t]``
 is credited to the step of sample ``t+1`` and summed per step with
 ``numpy.bincount``.
+
+The plugin also offers a repair (the ``robocritics_repairs`` hook): the slowest
+steps run faster (:data:`SPEEDUP` times the speed in effect, at most full
+speed), restored after each step; ``robocritics.repair`` keeps the edit only
+if no safety critic gets worse.
 """
 
 from __future__ import annotations
@@ -15,7 +20,7 @@ from pydantic import Field, model_validator
 from robocritics import hookimpl
 from robocritics.critic import CriticParams, Flag, Verdict, format_lines, make_evidence, make_signal, threshold_verdict
 
-__all__ = ["CycleTimeCritic", "register_critics"]
+__all__ = ["CycleTimeCritic", "register_critics", "robocritics_repairs"]
 __version__ = "0.1.0"
 
 
@@ -116,3 +121,52 @@ class CycleTimeCritic:
 @hookimpl
 def register_critics(register):
     register(CycleTimeCritic())
+
+
+#: How much faster the repair runs the slowest steps (factor on the speed fraction in effect).
+SPEEDUP = 2.0
+
+
+def _speed_at(plan, line):
+    """The speed fraction in effect at the first skill call on ``line`` (1 = full speed)."""
+    speed = 1.0
+    for call in plan.calls:
+        if call.line == line:
+            return speed
+        if call.skill in ("set_speed", "reduce_speed"):
+            speed = float(call.args["fraction"])
+    return speed
+
+
+@hookimpl
+def robocritics_repairs(verdict, execution, program):
+    """Run the lines that take the most time :data:`SPEEDUP` times faster, until the saving covers the excess.
+
+    Doubling the speed of a step roughly halves its time, so lines are taken,
+    slowest first, until half their time adds up to ``value - threshold`` (s).
+    """
+    if verdict.critic != "cycle_time" or verdict.value is None or verdict.threshold is None:
+        return []
+    from robocritics.repair import Edit, Insert
+
+    trajectory = execution.trajectory
+    per_step = np.bincount(trajectory.step[1:], weights=np.diff(trajectory.time), minlength=len(trajectory.steps))
+    per_line: dict[int, float] = {}
+    for step, seconds in zip(trajectory.steps, per_step):
+        if step.line > 0 and (step.skill.startswith("move") or step.skill == "home"):
+            per_line[step.line] = per_line.get(step.line, 0.0) + float(seconds)
+    excess = verdict.value - verdict.threshold
+    ops, parts, saved = [], [], 0.0
+    for line, seconds in sorted(per_line.items(), key=lambda kv: -kv[1]):
+        prev = _speed_at(execution.plan, line)
+        fast = min(1.0, round(prev * SPEEDUP, 2))
+        if fast <= prev:
+            continue
+        ops.append(Insert(line, before=(f"set_speed({fast:g})",), after=(f"set_speed({prev:g})",)))
+        parts.append(f"line {line}: speed {prev:g} -> {fast:g}")
+        saved += seconds * (1 - prev / fast)
+        if saved > excess:
+            break
+    if not ops:
+        return []
+    return [Edit("cycle_time", ops[0].line, "; ".join(parts), f"the program takes {verdict.value:.1f} s", ops)]
