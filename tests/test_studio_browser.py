@@ -40,6 +40,16 @@ def press_run(driver):
     return time.monotonic() - started
 
 
+def press_run_again(driver) -> float:
+    """Seconds from pressing Run until a NEW revision's flags are shown."""
+    count = driver.execute_script("return document.querySelectorAll('#history li').length")
+    started = time.monotonic()
+    driver.execute_script("document.getElementById('run').click()")
+    wait_for(driver, f"return document.querySelectorAll('#history li').length > {count} && "
+                     "!document.body.dataset.running", what="the second Run")
+    return time.monotonic() - started
+
+
 def flags(driver) -> dict[str, str]:
     return driver.execute_script(
         "const o = {}; for (const r of document.querySelectorAll('#critics .critic')) o[r.dataset.critic] = "
@@ -51,7 +61,8 @@ def test_run_on_sorting_naive_shows_the_critics_timeline_and_robot(driver):
     with Studio("sorting", NAIVE) as studio:
         open_studio(driver, studio)
         elapsed = press_run(driver)
-        print(f"studio: Run to flags shown took {elapsed:.2f} s")
+        print(f"studio: Run to flags shown took {elapsed:.2f} s (first Run, worker warming up)")
+        print(f"studio: Run to flags shown took {press_run_again(driver):.2f} s (second Run)")
         shown = flags(driver)
         for v in expected.verdicts:
             assert shown[v.critic] == v.flag.value.lower(), v.critic

@@ -278,7 +278,11 @@ class Studio:
         self._events.append({"type": "revision", "revision": revision.full()})
 
     def _approve(self, program: str, diff: str) -> bool:
-        """Loop's approval callback: post the diff to the page and wait (bounded) for its answer."""
+        """Loop's approval callback: post the diff to the page and wait (bounded) for its answer.
+
+        In ``auto`` automation revisions are approved without asking (the page still shows each one)."""
+        if self._loop is not None and self._loop.automation == "auto":
+            return True
         with self._lock:
             ident = len(self._approvals) + 1
             pending = {"program": program, "diff": diff}
