@@ -173,3 +173,12 @@ def test_deploy_a_passing_program_to_the_loopback_controller_after_confirming(dr
             wait_for(driver, "return document.body.dataset.deployed", timeout_s=180, what="the deploy result")
             assert driver.execute_script("return document.body.dataset.deployed") == "1", \
                 driver.find_element("id", "terminal").text
+
+
+def test_the_page_works_with_its_token_and_not_without(driver):
+    with Studio("sorting", NAIVE, token="t0ken-for-test") as studio:
+        driver.get(studio.url.split("?")[0])
+        assert "needs its token" in driver.find_element("tag name", "body").text
+        open_studio(driver, studio)
+        press_run(driver)  # every API call carried the token header
+        assert len(driver.find_elements("css selector", "#history li")) == 1
