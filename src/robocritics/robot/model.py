@@ -207,7 +207,15 @@ class Robot:
 
     @classmethod
     def from_urdf(cls, path: str | Path, tcp_frame: str = "tcp", **kwargs) -> "Robot":
-        """Load another arm; IK falls back to Pinocchio damped least squares."""
+        """Load another arm from a URDF that follows the contract in docs/robots.md.
+
+        ``tcp_frame``: the TCP link (+z the finger direction). Keyword arguments as for the
+        constructor: ``dh=`` (a standard-DH table, cross-checked against the URDF's ``tool0``;
+        turns on closed-form IK, otherwise Pinocchio damped least squares), ``reach_m=`` (default
+        the stretched-out chain from the shoulder), ``home=``, ``acceleration_limits=``,
+        ``jerk_limits=``, ``self_pairs=``, ``fixed_links=``. Raises :class:`RobotModelError`
+        naming what in the file breaks the contract.
+        """
         return cls(path, tcp_frame=tcp_frame, **kwargs)
 
     def copy(self) -> "Robot":
