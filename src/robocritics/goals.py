@@ -12,7 +12,7 @@ import math
 import re
 from typing import TYPE_CHECKING, Iterable, Literal
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from ._suggest import did_you_mean
 from .errors import GoalError
@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from .scene import Scene
     from .simulate import Execution
 
-__all__ = ["Goal", "GoalError", "parse_goals", "program_goals", "check_outcomes"]
+__all__ = ["Goal", "GoalError", "GoalOutcome", "parse_goals", "program_goals", "check_outcomes"]
 
 TABLE = "table"
 """The support id of the table top."""
@@ -145,6 +145,18 @@ class Goal(BaseModel):
         return met, where
 
 
+class GoalOutcome(BaseModel):
+    """One goal checked on a final scene: the goal's text, whether it holds, where the object ended."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    goal: str
+    met: bool
+    where: str
+    object: str = ""
+    lines: tuple[int, ...] = Field((), description="program lines of the expect() calls that stated it")
+
+
 def parse_goals(goals: "Iterable[str | Goal] | str | Goal | None", scene: "Scene | None" = None) -> list[Goal]:
     """Goals from text or :class:`Goal` values (duplicates dropped, order kept), checked against ``scene`` if given."""
     if goals is None:
@@ -170,11 +182,9 @@ def program_goals(plan) -> list[tuple[Goal, int]]:
     ]
 
 
-def check_outcomes(execution: "Execution", goals: "Iterable[str | Goal] | str | Goal | None" = None) -> list:
-    """:class:`~robocritics.critics.task_outcome.GoalOutcome` of every goal in ``goals`` and of the program's
-    ``expect(...)`` calls, checked on ``execution``'s final scene (duplicates once, with all their lines)."""
-    from .critics.task_outcome import GoalOutcome
-
+def check_outcomes(execution: "Execution", goals: "Iterable[str | Goal] | str | Goal | None" = None) -> list[GoalOutcome]:
+    """:class:`GoalOutcome` of every goal in ``goals`` and of the program's ``expect(...)`` calls, checked on
+    ``execution``'s final scene (each goal once, with all its lines)."""
     lines: dict[Goal, list[int]] = {g: [] for g in parse_goals(goals, execution.scene)}
     for goal, line in program_goals(execution.plan):
         lines.setdefault(goal, []).append(line)

@@ -20,27 +20,19 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from .. import hookimpl
-from ..critic import CriticParams, Evidence, Flag, Verdict
+from ..goals import GoalOutcome
+from ..hookspecs import hookimpl
+from ..verdict import Evidence, Flag, Verdict
 
 __all__ = ["TaskOutcomeCritic", "GoalOutcome", "register_critics"]
 
 NAME = "task_outcome"
 
 
-class GoalOutcome(BaseModel):
-    """One goal checked on a final scene: the goal's text, whether it holds, where the object ended."""
-
+# a CriticParams (frozen, unknown fields rejected) without importing robocritics.critic, which imports this module
+class Params(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    goal: str
-    met: bool
-    where: str
-    object: str = ""
-    lines: tuple[int, ...] = Field((), description="program lines of the expect() calls that stated it")
-
-
-class Params(CriticParams):
     outcomes: tuple[GoalOutcome, ...] = Field(
         (), description="goals checked on the final scene (filled by critique() from its goals and the program's expect())"
     )
