@@ -81,7 +81,9 @@ def test_the_model_rule_refuses_another_arm_naming_both(ur10e_trajectory):
     [(cause, text)] = check_model(ur10e_trajectory, "UR5")
     assert cause == "arm_model"
     assert "planned for a ur10e but the controller reports 'UR5'" in text
-    assert "Robot.ur5e()" in text
+    assert "robot=Robot.ur5e()" in text
+    [(_, text)] = check_model(ur10e_trajectory, "UR20")
+    assert "reports 'UR20'" in text and "no bundled arm is this one" in text
 
 
 def test_the_model_rule_refuses_when_the_dashboard_cannot_say(ur10e_trajectory):

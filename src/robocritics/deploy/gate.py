@@ -174,9 +174,10 @@ def check_model(trajectory: Trajectory, reported_model: str | None, *, dashboard
         return [("arm_model", f"cannot ask the dashboard which arm this is ('get robot model'): {dashboard_error}")]
     reported = reported_model.strip().upper()
     if reported != spec.dashboard_model:
+        other = ARMS_BY_DASHBOARD.get(reported)
+        hint = f"plan it for this arm (simulate(..., robot=Robot.{other}()))" if other else "no bundled arm is this one"
         return [("arm_model", f"the trajectory was planned for a {spec.name} but the controller reports "
-                              f"{reported_model.strip()!r} (a {spec.name} reports {spec.dashboard_model!r}); plan it "
-                              f"for this arm (e.g. Robot.{ARMS_BY_DASHBOARD.get(reported, 'ur(...)')}())")]
+                              f"{reported_model.strip()!r} (a {spec.name} reports {spec.dashboard_model!r}); {hint}")]
     return []
 
 
