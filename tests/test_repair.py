@@ -85,3 +85,32 @@ def test_move_block_reorders_paragraphs_and_keeps_home_last():
     assert paragraphs(src) == [(2, 3), (5, 7)]
     out = apply_edits(src, [MoveBlock(2, 5, 6)])
     assert out == "# c\nmove_down(0.1)\nclose_gripper()\n\nmove_up(0.1)\nopen_gripper()\n\nhome()\n"
+
+
+CAREFUL_CYCLE_FACTOR = 1.5
+
+
+@pytest.mark.parametrize(
+    "task, goals",
+    [
+        ("sorting", ["green_apple in white_box", "red_apple_1 in brown_box", "red_apple_2 in brown_box"]),
+        pytest.param(
+            "breakfast",
+            ["fork in trash_bin", "apple on plate", "cupcake on plate"],
+            marks=pytest.mark.xfail(strict=True, reason="collision left: the cupcake must be picked first and "
+                                    "placed clear of the apple; no single repair is accepted yet"),
+        ),
+        pytest.param(
+            "recycling",
+            ["coffee_cup in trash_bin", "food_container in trash_bin", "water_bottle in trash_bin"],
+            marks=pytest.mark.xfail(strict=True, reason="collision left: spreading the releases moves the hit to "
+                                    "the fingers on the cup; needs a lower release or a two-step acceptance"),
+        ),
+    ],
+)
+def test_every_bundled_naive_program_is_repaired_to_no_error(task, goals):
+    naive = repair((PROGRAMS / f"{task}_naive.py").read_text(), task, goal=goals)
+    careful = repair((PROGRAMS / f"{task}_careful.py").read_text(), task, goal=goals)
+    print(f"{task}: repaired {naive.execution.duration_s:.1f} s vs careful {careful.execution.duration_s:.1f} s")
+    assert naive.errors == [], [v.message for v in naive.errors]
+    assert naive.execution.duration_s <= CAREFUL_CYCLE_FACTOR * careful.execution.duration_s

@@ -8,7 +8,10 @@ re-simulates it and keeps it only when it removes the flag without adding anothe
 from __future__ import annotations
 
 from ..hookspecs import hookimpl
-from .edit import Edit, Insert, MoveBlock, ScaleNumbers, paragraphs
+import ast
+import math
+
+from .edit import Edit, Insert, MoveBlock, ReplaceText, ScaleNumbers, paragraphs
 
 #: Headroom under a speed threshold a slowdown aims for (fraction of the threshold).
 SPEED_MARGIN = 0.85
@@ -134,15 +137,86 @@ def _pick_first(verdict, execution, program) -> list[Edit]:
     return edits
 
 
+#: Fraction of a container's inner half-width at which released objects are spread.
+SPREAD_RADIUS = 0.55
+
+
+def _loop_variable(tree: ast.Module, line: int) -> str | None:
+    """The target name of the innermost ``for NAME in ...`` loop around ``line``."""
+    found = None
+    for node in ast.walk(tree):
+        if isinstance(node, ast.For) and isinstance(node.target, ast.Name):
+            if node.lineno < line <= (node.end_lineno or node.lineno):
+                if found is None or node.lineno > found[0]:
+                    found = (node.lineno, node.target.id)
+    return found[1] if found else None
+
+
+def _spread(verdict, execution, program) -> list[Edit]:
+    """Objects released at the same spot of a container collide: give each its own spot inside it.
+
+    The release move of a loop (``move_to(bin.x, bin.y, ...)``) gets a per-object
+    offset, on a circle of :data:`SPREAD_RADIUS` of the container's inner half-width.
+    """
+    final = execution.final_scene
+    ids = {o.id for o in final.objects}
+    pair = [p for p in str(verdict.details.get("closest_pair", "")).split("|") if p in ids]
+    if verdict.critic == "task_outcome":  # an object that ended on another instead of inside the container
+        pair = [o for o in verdict.evidence.objects if execution.resting_on.get(o) in ids]
+        pair = [pair[0], execution.resting_on[pair[0]]] if pair else []
+    if len(pair) != 2:
+        return []
+    holder = final.container_holding(pair[1])
+    if holder is None or (verdict.critic != "task_outcome" and final.container_holding(pair[0]) != holder):
+        return []
+    box = holder
+    inside = [o.id for o in final.objects if (h := final.container_holding(o.id)) is not None and h.id == box.id]
+    inside += [p for p in pair if p not in inside]
+    radius = SPREAD_RADIUS * (min(box.size[0], box.size[1]) / 2 - box.wall_m)
+    spots = {
+        oid: (round(radius * math.cos(2 * math.pi * k / len(inside)), 3), round(radius * math.sin(2 * math.pi * k / len(inside)), 3))
+        for k, oid in enumerate(inside)
+    }
+    tree = ast.parse(program)
+    text = program.splitlines()
+    ops: list = []
+    lines = sorted({c.line for c in execution.plan.calls if c.skill in ("move_to", "move_linear")})
+    for ln in lines:
+        if f"{box.id}.x" not in text[ln - 1] or f"{box.id}.y" not in text[ln - 1]:
+            continue
+        var = _loop_variable(tree, ln)
+        if var is None:
+            continue
+        ops += [
+            ReplaceText(ln, f"{box.id}.x", f"{box.id}.x + release_spots[{var}.id][0]"),
+        ]
+        ops.append(ReplaceText(ln, f"{box.id}.y", f"{box.id}.y + release_spots[{var}.id][1]"))
+    if not ops:
+        return []
+    first = min(c.line for c in execution.plan.calls)
+    top = next(s for s in tree.body if s.lineno <= first <= (s.end_lineno or s.lineno))
+    ops.append(Insert(top.lineno, before=(f"release_spots = {spots!r}  # each object at its own spot in {box.id}",)))
+    return [
+        Edit(
+            verdict.critic,
+            ops[0].line,
+            f"release at its own spot in {box.id} on line {ops[0].line} (spots {spots})",
+            f"{pair[0]} and {pair[1]} are released at the same spot of {box.id}",
+            ops,
+        )
+    ]
+
+
 _BY_CRITIC = {
     "joint_speed": [_slowdowns],
     "end_effector_pose": [_slowdowns],
-    "collision": [_avoid, _pick_first, _slowdowns],
+    "collision": [_spread, _avoid, _pick_first, _slowdowns],
     "space_usage": [_lower_heights],
+    "task_outcome": [_spread],
 }
 
 
 @hookimpl
 def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
     makers = _BY_CRITIC.get(verdict.critic, [])
-    return [e for make in makers for e in (make(verdict, execution, program) if make is _pick_first else make(verdict, execution))]
+    return [e for make in makers for e in (make(verdict, execution, program) if make in (_pick_first, _spread) else make(verdict, execution))]

@@ -11,15 +11,19 @@ from dataclasses import dataclass, field
 
 from ..errors import ProgramError
 
-__all__ = ["Edit", "Insert", "ScaleNumbers", "MoveBlock", "apply_edits", "paragraphs"]
+__all__ = ["Edit", "Insert", "ScaleNumbers", "MoveBlock", "ReplaceText", "apply_edits", "paragraphs"]
 
 
 def _statement_at(tree: ast.Module, line: int) -> ast.stmt:
-    """The innermost simple statement that starts on ``line`` (1-based)."""
-    best = None
+    """The innermost simple statement that starts on ``line`` (1-based), else the compound one (``for``...)."""
+    best = compound = None
     for node in ast.walk(tree):
-        if isinstance(node, ast.stmt) and node.lineno == line and not hasattr(node, "body"):
-            best = node
+        if isinstance(node, ast.stmt) and node.lineno == line:
+            if not hasattr(node, "body"):
+                best = node
+            elif compound is None:  # a loop or def header: its outermost statement
+                compound = node
+    best = best or compound
     if best is None:
         raise ProgramError(f"no statement starts on line {line} to edit", line=line)
     return best
@@ -42,11 +46,25 @@ class Insert:
 
 
 @dataclass(frozen=True)
+class ReplaceText:
+    """Replace ``old`` by ``new`` in the text of line ``line`` (every occurrence; the line count is unchanged)."""
+
+    line: int
+    old: str
+    new: str
+    inline = True
+
+    def apply(self, lines: list[str], tree: ast.Module) -> None:
+        lines[self.line - 1] = lines[self.line - 1].replace(self.old, self.new)
+
+
+@dataclass(frozen=True)
 class ScaleNumbers:
     """Multiply the positive float literals of the statement on ``line`` by ``factor`` (e.g. hover heights, m)."""
 
     line: int
     factor: float
+    inline = True
 
     def apply(self, lines: list[str], tree: ast.Module) -> None:
         stmt = _statement_at(tree, self.line)
@@ -119,6 +137,6 @@ def apply_edits(source: str, ops: list) -> str:
     lines = source.splitlines(keepends=True)
     if lines and not lines[-1].endswith("\n"):
         lines[-1] += "\n"
-    for op in sorted(ops, key=lambda o: (not isinstance(o, ScaleNumbers), -o.line)):
+    for op in sorted(ops, key=lambda o: (not getattr(o, "inline", False), -o.line)):
         op.apply(lines, tree)
     return "".join(lines)
