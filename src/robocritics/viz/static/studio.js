@@ -191,7 +191,8 @@
     if (path === "/api/fix") chatMessage("user", body.critics ? "Fix " + body.critics.join(", ") : "Fix all").before(reply);
     $("chat-status").textContent = "waiting for the model…";
     try {
-      await stream(path, {...body, automation: $("automation").value}, (ev) => {
+      const index = state.revision ? state.revision.index : null;
+      await stream(path, {...body, index, automation: $("automation").value}, (ev) => {
         if (ev.type === "text") { reply.textContent = ev.text; $("chat-status").textContent = "receiving…"; }
         else if (ev.type === "approval") askApproval(ev);
         else if (ev.type === "revision") show(ev.revision);

@@ -303,15 +303,19 @@ class Studio:
             self._approval_cond.notify_all()
 
     def llm_turn(self, action: str, *, text: str = "", critics: list[str] | None = None,
-                 automation: str = "guided") -> Iterator[dict[str, Any]]:
+                 automation: str = "guided", index: int | None = None) -> Iterator[dict[str, Any]]:
         """Start one chat or Fix turn in a thread; return its events (text so far, approvals, revisions,
         done/error) as they come. Raises StudioError at once when no model is configured."""
         loop = self._loop_for(automation)
+        # The revision on the page (the user may have gone back in the history) is the one to fix or refine.
+        shown = self.revisions[index - 1] if index and 0 < index <= len(self.revisions) else (
+            self.revisions[-1] if self.revisions else None)
+        if shown is not None and (loop.current is None or loop.current.program != shown.program):
+            self.program = shown.program
+            self._adopt(shown)
         return self._turn_events(loop, action, text, critics)
 
     def _turn_events(self, loop, action: str, text: str, critics: list[str] | None) -> Iterator[dict[str, Any]]:
-        if self.revisions and (loop.current is None or loop.current.program != self.program):
-            self._adopt(self.revisions[-1])
         events: list[dict[str, Any]] = []
         self._events = events
         done = threading.Event()
@@ -515,7 +519,8 @@ class _Handler(BaseHTTPRequestHandler):
                 critics = body.get("critics")
                 events = self.studio.llm_turn("chat" if path == "/api/chat" else "fix", text=text,
                                               critics=critics if isinstance(critics, list) else None,
-                                              automation=automation)
+                                              automation=automation,
+                                              index=body.get("index") if isinstance(body.get("index"), int) else None)
                 self._stream(events)
             elif path == "/api/approve":
                 self.studio.answer(int(body.get("id", 0)), bool(body.get("ok")))
