@@ -103,8 +103,8 @@ CAREFUL_CYCLE_FACTOR = 1.5
         pytest.param(
             "recycling",
             ["coffee_cup in trash_bin", "food_container in trash_bin", "water_bottle in trash_bin"],
-            marks=pytest.mark.xfail(strict=True, reason="collision left: spreading the releases moves the hit to "
-                                    "the fingers on the cup; needs a lower release or a two-step acceptance"),
+            marks=pytest.mark.xfail(strict=True, reason="collision left: spreading the releases (accepted as progress) leaves "
+                                    "the fingers opening into the released cup; release-higher candidate not yet accepted"),
         ),
     ],
 )

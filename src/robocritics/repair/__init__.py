@@ -86,10 +86,28 @@ def _flags(report: Report) -> dict[str, int]:
     return {v.critic: v.score for v in report.verdicts}
 
 
+#: Fraction by which an Error's distance from its threshold must shrink to count as progress.
+PROGRESS = 0.25
+
+
+def _progress(before: Report, after: Report, critic: str) -> bool:
+    old = next((v for v in before.verdicts if v.critic == critic), None)
+    new = next((v for v in after.verdicts if v.critic == critic), None)
+    if old is None or new is None or None in (old.value, old.threshold, new.value) or old.threshold != new.threshold:
+        return False
+    gap_old, gap_new = old.value - old.threshold, new.value - new.threshold
+    return gap_old * gap_new > 0 and abs(gap_new) <= (1 - PROGRESS) * abs(gap_old)
+
+
 def _acceptable(before: Report, after: Report, critic: str) -> bool:
-    """``after`` lifts ``critic`` out of Error and no verdict scores lower than in ``before``."""
+    """``after`` lifts ``critic`` out of Error (or makes its Error clearly smaller) and no verdict scores lower.
+
+    "Clearly smaller" (:data:`PROGRESS`): the measured value moved toward the threshold by
+    that fraction, e.g. a 6 cm penetration that became 2.9 cm, so a repair that uncovers
+    the next, lesser fault of the same critic still counts and the next round can fix that one.
+    """
     old, new = _flags(before), _flags(after)
-    if new.get(critic, 2) == 0:
+    if new.get(critic, 2) == 0 and not _progress(before, after, critic):
         return False
     return all(new.get(name, 2) >= score for name, score in old.items()) and all(
         name in old or score > 0 for name, score in new.items()

@@ -207,10 +207,51 @@ def _spread(verdict, execution, program) -> list[Edit]:
     ]
 
 
+#: Clearance added above a release point beyond the measured penetration, m.
+RELEASE_CLEARANCE_M = 0.05
+
+
+def _release_higher(verdict, execution, program) -> list[Edit]:
+    """The gripper hits what it just released: release higher, by the penetration plus a clearance.
+
+    For a collision flagged on an ``open_gripper()`` line, the z argument of the
+    move just before it becomes ``z + d`` with ``d = penetration + RELEASE_CLEARANCE_M``.
+    """
+    if verdict.value is None or verdict.value >= 0:
+        return []
+    calls = execution.plan.calls
+    skills = {c.line: c.skill for c in calls}
+    tree = ast.parse(program)
+    text = program.splitlines()
+    edits = []
+    for ln in verdict.evidence.lines:
+        if skills.get(ln) != "open_gripper":
+            continue
+        moves = [c.line for c in calls if c.line < ln and c.skill in ("move_to", "move_linear")]
+        if not moves:
+            continue
+        move = max(moves)
+        call = next((n for n in ast.walk(tree) if isinstance(n, ast.Call) and n.lineno == move and len(n.args) == 3), None)
+        if call is None or call.args[2].lineno != call.args[2].end_lineno:
+            continue
+        z = ast.get_source_segment(program, call.args[2]) or ""
+        d = round(-verdict.value + RELEASE_CLEARANCE_M, 2)
+        edits.append(
+            Edit(
+                verdict.critic,
+                move,
+                f"release {d:g} m higher on line {move} ({z} -> {z} + {d:g})",
+                f"the gripper penetrates what it releases by {-verdict.value:.3g} m on line {ln}",
+                [ReplaceText(move, f", {z})", f", {z} + {d:g})")],
+            )
+        )
+    return edits
+
+
 _BY_CRITIC = {
     "joint_speed": [_slowdowns],
     "end_effector_pose": [_slowdowns],
-    "collision": [_spread, _avoid, _pick_first, _slowdowns],
+    "collision": [_spread, _release_higher, _avoid, _pick_first, _slowdowns],
     "space_usage": [_lower_heights],
     "task_outcome": [_spread],
 }
@@ -219,4 +260,4 @@ _BY_CRITIC = {
 @hookimpl
 def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
     makers = _BY_CRITIC.get(verdict.critic, [])
-    return [e for make in makers for e in (make(verdict, execution, program) if make in (_pick_first, _spread) else make(verdict, execution))]
+    return [e for make in makers for e in (make(verdict, execution, program) if make in (_pick_first, _spread, _release_higher) else make(verdict, execution))]
