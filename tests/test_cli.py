@@ -158,9 +158,10 @@ def test_a_critic_beside_the_score_still_fails_check(capsys):
     assert "beside the score: " in out and "house_rule Error" in out
 
 
-def test_check_program_errors_are_exit_2(capsys, tmp_path):
+def test_a_program_that_does_not_run_is_a_runtime_error_report_exit_1(capsys, tmp_path):
     program = tmp_path / "prog.py"
     program.write_text("import os\nos.system('true')\n")
     code, out, err = run(capsys, "check", str(program), "--scene", "sorting")
-    assert code == 2 and out == ""
+    assert code == 1  # a report with the runtime critic's Error, like any other Error
+    assert "runtime" in out and "ERROR" in out and "line 1" in out
     assert err.startswith("robocritics: error: ProgramError") and err.strip().count("\n") == 0

@@ -93,9 +93,6 @@ def run(capsys, argv):
         (["check", "big.py"], "program file 'big.py' is larger than the limit of 1,000,000 bytes"),
         (["check", ""], "the program file name is empty"),
         (["check", "n\x00.py"], "cannot read program file"),
-        # legal programs, impossible motions: the planner's typed errors, with the line
-        (["check", "slow.py"], "ProgramError: line 1, column 1: reduce_speed: percent must be in 1 <= percent <= 100, got 0.01"),
-        (["check", "waits.py"], "MotionBudgetError: line 2: wait(seconds=10): the program's motion lasts 33.3 min; the limit is 5 min"),
         # --params and --critics
         (["check", "prog.py", "--params", "params_deep.json"], "params file 'params_deep.json': JSON nested 51 deep"),
         (["check", "prog.py", "--params", "params_bigint.json"], "joint_speed"),
@@ -149,3 +146,19 @@ def test_the_real_command_prints_no_traceback(files, argv, words):
     )
     assert (done.returncode, done.stdout) == (2, ""), done.stderr
     assert done.stderr.count("\n") == 1 and done.stderr.startswith(words), done.stderr
+
+
+@pytest.mark.parametrize(
+    "argv, words, line",
+    [
+        # legal programs, impossible motions: the planner's typed errors, with the line, as the runtime critic's Error
+        (["check", "slow.py"], "ProgramError: line 1, column 1: reduce_speed: percent must be in 1 <= percent <= 100, got 0.01", 1),
+        (["check", "waits.py"], "MotionBudgetError: line 2: wait(seconds=10): the program's motion lasts 33.3 min; the limit is 5 min", 2),
+    ],
+)
+def test_a_program_that_cannot_run_is_a_runtime_error_report(capsys, monkeypatch, files, argv, words, line):
+    monkeypatch.chdir(files)
+    code, out, err = run(capsys, argv)
+    assert code == 1, err
+    assert err.count("\n") == 1 and words in err and "Traceback" not in err
+    assert "runtime" in out and f"line {line}" in out

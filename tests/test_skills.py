@@ -28,6 +28,7 @@ from robocritics.scene import Scene
 SORTING = Scene.builtin("sorting")
 
 ALL_SKILLS = {
+    "expect",
     "move_to",
     "move_linear",
     "move_above",
