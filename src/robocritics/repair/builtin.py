@@ -225,12 +225,16 @@ def _release_higher(verdict, execution, program) -> list[Edit]:
     text = program.splitlines()
     edits = []
     for ln in verdict.evidence.lines:
-        if skills.get(ln) != "open_gripper":
+        releases = {c.line for c in calls if c.skill == "open_gripper"}
+        if skills.get(ln) in ("move_to", "move_linear") and any(r > ln for r in releases):
+            move = ln  # the release move itself
+        elif skills.get(ln) == "open_gripper":
+            moves = [c.line for c in calls if c.line < ln and c.skill in ("move_to", "move_linear")]
+            if not moves:
+                continue
+            move = max(moves)
+        else:
             continue
-        moves = [c.line for c in calls if c.line < ln and c.skill in ("move_to", "move_linear")]
-        if not moves:
-            continue
-        move = max(moves)
         call = next((n for n in ast.walk(tree) if isinstance(n, ast.Call) and n.lineno == move and len(n.args) == 3), None)
         if call is None or call.args[2].lineno != call.args[2].end_lineno:
             continue
