@@ -405,3 +405,14 @@ def test_panda_is_not_deployable_to_a_ur_controller(panda):
     trajectory = simulate("move_above(red_apple_1, 0.12)\n", scaled_sorting(panda), robot=panda).trajectory
     [(cause, text)] = check_model(trajectory, "UR5")
     assert cause == "arm_model" and "'panda'" in text
+
+
+def test_simulate_judges_a_scene_without_its_own_workspace_by_the_robots_reach():
+    big = Robot.ur10e()
+    plain = Scene()  # no workspace given
+    execution = simulate("move_to(0.5, 0.2, 0.4)\n", plain, robot=big)
+    assert execution.scene.workspace == big.workspace
+    assert big.workspace.radius_m > Robot.ur3e().workspace.radius_m
+    # a scene that states its workspace keeps it
+    own = Scene(workspace={"center": (0, 0, 0.2), "radius_m": 2.0})
+    assert simulate("move_to(0.5, 0.2, 0.4)\n", own, robot=big).scene.workspace.radius_m == 2.0

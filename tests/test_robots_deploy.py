@@ -13,7 +13,7 @@ import robocritics as rc
 from robocritics.critic import BUILTIN_CRITICS
 from robocritics.deploy import URArm
 from robocritics.deploy.dashboard import DashboardClient
-from robocritics.deploy.gate import check_model
+from robocritics.deploy.gate import DeployRefused, check_model
 from robocritics.errors import DeployError
 from robocritics.robot.model import Robot
 from robocritics.testing.ursim import URSim
@@ -64,6 +64,24 @@ def test_each_arm_deploys_to_a_controller_of_its_model(name):
         snap = sim.snapshot()
     assert max(abs(a - b) for a, b in zip(snap.q, traj.q[-1])) < 1e-3
     assert result.final_error_rad < 1e-3
+
+
+def test_deploy_refuses_a_controller_of_another_arm_before_anything_moves():
+    robot = Robot.ur3e()
+    execution = rc.simulate(SHORT_PROGRAM, rc.Scene.builtin("sorting"), robot=robot)
+    report = rc.critique(execution, critics=BUILTIN_CRITICS)
+    assert not report.has_errors, report.summary()
+    # a UR10e controller: whatever else the gate finds, the model rule names both arms
+    with URSim(**stepped(model="ur10e", idle_after_s=0.05)) as sim:
+        before = sim.snapshot().q
+        with URArm("127.0.0.1", rtde_port=sim.rtde_port, dashboard_port=sim.dashboard_port,
+                   secondary_port=sim.secondary_port, timeout_s=1.0) as arm:
+            with pytest.raises(DeployRefused) as refused:
+                arm.deploy(execution, report)
+        snap = sim.snapshot()
+    assert "arm_model" in refused.value.causes
+    assert "ur3e" in str(refused.value) and "'UR10'" in str(refused.value)
+    assert list(snap.q) == list(before)  # nothing moved
 
 
 @pytest.fixture(scope="module")

@@ -165,6 +165,7 @@ def simulate(
     if not isinstance(program, Plan):  # a program refers to objects by id
         check_scene_ids(scene)
     robot = robot or Robot.ur3e()
+    scene = robot.scene_for(scene)  # a scene without its own workspace is judged by this robot's reach
     plan = program if isinstance(program, Plan) else run_program(program, scene)
     planner = Planner(scene, robot, sample_rate_hz, settings or PlannerSettings(), start_q=start_q)
     planner.run(plan)

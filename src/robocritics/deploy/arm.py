@@ -37,6 +37,7 @@ import numpy as np
 from robocritics.deploy.dashboard import DASHBOARD_PORT, DashboardClient
 from robocritics.deploy.gate import (
     DeployRefused,
+    check_model,
     check_report,
     check_robot,
     check_trajectory,
@@ -293,8 +294,13 @@ class URArm:
                 remote, dashboard_error = self._healthy_dashboard().is_in_remote_control(), ""
             except RTDEError as exc:
                 remote, dashboard_error = None, str(exc)
+            try:  # joint angles mean a pose only on the arm they were planned for
+                model, model_error = self._healthy_dashboard().robot_model(), ""
+            except RTDEError as exc:
+                model, model_error = None, str(exc)
         reasons = check_robot(state, plan.q[0], remote_control=remote, start_tolerance_rad=start_tolerance_rad,
                               dashboard_error=dashboard_error)
+        reasons += check_model(traj, model, dashboard_error=model_error)
         if reasons:
             raise DeployRefused(reasons)
         program = streaming_program(

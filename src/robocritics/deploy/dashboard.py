@@ -215,6 +215,13 @@ class DashboardClient:
             raise RTDEError(f"dashboard {self.address}: 'is in remote control' got unexpected reply {reply!r}")
         return reply == "true"
 
+    def robot_model(self) -> str:
+        """The arm's model as the dashboard names it (``get robot model`` → ``"UR3"``, ``"UR5"``, ``"UR10"``, ``"UR16"``)."""
+        reply = self.command("get robot model").strip()
+        if not reply or len(reply) > 32 or not reply.replace("-", "").replace("_", "").isalnum():
+            raise RTDEError(f"dashboard {self.address}: 'get robot model' got unexpected reply {reply!r}")
+        return reply
+
     def polyscope_version(self) -> str:
         return self.command("PolyscopeVersion")
 
