@@ -14,7 +14,7 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
-from .local import DEFAULT_TIMEOUT_S, WORKER_ENV, BatchError
+from .local import DEFAULT_TIMEOUT_S, MAX_START_FAILURES, STARTUP_TIMEOUT_S, WORKER_ENV, BatchError
 from .rows import Job, SceneCache, error_row, evaluate_job
 
 __all__ = ["RayEngine", "import_ray"]
@@ -57,7 +57,8 @@ class RayEngine:
     """``workers`` Ray actors (default: the cluster's CPUs) evaluating Jobs; use it as a context manager.
 
     ``address`` names a running cluster (``"ray://host:10001"`` or ``"auto"``); by default, if Ray is not
-    initialised yet, a local one is started bound to 127.0.0.1 (and shut down on :meth:`close`).
+    initialised yet, a local one is started (and shut down on :meth:`close`). Ray itself listens on this host's
+    network address, not only loopback (it refuses 127.0.0.1 as a node address): see docs/batch.md.
     """
 
     def __init__(
@@ -77,8 +78,8 @@ class RayEngine:
         self._owns_ray = not ray.is_initialized()
         if self._owns_ray:
             options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
-            if address is None:
-                options.update(_node_ip_address="127.0.0.1", num_cpus=workers)
+            if address is None:  # Ray resolves 127.0.0.1 to this host's address: its ports are not loopback-only
+                options.update(num_cpus=workers)
             ray.init(address=address, **options)
         self.workers = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
         self.timeout_s = float(timeout_s)
@@ -87,6 +88,9 @@ class RayEngine:
         self._sample_rate_hz = float(sample_rate_hz)
         self._remote = ray.remote(num_cpus=1, max_restarts=0)(_Actor)
         self._actors: list = []
+        self._pid_of: dict[str, int] = {}  # actor id -> its process id, once started
+        self._running: dict[str, Any] = {}  # actor id -> the id of the row it is evaluating
+        self._start_failures = 0
 
     def _spawn(self):
         return self._remote.options(runtime_env={"env_vars": dict(WORKER_ENV)}).remote(
@@ -109,16 +113,24 @@ class RayEngine:
         self._owns_ray = False
 
     def pids(self) -> list[int]:
-        """The actors' process ids."""
+        """The actors' process ids (asks each actor: waits for a busy one)."""
         return self._ray.get([a.pid.remote() for a in self._actors])
 
+    def running(self) -> dict[int, Any]:
+        """``{actor pid: id of the row it is evaluating}`` right now (for monitoring; no call to the actors)."""
+        return {self._pid_of[a]: row_id for a, row_id in list(self._running.items()) if a in self._pid_of}
+
     def run(self, jobs: Iterator[Job], side: list[dict] | None = None) -> Iterator[dict]:
-        """Evaluate ``jobs``, yielding output rows as they finish, and the rows appended to ``side``."""
+        """Evaluate ``jobs``, yielding output rows as they finish, and the rows appended to ``side``.
+
+        A row's timeout starts when it is sent to an actor that has started (loaded the robot)."""
         ray = self._ray
         side = [] if side is None else side
         while len(self._actors) < self.workers:
             self._actors.append(self._spawn())
-        idle = list(self._actors)
+        idle: list = []
+        starting = {actor.pid.remote(): actor for actor in self._actors}  # ready when the robot is loaded
+        waiting_since = time.monotonic()  # for the startup timeout: the last time an actor became ready
         flight: dict[Any, tuple[Any, Job, float]] = {}  # ObjectRef -> (actor, job, started)
         exhausted = False
         while True:
@@ -131,35 +143,60 @@ class RayEngine:
                     break
                 actor = idle.pop()
                 flight[actor.evaluate.remote(job)] = (actor, job, time.monotonic())
-            if not flight:
-                if exhausted:
-                    yield from side
-                    return
-                continue
-            done, _ = ray.wait(list(flight), num_returns=1, timeout=_TICK_S)
+                self._running[actor._actor_id.hex()] = job.id
+            if exhausted and not flight:
+                yield from side
+                return
+            done, _ = ray.wait([*starting, *flight], num_returns=1, timeout=_TICK_S)
             now = time.monotonic()
             for ref in done:
+                if ref in starting:
+                    actor = starting.pop(ref)
+                    try:
+                        self._pid_of[actor._actor_id.hex()] = ray.get(ref)
+                    except ray.exceptions.RayError as exc:  # could not start, or died while idle: replace it
+                        self._start_failures += 1
+                        if self._start_failures >= MAX_START_FAILURES:
+                            raise BatchError(
+                                f"a Ray actor could not start ({self._start_failures} times): {' '.join(str(exc).split())[:300]}"
+                            ) from None
+                        fresh = self._replace(actor)
+                        starting[fresh.pid.remote()] = fresh
+                        continue
+                    self._start_failures, waiting_since = 0, now
+                    idle.append(actor)
+                    continue
                 actor, job, started = flight.pop(ref)
+                self._running.pop(actor._actor_id.hex(), None)
                 try:
                     row = ray.get(ref)
                 except ray.exceptions.RayActorError as exc:
                     why = " ".join(str(exc).split())[:300]
                     yield error_row(job.id, "WorkerDied", f"the worker process died during the row: {why}", duration_s=now - started)
-                    idle.append(self._replace(actor))
+                    fresh = self._replace(actor)
+                    starting[fresh.pid.remote()] = fresh
                     continue
                 if "memory" in row:
                     yield error_row(job.id, "WorkerMemory", "the row ran out of memory", duration_s=now - started)
-                    idle.append(self._replace(actor))
+                    fresh = self._replace(actor)
+                    starting[fresh.pid.remote()] = fresh
                     continue
                 idle.append(actor)
                 yield row
+            if starting and not idle and not flight and now - waiting_since > STARTUP_TIMEOUT_S:
+                raise BatchError(
+                    f"no Ray actor started within {STARTUP_TIMEOUT_S:g} s: does the cluster have a free CPU for each "
+                    f"of the {self.workers} workers?"
+                )
             for ref, (actor, job, started) in list(flight.items()):
                 if now - started > self.timeout_s:
                     flight.pop(ref)
+                    self._running.pop(actor._actor_id.hex(), None)
                     yield error_row(
                         job.id, "WorkerTimeout", f"the row took longer than its timeout of {self.timeout_s:g} s", duration_s=now - started
                     )
-                    idle.append(self._replace(actor))
+                    fresh = self._replace(actor)
+                    starting[fresh.pid.remote()] = fresh
 
     def _replace(self, actor):
         self._ray.kill(actor, no_restart=True)
