@@ -106,7 +106,7 @@ def ref_collision(traj, params) -> dict:
 
 def ref_end_effector_pose(traj, params) -> dict:
     """Every sample: central-difference TCP velocity dotted with the unit finger direction."""
-    i = traj.frame_names.index(params.frame)
+    i = traj.frame_names.index(params.frame or traj.tcp_frame)
     F, time = traj.frames, traj.time
     T = len(time)
 

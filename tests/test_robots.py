@@ -416,3 +416,14 @@ def test_simulate_judges_a_scene_without_its_own_workspace_by_the_robots_reach()
     # a scene that states its workspace keeps it
     own = Scene(workspace={"center": (0, 0, 0.2), "radius_m": 2.0})
     assert simulate("move_to(0.5, 0.2, 0.4)\n", own, robot=big).scene.workspace.radius_m == 2.0
+
+
+def test_a_scene_made_for_one_arm_is_refused_on_another_naming_both():
+    scene = Scene(robot="ur10e")
+    assert simulate("move_to(0.5, 0.2, 0.4)\n", scene, robot=Robot.ur10e()).scene.robot == "ur10e"
+    with pytest.raises(Exception) as refused:
+        simulate("move_to(0.3, 0.1, 0.3)\n", scene)  # the default UR3e
+    assert type(refused.value).__name__ == "SceneError"
+    assert "made for the ur10e, not the ur3e" in str(refused.value) and "robot" in str(refused.value)
+    # a scene that names no robot works on any
+    assert Scene().robot == "" and Scene.builtin("sorting").robot == ""

@@ -69,6 +69,7 @@ def _kwargs(T=4):
         ({"gripper_opening_m": np.zeros(3)}, "gripper_opening_m has 3 samples but q has 4"),
         ({"frames": np.zeros((4, 2, 4, 4))}, "frames hold 2 frames"),
         ({"step": np.array([0, 0, 1, 0])}, "step indices given without steps"),
+        ({"tcp_frame": "fingertips"}, "the TCP frame 'fingertips' is not one of the frames (base_link"),
     ],
 )
 def test_validation_names_the_problem(patch, words):
@@ -86,3 +87,16 @@ def test_hash_binds_the_motion(values, nudge):
     kw["q"] = kw["q"].copy()
     kw["q"][2, 1] += nudge
     assert Trajectory(**kw).content_hash() != a.content_hash()
+
+
+def test_the_tcp_frame_is_the_robots_and_survives_the_round_trip(execution):
+    traj = execution.trajectory
+    assert traj.tcp_frame == execution.robot.tcp_frame
+    # a robot whose TCP frame has another name: the trajectory says which frame it is
+    kwargs = _kwargs()
+    names = list(kwargs["frame_names"])
+    names[names.index("tcp")] = "fingertips"
+    other = Trajectory(**{**kwargs, "frame_names": names, "tcp_frame": "fingertips"})
+    np.testing.assert_array_equal(other.tcp, kwargs["frames"][:, names.index("fingertips")])
+    back = Trajectory.from_json(other.to_json())
+    assert back.tcp_frame == "fingertips" and back.slice(0, 2).tcp_frame == "fingertips"

@@ -559,6 +559,7 @@ class Scene(_Model):
     containers: Annotated[list[Container], BeforeValidator(_entities)] = Field(default_factory=list)
     table: Table = Field(default_factory=Table)
     workspace: Workspace = Field(default_factory=Workspace)
+    robot: Name = Field("", description="the robot this scene was made for (e.g. 'ur3e'); '' = any robot")
 
     @model_validator(mode="after")
     def _check_ids(self) -> "Scene":

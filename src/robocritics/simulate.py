@@ -165,6 +165,12 @@ def simulate(
     if not isinstance(program, Plan):  # a program refers to objects by id
         check_scene_ids(scene)
     robot = robot or Robot.ur3e()
+    if scene.robot and scene.robot != robot.name:
+        raise SceneError(
+            f"the scene {scene.name!r} was made for the {scene.robot}, not the {robot.name}: its objects are placed "
+            f"for that arm's reach; simulate it with that robot, or copy the scene for this one",
+            path="robot",
+        )
     scene = robot.scene_for(scene)  # a scene without its own workspace is judged by this robot's reach
     plan = program if isinstance(program, Plan) else run_program(program, scene)
     planner = Planner(scene, robot, sample_rate_hz, settings or PlannerSettings(), start_q=start_q)

@@ -120,6 +120,7 @@ class Trajectory:
         steps,
         limits: RobotLimits,
         robot_name: str = "",
+        tcp_frame: str = "tcp",
     ):
         self.q = _array("q", q, ndim=2)
         T, n = self.q.shape
@@ -134,6 +135,7 @@ class Trajectory:
         self.steps = tuple(s if isinstance(s, Step) else Step.model_validate(s) for s in steps)
         self.limits = limits if isinstance(limits, RobotLimits) else RobotLimits.model_validate(limits)
         self.robot_name = robot_name
+        self.tcp_frame = str(tcp_frame)
         self._validate(T, n)
         for arr in (self.q, self.time, self.frames, self.proximity, self.gripper_opening_m, self.attached, self.step):
             arr.setflags(write=False)
@@ -162,6 +164,8 @@ class Trajectory:
                 raise TrajectoryError(
                     f"time must increase strictly: sample {i + 1} at {self.time[i + 1]} s follows {self.time[i]} s"
                 )
+        if self.tcp_frame not in self.frame_names:
+            raise TrajectoryError(f"the TCP frame {self.tcp_frame!r} is not one of the frames ({', '.join(self.frame_names)})")
         if len(self.limits.joint_names) != n:
             raise TrajectoryError(f"limits name {len(self.limits.joint_names)} joints but q has {n} columns")
         if len(self.steps) and (self.step.min() < 0 or self.step.max() >= len(self.steps)):
@@ -186,8 +190,9 @@ class Trajectory:
 
     @property
     def tcp(self) -> np.ndarray:
-        """``(T, 4, 4)`` TCP poses in the base frame; column 2 of the rotation is the finger direction."""
-        return self.frames[:, self.frame_index("tcp")]
+        """``(T, 4, 4)`` poses of the TCP frame (``tcp_frame``, the robot's) in the base frame; column 2 of the
+        rotation is the finger direction."""
+        return self.frames[:, self.frame_index(self.tcp_frame)]
 
     def pair_mask(self, kind: str | None = None, group_a: str | None = None, group_b: str | None = None) -> np.ndarray:
         """Boolean ``(K,)`` selecting pairs by kind and groups."""
@@ -231,6 +236,7 @@ class Trajectory:
     def to_dict(self) -> dict:
         return {
             "robot_name": self.robot_name,
+            "tcp_frame": self.tcp_frame,
             "q": self.q.tolist(),
             "time": self.time.tolist(),
             "frames": self.frames.tolist(),
@@ -267,6 +273,7 @@ class Trajectory:
                 steps=data["steps"],
                 limits=data["limits"],
                 robot_name=data.get("robot_name", ""),
+                tcp_frame=data.get("tcp_frame", "tcp"),
             )
         except KeyError as exc:
             raise TrajectoryError(f"trajectory data lacks the field {exc.args[0]!r}") from None
@@ -317,6 +324,7 @@ class Trajectory:
             steps=self.steps,
             limits=self.limits,
             robot_name=self.robot_name,
+            tcp_frame=self.tcp_frame,
         )
 
     def __repr__(self) -> str:

@@ -56,7 +56,9 @@ class Params(CriticParams):
         description="error above this spearing speed, m/s (source: Kirschner et al. 2024, edged/pointed tools "
         "at <= 0.5 m/s generally prevented open wounds)",
     )
-    frame: str = Field("tcp", description="frame at the fingertips whose z axis is the finger direction")
+    frame: str | None = Field(
+        None, description="frame at the fingertips whose z axis is the finger direction (default: the trajectory's TCP frame)"
+    )
 
     @model_validator(mode="after")
     def _order(self) -> "Params":
@@ -91,7 +93,8 @@ class EndEffectorPoseCritic:
 
     def check(self, trajectory, scene, params: Params) -> Verdict:
         time = trajectory.time
-        poses = trajectory.frames[:, trajectory.frame_index(params.frame)]
+        frame = params.frame or trajectory.tcp_frame
+        poses = trajectory.frames[:, trajectory.frame_index(frame)]
         s, v, f = spearing_speed(poses, time)
         wt = int(np.argmax(s))
         worst = float(s[wt])
@@ -124,7 +127,7 @@ class EndEffectorPoseCritic:
                 return verdict(
                     flag,
                     s > threshold,
-                    links=[params.frame],
+                    links=[frame],
                     threshold=threshold,
                     message="The gripper moves in the direction its fingers point faster than "
                     f"{limit.format(fmt_value(threshold))}: {how}.",
@@ -134,7 +137,7 @@ class EndEffectorPoseCritic:
                 )
         return verdict(
             Flag.OK,
-            links=[params.frame],
+            links=[frame],
             threshold=params.warn_speed_m_s,
             message=f"The gripper never moves toward where its fingers point faster than "
             f"{fmt_value(params.warn_speed_m_s)} m/s (at most {worst:.2f} m/s).",

@@ -147,4 +147,5 @@ def build_trajectory(
         steps=steps,
         limits=robot.limits,
         robot_name=robot.name,
+        tcp_frame=robot.tcp_frame,
     )
