@@ -298,3 +298,21 @@ def test_done_rows_of_a_file_with_only_a_torn_line(tmp_path):
     out = tmp_path / "out.jsonl"
     out.write_text('{"id": "a", "sco')
     assert done_rows(out) == [] and out.read_text() == ""
+
+
+def _vm_size_bytes(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmSize:"):
+            return int(line.split()[1]) * 1024
+    raise AssertionError("no VmSize")
+
+
+def test_a_row_over_the_memory_limit_is_marked_and_its_worker_replaced(engine):
+    list(evaluate([{"id": 0, "scene": "sorting", "program": SHORT}], engine))
+    warm = max(_vm_size_bytes(w.pid) for w in engine._pool)  # a warm worker's address space
+    # room for a short program, not for planning 280 s of motion (~100+ MB more)
+    with LocalEngine(1, memory_bytes=warm + 50 * 1024**2) as pool:
+        rows = [{"id": i, "scene": "sorting", "program": p} for i, p in enumerate((SHORT, LONG + LONG, SHORT))]
+        out = {r["id"]: r for r in evaluate(rows, pool)}
+        assert out[1]["error"]["type"] == "WorkerMemory" and "address-space limit" in out[1]["error"]["message"]
+        assert out[0]["error"] is None and out[2]["error"] is None and pool.restarts == 1
