@@ -122,11 +122,6 @@ def test_run_goal_option_reaches_the_model(llm_server, capsys):
     _run_with_a_goal_the_program_misses(llm_server, capsys)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="llm/loop.py critiques execution.trajectory, so neither --goal nor expect() reaches task_outcome yet: "
-    "it needs critique(execution, ..., goals=self.goals) there",
-)
 def test_run_goal_option_fails_a_program_that_misses_it(llm_server, capsys):
     code, out = _run_with_a_goal_the_program_misses(llm_server, capsys)
     assert code == 1 and "task_outcome Error" in out

@@ -284,6 +284,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
             on_attempt=lambda attempt: _print_attempt(attempt, out),
             model_options=options,
             context_tokens=context,
+            goals=goals,
         )
         progress.loop = loop  # the prompt size of each call, for the progress line
         _say(out, f"robocritics run: {client.model} at {client.base_url}, scene {scene.name!r}")

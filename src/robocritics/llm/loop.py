@@ -273,6 +273,9 @@ class Loop:
       :func:`~robocritics.simulate.simulate`'s).
     * ``context_tokens`` — the model's context window in tokens, to fit every
       prompt to (module docstring); None: unknown until the server refuses one.
+    * ``goals`` — task goals (``"green_apple in white_box"`` or :class:`~robocritics.goals.Goal`) that
+      every attempt's ``task_outcome`` critic checks on the final scene, beside the program's own
+      ``expect(...)`` calls (in-process checking; a ``simulate`` hook checks its own).
     * ``simulate`` — ``simulate(program) -> (Execution, Report)`` to check a
       program elsewhere (e.g. :meth:`robocritics.viz.studio.worker.Evaluator.loop_simulate`,
       in a resource-limited process); it raises :class:`ProgramError`,
@@ -303,6 +306,7 @@ class Loop:
         sample_rate_hz: float | None = None,
         context_tokens: int | None = None,
         simulate: Callable[[str], tuple[Execution, Report]] | None = None,
+        goals: Iterable[Any] | None = None,
     ):
         from ..critic import select_critics
 
@@ -347,6 +351,9 @@ class Loop:
         self.sample_rate_hz = None if sample_rate_hz is None else float(sample_rate_hz)
         self.context_tokens: int | None = None if context_tokens is None else int(context_tokens)
         self._simulate = simulate
+        from ..goals import parse_goals
+
+        self.goals = parse_goals(goals, scene) if goals else []  # a bad goal fails here, before any model call
         self.last_prompt_tokens: int | None = None
         self.keyword_memory_reason: str | None = None  # why retrieval fell back to BM25, once it did
 
@@ -758,7 +765,7 @@ class Loop:
             return
         attempt.execution = execution
         try:
-            attempt.report = critique(execution.trajectory, self.scene, self._selection, self.params or None)
+            attempt.report = critique(execution, self.scene, self._selection, self.params or None, goals=self.goals)
         except CriticError as exc:  # a critic could not judge this motion: report it, never crash the loop
             log.warning("attempt %d: %s", attempt.index, exc)
             attempt.error = runtime_feedback(exc, program=attempt.program)
