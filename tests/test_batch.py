@@ -316,3 +316,14 @@ def test_a_row_over_the_memory_limit_is_marked_and_its_worker_replaced(engine):
         out = {r["id"]: r for r in evaluate(rows, pool)}
         assert out[1]["error"]["type"] == "WorkerMemory" and "address-space limit" in out[1]["error"]["message"]
         assert out[0]["error"] is None and out[2]["error"] is None and pool.restarts == 1
+
+
+def test_the_ray_engine_without_ray_names_the_extra(monkeypatch, tmp_path):
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError, as when it is not installed
+    with pytest.raises(BatchError, match=r"robocritics\[ray\]"):
+        list(evaluate([{"id": 1, "scene": "sorting", "program": SHORT}], "ray"))
+    from robocritics.cli.main import main
+
+    src = tmp_path / "in.jsonl"
+    _write_rows(src, [{"id": 1, "scene": "sorting", "program": SHORT}])
+    assert main(["batch", str(src), "-o", str(tmp_path / "out.jsonl"), "--engine", "ray"]) == 2
