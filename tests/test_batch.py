@@ -327,3 +327,12 @@ def test_the_ray_engine_without_ray_names_the_extra(monkeypatch, tmp_path):
     src = tmp_path / "in.jsonl"
     _write_rows(src, [{"id": 1, "scene": "sorting", "program": SHORT}])
     assert main(["batch", str(src), "-o", str(tmp_path / "out.jsonl"), "--engine", "ray"]) == 2
+
+
+def test_a_batch_abandoned_early_does_not_leak_its_rows_into_the_next(engine):
+    rows = evaluate([{"id": f"old{i}", "scene": "sorting", "program": LONG} for i in range(4)], engine)
+    first = next(rows)
+    rows.close()  # the caller stops reading while workers are busy
+    assert first["id"].startswith("old")
+    out = list(evaluate([{"id": "new", "scene": "sorting", "program": SHORT}], engine))
+    assert [r["id"] for r in out] == ["new"] and out[0]["error"] is None

@@ -200,29 +200,34 @@ class LocalEngine:
             self._pool.append(self._spawn())
         queue: deque[Job] = deque()
         exhausted = False
-        while True:
-            while side:
-                yield side.pop(0)
-            for w in self._pool:  # give every idle, ready worker a job
-                if w.ready and w.job is None:
-                    if not queue and not exhausted:
-                        nxt = next(jobs, None)
-                        exhausted = nxt is None
-                        if nxt is not None:
-                            queue.append(nxt)
-                    if queue:
-                        with self._lock:
-                            w.job, w.job_started = queue.popleft(), time.monotonic()
-                        w.conn.send(w.job)
-            if exhausted and not queue and all(w.job is None for w in self._pool):
-                yield from side
-                return
-            ready = set(wait([w.conn for w in self._pool] + [w.process.sentinel for w in self._pool], _TICK_S))
-            now = time.monotonic()
+        try:
+            while True:
+                while side:
+                    yield side.pop(0)
+                for w in self._pool:  # give every idle, ready worker a job
+                    if w.ready and w.job is None:
+                        if not queue and not exhausted:
+                            nxt = next(jobs, None)
+                            exhausted = nxt is None
+                            if nxt is not None:
+                                queue.append(nxt)
+                        if queue:
+                            with self._lock:
+                                w.job, w.job_started = queue.popleft(), time.monotonic()
+                            w.conn.send(w.job)
+                if exhausted and not queue and all(w.job is None for w in self._pool):
+                    yield from side
+                    return
+                ready = set(wait([w.conn for w in self._pool] + [w.process.sentinel for w in self._pool], _TICK_S))
+                now = time.monotonic()
+                for w in list(self._pool):
+                    row = self._poll(w, w.conn in ready or w.process.sentinel in ready, now)
+                    if row is not None:
+                        yield row
+        finally:  # abandoned early (the caller stopped reading): a busy worker's late row must not reach the next run
             for w in list(self._pool):
-                row = self._poll(w, w.conn in ready or w.process.sentinel in ready, now)
-                if row is not None:
-                    yield row
+                if w.job is not None:
+                    self._replace(w)
 
     def _poll(self, w: _Worker, signalled: bool, now: float) -> dict | None:
         """The row ``w`` finished, or its error row if it died or timed out (then it is replaced)."""
