@@ -211,3 +211,20 @@ def test_a_plugin_verdict_with_odd_numbers_still_renders():
     assert shown["windows_s"] == [[t[2] - t[0], t[4] - t[0]]]
     page = script_json(data)
     assert "<b>" not in page and json.loads(page)["verdicts"][-1]["message"] == "<b>odd</b>"
+
+
+def test_the_replay_draws_any_arm_its_capsules_and_its_reach():
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_robots import scaled_sorting
+
+    from robocritics.robot.model import Robot
+
+    robot = Robot.panda()
+    execution = rc.simulate((EXAMPLES / "sorting_careful.py").read_text(), scaled_sorting(robot), robot=robot)
+    data = replay_data(execution, rc.critique(execution))
+    assert [c["name"] for c in data["capsules"]] == list(robot.capsule_names)
+    assert f32(data["capsule_ends"]).shape[1] == len(robot.capsules)
+    assert data["robot"] == "panda"
+    assert data["workspace"]["radius_m"] == pytest.approx(robot.workspace.radius_m)

@@ -214,10 +214,19 @@
     this.ends = decode(data.capsule_ends).values; // (F, C, 6)
     this.nCapsules = data.capsules.length;
     this.duration = data.duration_s;
+    this._frameCamera(data.workspace);
     this._buildScene(data);
     this._buildTimeline(data);
     this._buildVerdictList(data);
     this.seek(0);
+  };
+
+  // Frame the robot's allowed workspace (its reach sphere): the same view on a UR3e as on a UR16e.
+  Replay.prototype._frameCamera = function (ws) {
+    const r = ws.radius_m, st = this.orbit.state;
+    st.target.set(ws.center[0] + 0.3 * r, ws.center[1], 0.24 * r);
+    st.distance = 2.7 * r;
+    this.orbit.apply();
   };
 
   Replay.prototype._buildScene = function (data) {
