@@ -108,3 +108,11 @@ def test_a_ray_row_over_its_timeout_is_marked(engine):
         engine.timeout_s = 60.0
     assert row["error"]["type"] == "WorkerTimeout" and engine.restarts == restarts + 1
     assert row["duration_s"] >= 0.05
+
+
+def test_a_ray_batch_abandoned_early_does_not_leak_into_the_next(engine):
+    rows = evaluate([{"id": f"old{i}", "scene": "sorting", "program": LONG} for i in range(3)], engine)
+    assert next(rows)["id"].startswith("old")
+    rows.close()
+    out = list(evaluate([{"id": "new", "scene": "sorting", "program": SHORT}], engine))
+    assert [r["id"] for r in out] == ["new"] and out[0]["error"] is None and engine.running() == {}

@@ -121,6 +121,16 @@ class RayEngine:
         return {self._pid_of[a]: row_id for a, row_id in list(self._running.items()) if a in self._pid_of}
 
     def run(self, jobs: Iterator[Job], side: list[dict] | None = None) -> Iterator[dict]:
+        """See :meth:`_run`; a run abandoned early cancels its rows still in flight."""
+        flight: dict[Any, tuple[Any, Job, float]] = {}
+        try:
+            yield from self._run(jobs, side, flight)
+        finally:
+            for ref in flight:
+                self._ray.cancel(ref)
+            self._running.clear()
+
+    def _run(self, jobs: Iterator[Job], side: list[dict] | None, flight: dict) -> Iterator[dict]:
         """Evaluate ``jobs``, yielding output rows as they finish, and the rows appended to ``side``.
 
         A row's timeout starts when it is sent to an actor that has started (loaded the robot)."""
@@ -131,7 +141,7 @@ class RayEngine:
         idle: list = []
         starting = {actor.pid.remote(): actor for actor in self._actors}  # ready when the robot is loaded
         waiting_since = time.monotonic()  # for the startup timeout: the last time an actor became ready
-        flight: dict[Any, tuple[Any, Job, float]] = {}  # ObjectRef -> (actor, job, started)
+        # flight: ObjectRef -> (actor, job, started)
         exhausted = False
         while True:
             while side:
