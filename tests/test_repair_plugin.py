@@ -41,3 +41,26 @@ def test_cycle_time_repair_speeds_up_the_slowest_steps_without_new_flags(cycle_p
     assert all(v.flag == Flag.OK for v in r.report.verdicts if v.critic not in ("cycle_time",))
     assert r.execution.object_inside("green_apple", "white_box")
     assert f"line {r.changes[0].line}" in r.changes[0].what
+
+
+class _BrokenRepairs:
+    """A third-party plugin whose repair hook raises."""
+
+    from robocritics.hookspecs import hookimpl
+
+    @staticmethod
+    @hookimpl
+    def robocritics_repairs(verdict, execution, program):
+        raise RuntimeError("this plugin is broken")
+
+
+def test_a_plugin_repair_that_raises_is_skipped_and_named(cycle_plugin, caplog):
+    pm.register(_BrokenRepairs, name="broken-repairs")
+    try:
+        src = (ROOT / "examples" / "programs" / "sorting_careful.py").read_text()
+        with caplog.at_level("WARNING", logger="robocritics.repair"):
+            r = repair(src, "sorting", params=PARAMS, goal="green_apple in white_box")
+    finally:
+        pm.unregister(_BrokenRepairs)
+    assert r.changes and all(c.critic == "cycle_time" for c in r.changes)  # the working plugin still repaired
+    assert "broken-repairs" in caplog.text and "this plugin is broken" in caplog.text

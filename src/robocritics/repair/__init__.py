@@ -12,12 +12,15 @@ Error is left or no candidate helps; no LLM is involved.
 from __future__ import annotations
 
 import difflib
+import logging
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable
 
 from ..errors import RoboCriticsError
 from ..verdict import Flag
 from . import builtin
+
+log = logging.getLogger(__name__)
 from .edit import Edit, Insert, MoveBlock, ScaleNumbers, apply_edits, paragraphs
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -114,6 +117,20 @@ def _acceptable(before: Report, after: Report, critic: str) -> bool:
     )
 
 
+def _offered_edits(hook, verdict, execution, source: str) -> list:
+    """Every plugin's edits for ``verdict``; a plugin whose hook raises is logged by name and skipped."""
+    edits: list = []
+    for impl in hook.robocritics_repairs.get_hookimpls():
+        try:
+            offered = impl.function(verdict=verdict, execution=execution, program=source)
+        except Exception as exc:  # noqa: BLE001 - third-party code: report it, keep repairing with the others
+            log.warning("repair plugin %s failed on %s and was skipped: %s: %s",
+                        impl.plugin_name, verdict.critic, type(exc).__name__, str(exc)[:200])  # fmt: skip
+            continue
+        edits += [e for e in offered or [] if isinstance(e, Edit)]
+    return edits
+
+
 def repair(
     program: str,
     scene: Scene | str,
@@ -153,7 +170,7 @@ def repair(
         errors = [v for v in report.verdicts if v.flag == Flag.ERROR]
         accepted = False
         for verdict in errors:
-            candidates = [e for edits in hook.robocritics_repairs(verdict=verdict, execution=execution, program=source) for e in edits or []]
+            candidates = _offered_edits(hook, verdict, execution, source)
             for edit in candidates:
                 try:
                     new_source = apply_edits(source, edit.ops)
