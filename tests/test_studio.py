@@ -144,6 +144,8 @@ def test_the_command_serves_until_ctrl_c_and_exits_0(tmp_path):
         [sys.executable, "-m", "robocritics", "studio", "--program", str(ROOT / "examples/programs/sorting_naive.py"),
          "--port", "0", "--no-browser"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, "ROBOCRITICS_BASE_URL": ""},
+        # a suite started from a background shell ignores SIGINT, and children inherit that: give Ctrl-C back
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         line = proc.stdout.readline()
