@@ -157,3 +157,19 @@ def test_the_command_serves_until_ctrl_c_and_exits_0(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_a_connection_reset_mid_request_is_not_a_traceback(studio, capfd):
+    import socket
+    import struct
+    import time
+
+    for _ in range(3):  # a browser dropping keep-alive connections
+        sock = socket.create_connection(("127.0.0.1", studio.port), timeout=5)
+        sock.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n")  # no blank line: the server is still reading
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # close with RST
+        sock.close()
+    time.sleep(0.5)
+    status, _ = request(studio, "GET", "/")  # still serving
+    assert status == 200
+    assert "Traceback" not in capfd.readouterr().err

@@ -18,6 +18,8 @@ server is threaded, so other requests are answered while a run or an LLM call is
 from __future__ import annotations
 
 import hmac
+import logging
+import sys
 import ipaddress
 import json
 import threading
@@ -38,6 +40,16 @@ MAX_PROGRAM_CHARS = 200_000
 APPROVAL_TIMEOUT_S = 600.0
 #: Longest chat message accepted, characters.
 MAX_CHAT_CHARS = 20_000
+
+
+class _QuietServer(ThreadingHTTPServer):
+    """A browser that closes a connection mid-request is normal, not a traceback on stderr; other errors are logged."""
+
+    def handle_error(self, request, client_address) -> None:
+        exc = sys.exc_info()[1]
+        if isinstance(exc, (ConnectionError, TimeoutError)):
+            return
+        logging.getLogger(__name__).exception("studio: request from %s failed", client_address[0])
 
 
 class StudioError(RoboCriticsError):
@@ -144,7 +156,7 @@ class Studio:
 
     def start(self) -> "Studio":
         handler = type("StudioHandler", (_Handler,), {"studio": self})
-        self._server = ThreadingHTTPServer((self.host, self._requested_port), handler)
+        self._server = _QuietServer((self.host, self._requested_port), handler)
         self._server.daemon_threads = True
         self._thread = threading.Thread(target=self._server.serve_forever, name="robocritics-studio", daemon=True)
         self._thread.start()
