@@ -65,7 +65,9 @@ def test_attack_is_stopped_at_its_line(name: str) -> None:
     start = time.process_time()
     with pytest.raises(error) as info:
         run_program(source, SCENE, NO_CLOCK)
-    assert time.process_time() - start < (bound[0] if bound else 2.0)
+    # CPU time, with 3x headroom: a loaded 2-core machine inflates it (1.01 s seen for a 1 s bound), while an
+    # unbounded attack costs orders of magnitude more
+    assert time.process_time() - start < 3 * (bound[0] if bound else 2.0)
     assert info.value.line == line
     assert f"line {line}" in str(info.value)
     assert len(str(info.value)) < 4000
