@@ -158,6 +158,17 @@ class Plan:
     calls: list[SkillCall] = field(default_factory=list)
     output: list[str] = field(default_factory=list)
 
+    def speed_at(self, line: int) -> float:
+        """The speed fraction in effect at the first skill call on ``line`` (1 = full speed), as set by the
+        ``set_speed`` / ``reduce_speed`` calls before it."""
+        speed = 1.0
+        for call in self.calls:
+            if call.line == line:
+                return speed
+            if call.skill in ("set_speed", "reduce_speed"):
+                speed = float(call.args["fraction"])
+        return speed
+
     def describe(self) -> str:
         """One line per call: ``line 4: move_above(green_apple, height=0.1)``."""
         return "\n".join(f"line {c.line}: {c.describe()}" for c in self.calls)

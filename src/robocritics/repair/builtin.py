@@ -20,16 +20,6 @@ HEIGHT_FACTORS = (0.5,)
 _MOVES = {"move_to", "move_linear", "move_above", "move_down", "move_up", "home"}
 
 
-def _speed_before(program_plan, line: int) -> float:
-    """The speed fraction in effect at the first call on ``line`` (1 = full speed)."""
-    speed = 1.0
-    for call in program_plan.calls:
-        if call.line == line:
-            return speed
-        if call.skill in ("set_speed", "reduce_speed"):
-            speed = float(call.args["fraction"])
-    return speed
-
 
 def _move_lines(verdict, execution) -> list[int]:
     skills = {c.line: c.skill for c in execution.plan.calls}
@@ -50,7 +40,7 @@ def _slowdowns(verdict, execution) -> list[Edit]:
     for margin in (SPEED_MARGIN, SPEED_MARGIN**2, SPEED_MARGIN**4):
         ops, parts = [], []
         for ln in lines:
-            prev = _speed_before(execution.plan, ln)
+            prev = execution.plan.speed_at(ln)
             f = max(0.01, round(prev * margin * verdict.threshold / verdict.value, 2))
             ops.append(Insert(ln, before=(f"set_speed({f:g})",), after=(f"set_speed({prev:g})",)))
             parts.append(f"line {ln}: speed {prev:g} -> {f:g}")

@@ -850,7 +850,9 @@ def _coal_geometry(kind: str, size: Sequence[float]):
         return coal.Cylinder(float(size[0]), float(size[1]))  # radius, full length
     if kind == "sphere":
         return coal.Sphere(float(size[0]))
-    raise ValueError(f"unknown shape kind {kind!r}; use box, cylinder or sphere")
+    if kind == "capsule":
+        return coal.Capsule(float(size[0]), float(size[1]))  # radius, full segment length
+    raise ValueError(f"unknown shape kind {kind!r}; use box, cylinder, sphere or capsule")
 
 
 def _bounding_radius(kind: str, size: Sequence[float]) -> float:

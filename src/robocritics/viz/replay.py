@@ -91,16 +91,7 @@ def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> 
     """
     import coal
 
-    def geometry(kind, size):
-        if kind == "capsule":
-            return coal.Capsule(float(size[0]), float(size[1]))
-        if kind == "box":
-            return coal.Box(*(float(s) for s in size))
-        if kind == "cylinder":
-            return coal.Cylinder(float(size[0]), float(size[1]))
-        if kind == "sphere":
-            return coal.Sphere(float(size[0]))
-        raise ValueError(f"unknown shape kind {kind!r}")
+    from ..robot.proximity import _coal_geometry
 
     def transform(pose):
         pose = np.asarray(pose, float)
@@ -108,7 +99,7 @@ def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> 
 
     request, result = coal.DistanceRequest(), coal.DistanceResult()
     request.enable_signed_distance = True
-    distance = coal.distance(geometry(a_kind, a_size), transform(a_pose), geometry(b_kind, b_size), transform(b_pose),
+    distance = coal.distance(_coal_geometry(a_kind, a_size), transform(a_pose), _coal_geometry(b_kind, b_size), transform(b_pose),
                              request, result)  # fmt: skip
     return np.array(result.getNearestPoint1()), np.array(result.getNearestPoint2()), float(distance)
 
@@ -144,7 +135,7 @@ def _segment(execution: Execution, pair_name: str, sample: int) -> list[list[flo
         moved = execution.object_poses.get(name)
         return [
             (s.kind, s.size, s.pose if moved is None else moved[sample])
-            for s in _entity_shapes(execution.scene)
+            for s in execution.scene.shapes()
             if s.owner == name
         ]
 
@@ -158,15 +149,6 @@ def _segment(execution: Execution, pair_name: str, sample: int) -> list[list[flo
         return None
     return [[round(float(v), 6) for v in best[0]], [round(float(v), 6) for v in best[1]]]
 
-
-def _entity_shapes(scene) -> list:
-    shapes = []
-    for o in scene.objects:
-        shapes += o.shapes()
-    for c in scene.containers:
-        shapes += c.shapes()
-    shapes += scene.table.shapes()
-    return shapes
 
 
 def _finite(x: float | None) -> float | None:

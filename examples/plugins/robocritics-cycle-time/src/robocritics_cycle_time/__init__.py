@@ -127,16 +127,6 @@ def register_critics(register):
 SPEEDUP = 2.0
 
 
-def _speed_at(plan, line):
-    """The speed fraction in effect at the first skill call on ``line`` (1 = full speed)."""
-    speed = 1.0
-    for call in plan.calls:
-        if call.line == line:
-            return speed
-        if call.skill in ("set_speed", "reduce_speed"):
-            speed = float(call.args["fraction"])
-    return speed
-
 
 @hookimpl
 def robocritics_repairs(verdict, execution, program):
@@ -158,7 +148,7 @@ def robocritics_repairs(verdict, execution, program):
     excess = verdict.value - verdict.threshold
     ops, parts, saved = [], [], 0.0
     for line, seconds in sorted(per_line.items(), key=lambda kv: -kv[1]):
-        prev = _speed_at(execution.plan, line)
+        prev = execution.plan.speed_at(line)
         fast = min(1.0, round(prev * SPEEDUP, 2))
         if fast <= prev:
             continue
