@@ -16,11 +16,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from .errors import ProgramError, RobotModelError, SceneError
 
 if TYPE_CHECKING:  # pragma: no cover
+    import numpy as np
+
     from .program.plan import Plan
     from .report import Report
     from .robot.model import Robot
