@@ -72,17 +72,25 @@ window.replay = RoboReplay.mount(document.getElementById("replay"),
 """
 
 
-def replay_html(execution: Execution, report: Report | None = None, *, title: str | None = None) -> str:
-    """One self-contained HTML page: the 3-D replay with its timeline and verdicts, then the report table."""
+def _replay_page(execution: Execution, report: Report | None, title: str | None, *, embedded: bool) -> str:
     data = replay_data(execution, report, title=title)
     report_html = report._repr_html_() if report is not None else ""
-    return _page(data, data["title"], report_html, embedded=False)
+    return _page(data, data["title"], report_html, embedded=embedded)
+
+
+def replay_html(execution: Execution, report: Report | None = None, *, title: str | None = None) -> str:
+    """One self-contained HTML page: the 3-D replay with its timeline and verdicts, then the report table."""
+    return _replay_page(execution, report, title, embedded=False)
 
 
 def write_replay_html(path: str | Path, execution: Execution, report: Report | None = None, *, title: str | None = None) -> Path:
     """Write :func:`replay_html` to ``path`` (UTF-8); returns the path."""
+    return _write(path, replay_html(execution, report, title=title))
+
+
+def _write(path: str | Path, page: str) -> Path:
     path = Path(path)
-    path.write_text(replay_html(execution, report, title=title), encoding="utf-8")
+    path.write_text(page, encoding="utf-8")
     return path
 
 
@@ -94,9 +102,7 @@ class Replay:
 
     def __init__(self, execution: Execution, report: Report | None = None, *, title: str | None = None,
                  height_px: int = 760):  # fmt: skip
-        data = replay_data(execution, report, title=title)
-        report_html = report._repr_html_() if report is not None else ""
-        self.html = _page(data, data["title"], report_html, embedded=True)
+        self.html = _replay_page(execution, report, title, embedded=True)
         self.height_px = int(height_px)
 
     def _repr_html_(self) -> str:
@@ -108,6 +114,4 @@ class Replay:
 
     def save(self, path: str | Path) -> Path:
         """Write the page to ``path`` (UTF-8); returns the path."""
-        path = Path(path)
-        path.write_text(self.html, encoding="utf-8")
-        return path
+        return _write(path, self.html)
