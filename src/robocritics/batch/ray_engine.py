@@ -22,8 +22,22 @@ __all__ = ["RayEngine", "import_ray"]
 _TICK_S = 0.05
 
 
-def import_ray():
-    """The ``ray`` module, or a BatchError naming the extra that installs it."""
+#: Ray reads this when it is imported: "0" makes a local cluster use 127.0.0.1 as its node address, so
+#: every port it opens (GCS, raylet, object store, workers) listens on loopback only. Ray's own default
+#: on Linux is this host's network address on all interfaces, i.e. a cluster that runs programs for anyone
+#: who can reach the machine.
+LOOPBACK_ENV = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
+
+
+def import_ray(loopback: bool = True):
+    """The ``ray`` module, or a BatchError naming the extra that installs it.
+
+    ``loopback``: when this call is the first import of Ray in the process, make a local cluster it
+    starts bind to 127.0.0.1 only (:data:`LOOPBACK_ENV`; an explicit setting in the environment wins).
+    """
+    if loopback:
+        for name, value in LOOPBACK_ENV.items():
+            os.environ.setdefault(name, value)
     try:
         import ray
     except ImportError:
@@ -57,8 +71,8 @@ class RayEngine:
     """``workers`` Ray actors (default: the cluster's CPUs) evaluating Jobs; use it as a context manager.
 
     ``address`` names a running cluster (``"ray://host:10001"`` or ``"auto"``); by default, if Ray is not
-    initialised yet, a local one is started (and shut down on :meth:`close`). Ray itself listens on this host's
-    network address, not only loopback (it refuses 127.0.0.1 as a node address): see docs/batch.md.
+    initialised yet, a local one is started on loopback only (127.0.0.1, see :data:`LOOPBACK_ENV`) and shut
+    down on :meth:`close`. A cluster you start yourself is yours to secure: see docs/batch.md.
     """
 
     def __init__(
@@ -70,7 +84,7 @@ class RayEngine:
         sample_rate_hz: float = 125.0,
         address: str | None = None,
     ):
-        ray = self._ray = import_ray()
+        ray = self._ray = import_ray(loopback=address is None)
         if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
             raise ValueError(f"workers must be a whole number of at least 1, got {workers!r}")
         if not timeout_s > 0:
@@ -78,7 +92,7 @@ class RayEngine:
         self._owns_ray = not ray.is_initialized()
         if self._owns_ray:
             options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
-            if address is None:  # Ray resolves 127.0.0.1 to this host's address: its ports are not loopback-only
+            if address is None:
                 options.update(num_cpus=workers)
             ray.init(address=address, **options)
         self.workers = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
