@@ -194,11 +194,13 @@ def test_the_timeout_is_an_error_naming_it_and_the_next_job_works(sorting):
 
 
 def test_the_cpu_limit_is_an_error_naming_it(sorting):
-    with Evaluator(sorting, critics=CRITICS, cpu_s=0.5) as ev:
+    # LONG costs ~0.3 s of CPU in the (single-threaded) child: well over this limit
+    with Evaluator(sorting, critics=CRITICS, cpu_s=0.05) as ev:
         over = ev.evaluate(LONG)
         assert over.error["type"] == "EvaluatorError"
-        assert "CPU limit" in over.error["message"] and "0.5 s" in over.error["message"]
-        assert over.cpu_s > 0.5
+        assert "CPU limit" in over.error["message"] and "0.05 s" in over.error["message"]
+        assert over.cpu_s > 0.05 and ev.restarts == 1
+        ev.cpu_s = 60.0
         assert ev.evaluate("home()\n").error is None
 
 
@@ -294,3 +296,10 @@ def test_loop_through_the_worker_scores_as_in_process(llm_server, make_client, s
         errors.append([a.error for a in loop.attempts])
     assert scores[0] == scores[1] and scores[0][0] is not None and scores[0][1] > scores[0][0]
     assert errors[0] == errors[1] and errors[0][2] is not None and "line 1" in errors[0][2]
+
+
+def test_the_child_runs_with_single_threaded_blas(evaluator):
+    # numpy's multi-threaded matmul on long trajectories costs several times the CPU here (robocritics.child)
+    assert evaluator.evaluate(SHORT).error is None
+    environ = Path(f"/proc/{evaluator.pid}/environ").read_bytes().split(b"\0")
+    assert b"OMP_NUM_THREADS=1" in environ and b"OPENBLAS_NUM_THREADS=1" in environ

@@ -1,8 +1,7 @@
 """The local engine: a pool of warm, resource-limited worker processes on this machine.
 
-Each worker is a ``spawn`` child (the caller may have threads; forking them is unsafe) started with
-single-threaded BLAS (:data:`WORKER_ENV`, set in its environment before it imports numpy: with
-several workers, a multi-threaded BLAS in each only fights for the same cores). It loads the robot
+Each worker is a :class:`~robocritics.child.Child` (``spawn``, single-threaded BLAS: :data:`WORKER_ENV`;
+with several workers, a multi-threaded BLAS in each would only fight for the same cores). It loads the robot
 once, then evaluates rows one at a time, keeping the scenes it has loaded. Limits, set per worker:
 
 * address space (``RLIMIT_AS``, ``memory_bytes``): a row that runs out of memory ends its worker;
@@ -14,10 +13,7 @@ is replaced, and its row is an error row of type ``WorkerDied``/``WorkerTimeout`
 
 from __future__ import annotations
 
-import multiprocessing
 import os
-import resource
-import signal
 import threading
 import time
 from collections import deque
@@ -25,19 +21,14 @@ from collections.abc import Iterator
 from multiprocessing.connection import wait
 from typing import Any
 
+from ..child import SINGLE_THREADED_ENV, Child, limit_address_space
 from ..errors import RoboCriticsError
 from .rows import Job, SceneCache, error_row, evaluate_job
 
 __all__ = ["LocalEngine", "BatchError", "WORKER_ENV", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_BYTES"]
 
 #: Environment every worker starts with: one BLAS/OpenMP thread each.
-WORKER_ENV = {
-    "OMP_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "VECLIB_MAXIMUM_THREADS": "1",
-    "NUMEXPR_NUM_THREADS": "1",
-}
+WORKER_ENV = SINGLE_THREADED_ENV
 #: Wall-clock seconds one row may take in a worker.
 DEFAULT_TIMEOUT_S = 60.0
 #: Address-space limit of a worker, bytes (a checked bundled program peaks near 0.5 GB of address space).
@@ -48,8 +39,6 @@ STARTUP_TIMEOUT_S = 120.0
 MAX_START_FAILURES = 3
 # How often the parent wakes to check timeouts when no worker has answered, s.
 _TICK_S = 0.05
-# os.environ is process-wide: starting workers with WORKER_ENV is done under this lock.
-_ENV_LOCK = threading.Lock()
 
 
 class BatchError(RoboCriticsError):
@@ -59,7 +48,7 @@ class BatchError(RoboCriticsError):
 def _serve(conn, robot, memory_bytes: int, sample_rate_hz: float) -> None:
     """A worker's main loop: set the limit, load the robot, then answer Jobs with output rows."""
     os.environ.update(WORKER_ENV)  # for anything this process starts
-    resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+    limit_address_space(memory_bytes)
     try:
         from ..robot.model import Robot
 
@@ -83,51 +72,14 @@ def _serve(conn, robot, memory_bytes: int, sample_rate_hz: float) -> None:
                 os._exit(1)
 
 
-class _Worker:
+class _Worker(Child):
     """One child process and the row it is working on."""
 
-    def __init__(self, context, robot, memory_bytes: int, sample_rate_hz: float):
-        parent, child = context.Pipe()
-        self.process = context.Process(
-            target=_serve, args=(child, robot, memory_bytes, sample_rate_hz), name="robocritics-batch", daemon=True
-        )
-        with _ENV_LOCK:
-            saved = {k: os.environ.get(k) for k in WORKER_ENV}
-            os.environ.update(WORKER_ENV)
-            try:
-                self.process.start()
-            finally:
-                for k, v in saved.items():
-                    if v is None:
-                        os.environ.pop(k, None)
-                    else:
-                        os.environ[k] = v
-        child.close()
-        self.conn = parent
+    def __init__(self, robot, memory_bytes: int, sample_rate_hz: float):
+        super().__init__(_serve, (robot, memory_bytes, sample_rate_hz), name="robocritics-batch", env=WORKER_ENV)
         self.ready = False
-        self.started = time.monotonic()
         self.job: Job | None = None
         self.job_started = 0.0
-
-    @property
-    def pid(self) -> int | None:
-        return self.process.pid
-
-    def kill(self) -> None:
-        if self.process.is_alive():
-            self.process.kill()
-        self.process.join(10.0)
-        self.conn.close()
-
-    def death(self) -> str:
-        self.process.join(5.0)
-        code = self.process.exitcode
-        if code is not None and code < 0:
-            try:
-                return f"signal {signal.Signals(-code).name}"
-            except ValueError:
-                return f"signal {-code}"
-        return f"exit code {code}"
 
 
 class LocalEngine:
@@ -156,7 +108,6 @@ class LocalEngine:
         self.timeout_s = float(timeout_s)
         self.memory_bytes = int(memory_bytes)
         self._args = (robot, self.memory_bytes, float(sample_rate_hz))
-        self._context = multiprocessing.get_context("spawn")
         self._pool: list[_Worker] = []
         self._start_failures = 0
         self.restarts = 0  # workers replaced after a death or a limit
@@ -182,7 +133,7 @@ class LocalEngine:
             return {w.pid: w.job.id for w in self._pool if w.job is not None and w.pid is not None}
 
     def _spawn(self) -> _Worker:
-        return _Worker(self._context, *self._args)
+        return _Worker(*self._args)
 
     def _replace(self, worker: _Worker) -> None:
         worker.kill()

@@ -22,16 +22,13 @@ segfault, ``os._exit``, killed), is reported as an :class:`EvaluatorError` in
 Jobs run one at a time (a lock): the Evaluator is safe to share between
 threads.
 
-The ``spawn`` child re-imports the main module of a script, as every spawned
-multiprocessing child does: a script that makes an Evaluator at import time
-must do so under ``if __name__ == "__main__":`` (console scripts, notebooks and
-pytest need nothing).
+A script that makes an Evaluator at import time must do so under
+``if __name__ == "__main__":`` (see :mod:`robocritics.child`).
 """
 
 from __future__ import annotations
 
 import math
-import multiprocessing
 import os
 import resource
 import signal
@@ -42,6 +39,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from ...child import Child, cpu_seconds, limit_address_space
 from ...errors import CriticError, PlanningError, ProgramError, RoboCriticsError, SceneError, TrajectoryError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -139,23 +137,12 @@ def _rebuild(error: Mapping[str, Any]) -> RoboCriticsError:
     return EvaluatorError(f"the check failed in the worker: {kind}: {message}")
 
 
-def _cpu_seconds(pid: int) -> float:
-    """utime + stime of process ``pid`` from /proc/<pid>/stat, s (0 if it is gone)."""
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            fields = f.read().rsplit(b")", 1)[1].split()
-    except (OSError, IndexError):
-        return 0.0
-    # fields[0] is field 3 (state): utime and stime are fields 14 and 15
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 # --- the child ------------------------------------------------------------------------------------
 
 
 def _serve(conn, scene, robot, critics, params, sample_rate_hz, memory_bytes) -> None:
     """The child's main loop: set the limits, warm up, then answer ``(program, critics, params, cpu_s)`` jobs."""
-    resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+    limit_address_space(memory_bytes)
     try:
         from ...critic import critique
         from ...robot.model import Robot
@@ -247,8 +234,7 @@ class Evaluator:
         self.restarts = 0  # children replaced after a crash or a limit
         self._lock = threading.Lock()
         self._closed = False
-        self._process: multiprocessing.process.BaseProcess | None = None
-        self._conn = None
+        self._child: Child | None = None
         self._ready = False
         self._start()
 
@@ -264,31 +250,21 @@ class Evaluator:
     @property
     def pid(self) -> int | None:
         """The child's process id (None when closed or not started)."""
-        return None if self._process is None else self._process.pid
+        return None if self._child is None else self._child.pid
+
+    @property
+    def _conn(self):
+        return self._child.conn  # type: ignore[union-attr]
 
     def _start(self) -> None:
-        context = multiprocessing.get_context("spawn")
-        parent, child = context.Pipe()
-        self._process = context.Process(
-            target=_serve,
-            args=(child, self.scene, self.robot, self.critics, self.params, self.sample_rate_hz, self.memory_bytes),
-            name="robocritics-evaluator",
-            daemon=True,
-        )
-        self._process.start()
-        child.close()
-        self._conn = parent
+        args = (self.scene, self.robot, self.critics, self.params, self.sample_rate_hz, self.memory_bytes)
+        self._child = Child(_serve, args, name="robocritics-evaluator")
         self._ready = False
 
     def _stop(self) -> None:
-        process, conn = self._process, self._conn
-        self._process = self._conn = None
-        if process is not None and process.is_alive():
-            process.kill()
-        if process is not None:
-            process.join(10.0)
-        if conn is not None:
-            conn.close()
+        child, self._child = self._child, None
+        if child is not None:
+            child.kill()
 
     def _replace(self) -> None:
         self._stop()
@@ -300,7 +276,7 @@ class Evaluator:
         """Wait for the child's warm-up; a child that cannot start is an EvaluatorError."""
         if self._ready:
             return
-        assert self._conn is not None and self._process is not None
+        assert self._child is not None
         if not self._conn.poll(STARTUP_TIMEOUT_S):
             raise EvaluatorError(f"the worker did not start within {STARTUP_TIMEOUT_S:g} s", "startup", STARTUP_TIMEOUT_S)
         try:
@@ -317,17 +293,9 @@ class Evaluator:
         self._ready = True
 
     def _death(self, when: str) -> EvaluatorError:
-        assert self._process is not None
-        self._process.join(5.0)
-        code = self._process.exitcode
-        if code is not None and code < 0:
-            try:
-                how = f"signal {signal.Signals(-code).name}"
-            except ValueError:
-                how = f"signal {-code}"
-        else:
-            how = f"exit code {code}"
-        if code == -signal.SIGXCPU:
+        assert self._child is not None
+        how = self._child.death()
+        if self._child.exitcode == -signal.SIGXCPU:
             return EvaluatorError(
                 f"the check used more than its CPU limit of {self.cpu_s:g} s (cpu_s; RLIMIT_CPU stopped it)",
                 "cpu_s",
@@ -338,9 +306,9 @@ class Evaluator:
     def close(self) -> None:
         """Kill the child; a job running in another thread ends with an EvaluatorError. Idempotent."""
         self._closed = True
-        process = self._process
-        if process is not None and process.is_alive():
-            process.kill()
+        child = self._child
+        if child is not None and child.is_alive():
+            child.process.kill()  # now: a job in another thread holds the lock and sees the pipe close
         with self._lock:
             self._stop()
 
@@ -351,9 +319,9 @@ class Evaluator:
         self.close()
 
     def __del__(self) -> None:  # a forgotten Evaluator must not leave its child behind
-        process = getattr(self, "_process", None)
-        if process is not None and process.is_alive():
-            process.kill()
+        child = getattr(self, "_child", None)
+        if child is not None and child.is_alive():
+            child.process.kill()
 
     # --- jobs ---
 
@@ -379,10 +347,10 @@ class Evaluator:
         with self._lock:
             if self._closed:
                 raise EvaluatorError("the Evaluator is closed")
-            assert self._process is not None
+            assert self._child is not None
             # died between jobs (killed from outside): start afresh. An idle, ready child sends nothing, so a
             # readable pipe is its end closing (seen before the process can be reaped).
-            if not self._process.is_alive() or (self._ready and self._conn.poll(0)):
+            if not self._child.is_alive() or (self._ready and self._conn.poll(0)):
                 self._replace()
             evaluation = Evaluation(program)
             try:
@@ -395,15 +363,15 @@ class Evaluator:
             return evaluation
 
     def _run(self, evaluation: Evaluation, job: tuple) -> None:
-        assert self._conn is not None and self._process is not None
-        pid = self._process.pid
-        cpu_before = _cpu_seconds(pid)
+        assert self._child is not None
+        pid = self._child.pid
+        cpu_before = cpu_seconds(pid)
         started = time.monotonic()
         try:
             self._conn.send(job)
             while not self._conn.poll(_WATCH_INTERVAL_S):
                 evaluation.duration_s = time.monotonic() - started
-                evaluation.cpu_s = _cpu_seconds(pid) - cpu_before
+                evaluation.cpu_s = cpu_seconds(pid) - cpu_before
                 if self._closed:
                     raise EvaluatorError("the Evaluator was closed during the check")
                 if evaluation.cpu_s > self.cpu_s:
@@ -416,7 +384,7 @@ class Evaluator:
                         "timeout_s",
                         self.timeout_s,
                     )
-                if not self._process.is_alive() and not self._conn.poll():
+                if not self._child.is_alive() and not self._conn.poll():
                     raise self._death("during the check")
             answer = self._conn.recv()
         except (EOFError, OSError):

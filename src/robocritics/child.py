@@ -1,0 +1,113 @@
+"""One warm ``spawn`` child process with limits: how the studio and the batch engine run untrusted checks.
+
+The studio's :class:`~robocritics.viz.studio.worker.Evaluator` and the batch
+:class:`~robocritics.batch.local.LocalEngine` both check programs an LLM wrote
+in child processes, so that a limit hit or a crash in a native library
+(Pinocchio, coal) ends the child, not the caller. This module is what they
+share: the start (``spawn``, since the callers have threads and forking them is
+unsafe; single-threaded BLAS in the child's environment before it imports
+numpy), the address-space limit, the child's CPU time as the kernel counts it,
+and the description of how a child died.
+
+A ``spawn`` child re-imports the main module of a script: a script that starts
+one at import time must do so under ``if __name__ == "__main__":`` (console
+scripts, notebooks and pytest need nothing).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import resource
+import signal
+import threading
+import time
+from collections.abc import Callable, Mapping
+
+__all__ = ["Child", "SINGLE_THREADED_ENV", "cpu_seconds", "limit_address_space"]
+
+#: Environment a child starts with: one BLAS/OpenMP thread. A checking process runs one program at a time,
+#: and numpy's multi-threaded matmul on long trajectories costs 5-8x the CPU of the single-threaded one here.
+SINGLE_THREADED_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "VECLIB_MAXIMUM_THREADS": "1",
+    "NUMEXPR_NUM_THREADS": "1",
+}
+# os.environ is process-wide: a child is started with its environment under this lock.
+_ENV_LOCK = threading.Lock()
+
+
+def limit_address_space(memory_bytes: int) -> None:
+    """In the child: cap its address space at ``memory_bytes`` bytes (``RLIMIT_AS``); an allocation past it
+    raises MemoryError (or kills a native library that does not check)."""
+    resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+
+
+def cpu_seconds(pid: int) -> float:
+    """utime + stime of process ``pid`` from /proc/<pid>/stat, s (0 if it is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+    except (OSError, IndexError):
+        return 0.0
+    # fields[0] is field 3 (state): utime and stime are fields 14 and 15
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+class Child:
+    """A started ``spawn`` child running ``target(conn, *args)``, with ``conn`` its end of a duplex pipe.
+
+    ``env`` is set in the child's environment before it starts (numpy reads it on import);
+    ``started`` is the monotonic time it was started, s.
+    """
+
+    def __init__(self, target: Callable, args: tuple, *, name: str, env: Mapping[str, str] = SINGLE_THREADED_ENV):
+        context = multiprocessing.get_context("spawn")
+        parent, child = context.Pipe()
+        self.process = context.Process(target=target, args=(child, *args), name=name, daemon=True)
+        with _ENV_LOCK:  # the spawned interpreter inherits os.environ as it is at start()
+            saved = {k: os.environ.get(k) for k in env}
+            os.environ.update(env)
+            try:
+                self.process.start()
+            finally:
+                for k, v in saved.items():
+                    if v is None:
+                        os.environ.pop(k, None)
+                    else:
+                        os.environ[k] = v
+        child.close()
+        self.conn = parent
+        self.started = time.monotonic()
+
+    @property
+    def pid(self) -> int | None:
+        return self.process.pid
+
+    @property
+    def exitcode(self) -> int | None:
+        """The exit code once it has ended (negative: the signal that ended it), else None."""
+        return self.process.exitcode
+
+    def is_alive(self) -> bool:
+        return self.process.is_alive()
+
+    def kill(self) -> None:
+        """SIGKILL the child, reap it and close the pipe. Idempotent."""
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join(10.0)
+        self.conn.close()
+
+    def death(self) -> str:
+        """How the child ended, e.g. ``"signal SIGKILL"`` or ``"exit code 1"`` (waits up to 5 s for it)."""
+        self.process.join(5.0)
+        code = self.process.exitcode
+        if code is not None and code < 0:
+            try:
+                return f"signal {signal.Signals(-code).name}"
+            except ValueError:
+                return f"signal {-code}"
+        return f"exit code {code}"
