@@ -72,9 +72,38 @@ def test_run_gives_the_in_process_report(studio):
 
 
 def test_a_program_that_does_not_run_is_reported_with_its_line(studio):
-    status, body = request(studio, "POST", "/api/run", {"program": "move_to(apple)\nimport os\n"}, API)
+    status, body = request(studio, "POST", "/api/run", {"program": "home()\nimport os\n"}, API)
     revision = json.loads(body)
-    assert status == 200 and revision["score"] is None and "line" in revision["error"]
+    assert status == 200 and "line 2" in revision["error"]
+    # the runtime critic's Error verdict, scored like any failing report and marking the line in the editor
+    assert revision["score"] == 0 and revision["has_errors"]
+    (verdict,) = revision["verdicts"]
+    assert verdict["critic"] == "runtime" and verdict["flag"] == "error" and verdict["lines"] == [2]
+
+
+def test_goals_are_checked_on_every_run(tmp_path):
+    wrong = (  # the task says white_box
+        "open_gripper()\nmove_above(green_apple, 0.1)\nmove_linear(green_apple.x, green_apple.y, green_apple.z)\n"
+        "close_gripper()\nmove_up(0.15)\nmove_to(brown_box.x, brown_box.y, brown_box.top + 0.1)\n"
+        "open_gripper()\nhome()\n"
+    )
+    right = wrong.replace("brown_box", "white_box")
+    with Studio("sorting", wrong, goals=["green_apple in white_box"]) as studio:
+        status, body = request(studio, "GET", "/api/state", headers=API)
+        assert status == 200 and json.loads(body)["goals"] == ["green_apple in white_box"]
+        verdicts = {}
+        for program in (wrong, right):
+            status, body = request(studio, "POST", "/api/run", {"program": program}, API)
+            assert status == 200, body
+            verdicts[program] = {v["critic"]: v for v in json.loads(body)["verdicts"]}
+    assert verdicts[wrong]["task_outcome"]["flag"] == "error"
+    assert "green_apple" in verdicts[wrong]["task_outcome"]["message"] and "brown_box" in verdicts[wrong]["task_outcome"]["message"]
+    assert verdicts[right]["task_outcome"]["flag"] == "ok"
+
+
+def test_a_goal_naming_no_object_of_the_scene_is_refused_before_serving(capsys):
+    assert main(["studio", "--goal", "purple_pear in white_box", "--no-browser", "--port", "0"]) == 2
+    assert "purple_pear" in capsys.readouterr().err
 
 
 def test_cross_origin_post_is_refused(studio):

@@ -66,6 +66,10 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+#: Error types of a program that does not run (sandbox, planning, motion budget): reported by the runtime critic.
+RUNTIME_ERRORS = ("ProgramError", "PlanningError", "MotionBudgetError")
+
+
 class _Revision:
     """One checked program: a user Run or an LLM attempt."""
 
@@ -123,7 +127,7 @@ class Studio:
 
     def __init__(self, scene, program: str | None = None, *, host: str = "127.0.0.1", port: int = 0,
                  token: str | None = None, model=None, deploy: dict[str, Any] | None = None, critics=None,
-                 timeout_s: float = 60.0, no_model_reason: str = "no LLM endpoint is configured (start the studio "
+                 goals=None, timeout_s: float = 60.0, no_model_reason: str = "no LLM endpoint is configured (start the studio "
                  "with --base-url and --model)"):
         from ...scene import Scene
 
@@ -138,6 +142,9 @@ class Studio:
         self.no_model_reason = no_model_reason
         self.deploy_target = dict(deploy) if deploy else None
         self.critics = list(critics) if critics else None
+        from ...goals import parse_goals
+
+        self.goals = parse_goals(goals, self.scene)  # a bad goal (GoalError) fails here, before serving
         self.timeout_s = float(timeout_s)
         self.revisions: list[_Revision] = []
         self._lock = threading.Lock()
@@ -214,7 +221,8 @@ class Studio:
             if self._evaluator is None:
                 from .worker import Evaluator
 
-                self._evaluator = Evaluator(self.scene, critics=self.critics, timeout_s=self.timeout_s)
+                self._evaluator = Evaluator(self.scene, critics=self.critics, goals=self.goals,
+                                            timeout_s=self.timeout_s)
             return self._evaluator
 
     def installed_critics(self) -> list[str]:
@@ -228,6 +236,7 @@ class Studio:
             "program": self.program,
             "critics": self.installed_critics(),
             "selected": self.critics or self.installed_critics(),
+            "goals": [str(g) for g in self.goals],
             "chat": None if self.model is not None else self.no_model_reason,
             "deploy": None if self.deploy_target else "no UR controller is configured (--deploy-host)",
             "revisions": [r.summary() for r in self.revisions],
@@ -244,13 +253,18 @@ class Studio:
         """Simulate and critique ``program`` in the worker; record and return the revision."""
         with self._run_lock:
             evaluation = self.evaluator.evaluate(program, critics=critics or None)
-            error = None
+            error, report = None, evaluation.report
             if evaluation.error is not None:
                 e = evaluation.error
                 where = f" (line {e['line']})" if e.get("line") else ""
                 error = f"{e['type']}{where}: {e['message']}"
+                if e["type"] in RUNTIME_ERRORS:  # the runtime critic's Error verdict: scored, listed, fixable
+                    from ...critic import runtime_report
+                    from .worker import _rebuild
+
+                    report = runtime_report(_rebuild(e))
             revision = self._add(dict(kind="run", program=program, execution=evaluation.execution,
-                                      report=evaluation.report, error=error, duration_s=evaluation.duration_s))
+                                      report=report, error=error, duration_s=evaluation.duration_s))
             self.program = program
             self._adopt(revision)
             return revision
@@ -261,7 +275,7 @@ class Studio:
         if self.model is None:
             raise StudioError(self.no_model_reason)
         if self._loop is None:
-            self._loop = Loop(self.model, self.scene, critics=self.critics, approve=self._approve,
+            self._loop = Loop(self.model, self.scene, critics=self.critics, goals=self.goals, approve=self._approve,
                               simulate=self.evaluator.loop_simulate, on_attempt=self._on_attempt)
         self._loop.automation = automation
         return self._loop

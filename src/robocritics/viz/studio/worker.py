@@ -140,7 +140,7 @@ def _rebuild(error: Mapping[str, Any]) -> RoboCriticsError:
 # --- the child ------------------------------------------------------------------------------------
 
 
-def _serve(conn, scene, robot, critics, params, sample_rate_hz, memory_bytes) -> None:
+def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_bytes) -> None:
     """The child's main loop: set the limits, warm up, then answer ``(program, critics, params, cpu_s)`` jobs."""
     limit_address_space(memory_bytes)
     try:
@@ -170,7 +170,7 @@ def _serve(conn, scene, robot, critics, params, sample_rate_hz, memory_bytes) ->
         resource.setrlimit(resource.RLIMIT_CPU, (soft if hard == resource.RLIM_INFINITY else min(soft, hard), hard))
         try:
             execution = simulate(program, scene, robot, **rate)
-            report = critique(execution.trajectory, scene, job_critics, job_params)
+            report = critique(execution, scene, job_critics, job_params, goals=goals)
             conn.send(("done", execution, report, None, time.process_time() - used))
         except MemoryError:
             _out_of_memory(conn, time.process_time() - used)
@@ -200,7 +200,9 @@ class Evaluator:
     ``scene``, ``robot`` (default the UR3e, loaded in the child), ``critics``, ``params`` and
     ``sample_rate_hz`` (Hz) are as in :func:`~robocritics.simulate.simulate` and
     :func:`~robocritics.critic.critique`; ``critics``/``params`` are checked here and are the
-    defaults for :meth:`evaluate`. ``timeout_s`` is the wall-clock limit per job, s; ``cpu_s`` the
+    defaults for :meth:`evaluate`. ``goals`` are task goals (``"green_apple in white_box"``, checked here
+    against the scene: a bad one raises GoalError) that ``task_outcome`` checks on every job's final scene,
+    together with the program's own ``expect(...)`` calls. ``timeout_s`` is the wall-clock limit per job, s; ``cpu_s`` the
     CPU limit per job, s; ``memory_bytes`` the child's address-space limit, bytes.
     Use it as a context manager, or call :meth:`close`.
     """
@@ -212,12 +214,14 @@ class Evaluator:
         *,
         critics: Iterable[str] | str | None = None,
         params: Mapping[str, Any] | None = None,
+        goals: Iterable[Any] | str | None = None,
         sample_rate_hz: float | None = None,
         timeout_s: float = DEFAULT_TIMEOUT_S,
         memory_bytes: int = DEFAULT_MEMORY_BYTES,
         cpu_s: float = DEFAULT_CPU_S,
     ):
         from ...critic import select_critics
+        from ...goals import parse_goals
 
         if not timeout_s > 0 or not cpu_s > 0 or not memory_bytes > 0:
             raise ValueError(
@@ -226,6 +230,7 @@ class Evaluator:
         self.critics = self._names(critics, params, select_critics)
         self.params = dict(params or {})
         self.scene = scene
+        self.goals = parse_goals(goals, scene)
         self.robot = robot
         self.sample_rate_hz = None if sample_rate_hz is None else float(sample_rate_hz)
         self.timeout_s = float(timeout_s)
@@ -257,7 +262,7 @@ class Evaluator:
         return self._child.conn  # type: ignore[union-attr]
 
     def _start(self) -> None:
-        args = (self.scene, self.robot, self.critics, self.params, self.sample_rate_hz, self.memory_bytes)
+        args = (self.scene, self.robot, self.critics, self.params, self.goals, self.sample_rate_hz, self.memory_bytes)
         self._child = Child(_serve, args, name="robocritics-evaluator")
         self._ready = False
 
