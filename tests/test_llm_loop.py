@@ -3,6 +3,8 @@
 The scripted "model" answers with the example programs: the naive one is
 criticised (too fast, spearing), the careful one is slower. Each simulation
 takes a few tenths of a second, so every test simulates only a few programs.
+Tests of the model's side of a Fix use ``repairs=False`` (the paper's loop);
+repairs before the model are tested in tests/test_loop_repairs.py.
 """
 
 # ruff: noqa: F811  (pytest fixtures imported from llm_fixtures are parameters here)
@@ -58,7 +60,7 @@ def last_user(request) -> str:
 
 def test_fix_round_trip_raises_the_score(llm_server, make_client, sorting):
     llm_server.reply(fenced(NAIVE), fenced(CAREFUL, "I slowed the robot down near the objects:"))
-    loop = Loop(make_client(), sorting, critics=MOTION_CRITICS)
+    loop = Loop(make_client(), sorting, repairs=False, critics=MOTION_CRITICS)
     first = loop.request(TASK)
     assert isinstance(first, Attempt) and first.index == 1 and first.kind == "request"
     assert first.program == NAIVE and first.report is not None and first.execution is not None
@@ -112,7 +114,7 @@ def test_fix_refuses_without_anything_to_fix(llm_server, make_client, sorting):
 def test_run_stops_when_the_model_says_complete(llm_server, make_client, sorting):
     llm_server.reply(fenced(NAIVE), "I have reviewed the feedback. PROGRAM COMPLETE", fenced(CAREFUL))
     seen: list[Attempt] = []
-    loop = Loop(make_client(), sorting, critics=MOTION_CRITICS, on_attempt=seen.append)
+    loop = Loop(make_client(), sorting, repairs=False, critics=MOTION_CRITICS, on_attempt=seen.append)
     best = loop.run(TASK, max_attempts=5)
     assert len(loop.last_run) == 2 and seen == loop.attempts == loop.last_run
     first, done = loop.attempts
@@ -125,7 +127,7 @@ def test_run_stops_when_the_model_says_complete(llm_server, make_client, sorting
 
 def test_run_same_program_with_complete_counts_as_done(llm_server, make_client, sorting):
     llm_server.reply(fenced(NAIVE), fenced(NAIVE, "No change needed. PROGRAM COMPLETE."))
-    loop = Loop(make_client(), sorting, critics=MOTION_CRITICS)
+    loop = Loop(make_client(), sorting, repairs=False, critics=MOTION_CRITICS)
     loop.run(TASK)
     assert [a.complete for a in loop.last_run] == [False, True]
     assert loop.last_run[1].diff == ""
@@ -133,7 +135,7 @@ def test_run_same_program_with_complete_counts_as_done(llm_server, make_client, 
 
 def test_run_stops_when_every_critic_is_ok(llm_server, make_client, sorting):
     llm_server.reply(fenced(NAIVE), fenced(CAREFUL), "PROGRAM COMPLETE")
-    loop = Loop(make_client(), sorting, critics=SPEED_CRITICS)
+    loop = Loop(make_client(), sorting, repairs=False, critics=SPEED_CRITICS)
     best = loop.run(TASK, max_attempts=5)
     assert len(loop.last_run) == 2 and best is loop.attempts[1] and best.passed
     assert llm_server.pending == 1  # the model is not asked again once everything is OK
@@ -143,7 +145,7 @@ def test_run_stops_at_max_attempts_and_returns_the_best(llm_server, make_client,
     # A recommended speed of 0.1 m/s: even the careful program gets a warning, so it never passes.
     params = {"joint_speed": {"warn_speed_m_s": 0.1}}
     llm_server.reply(fenced(NAIVE), fenced(CAREFUL), fenced(NAIVE), fenced(NAIVE), fenced(NAIVE))
-    loop = Loop(make_client(), sorting, critics=SPEED_CRITICS, params=params, max_attempts=3)
+    loop = Loop(make_client(), sorting, repairs=False, critics=SPEED_CRITICS, params=params, max_attempts=3)
     best = loop.run(TASK)  # the loop's own max_attempts
     assert len(loop.last_run) == 3
     assert [a.changed for a in loop.last_run] == [True, True, True]
@@ -155,7 +157,7 @@ def test_run_stops_at_max_attempts_and_returns_the_best(llm_server, make_client,
 
 def test_auto_request_iterates(llm_server, make_client, sorting):
     llm_server.reply(fenced(NAIVE), fenced(CAREFUL))
-    loop = Loop(make_client(), sorting, critics=SPEED_CRITICS, automation="auto")
+    loop = Loop(make_client(), sorting, repairs=False, critics=SPEED_CRITICS, automation="auto")
     best = loop.request(TASK)
     assert len(loop.attempts) == 2 and best.passed
 
@@ -272,7 +274,7 @@ def test_approve_rejecting_a_revision(llm_server, make_client, sorting):
         return next(answers)
 
     llm_server.reply(fenced(NAIVE), fenced(CAREFUL), fenced(CAREFUL))
-    loop = Loop(make_client(), sorting, critics=SPEED_CRITICS, approve=approve)
+    loop = Loop(make_client(), sorting, repairs=False, critics=SPEED_CRITICS, approve=approve)
     first = loop.request(TASK)
     assert seen == []  # the first program is not a revision
     rejected = loop.fix()

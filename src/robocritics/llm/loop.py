@@ -22,20 +22,38 @@ text is sent to the model with the next turn. Only :class:`LLMError` (the
 endpoint failed after the client's retries) propagates; the conversation is
 then left as it was before the call, so the call can simply be repeated.
 
+Fix = repairs, then the model: :meth:`Loop.fix` (and each feedback round of
+:meth:`Loop.run`) first applies the critics' own repairs
+(:func:`robocritics.repair.repair`: program edits derived from a critic's
+evidence, each kept only when re-simulation shows it removes its Error without
+worsening another verdict or the task goals). The repaired program is an
+attempt of its own (``kind="repair"``, ``source="repair"``, its accepted
+:class:`~robocritics.repair.Change` list in ``changes``); only the Error and
+Warning verdicts left after it are sent to the model, and when none is left no
+model call is made. Repairs act on Error verdicts only (a Warning is a
+judgement call for the model) and only when the current program ran.
+``Loop(repairs=False)`` sends everything to the model (the paper's loop; the
+ablation's LLM-only baseline).
+
 Automation levels (``automation=``):
 
 * ``"manual"`` — critics only report. Critic feedback never reaches the model
-  unless the user writes it: :meth:`Loop.fix` is refused, :meth:`Loop.run`
-  makes a single request. Use :meth:`Loop.refine` with your own words.
+  unless the user writes it: :meth:`Loop.fix` applies the critics' repairs only
+  (refused when repairs are off or change nothing), :meth:`Loop.run` makes a
+  single request. Use :meth:`Loop.refine` with your own words.
 * ``"guided"`` (default) — the user decides: :meth:`Loop.fix` (the Fix button)
-  forwards the failing critics' feedback; :meth:`Loop.run` iterates when called.
+  repairs, then forwards the remaining failing critics' feedback; :meth:`Loop.run` iterates when called.
 * ``"auto"`` — :meth:`Loop.request` already iterates like :meth:`Loop.run`.
 
 Approval: ``approve(program, diff) -> bool`` is called for every *revision*
 (a program that differs from the current one, with its unified diff) before it
-is simulated. A rejected revision is recorded (``approved=False``) but not
-simulated, the previous attempt stays current, and the model is told with its
-next turn that the revision was not accepted.
+is simulated — the model's revisions and the critics' repairs alike (a
+repair's diff names its new side ``attempt N (critic repairs)``). A rejected
+revision is recorded (``approved=False``) but not simulated and the previous
+attempt stays current. A rejected model revision: the model is told with its
+next turn that it was not accepted. A rejected repair: the model is asked with
+the unrepaired program's feedback, as if there had been no repair (in
+``manual``, nothing more happens).
 
 History: the loop keeps the whole conversation (:attr:`Loop.history`) but
 sends the model only the system prompt plus the last ``max_history_messages``
@@ -80,9 +98,8 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
-from ..errors import CriticError, PlanningError, ProgramError, RoboCriticsError, TrajectoryError
+from ..errors import CriticError, LLMError, PlanningError, ProgramError, RoboCriticsError, TrajectoryError
 from ..report import format_score
-from ..errors import LLMError
 from .client import ChatModel, ContextLengthError
 from .limits import DEFAULT_MAX_TOKENS, MAX_MESSAGE_CHARS, MIN_REPLY_TOKENS, clean_text, cut_text
 from .memory import MAX_SEARCH_K, Interaction, InteractionMemory
@@ -103,11 +120,15 @@ from .prompts import (
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic import Report
+    from ..repair import Change
     from ..simulate import Execution
     from ..robot.model import Robot
     from ..scene import Scene
 
-__all__ = ["Attempt", "Loop", "NothingToFixError", "AUTOMATION_LEVELS"]
+__all__ = ["Attempt", "Loop", "NothingToFixError", "AUTOMATION_LEVELS", "SOURCES"]
+
+#: Who wrote an attempt's program: the chat model, or the critics' own repairs (also the memory's ``source``).
+SOURCES = ("llm", "repair")
 
 AUTOMATION_LEVELS = ("manual", "guided", "auto")
 Automation = Literal["manual", "guided", "auto"]
@@ -144,10 +165,14 @@ class Attempt:
 
     ``index`` counts attempts of the loop from 1. ``kind`` says what produced
     it: ``"request"`` (a task), ``"fix"`` (critic or runtime feedback),
-    ``"refine"`` (the user's own words) or ``"review"`` (the embedded
-    condition's self-review). ``prompt`` is the user message sent (including
-    any runtime feedback or note carried over from the previous turn);
-    ``reply`` the model's raw answer.
+    ``"refine"`` (the user's own words), ``"review"`` (the embedded
+    condition's self-review) or ``"repair"`` (the critics' own repairs, no
+    model call). ``source`` is who wrote the program: ``"llm"`` or
+    ``"repair"``; a repair attempt's accepted edits are in ``changes``
+    (:class:`~robocritics.repair.Change`: critic, line, what, why, cycle-time
+    cost in s; [] for the model's). ``prompt`` is the user message sent
+    (including any runtime feedback or note carried over from the previous
+    turn); ``reply`` the model's raw answer ("" for both of a repair).
 
     ``program`` is the program this attempt stands for: the extracted code, or
     — when the model said "PROGRAM COMPLETE" without code, or sent the same
@@ -179,6 +204,8 @@ class Attempt:
     changed: bool = True
     approved: bool | None = None
     memory_id: int | None = None
+    source: str = "llm"
+    changes: list[Change] = field(default_factory=list)
 
     @property
     def feedback(self) -> str:
@@ -209,7 +236,7 @@ class Attempt:
     def summary(self) -> str:
         """One line: index, kind, outcome."""
         if self.approved is False:
-            outcome = "revision rejected"
+            outcome = "repair rejected" if self.source == "repair" else "revision rejected"
         elif self.error:
             outcome = "did not run: " + self.error.splitlines()[0]
         elif self.complete:
@@ -221,6 +248,8 @@ class Attempt:
                 outcome += "; program unchanged"
         else:
             outcome = "no result"
+        if self.source == "repair" and self.approved is not False:
+            outcome = f"{len(self.changes)} critic repair{'s' if len(self.changes) != 1 else ''}; {outcome}"
         return f"attempt {self.index} [{self.kind}]: {outcome}"
 
 
@@ -261,10 +290,14 @@ class Loop:
       interactions (other than this loop's own; the best-scored one per
       request text) into the system prompt.
     * ``automation`` — ``"manual"``, ``"guided"`` or ``"auto"`` (module docstring).
-    * ``approve`` — ``approve(program, diff) -> bool`` for revisions (module docstring).
+    * ``approve`` — ``approve(program, diff) -> bool`` for revisions, the model's and the repairs' (module docstring).
+    * ``repairs`` — apply the critics' own repairs before asking the model to fix (module docstring);
+      False: every fix goes to the model. The repairs simulate in this process, with ``robot``,
+      ``critics``, ``params`` and ``goals`` (not through a ``simulate`` hook, which then re-checks the
+      repaired program like any revision).
     * ``session`` — the memory session id (default: a fresh one).
     * ``max_history_messages`` — user/assistant messages sent per call (>= 2).
-    * ``max_attempts`` — attempts per :meth:`run` (and per request in ``auto``).
+    * ``max_attempts`` — model replies per :meth:`run` (and per request in ``auto``; repairs do not count).
     * ``embedded_rules`` — paste the critics' rules into the system prompt
       (the paper's *embedded* condition).
     * ``on_attempt`` — called with each :class:`Attempt` as soon as it is made.
@@ -307,6 +340,7 @@ class Loop:
         context_tokens: int | None = None,
         simulate: Callable[[str], tuple[Execution, Report]] | None = None,
         goals: Iterable[Any] | None = None,
+        repairs: bool = True,
     ):
         from ..critic import select_critics
 
@@ -342,6 +376,7 @@ class Loop:
         self.session = session or InteractionMemory.new_session_id()
         self.automation: Automation = automation
         self.approve = approve
+        self.repairs = bool(repairs)
         self.max_history_messages = int(max_history_messages)
         self.max_attempts = int(max_attempts)
         self.memory_k = int(memory_k)
@@ -396,22 +431,30 @@ class Loop:
         return self._request(text)
 
     def fix(self, critics: Iterable[str] | str | None = None) -> Attempt:
-        """The one-click Fix: send the feedback of the FAILING critics of the current attempt; return the revision.
+        """The one-click Fix: the critics' repairs, then the FAILING critics' feedback to the model.
 
-        ``critics`` restricts the feedback to some critics (default: the
-        loop's critics); only those that gave a Warning or Error are sent.
+        First, when a selected critic gave an Error, the critics' own repairs
+        (module docstring) are applied to the current program — one attempt
+        with ``source="repair"``, through ``approve`` like any revision. Then
+        the feedback of the selected critics that still give a Warning or
+        Error is sent to the model; with none left, no model call is made.
+        ``critics`` restricts both to some critics (default: the loop's
+        critics; a repair still changes only what makes no verdict worse).
         If the last reply could not be run (sandbox, planning, no code), its
-        runtime feedback is what is sent. Raises :class:`NothingToFixError`
-        when there is no attempt yet or every selected critic passed, and
-        :class:`RoboCriticsError` in ``manual`` automation.
+        runtime feedback is what is sent (there is nothing to repair).
+
+        Returns the latest attempt: the model's revision, or the repair when
+        the model was not asked. Raises :class:`NothingToFixError` when there
+        is no attempt yet or every selected critic passed, and
+        :class:`RoboCriticsError` in ``manual`` automation when the repairs
+        are off or changed nothing (the model is never asked there).
         """
-        if self.automation == "manual":
+        if self.automation == "manual" and not self.repairs:
             raise RoboCriticsError(
-                "automation='manual': critic feedback is not sent to the model; use refine(text) with your "
-                "own words, or automation='guided' to fix on request"
+                "automation='manual': critic feedback is not sent to the model and repairs are off; use "
+                "refine(text) with your own words, or automation='guided' to fix on request"
             )
-        message = self._fix_message(critics)
-        return self._turn("fix", message)
+        return self._fix(critics)
 
     def refine(self, text: str) -> Attempt:
         """Send the user's own words about the current program; return the revision.
@@ -459,7 +502,7 @@ class Loop:
         self.last_run = []
         attempt = self._request(text)
         self.last_run = self.attempts[start:]
-        while self.automation != "manual" and len(self.attempts) - start < limit:
+        while self.automation != "manual" and self._model_replies(start) < limit:
             if attempt.complete:
                 break
             current = self.current
@@ -467,14 +510,17 @@ class Loop:
                 break
             if feedback == "critics":
                 try:
-                    message = self._fix_message(None)
+                    attempt = self._fix(None)  # repairs first (when on), then the model with what is left
                 except NothingToFixError:
                     break
-                attempt = self._turn("fix", message)
             else:
                 attempt = self._turn("review", REVIEW_INSTRUCTION)
             self.last_run = self.attempts[start:]
         return self.best(self.last_run)
+
+    def _model_replies(self, start: int) -> int:
+        """Attempts since ``start`` that were model replies (repairs make no model call)."""
+        return sum(1 for a in self.attempts[start:] if a.source == "llm")
 
     @staticmethod
     def best(attempts: Iterable[Attempt]) -> Attempt:
@@ -527,12 +573,28 @@ class Loop:
             self.task, self.examples, self.system, self._task_index = previous
             raise
 
-    def _fix_message(self, critics: Iterable[str] | str | None) -> str:
-        """The next fix turn's message; raises NothingToFixError when there is nothing to fix."""
-        if not self.attempts:
-            raise NothingToFixError("nothing to fix: no attempt yet; call request(text) first")
-        if self._pending_error is not None:
-            return ""  # the runtime feedback owed to the model is the message
+    def _fix(self, critics: Iterable[str] | str | None) -> Attempt:
+        """One Fix round: repairs (when on and an Error is selected), then the model with what is left."""
+        message = self._fix_message(critics)  # NothingToFixError before anything is done
+        repaired: Attempt | None = None
+        if self.repairs and self._pending_error is None:
+            repaired = self._repair(critics)
+            if repaired is not None and repaired.approved is not False:
+                try:
+                    message = self._fix_message(critics)
+                except NothingToFixError:
+                    return repaired  # the repairs fixed everything selected: no model call
+        if self.automation == "manual":
+            if repaired is None:
+                raise RoboCriticsError(
+                    "automation='manual': the critics' repairs had nothing to change and critic feedback is not "
+                    "sent to the model; use refine(text) with your own words, or automation='guided'"
+                )
+            return repaired
+        return self._turn("fix", message)
+
+    def _failing(self, critics: Iterable[str] | str | None) -> tuple[Attempt, list[str]]:
+        """The current attempt and its selected critics that did not give OK; NothingToFixError if none."""
         current = self.current
         if current is None or current.report is None:
             raise NothingToFixError("nothing to fix: no program has been checked yet")
@@ -545,7 +607,71 @@ class Loop:
                 f"nothing to fix: {'every selected critic' if critics is not None else 'every critic'} passed "
                 f"on attempt {current.index} (score {format_score(report.score)})"
             )
-        return fix_prompt(report, failing, program=current.program)
+        return current, failing
+
+    def _fix_message(self, critics: Iterable[str] | str | None) -> str:
+        """The next fix turn's message; raises NothingToFixError when there is nothing to fix."""
+        if not self.attempts:
+            raise NothingToFixError("nothing to fix: no attempt yet; call request(text) first")
+        if self._pending_error is not None:
+            return ""  # the runtime feedback owed to the model is the message
+        current, failing = self._failing(critics)
+        assert current.report is not None
+        return fix_prompt(current.report, failing, program=current.program)
+
+    def _repair(self, critics: Iterable[str] | str | None) -> Attempt | None:
+        """Apply the critics' repairs to the current program as a new attempt (approved, checked, stored).
+
+        None when no selected critic gives an Error, or the repairs change
+        nothing (or fail: then the model is asked, as without repairs).
+        """
+        from ..repair import repair
+        from ..verdict import Flag
+
+        current, failing = self._failing(critics)
+        assert current.report is not None and current.program is not None
+        if not any(current.report.verdict(n).flag == Flag.ERROR for n in failing):
+            return None  # repairs act on Errors only
+        try:
+            result = repair(current.program, self.scene, goal=self.goals or None, critics=self._selection,
+                            robot=self._robot, params=self.params or None)  # fmt: skip
+        except RoboCriticsError as exc:  # e.g. a plugin's repair broke the program: the model is asked instead
+            log.warning("attempt %d: the critics' repairs failed (%s); asking the model", current.index, exc)
+            return None
+        code = _normalise(result.program)
+        if not result.changes or code == current.program:
+            return None
+        assert self.task is not None
+        index = len(self.attempts) + 1
+        attempt = Attempt(index=index, kind="repair", request=self.task, prompt="", reply="", program=code,
+                          source="repair", changes=list(result.changes))  # fmt: skip
+        attempt.diff = unified_diff(current.program, code, f"attempt {current.index}",
+                                    f"attempt {index} (critic repairs)")  # fmt: skip
+        if self.approve is not None:
+            if not self.approve(code, attempt.diff):  # it raises: nothing has changed yet
+                attempt.approved = False
+                self._record(attempt)
+                return attempt
+            attempt.approved = True
+        if self._simulate is None and self.sample_rate_hz is None and result.program == code:
+            # repair() checked exactly this program the way _check would (same simulate and critique calls)
+            attempt.execution, attempt.report, attempt.score = result.execution, result.report, result.report.score
+        else:
+            self._check(attempt)
+        self.current = attempt
+        self._store(attempt)
+        self._record(attempt)
+        # The model's last program in the history is the unrepaired one: say what changed, so it keeps it.
+        done = "\n".join(f"- line {c.line}: {c.what}" for c in attempt.changes)
+        self._notes.append(
+            f"Automatic repairs were applied to your program (now attempt {index}); keep them:\n{done}"
+        )
+        return attempt
+
+    def _record(self, attempt: Attempt) -> None:
+        self.attempts.append(attempt)
+        if self.on_attempt is not None:
+            self.on_attempt(attempt)
 
     def _turn(self, kind: str, message: str) -> Attempt:
         """Send one user message (with what is owed to the model), interpret the reply, record the attempt."""
@@ -814,7 +940,8 @@ class Loop:
     def _store(self, attempt: Attempt) -> None:
         if self.memory is None or attempt.program is None:
             return
-        attempt.memory_id = self.memory.add(self.session, attempt.request, attempt.program, attempt.feedback, attempt.score)
+        attempt.memory_id = self.memory.add(self.session, attempt.request, attempt.program, attempt.feedback,
+                                            attempt.score, source=attempt.source)  # fmt: skip
         self._memory_ids.add(attempt.memory_id)
 
     # --- history --------------------------------------------------------------------------------

@@ -3,13 +3,15 @@
 Step 4 of the RoboCritics workflow stores each attempt; step 5 retrieves
 similar past attempts so the model can refine instead of starting over.
 
-Storage (one SQLite file, or ``":memory:"``; schema version 2):
+Storage (one SQLite file, or ``":memory:"``; schema version 3):
 
 * ``sessions(id, created_s)`` — one row per conversation / task run.
 * ``interactions(id, session_id, request, program, feedback, score, created_s,
-  request_tokens)`` — ``score`` is the 0–10 program quality index (NULL when
+  request_tokens, source)`` — ``score`` is the 0–10 program quality index (NULL when
   the program was never critiqued, e.g. it failed to parse); times are unix
-  seconds; ``request_tokens`` is the request's length in BM25 words.
+  seconds; ``request_tokens`` is the request's length in BM25 words;
+  ``source`` is who wrote the program: ``'llm'`` (the model) or ``'repair'``
+  (the critics' own repairs, :mod:`robocritics.repair`).
 * ``request_terms(term, interaction_id, session_id, tf)`` — the inverted index
   of the requests (how often each word occurs in each request), and
   ``corpus_stats(session_id, documents, tokens)`` — counts per session and,
@@ -17,7 +19,9 @@ Storage (one SQLite file, or ``":memory:"``; schema version 2):
 * ``embeddings(interaction_id, model, dim, vector, created_s)`` — one vector per
   interaction *per embedding model*, tagged with the model's name and length.
 
-A version-1 file (before the index existed) is upgraded when it is opened.
+Older files are upgraded when they are opened: version 1 (before the index
+existed) gets the index; versions 1 and 2 (before ``source``) get the column,
+every older row counting as ``'llm'`` (only the model wrote programs then).
 
 Bounds: stored texts are capped (request ``MAX_TASK_CHARS``, program
 ``MAX_STORED_PROGRAM_CHARS``, feedback ``MAX_STORED_FEEDBACK_CHARS``; longer
@@ -87,9 +91,11 @@ from robocritics.llm.limits import (
     cut_text,
 )
 
-__all__ = ["Interaction", "InteractionMemory", "InteractionMemoryError", "MAX_SEARCH_K"]
+__all__ = ["Interaction", "InteractionMemory", "InteractionMemoryError", "MAX_SEARCH_K", "SOURCES"]
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
+#: Who wrote a stored program: the chat model, or the critics' own repairs.
+SOURCES = ("llm", "repair")
 
 #: Seconds a write waits for another writer's lock: writes are single small transactions, so a lock held
 #: this long means a stuck writer, not a busy one.
@@ -126,7 +132,8 @@ CREATE TABLE IF NOT EXISTS interactions (
     feedback       TEXT NOT NULL,
     score          REAL CHECK (score IS NULL OR (score >= 0 AND score <= 10)),
     created_s      REAL NOT NULL,
-    request_tokens INTEGER NOT NULL DEFAULT 0
+    request_tokens INTEGER NOT NULL DEFAULT 0,
+    source         TEXT NOT NULL DEFAULT 'llm' CHECK (source IN ('llm', 'repair'))
 );
 CREATE INDEX IF NOT EXISTS interactions_by_session ON interactions(session_id, id);
 CREATE TABLE IF NOT EXISTS embeddings (
@@ -158,7 +165,9 @@ CREATE TABLE IF NOT EXISTS corpus_stats (
 CREATE INDEX IF NOT EXISTS embeddings_by_space ON embeddings(model, dim, interaction_id);
 """
 
-_COLUMNS = "id, session_id, request, program, feedback, score, created_s"
+_COLUMNS = "id, session_id, request, program, feedback, score, created_s, source"
+# Added in version 3 to a file that has the interactions table without it (older rows: the model's).
+_SOURCE_COLUMN = "ALTER TABLE interactions ADD COLUMN source TEXT NOT NULL DEFAULT 'llm' CHECK (source IN ('llm', 'repair'))"
 
 
 class InteractionMemoryError(RoboCriticsError, ValueError):
@@ -178,7 +187,8 @@ class Interaction:
     """One stored attempt: what was asked, the program written, what the critics said.
 
     ``score`` is the 0–10 quality index or None if the program was not
-    critiqued; ``created_s`` is unix time in seconds.
+    critiqued; ``created_s`` is unix time in seconds; ``source`` who wrote the
+    program (:data:`SOURCES`: ``"llm"`` or ``"repair"``).
     """
 
     id: int
@@ -188,6 +198,7 @@ class Interaction:
     feedback: str
     score: float | None
     created_s: float
+    source: str = "llm"
 
 
 def _query_terms(text: str) -> list[str]:
@@ -350,6 +361,9 @@ class InteractionMemory:
                     if version == 1:
                         _upgrade_from_1(conn)
                     _executescript(conn, _INDEX_TABLES)
+                    columns = {row[1] for row in conn.execute("PRAGMA table_info(interactions)")}
+                    if "source" not in columns:  # versions 1 and 2 (a fresh file was created with it)
+                        conn.execute(_SOURCE_COLUMN)
                     conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
                 conn.execute("COMMIT")
             except BaseException:
@@ -430,10 +444,13 @@ class InteractionMemory:
         program: str,
         feedback: str = "",
         score: float | None = None,
+        *,
+        source: str = "llm",
     ) -> int:
         """Store one interaction in ``session`` (created if new); return its id.
 
-        ``score`` must be within 0–10 or None. Texts are cleaned of lone
+        ``score`` must be within 0–10 or None; ``source`` one of :data:`SOURCES`
+        (who wrote the program). Texts are cleaned of lone
         surrogates and cut to their limits (module docstring). Ids increase in
         commit order, across threads and processes. Raises
         ``InteractionMemoryError`` (a ``ValueError``) for invalid values.
@@ -445,6 +462,8 @@ class InteractionMemory:
         for label, text in (("request", request), ("program", program), ("feedback", feedback)):
             if not isinstance(text, str):
                 raise self._error(f"{label} must be a string, got {type(text).__name__}")
+        if source not in SOURCES:
+            raise self._error(f"source must be one of {', '.join(SOURCES)}, got {source!r:.40}")
         if score is not None:
             try:
                 score = float(score)
@@ -462,9 +481,9 @@ class InteractionMemory:
         with self._write("storing an interaction") as conn:
             conn.execute("INSERT OR IGNORE INTO sessions (id, created_s) VALUES (?, ?)", (session, now))
             cursor = conn.execute(
-                "INSERT INTO interactions (session_id, request, program, feedback, score, created_s, request_tokens) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?)",
-                (session, request, program, feedback, score, now, tokens),
+                "INSERT INTO interactions (session_id, request, program, feedback, score, created_s, request_tokens, "
+                "source) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                (session, request, program, feedback, score, now, tokens, source),
             )
             assert cursor.lastrowid is not None  # an INSERT always sets it
             interaction_id = int(cursor.lastrowid)
@@ -764,4 +783,5 @@ def _interaction(row: tuple) -> Interaction:
         feedback=row[4],
         score=None if row[5] is None else float(row[5]),
         created_s=float(row[6]),
+        source=row[7],
     )
