@@ -2,14 +2,25 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
-from .rows import Job, RowError, check_row, error_row
+from .rows import MAX_ID_CHARS, Job, RowError, _is_text, check_row, error_row
 
 __all__ = ["evaluate", "jobs_of", "ENGINES"]
 
 ENGINES = ("local", "ray")
+
+
+def _shown_id(row: Any) -> str | int | None:
+    """The id an error row echoes: the row's own if it is a valid id, else None (an over-long or broken id
+    is not copied into the output)."""
+    row_id = row.get("id") if isinstance(row, Mapping) else None
+    if isinstance(row_id, bool) or not isinstance(row_id, (str, int)) or row_id == "":
+        return None
+    if isinstance(row_id, str) and (len(row_id) > MAX_ID_CHARS or not _is_text(row_id)):
+        return None
+    return row_id
 
 
 def jobs_of(rows: Iterable[Any], errors: list[dict]) -> Iterator[Job]:
@@ -20,13 +31,12 @@ def jobs_of(rows: Iterable[Any], errors: list[dict]) -> Iterator[Job]:
         if isinstance(row, RowError):
             errors.append(error_row(getattr(row, "row_id", None), "RowError", str(row)))
             continue
-        row_id = row.get("id") if isinstance(row, dict) else None
         try:
             job = check_row(row)
             if job.id in seen:
                 raise RowError(f"duplicate id {job.id!r}: an earlier row has it, so this one is not evaluated")
         except RowError as exc:
-            shown = row_id if isinstance(row_id, (str, int)) and not isinstance(row_id, bool) else None
+            shown = _shown_id(row)
             where = getattr(row, "input_line", 0)  # a reader's line number (robocritics batch)
             errors.append(error_row(shown, "RowError", f"input line {where}: {exc}" if where else str(exc)))
             continue
@@ -60,6 +70,9 @@ def evaluate(
     """
     from .local import DEFAULT_MEMORY_BYTES, DEFAULT_TIMEOUT_S, LocalEngine
 
+    if isinstance(rows, (Mapping, str, bytes)):  # iterating one would make an error row per key or character
+        what = "one row (a mapping): pass a list of rows, [row]" if isinstance(rows, Mapping) else type(rows).__name__
+        raise TypeError(f"rows must be an iterable of input rows, got {what}")
     if not isinstance(engine, str):  # an open engine, reused: the caller closes it
         errors: list[dict] = []
         yield from engine.run(jobs_of(rows, errors), errors)

@@ -10,6 +10,11 @@ where ``score`` is the 0-10 program quality index of the five built-in motion cr
 (:attr:`robocritics.report.Report.score`: OK 2, Warning 1, Error 0 points each). With goals, a program
 that moves well but leaves the objects in the wrong place earns nothing: the motion quality only counts
 once the task is done.
+
+A bad ``scene``, ``goal``, ``critics`` or ``params`` is the caller's mistake, the same for every program: it
+raises (:class:`~robocritics.batch.RowError` for a wrong type, :class:`~robocritics.errors.SceneError`, :class:`~robocritics.errors.GoalError`,
+:class:`~robocritics.errors.CriticError`) before any program runs, instead of silently scoring every
+program 0 (a trainer would learn nothing and not know why).
 """
 
 from __future__ import annotations
@@ -31,6 +36,19 @@ def reward_of(row: Mapping[str, Any], gated: bool) -> float:
     return float(row["score"]) / 10.0
 
 
+def _check_inputs(scene: Any, goals: list | None, critics: Any, params: Any) -> None:
+    """Raise the error every row would get for a bad scene, goal, critic or parameter (see the module docstring)."""
+    from ..critic import select_critics
+    from ..goals import parse_goals
+    from .rows import SceneCache, check_row
+
+    # the batch's row checks (types of scene, goal, critics, params): a RowError naming the field
+    check_row({"id": 0, "scene": scene, "program": "", "goal": goals, "critics": critics, "params": params})
+    loaded = SceneCache(1).get(scene.strip() if isinstance(scene, str) else dict(scene))
+    parse_goals(goals, loaded)
+    select_critics(critics, params)
+
+
 def reward(
     programs: Sequence[str],
     scene: str | Mapping[str, Any],
@@ -49,13 +67,19 @@ def reward(
     (:class:`~robocritics.batch.LocalEngine`, :class:`~robocritics.batch.ray_engine.RayEngine`) reused across
     calls, which a trainer calling this every step should pass (starting workers costs seconds).
     Other keyword arguments go to :func:`~robocritics.batch.evaluate` (``workers``, ``timeout_s``, ...).
-    A program that is not a string earns 0.0.
+    A program that is not a string earns 0.0. ``reward([], ...)`` is ``[]`` (no worker is started).
     """
     from .evaluate import evaluate
 
+    if isinstance(programs, (str, bytes)):  # iterating one would score each character as a program
+        raise TypeError("programs must be a sequence of program texts, got one text: pass [program]")
+    programs = list(programs)
     goals = None if goal is None else ([goal] if isinstance(goal, str) else list(goal))
     if isinstance(critics, str):
         critics = [c.strip() for c in critics.split(",") if c.strip()]
+    _check_inputs(scene, goals, critics, params)
+    if not programs:
+        return []
     rows = []
     for i, program in enumerate(programs):
         row: dict[str, Any] = {"id": i, "scene": scene, "program": program}

@@ -20,6 +20,7 @@ None when the error is not in the program).
 from __future__ import annotations
 
 import json
+import pickle
 import time
 from collections import OrderedDict
 from collections.abc import Mapping
@@ -27,13 +28,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["Job", "RowError", "check_row", "error_row", "evaluate_job", "SceneCache", "OUTPUT_KEYS"]
+__all__ = ["Job", "RowError", "check_row", "error_row", "evaluate_job", "SceneCache", "OUTPUT_KEYS", "MAX_MESSAGE_CHARS"]
 
 #: The keys of every output row, in this order.
 OUTPUT_KEYS = ("id", "score", "flags", "passed", "duration_s", "samples", "error")
 _INPUT_KEYS = {"id", "scene", "program", "goal", "critics", "params"}
 #: Longest id accepted, characters (ids are echoed in every output row).
 MAX_ID_CHARS = 200
+#: Longest error message in an output row, characters: a plugin's exception (or any error quoting its input)
+#: could carry megabytes, copied into every output row and the progress of a batch.
+MAX_MESSAGE_CHARS = 2_000
 #: Scenes a worker keeps loaded (most recently used first out last).
 SCENE_CACHE_SIZE = 32
 
@@ -54,8 +58,15 @@ class Job:
     params: dict | None = None
 
 
+def _bounded(message: str) -> str:
+    """``message`` cut to :data:`MAX_MESSAGE_CHARS` (saying how long it was), as valid Unicode."""
+    if len(message) > MAX_MESSAGE_CHARS:
+        message = f"{message[: MAX_MESSAGE_CHARS - 60]}... (cut: the message was {len(message):,} characters)"
+    return message if _is_text(message) else message.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def error_row(row_id: Any, kind: str, message: str, line: int | None = None, duration_s: float = 0.0) -> dict:
-    """An output row for a row that could not be evaluated."""
+    """An output row for a row that could not be evaluated (``message`` bounded by :data:`MAX_MESSAGE_CHARS`)."""
     return {
         "id": row_id,
         "score": None,
@@ -63,16 +74,33 @@ def error_row(row_id: Any, kind: str, message: str, line: int | None = None, dur
         "passed": False,
         "duration_s": float(duration_s),
         "samples": 0,
-        "error": {"type": kind, "message": message, "line": line},
+        "error": {"type": kind, "message": _bounded(message), "line": line},
     }
 
 
 def _strings(value: Any, field: str) -> tuple[str, ...]:
+    """A row's ``goal`` or ``critics``: one string (``critics`` may be comma-separated) or a non-empty list of
+    non-empty strings. An empty selection is an error, not "the default": omit the field for that."""
+    items = value
     if isinstance(value, str):
-        value = [v.strip() for v in value.split(",")] if field == "critics" else [value]
-    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v.strip() for v in value):
-        raise RowError(f"{field!r} must be a string or a list of non-empty strings, got {type(value).__name__}")
-    return tuple(v.strip() for v in value)
+        items = value.split(",") if field == "critics" else [value]
+    if not isinstance(items, (list, tuple)) or not all(isinstance(v, str) for v in items):
+        got = type(value).__name__ if not isinstance(value, (list, tuple)) else "a list holding a non-string"
+        raise RowError(f"{field!r} must be a string or a list of non-empty strings, got {got}")
+    if not items:
+        raise RowError(f"{field!r} is an empty list; omit {field!r} for the default")
+    if not all(v.strip() for v in items):
+        raise RowError(f"{field!r} holds an empty name ({json.dumps(value)[:60]}); omit {field!r} for the default")
+    return tuple(v.strip() for v in items)
+
+
+def _is_text(value: str) -> bool:
+    """``value`` is valid Unicode (no lone surrogates, which JSON escapes allow but UTF-8 and Parquet refuse)."""
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def check_row(row: Any) -> Job:
@@ -83,9 +111,15 @@ def check_row(row: Any) -> Job:
         raise RowError("the row has no 'id'")
     row_id = row["id"]
     if isinstance(row_id, bool) or not isinstance(row_id, (str, int)) or row_id == "":
-        raise RowError(f"'id' must be a non-empty string or an integer, got {json.dumps(row_id, default=repr)[:60]}")
+        try:
+            shown = json.dumps(row_id)
+        except (TypeError, ValueError):  # e.g. the parser's marker for an integer of thousands of digits
+            shown = repr(row_id)
+        raise RowError(f"'id' must be a non-empty string or an integer, got {shown[:60]}")
     if isinstance(row_id, str) and len(row_id) > MAX_ID_CHARS:
         raise RowError(f"'id' is longer than {MAX_ID_CHARS} characters")
+    if isinstance(row_id, str) and not _is_text(row_id):
+        raise RowError("'id' is not valid Unicode text (it holds a lone surrogate such as \\ud800)")
     unknown = sorted(set(map(str, row)) - _INPUT_KEYS)
     if unknown:
         raise RowError(f"unknown field {unknown[0]!r} (a row has {', '.join(sorted(_INPUT_KEYS))})")
@@ -93,21 +127,44 @@ def check_row(row: Any) -> Job:
         if field not in row:
             raise RowError(f"the row has no {field!r}")
     scene = row["scene"]
-    if not (isinstance(scene, str) and scene.strip()) and not isinstance(scene, Mapping):
+    if isinstance(scene, str) and not scene.strip():
+        raise RowError("'scene' is an empty string; it must be a scene name, a scene file path or a scene object")
+    if not isinstance(scene, (str, Mapping)):
+        from ..scene import Scene
+
+        if isinstance(scene, Scene):  # the Python API: a loaded scene travels as its JSON data
+            scene = scene.model_dump(mode="json")
+    if not isinstance(scene, (str, Mapping)):
         raise RowError(f"'scene' must be a scene name, a scene file path or a scene object, got {type(scene).__name__}")
     if not isinstance(row["program"], str):
         raise RowError(f"'program' must be the program's source text (a string), got {type(row['program']).__name__}")
     params = row.get("params")
     if params is not None and not (isinstance(params, Mapping) and all(isinstance(v, Mapping) for v in params.values())):
         raise RowError("'params' must be an object {critic: {field: value}}")
-    return Job(
+    job = Job(
         id=row_id,
         scene=dict(scene) if isinstance(scene, Mapping) else scene.strip(),
         program=row["program"],
-        goals=None if row.get("goal") is None else _strings(row["goal"], "goal"),
+        goals=None if row.get("goal") in (None, []) else _strings(row["goal"], "goal"),  # []: no goals
         critics=None if row.get("critics") is None else _strings(row["critics"], "critics"),
         params=None if params is None else {str(k): dict(v) for k, v in params.items()},
     )
+    for field, value in (("scene", job.scene), ("params", job.params)):
+        if isinstance(value, dict):
+            _check_picklable(value, field)
+    return job
+
+
+def _check_picklable(value: Any, field: str) -> None:
+    """A RowError unless ``value`` can travel to a worker (pickled): from the Python API, a row may hold a
+    function, an open file or a structure nested too deep, which would otherwise stop the whole batch."""
+    try:
+        pickle.dumps(value)
+    except RecursionError:
+        raise RowError(f"{field!r} is nested too deep to send to a worker") from None
+    except Exception as exc:  # noqa: BLE001 - pickle raises PicklingError, TypeError, AttributeError, ...
+        raise RowError(f"{field!r} holds something that is not data ({type(exc).__name__}: {str(exc)[:120]}); "
+                       "use JSON-like values: objects, lists, strings, numbers, booleans, null") from None  # fmt: skip
 
 
 class SceneCache:
@@ -160,11 +217,9 @@ def evaluate_job(job: Job, robot, scenes: SceneCache, sample_rate_hz: float = 12
     except MemoryError:
         raise  # the worker's heap may be in any state: its engine replaces it
     except Exception as exc:  # noqa: BLE001 - a library error, or a plugin's bug: the row says which
-        row = error_row(job.id, "", "", duration_s=time.perf_counter() - started)
-        row["error"] = _error_of(exc)
-        if not isinstance(exc, RoboCriticsError):
-            row["error"]["message"] = f"{type(exc).__name__}: {exc}"
-        return row
+        error = _error_of(exc)
+        message = error["message"] if isinstance(exc, RoboCriticsError) else f"{type(exc).__name__}: {exc}"
+        return error_row(job.id, error["type"], message, error["line"], time.perf_counter() - started)
     return {
         "id": job.id,
         "score": float(report.score),

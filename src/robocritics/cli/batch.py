@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TextIO
 
-from ._common import UsageError, bounded_float, positive_int, shown_path, subcommand
+from ._common import UsageError, bounded_float, one_line, path_label, positive_int, shown_path, subcommand
 
 #: Longest input line, bytes: a program is at most 100,000 characters and a scene is bounded; a longer
 #: line is an error row, not read whole.
@@ -31,7 +31,7 @@ def _build_batch(sub) -> None:
     )
     p.add_argument("input", metavar="IN.jsonl", help="input rows, one JSON object per line")
     p.add_argument("-o", "--output", metavar="OUT.jsonl", required=True,
-                   help="output rows (JSON lines; Parquet when the name ends in .parquet, which needs pyarrow)")  # fmt: skip
+                   help="output rows (JSON lines; Parquet when the name ends in .parquet, which needs pyarrow; - for standard output)")  # fmt: skip
     p.add_argument("--engine", choices=("local", "ray"), default="local",
                    help="local: worker processes on this machine (default); ray: Ray actors (robocritics[ray])")  # fmt: skip
     p.add_argument("--workers", type=positive_int, metavar="N", help="worker processes or actors; default the CPUs")
@@ -93,35 +93,58 @@ def read_rows(path: str) -> Iterator[Any]:
 
 
 def count_rows(path: str) -> int:
-    """Non-blank lines of ``path`` (the progress total)."""
+    """Non-blank lines of ``path`` (the progress total), read in 1 MiB chunks: a line of gigabytes (which
+    :func:`read_rows` skips as too long) is never held in memory."""
+    count, blank = 0, True  # blank: the current line holds only whitespace so far
     with open(path, "rb") as f:
-        return sum(1 for line in f if line.strip())
+        while chunk := f.read(1 << 20):
+            *ended, rest = chunk.split(b"\n")
+            for part in ended:
+                count += not (blank and not part.strip())
+                blank = True
+            blank = blank and not rest.strip()
+    return count + (not blank)
 
 
 # --- output ---------------------------------------------------------------------------------------
 
 
-def _key(row_id: Any) -> str:
+def _key(row_id: Any) -> str | None:
+    """The resume key of a row's id: its JSON text (``7`` and ``"7"`` differ), None for an id no row may have
+    (a float, null, an object, a parser's marker for an over-long integer: such a row is an error row)."""
+    if isinstance(row_id, bool) or not isinstance(row_id, (str, int)):
+        return None
     return json.dumps(row_id)
 
 
+#: Longest line of an output file that can be a row, bytes (a row is a few kB: its id and error message are bounded).
+_MAX_OUT_LINE_BYTES = 1 << 20
+
+
 def done_rows(path: Path) -> list[dict]:
-    """The complete rows already in the JSONL file ``path``; a torn last line (an interrupted write) is cut off."""
+    """The complete rows already in the JSONL file ``path``; a torn last line (an interrupted write) is cut off.
+
+    Lines that are not output rows (garbage, over-long) are skipped, not kept as rows."""
     if not path.exists():
         return []
+    rows, end = [], 0
     with open(path, "rb+") as f:
-        data = f.read()
-        end = data.rfind(b"\n") + 1
-        if end < len(data):  # a torn last line: drop it, so the next row starts on its own line
-            f.truncate(end)
-    rows = []
-    for line in data[:end].splitlines():
-        try:
-            row = json.loads(line)
-        except ValueError:
-            continue
-        if isinstance(row, dict) and "id" in row:
-            rows.append(row)
+        while line := f.readline(_MAX_OUT_LINE_BYTES):
+            if not line.endswith(b"\n"):
+                if len(line) < _MAX_OUT_LINE_BYTES:
+                    break  # the torn last line
+                while line and not line.endswith(b"\n"):
+                    line = f.readline(_MAX_OUT_LINE_BYTES)
+                end = f.tell()
+                continue
+            end = f.tell()
+            try:
+                row = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(row, dict) and "id" in row and isinstance(row.get("error"), (dict, type(None))):
+                rows.append(row)
+        f.truncate(end)  # drop a torn last line, so the next row starts on its own line
     return rows
 
 
@@ -139,20 +162,45 @@ class JsonlWriter:
         self.f.close()
 
 
+class StdoutWriter(JsonlWriter):
+    """Output rows as JSON lines on standard output (``-o -``).
+
+    While it is open, file descriptor 1 points at stderr and the rows go to a private copy of stdout: nothing
+    else (a library printing, a worker process, which inherits descriptor 1) can write into the rows."""
+
+    def __init__(self) -> None:
+        sys.stdout.flush()
+        self.saved = os.dup(1)
+        os.dup2(2, 1)
+        self.f = os.fdopen(os.dup(self.saved), "w", encoding="utf-8")
+
+    def close(self) -> None:
+        try:
+            self.f.close()
+        finally:
+            os.dup2(self.saved, 1)
+            os.close(self.saved)
+
+
+#: The Parquet columns: an output row's fields, ``flags`` and ``error`` as JSON text, and ``id`` as text with
+#: ``id_is_int`` saying whether it was an integer (``7`` and ``"7"`` are different ids; one Parquet column
+#: cannot hold both types, and an id may have 20 digits, beyond int64).
+PARQUET_COLUMNS = ("id", "id_is_int", "score", "flags", "passed", "duration_s", "samples", "error")
+
+
 class ParquetWriter:
-    """Output rows as Parquet (pyarrow), a row group per :data:`GROUP_ROWS` rows; ``flags`` and ``error`` are
-    JSON text columns. Parquet cannot be appended to, so ``--resume`` rewrites the file with the old rows first."""
+    """Output rows as Parquet (pyarrow), a row group per :data:`GROUP_ROWS` rows, with the columns
+    :data:`PARQUET_COLUMNS`. Parquet cannot be appended to, so the rows go to ``OUT.partial``, renamed to OUT
+    when the batch ends (or is interrupted); ``--resume`` rewrites the file with the old rows first."""
 
     GROUP_ROWS = 64
 
     def __init__(self, path: Path, old_rows: list[dict]):
         self.pa, self.pq = _pyarrow()
         self.path, self.tmp = path, path.with_name(path.name + ".partial")
-        self.schema = self.pa.schema([
-            ("id", self.pa.string()), ("score", self.pa.float64()), ("flags", self.pa.string()),
-            ("passed", self.pa.bool_()), ("duration_s", self.pa.float64()), ("samples", self.pa.int64()),
-            ("error", self.pa.string()),
-        ])  # fmt: skip
+        pa = self.pa
+        types = (pa.string(), pa.bool_(), pa.float64(), pa.string(), pa.bool_(), pa.float64(), pa.int64(), pa.string())
+        self.schema = pa.schema(list(zip(PARQUET_COLUMNS, types)))
         self.writer = self.pq.ParquetWriter(str(self.tmp), self.schema)
         self.pending: list[dict] = []
         for row in old_rows:
@@ -160,8 +208,11 @@ class ParquetWriter:
 
     @staticmethod
     def flat(row: dict) -> dict:
-        return {**row, "id": row["id"] if isinstance(row["id"], str) or row["id"] is None else json.dumps(row["id"]),
-                "flags": json.dumps(row["flags"]), "error": None if row["error"] is None else json.dumps(row["error"])}  # fmt: skip
+        """``row`` as a Parquet record (see :data:`PARQUET_COLUMNS`)."""
+        row_id = row["id"]
+        is_int = isinstance(row_id, int) and not isinstance(row_id, bool)
+        return {**row, "id": str(row_id) if is_int else row_id, "id_is_int": is_int, "flags": json.dumps(row["flags"]),
+                "error": None if row["error"] is None else json.dumps(row["error"])}  # fmt: skip
 
     def write(self, row: dict) -> None:
         self.pending.append(self.flat(row))
@@ -174,9 +225,11 @@ class ParquetWriter:
             self.pending = []
 
     def close(self) -> None:
-        self._flush()
-        self.writer.close()
-        os.replace(self.tmp, self.path)
+        try:
+            self._flush()
+        finally:
+            self.writer.close()
+            os.replace(self.tmp, self.path)
 
 
 def _pyarrow():
@@ -189,13 +242,26 @@ def _pyarrow():
 
 
 def parquet_rows(path: Path) -> list[dict]:
+    """The output rows of the Parquet file ``path`` (written by :class:`ParquetWriter`), as JSONL would hold them."""
+    from ..batch.rows import OUTPUT_KEYS
+
     if not path.exists():
         return []
     _, pq = _pyarrow()
-    rows = pq.read_table(str(path)).to_pylist()
-    for row in rows:
-        row["flags"] = json.loads(row["flags"] or "{}")
-        row["error"] = None if row["error"] is None else json.loads(row["error"])
+    try:
+        table = pq.read_table(str(path))
+    except Exception as exc:  # noqa: BLE001 - pyarrow's errors have no common base but Exception
+        raise UsageError(f"--resume: {shown_path(path)} is not a readable Parquet file: {one_line(exc)[:200]}") from None
+    if tuple(table.column_names) != PARQUET_COLUMNS:
+        raise UsageError(f"--resume: {shown_path(path)} is not a robocritics batch output: its columns are "
+                         f"{', '.join(table.column_names)[:200]}, not {', '.join(PARQUET_COLUMNS)}")  # fmt: skip
+    rows = []
+    for rec in table.to_pylist():
+        is_int = rec.pop("id_is_int")
+        rec["id"] = int(rec["id"]) if is_int and rec["id"] is not None else rec["id"]
+        rec["flags"] = json.loads(rec["flags"] or "{}")
+        rec["error"] = None if rec["error"] is None else json.loads(rec["error"])
+        rows.append({k: rec[k] for k in OUTPUT_KEYS})
     return rows
 
 
@@ -205,6 +271,7 @@ def parquet_rows(path: Path) -> list[dict]:
 class Progress:
     """Rows done, rate (rows/s) and ETA on ``stream``: a ``\\r`` bar on a terminal, else a line per ``every`` rows.
 
+    ``total``: the input's rows; rows skipped by ``--resume`` (:meth:`skip`) count as done but not in the rate.
     ``clock`` returns seconds (monotonic); injected by tests.
     """
 
@@ -213,37 +280,61 @@ class Progress:
         self.tty = bool(getattr(stream, "isatty", lambda: False)())
         self.every = every or max(1, total // 20)
         self.started = clock()
-        self.done = self.errors = 0
+        self.done = self.errors = self.skipped = 0
+
+    def skip(self) -> None:
+        """One input row needs no work (its id is in OUT already)."""
+        self.skipped += 1
 
     def text(self) -> str:
         elapsed = max(self.clock() - self.started, 1e-9)
         rate = self.done / elapsed
-        left = max(self.total - self.done, 0)
+        finished = self.done + self.skipped
+        left = max(self.total - finished, 0)
         eta = f"{left / rate:.0f} s" if rate > 0 else "?"
-        pct = 100.0 * self.done / self.total if self.total else 100.0
-        return f"{self.done}/{self.total} rows ({pct:.0f} %), {self.errors} error rows, {rate:.2f} rows/s, ETA {eta}"
+        pct = 100.0 * min(finished, self.total) / self.total if self.total else 100.0
+        kept = f", {self.skipped} kept from OUT" if self.skipped else ""
+        return f"{finished}/{self.total} rows ({pct:.0f} %){kept}, {self.errors} error rows, {rate:.2f} rows/s, ETA {eta}"
 
     def update(self, row: dict) -> None:
         self.done += 1
         self.errors += row.get("error") is not None
+        finished = self.done + self.skipped
         if self.tty:
             width = 30
-            filled = int(width * self.done / self.total) if self.total else width
+            filled = min(int(width * finished / self.total), width) if self.total else width
             self.stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {self.text()}")
             self.stream.flush()
-        elif self.done % self.every == 0 or self.done == self.total:
+        elif self.done % self.every == 0 or finished == self.total:
             self.stream.write(f"robocritics batch: {self.text()}\n")
             self.stream.flush()
 
-    def finish(self) -> None:
+    def finish(self, interrupted: bool = False) -> None:
         if self.tty:
             self.stream.write("\n")
         elapsed = self.clock() - self.started
-        self.stream.write(f"robocritics batch: {self.done} rows in {elapsed:.1f} s, {self.errors} error rows\n")
+        how = "interrupted after " if interrupted else ""
+        kept = f" ({self.skipped} kept from OUT)" if self.skipped else ""
+        self.stream.write(f"robocritics batch: {how}{self.done} rows in {elapsed:.1f} s, {self.errors} error rows{kept}\n")
         self.stream.flush()
 
 
 # --- the command ----------------------------------------------------------------------------------
+
+
+def _check_output(out: Path, source: Path, resume: bool) -> None:
+    """A one-line UsageError for an output path the batch cannot write, before any work."""
+    shown = shown_path(out)
+    if out.exists():
+        if out.is_dir():
+            raise UsageError(f"--output {shown} is a directory; name a file in it")
+        if os.path.samefile(out, source):
+            raise UsageError(f"--output {shown} is the input file: writing it would destroy the input")
+        if resume and not out.is_file():
+            raise UsageError(f"--resume: --output {shown} is not a regular file, so it holds no rows to keep")
+    parent = out.resolve().parent
+    if not parent.is_dir():
+        raise UsageError(f"--output {shown}: the directory {path_label(parent)} does not exist")
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
@@ -253,35 +344,69 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     source = Path(args.input)
     if not source.is_file():
         raise UsageError(f"input {shown_path(args.input)} is not a file")
+    to_stdout = args.output == "-"
     out = Path(args.output)
-    if not out.resolve().parent.is_dir():
-        raise UsageError(f"--output {shown_path(args.output)}: the directory {out.resolve().parent} does not exist")
-    parquet = out.suffix.lower() == ".parquet"
+    if to_stdout and args.resume:
+        raise UsageError("--resume needs an output file to read the finished rows from, not -o - (standard output)")
+    if not to_stdout:
+        _check_output(out, source, args.resume)
+    parquet = not to_stdout and out.suffix.lower() == ".parquet"
     if parquet:
         _pyarrow()  # fail before any work
-    old = (parquet_rows(out) if parquet else done_rows(out)) if args.resume else []
-    done = {_key(r["id"]) for r in old if r.get("id") is not None}
+    try:
+        old = (parquet_rows(out) if parquet else done_rows(out)) if args.resume else []
+    except OSError as exc:
+        raise UsageError(f"--resume: cannot read --output {shown_path(out)}: {exc.strerror or exc}") from None
+    done = {_key(r["id"]) for r in old} - {None}
     reported = {json.dumps(r.get("error"), sort_keys=True) for r in old if r.get("id") is None}
+    unmatched = set(done)  # ids in OUT not seen in IN (a different input?): kept, and said so at the end
+    progress = Progress(count_rows(args.input), sys.stderr)
 
     def pending() -> Iterator[Any]:
         for row in read_rows(args.input):
-            if isinstance(row, dict) and _key(row.get("id")) in done:
+            key = _key(row.get("id")) if isinstance(row, dict) else None
+            if key in done:
+                unmatched.discard(key)
+                progress.skip()
                 continue
             yield row
 
-    total = count_rows(args.input) - len(old)
-    writer = ParquetWriter(out, old) if parquet else JsonlWriter(out, append=args.resume)
-    progress = Progress(max(total, 0), sys.stderr)
     try:
-        rows = evaluate(pending(), args.engine, args.workers, timeout_s=args.timeout, ray_address=args.ray_address)
+        writer = StdoutWriter() if to_stdout else ParquetWriter(out, old) if parquet else JsonlWriter(out, append=args.resume)
+    except OSError as exc:
+        raise UsageError(f"--output {shown_path(args.output)}: cannot write it: {exc.strerror or exc}") from None
+    rows = evaluate(pending(), args.engine, args.workers, timeout_s=args.timeout, ray_address=args.ray_address)
+    failed = True
+    try:
         for row in rows:
             if row["id"] is None and json.dumps(row["error"], sort_keys=True) in reported:
+                progress.skip()
                 continue  # an unreadable line already reported before --resume
-            writer.write(row)
+            try:
+                writer.write(row)
+            except BrokenPipeError:
+                raise  # -o - into a reader that stopped (`| head`): main exits quietly
+            except OSError as exc:
+                raise UsageError(f"cannot write to --output {shown_path(args.output)}: {exc.strerror or exc} (after "
+                                 f"{progress.done} rows; rerun with --resume once it is fixed)") from None  # fmt: skip
             progress.update(row)
+        failed = False
     except BatchError as exc:
         raise UsageError(str(exc)) from None
+    except KeyboardInterrupt:
+        progress.finish(interrupted=True)
+        where = "" if to_stdout else f"; {shown_path(args.output)} holds every finished row: rerun with --resume"
+        print(f"robocritics batch: interrupted{where}", file=sys.stderr)
+        raise
     finally:
-        writer.close()
+        rows.close()  # stops the workers now, not when the generator is collected
+        try:
+            writer.close()
+        except OSError as exc:
+            if not failed:  # else the error that stopped the batch is the one to report
+                raise UsageError(f"cannot write to --output {shown_path(args.output)}: {exc.strerror or exc}") from None
     progress.finish()
+    if unmatched:
+        print(f"robocritics batch: note: {len(unmatched)} rows of {shown_path(args.output)} have ids that are not in "
+              f"{shown_path(args.input)} (from another input?); they were kept", file=sys.stderr)  # fmt: skip
     return 0
