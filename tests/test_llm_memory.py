@@ -22,7 +22,7 @@ from llm_server import Fail, hashed_embedding
 from robocritics.errors import LLMError, RoboCriticsError
 from robocritics.llm.bm25 import bm25_scores, tokenize
 from robocritics.llm.limits import MAX_STORED_PROGRAM_CHARS
-from robocritics.llm.memory import Interaction, InteractionMemory
+from robocritics.llm.memory import Interaction, InteractionMemory, InteractionMemoryError
 
 pytestmark = pytest.mark.usefixtures("clean_llm_env")
 
@@ -512,3 +512,65 @@ def test_a_forked_child_gets_its_own_connection(tmp_path):
         memory.add("parent", "after fork", "p")
         assert [i.request for i in memory.history("child")] == ["from the child"]
         assert [i.request for i in memory.history("parent")] == ["before fork", "after fork"]
+
+
+# -- the program's source (schema version 3) -----------------------------------------------------------
+
+# A version-2 file, as robocritics wrote it before programs had a source (all of them the model's then).
+VERSION_2 = """
+CREATE TABLE sessions (id TEXT PRIMARY KEY, created_s REAL NOT NULL);
+CREATE TABLE interactions (
+    id INTEGER PRIMARY KEY AUTOINCREMENT, session_id TEXT NOT NULL REFERENCES sessions(id),
+    request TEXT NOT NULL, program TEXT NOT NULL, feedback TEXT NOT NULL,
+    score REAL CHECK (score IS NULL OR (score >= 0 AND score <= 10)), created_s REAL NOT NULL,
+    request_tokens INTEGER NOT NULL DEFAULT 0);
+CREATE INDEX interactions_by_session ON interactions(session_id, id);
+CREATE TABLE embeddings (
+    interaction_id INTEGER NOT NULL REFERENCES interactions(id) ON DELETE CASCADE, model TEXT NOT NULL,
+    dim INTEGER NOT NULL CHECK (dim > 0), vector BLOB NOT NULL, created_s REAL NOT NULL,
+    PRIMARY KEY (interaction_id, model));
+CREATE INDEX embeddings_by_model ON embeddings(model, dim);
+CREATE TABLE request_terms (
+    term TEXT NOT NULL, interaction_id INTEGER NOT NULL REFERENCES interactions(id) ON DELETE CASCADE,
+    session_id TEXT NOT NULL, tf INTEGER NOT NULL CHECK (tf > 0), PRIMARY KEY (term, interaction_id)) WITHOUT ROWID;
+CREATE INDEX request_terms_by_session ON request_terms(session_id, term);
+CREATE TABLE corpus_stats (session_id TEXT PRIMARY KEY, documents INTEGER NOT NULL, tokens INTEGER NOT NULL);
+CREATE INDEX embeddings_by_space ON embeddings(model, dim, interaction_id);
+INSERT INTO sessions VALUES ('old', 0);
+INSERT INTO interactions VALUES (1, 'old', 'put the green apple in the white box', 'move_above(green_apple)', 'ok', 9.0, 0, 7);
+INSERT INTO request_terms VALUES ('green', 1, 'old', 1), ('apple', 1, 'old', 1), ('white', 1, 'old', 1),
+    ('box', 1, 'old', 1), ('put', 1, 'old', 1), ('the', 1, 'old', 2), ('in', 1, 'old', 1);
+INSERT INTO corpus_stats VALUES ('', 1, 8), ('old', 1, 8);
+PRAGMA user_version = 2;
+"""
+
+
+def test_every_interaction_has_the_source_of_its_program():
+    with InteractionMemory() as memory:
+        by_model = memory.add("s", TASKS[0], "home()", "fine", 10.0)
+        by_repair = memory.add("s", TASKS[0], "lib.set_speed(0.5)\nhome()", "fine", 10.0, source="repair")
+        assert [i.source for i in memory.history("s")] == ["llm", "repair"]
+        assert memory.get(by_model).source == "llm" and memory.get(by_repair).source == "repair"
+        assert {i.source for i in memory.search(TASKS[0], k=5)} == {"llm", "repair"}
+        for bad in ("user", "", None, 3):
+            with pytest.raises(InteractionMemoryError, match="source must be one of llm, repair"):
+                memory.add("s", TASKS[0], "home()", source=bad)
+        assert len(memory) == 2
+
+
+def test_a_version_2_file_still_loads_its_rows_as_the_models_and_takes_new_sources(tmp_path):
+    path = tmp_path / "v2.sqlite"
+    with sqlite3.connect(path) as raw:
+        raw.executescript(VERSION_2)
+    with InteractionMemory(path) as memory:
+        assert memory._read("PRAGMA user_version") == [(3,)]
+        (old,) = memory.history("old")
+        assert (old.id, old.program, old.score, old.source) == (1, "move_above(green_apple)", 9.0, "llm")
+        assert memory.search("green apple", k=1) == [old]
+        new = memory.add("old", "put the green apple in the white box", "home()", source="repair")
+    with InteractionMemory(path) as reopened:  # upgraded once: the column is not added again
+        assert [(i.id, i.source) for i in reopened.history("old")] == [(1, "llm"), (new, "repair")]
+    with sqlite3.connect(path) as raw:  # SQLite itself refuses a source the schema does not know
+        with pytest.raises(sqlite3.IntegrityError):
+            raw.execute("INSERT INTO interactions (session_id, request, program, feedback, created_s, source) "
+                        "VALUES ('old', 'r', 'p', 'f', 0, 'someone')")  # fmt: skip
