@@ -94,18 +94,8 @@ CAREFUL_CYCLE_FACTOR = 1.5
     "task, goals",
     [
         ("sorting", ["green_apple in white_box", "red_apple_1 in brown_box", "red_apple_2 in brown_box"]),
-        pytest.param(
-            "breakfast",
-            ["fork in trash_bin", "apple on plate", "cupcake on plate"],
-            marks=pytest.mark.xfail(strict=True, reason="collision left: the cupcake must be picked first and "
-                                    "placed clear of the apple; no single repair is accepted yet"),
-        ),
-        pytest.param(
-            "recycling",
-            ["coffee_cup in trash_bin", "food_container in trash_bin", "water_bottle in trash_bin"],
-            marks=pytest.mark.xfail(strict=True, reason="collision left: spreading the releases (accepted as progress) leaves "
-                                    "the fingers opening into the released cup; release-higher candidate not yet accepted"),
-        ),
+        ("breakfast", ["fork in trash_bin", "apple on plate", "cupcake on plate"]),
+        ("recycling", ["coffee_cup in trash_bin", "food_container in trash_bin", "water_bottle in trash_bin"]),
     ],
 )
 def test_every_bundled_naive_program_is_repaired_to_no_error(task, goals):

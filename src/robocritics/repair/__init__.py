@@ -103,18 +103,23 @@ def _progress(before: Report, after: Report, critic: str) -> bool:
 
 
 def _acceptable(before: Report, after: Report, critic: str) -> bool:
-    """``after`` lifts ``critic`` out of Error (or makes its Error clearly smaller) and no verdict scores lower.
+    """``after`` scores no verdict lower than ``before`` and makes progress on an Error.
 
-    "Clearly smaller" (:data:`PROGRESS`): the measured value moved toward the threshold by
-    that fraction, e.g. a 6 cm penetration that became 2.9 cm, so a repair that uncovers
-    the next, lesser fault of the same critic still counts and the next round can fix that one.
+    Progress is one of: ``critic`` is out of Error; its Error is clearly smaller
+    (:data:`PROGRESS`: the measured value moved toward the threshold by that
+    fraction, e.g. a 6 cm penetration that became 2.9 cm, so a repair that uncovers
+    the next, lesser fault of the same critic still counts and the next round can
+    fix that one); or another critic's Error is gone (e.g. picking the cupcake
+    first puts it on the plate, while the collision it caused moves elsewhere).
     """
     old, new = _flags(before), _flags(after)
-    if new.get(critic, 2) == 0 and not _progress(before, after, critic):
+    if not all(new.get(name, 2) >= score for name, score in old.items()):
         return False
-    return all(new.get(name, 2) >= score for name, score in old.items()) and all(
-        name in old or score > 0 for name, score in new.items()
-    )
+    if not all(name in old or score > 0 for name, score in new.items()):
+        return False
+    if new.get(critic, 2) > 0 or _progress(before, after, critic):
+        return True
+    return sum(s == 0 for s in new.values()) < sum(s == 0 for s in old.values())
 
 
 def _offered_edits(hook, verdict, execution, source: str) -> list:

@@ -10,6 +10,7 @@ from __future__ import annotations
 from ..hookspecs import hookimpl
 import ast
 import math
+import re
 
 from .edit import Edit, Insert, MoveBlock, ReplaceText, ScaleNumbers, paragraphs
 
@@ -197,27 +198,99 @@ def _spread(verdict, execution, program) -> list[Edit]:
     ]
 
 
-#: Clearance added above a release point beyond the measured penetration, m.
+#: Clearance left between what the robot carries (or its fingertips) and what it passed through, m.
 RELEASE_CLEARANCE_M = 0.05
+#: Name of the per-object raise table a loop's release move reads (one entry per object carried there).
+RAISE_TABLE = "release_raise"
 
 
-def _release_higher(verdict, execution, program) -> list[Edit]:
-    """The gripper hits what it just released: release higher, by the penetration plus a clearance.
+def _load_per_step(trajectory) -> dict[int, str]:
+    """The object each step carries: held at its first sample, or (a release) just before it."""
+    first = {}
+    for row, step in enumerate(trajectory.step.tolist()):
+        first.setdefault(step, row)
+    held = trajectory.attached
+    return {s: str(held[r]) or (str(held[r - 1]) if r > 0 else "") for s, r in first.items()}
 
-    For a collision flagged on an ``open_gripper()`` line, the z argument of the
-    move just before it becomes ``z + d`` with ``d = penetration + RELEASE_CLEARANCE_M``.
+
+def _vertical_overlaps(execution, line: int) -> dict[str, float]:
+    """Per carried object: how far (m, vertically) the robot's load sinks into what it penetrates on ``line``.
+
+    For every counted collision sample of the gripper or the carried object
+    against a scene object or container on ``line``, the overlap is
+    ``top(b) - bottom(a)``: ``top(b)`` the entity's top at that sample (an object
+    that moved has its pose from the execution), ``bottom(a)`` the carried
+    object's lowest point, or the TCP (the fingertips, the gripper's lowest point
+    with the fingers down). Keyed by the object carried during that step (``""``:
+    nothing). Lifting the motion of ``line`` by that much clears the top of what
+    it hit, whichever side the penetration depth itself points to.
     """
-    if verdict.value is None or verdict.value >= 0:
+    import numpy as np
+
+    from ..critics.collision import Counted
+
+    traj = execution.trajectory
+    steps = [i for i, s in enumerate(traj.steps) if s.line == line]
+    rows = np.flatnonzero(np.isin(traj.step, steps))
+    if rows.size == 0:
+        return {}
+    counted = Counted(traj)
+    hit = counted.row_mask(rows) & (traj.proximity[rows] <= 0)
+    load = _load_per_step(traj)
+    tcp_z = traj.tcp[rows, 2, 3]
+    objects = {o.id: o for o in execution.scene.objects}
+    containers = {c.id: c for c in execution.scene.containers}
+    out: dict[str, float] = {}
+    for k in np.flatnonzero(hit.any(axis=0)):
+        pair = traj.pairs[k]
+        if pair.group_a not in ("gripper", "attached") or pair.group_b not in ("object", "container"):
+            continue
+        at = rows[hit[:, k]]
+        b = pair.b_entity
+        if b in containers:
+            top = np.full(at.size, containers[b].top)
+        elif b in execution.object_poses:
+            top = execution.object_poses[b][at, 2, 3] + objects[b].half_height
+        else:
+            top = np.full(at.size, objects[b].top)
+        if pair.group_a == "attached":
+            bottom = execution.object_poses[pair.a][at, 2, 3] - objects[pair.a].half_height
+        else:
+            bottom = tcp_z[hit[:, k]]
+        depth = np.maximum(top - bottom, -traj.proximity[at, k])
+        for step, d in zip(traj.step[at].tolist(), depth.tolist()):
+            key = load.get(step, "")
+            out[key] = max(out.get(key, 0.0), d)
+    return out
+
+
+def _cm_up(x: float) -> float:
+    """``x`` rounded up to the next centimetre, m (a program reads better in whole cm)."""
+    return math.ceil(round(x * 100, 6)) / 100
+
+
+def _raise_release(verdict, execution, program) -> list[Edit]:
+    """The robot hits what is already where it releases (or what it just let go of): release higher.
+
+    For a collision flagged on a release move (a ``move_to``/``move_linear`` followed
+    by ``open_gripper``) or on the ``open_gripper`` itself, the z argument of that
+    move is raised by the vertical overlap measured in the trace
+    (:func:`_vertical_overlaps`) plus :data:`RELEASE_CLEARANCE_M`, rounded up to a
+    centimetre. In a ``for`` loop over objects each object gets its own raise (a
+    tall bottle needs more than a flat box), through a ``release_raise`` table keyed
+    by the object's id; a second round adds to the raise already there.
+    """
+    if verdict.value is None or verdict.value > 0:
         return []
     calls = execution.plan.calls
     skills = {c.line: c.skill for c in calls}
+    releases = sorted({c.line for c in calls if c.skill == "open_gripper"})
     tree = ast.parse(program)
     text = program.splitlines()
-    edits = []
+    needs: dict[int, dict[str, float]] = {}  # release move line -> per carried object, m
     for ln in verdict.evidence.lines:
-        releases = {c.line for c in calls if c.skill == "open_gripper"}
         if skills.get(ln) in ("move_to", "move_linear") and any(r > ln for r in releases):
-            move = ln  # the release move itself
+            move = ln
         elif skills.get(ln) == "open_gripper":
             moves = [c.line for c in calls if c.line < ln and c.skill in ("move_to", "move_linear")]
             if not moves:
@@ -225,27 +298,75 @@ def _release_higher(verdict, execution, program) -> list[Edit]:
             move = max(moves)
         else:
             continue
+        for key, d in _vertical_overlaps(execution, ln).items():
+            needs.setdefault(move, {})
+            needs[move][key] = max(needs[move].get(key, 0.0), d)
+    edits = []
+    for move, need in sorted(needs.items()):
         call = next((n for n in ast.walk(tree) if isinstance(n, ast.Call) and n.lineno == move and len(n.args) == 3), None)
-        if call is None or call.args[2].lineno != call.args[2].end_lineno:
+        if call is None or call.args[2].lineno != call.args[2].end_lineno or not need:
             continue
         z = ast.get_source_segment(program, call.args[2]) or ""
-        d = round(-verdict.value + RELEASE_CLEARANCE_M, 2)
-        edits.append(
-            Edit(
-                verdict.critic,
-                move,
-                f"release {d:g} m higher on line {move} ({z} -> {z} + {d:g})",
-                f"the gripper penetrates what it releases by {-verdict.value:.3g} m on line {ln}",
-                [ReplaceText(move, f", {z})", f", {z} + {d:g})")],
-            )
+        raise_by = {key: _cm_up(d + RELEASE_CLEARANCE_M) for key, d in need.items()}
+        load = _load_per_step(execution.trajectory)
+        carried = {load.get(i, "") for i, s in enumerate(execution.trajectory.steps) if s.line == move}
+        raise_by.update({k: 0.0 for k in carried if k not in raise_by})  # every object the move carries has an entry
+        var = _loop_variable(tree, move)
+        loads = [k for k in raise_by if k]
+        why = (
+            f"on line {move} the robot sinks {max(need.values()):.3g} m into what is below "
+            f"(collision {-verdict.value:.3g} m deep)"
         )
+        if var is not None and loads and len(loads) == len(raise_by):
+            key = f"{RAISE_TABLE}[{var}.id]"
+            table = _raise_table(tree)
+            if table is not None and z.endswith(f" + {key}"):
+                old, assign = table
+                merged = {k: round(old.get(k, 0.0) + raise_by.get(k, 0.0), 3) for k in sorted({**old, **raise_by})}
+                ops = [ReplaceText(assign.lineno, text[assign.lineno - 1].strip(), f"{RAISE_TABLE} = {merged!r}  # m")]
+            else:
+                if table is not None:
+                    continue  # another move already uses the table: do not mix them
+                merged = {k: raise_by[k] for k in sorted(loads)}
+                first = min(c.line for c in calls)
+                top = next(s for s in tree.body if s.lineno <= first <= (s.end_lineno or s.lineno))
+                ops = [
+                    ReplaceText(move, f", {z})", f", {z} + {key})"),
+                    Insert(top.lineno, before=(f"{RAISE_TABLE} = {merged!r}  # m",)),
+                ]
+            what = f"release higher on line {move}, per object: {merged} m"
+        else:
+            d = max(raise_by.values())
+            m = re.fullmatch(r"(.*) \+ (\d+(?:\.\d+)?)", z)
+            new_z = f"{m.group(1)} + {float(m.group(2)) + d:g}" if m else f"{z} + {d:g}"
+            ops = [ReplaceText(move, f", {z})", f", {new_z})")]
+            what = f"release {d:g} m higher on line {move} ({z} -> {new_z})"
+        edits.append(Edit(verdict.critic, move, what, why, ops))
     return edits
+
+
+def _raise_table(tree: ast.Module):
+    """The program's top-level ``release_raise = {...}`` table and its statement, if there is one on one line."""
+    for stmt in tree.body:
+        if (
+            isinstance(stmt, ast.Assign)
+            and len(stmt.targets) == 1
+            and isinstance(stmt.targets[0], ast.Name)
+            and stmt.targets[0].id == RAISE_TABLE
+            and stmt.lineno == stmt.end_lineno
+        ):
+            try:
+                value = ast.literal_eval(stmt.value)
+            except ValueError:
+                return None
+            return (value, stmt) if isinstance(value, dict) else None
+    return None
 
 
 _BY_CRITIC = {
     "joint_speed": [_slowdowns],
     "end_effector_pose": [_slowdowns],
-    "collision": [_spread, _release_higher, _avoid, _pick_first, _slowdowns],
+    "collision": [_spread, _raise_release, _avoid, _pick_first, _slowdowns],
     "space_usage": [_lower_heights],
     "task_outcome": [_spread],
 }
@@ -254,4 +375,4 @@ _BY_CRITIC = {
 @hookimpl
 def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
     makers = _BY_CRITIC.get(verdict.critic, [])
-    return [e for make in makers for e in (make(verdict, execution, program) if make in (_pick_first, _spread, _release_higher) else make(verdict, execution))]
+    return [e for make in makers for e in (make(verdict, execution, program) if make in (_pick_first, _spread, _raise_release) else make(verdict, execution))]
