@@ -44,13 +44,13 @@ import math
 from dataclasses import dataclass, fields
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from ..errors import PlanningError
 from ..program.plan import Plan, SkillCall
 from ..scene import MAX_COORD_M, Container, Scene, SceneObject, rpy_matrix
 from ..trajectory import Step
 from .model import Robot, fingers_down
+from .spline import cubic_spline
 from .motion import (
     JOINT_SPEED_MARGIN,
     MIN_SPEED_FRACTION,
@@ -622,7 +622,7 @@ class Planner:
         s, times, duration = path.q[:, 0], path.time, path.duration_s
         # q(s) between the dense-IK grid points by a cubic spline: its deviation from
         # the exact line shrinks as line_step_m^4
-        q = CubicSpline(grid, q_grid, axis=0)(s)
+        q = cubic_spline(grid, q_grid, s)
         self.emit(Segment(q, times, duration), step)
         self.q = q_grid[-1]
 

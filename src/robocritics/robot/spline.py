@@ -1,0 +1,142 @@
+r"""Piecewise cubic interpolation in numpy (no scipy on the simulate and deploy paths).
+
+Both interpolants are cubic Hermite: on ``[x_i, x_{i+1}]`` with ``h_i = x_{i+1} - x_i``, ``t = x - x_i``,
+secant ``m_i = (y_{i+1} - y_i) / h_i`` and knot slopes ``s_i``,
+
+    y(x) = y_i + s_i t + c2_i t^2 + c3_i t^3,
+    c2_i = (m_i - s_i) / h_i - (s_i + s_{i+1} - 2 m_i) / h_i,   c3_i = (s_i + s_{i+1} - 2 m_i) / h_i^2,
+
+and outside ``[x_0, x_{n-1}]`` the end pieces extend (extrapolation). They differ in the slopes:
+
+* :func:`cubic_spline` — the C^2 interpolating spline with *not-a-knot* ends (the third derivative is
+  continuous at ``x_1`` and ``x_{n-2}``), the same slopes as ``scipy.interpolate.CubicSpline``'s default:
+  the tridiagonal system ``h_i s_{i-1} + 2 (h_{i-1} + h_i) s_i + h_{i-1} s_{i+1} = 3 (h_i m_{i-1} + h_{i-1} m_i)``
+  with scipy's not-a-knot end rows; two points give the straight line, three the parabola through them.
+* :func:`pchip` — the monotone piecewise cubic of Fritsch and Carlson (``scipy.interpolate.PchipInterpolator``):
+  ``s_i = 0`` where the secants change sign or one is 0, else the weighted harmonic mean
+  ``(w1 + w2) / (w1 / m_{i-1} + w2 / m_i)`` with ``w1 = 2 h_i + h_{i-1}``, ``w2 = h_i + 2 h_{i-1}``; the end
+  slopes by the one-sided three-point formula, limited to keep the shape.
+
+``x`` must be strictly increasing; ``y`` is ``(n,)`` or ``(n, k)`` (each column interpolated). Units are the
+caller's (the planner: path length m to joint angle rad; deploy: time s to rad and m).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["cubic_spline", "pchip", "hermite"]
+
+
+def _check(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if x.ndim != 1 or len(x) < 2 or y.shape[:1] != x.shape:
+        raise ValueError(f"need x (n,) with n >= 2 and y (n, ...), got x {x.shape} and y {y.shape}")
+    if not np.all(np.diff(x) > 0):
+        raise ValueError("x must be strictly increasing")
+    return x, y
+
+
+def hermite(x: np.ndarray, y: np.ndarray, slopes: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """The cubic Hermite interpolant with knot values ``y`` and knot slopes ``slopes``, evaluated at ``xs``."""
+    x, y = _check(x, y)
+    xs = np.asarray(xs, dtype=float)
+    h = np.diff(x)
+    hr = h.reshape((-1,) + (1,) * (y.ndim - 1))
+    m = np.diff(y, axis=0) / hr
+    t = (slopes[:-1] + slopes[1:] - 2 * m) / hr
+    c3 = t / hr
+    c2 = (m - slopes[:-1]) / hr - t
+    # the piece of each xs: x_i <= xs < x_{i+1}, the last piece closed, the end pieces extended outward
+    i = np.clip(np.searchsorted(x, xs, side="right") - 1, 0, len(h) - 1)
+    dt = (xs - x[i]).reshape(xs.shape + (1,) * (y.ndim - 1))
+    # power sums in scipy's PPoly order (not Horner), so the two agree to the last bit or two
+    z = dt.copy()
+    out = y[:-1][i] + slopes[:-1][i] * z
+    z *= dt
+    out += c2[i] * z
+    z *= dt
+    out += c3[i] * z
+    return out
+
+
+def _not_a_knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    n = len(x)
+    h = np.diff(x)
+    hr = h.reshape((-1,) + (1,) * (y.ndim - 1))
+    m = np.diff(y, axis=0) / hr
+    if n == 2:  # one piece: not-a-knot is the straight line
+        return np.stack([m[0], m[0]])
+    if n == 3:  # both ends' conditions coincide: the parabola through the three points
+        A = np.array([[1.0, 1.0, 0.0], [h[1], 2 * (h[0] + h[1]), h[0]], [0.0, 1.0, 1.0]])
+        b = np.stack([2 * m[0], 3 * (hr[0] * m[1] + hr[1] * m[0]), 2 * m[1]])
+        return np.linalg.solve(A, b.reshape(3, -1)).reshape(y.shape)
+    # tridiagonal system: lower[i] s_{i-1} + diag[i] s_i + upper[i] s_{i+1} = rhs[i]
+    diag = np.empty(n)
+    upper = np.zeros(n)
+    lower = np.zeros(n)
+    rhs = np.empty_like(y)
+    diag[1:-1] = 2 * (h[:-1] + h[1:])
+    upper[1:-1] = h[:-1]
+    lower[1:-1] = h[1:]
+    rhs[1:-1] = 3 * (hr[1:] * m[:-1] + hr[:-1] * m[1:])
+    d = x[2] - x[0]
+    diag[0], upper[0] = h[1], d
+    rhs[0] = ((hr[0] + 2 * d) * hr[1] * m[0] + hr[0] ** 2 * m[1]) / d
+    d = x[-1] - x[-3]
+    diag[-1], lower[-1] = h[-2], d
+    rhs[-1] = (hr[-1] ** 2 * m[-2] + (2 * d + hr[-1]) * hr[-2] * m[-1]) / d
+    # Thomas algorithm (the system is diagonally dominant inside; scipy uses LAPACK's banded LU, which
+    # pivots, so the two agree to rounding, not bit for bit)
+    c = np.empty(n)
+    r = np.empty_like(rhs)
+    c[0] = upper[0] / diag[0]
+    r[0] = rhs[0] / diag[0]
+    for i in range(1, n):
+        denom = diag[i] - lower[i] * c[i - 1]
+        c[i] = upper[i] / denom
+        r[i] = (rhs[i] - lower[i] * r[i - 1]) / denom
+    s = np.empty_like(rhs)
+    s[-1] = r[-1]
+    for i in range(n - 2, -1, -1):
+        s[i] = r[i] - c[i] * s[i + 1]
+    return s
+
+
+def cubic_spline(x: np.ndarray, y: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """The not-a-knot cubic spline through ``(x, y)`` (as scipy's ``CubicSpline(x, y, axis=0)``) at ``xs``."""
+    x, y = _check(x, y)
+    return hermite(x, y, _not_a_knot_slopes(x, y), xs)
+
+
+def _pchip_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    h = np.diff(x)
+    hr = h.reshape((-1,) + (1,) * (y.ndim - 1))
+    m = np.diff(y, axis=0) / hr
+    if len(x) == 2:
+        return np.stack([m[0], m[0]])
+    s = np.zeros_like(y)
+    w1 = (2 * hr[1:] + hr[:-1])
+    w2 = (hr[1:] + 2 * hr[:-1])
+    same_sign = np.sign(m[1:]) * np.sign(m[:-1]) > 0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # where a secant is 0 (or tiny), same_sign is False or the slope is 0
+        harmonic = 1.0 / ((w1 / m[:-1] + w2 / m[1:]) / (w1 + w2))
+    s[1:-1] = np.where(same_sign, harmonic, 0.0)
+    s[0] = _pchip_end(h[0], h[1], m[0], m[1])
+    s[-1] = _pchip_end(h[-1], h[-2], m[-1], m[-2])
+    return s
+
+
+def _pchip_end(h0: float, h1: float, m0: np.ndarray, m1: np.ndarray) -> np.ndarray:
+    """One-sided three-point end slope, set to 0 against the secant's sign and capped at 3 m0 where the
+    secants change sign (shape preserving, as scipy)."""
+    d = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+    d = np.where(np.sign(d) != np.sign(m0), 0.0, d)
+    return np.where((np.sign(m0) != np.sign(m1)) & (np.abs(d) > np.abs(3 * m0)), 3 * m0, d)
+
+
+def pchip(x: np.ndarray, y: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """The monotone cubic (as scipy's ``PchipInterpolator(x, y, axis=0)``) through ``(x, y)`` at ``xs``."""
+    x, y = _check(x, y)
+    return hermite(x, y, _pchip_slopes(x, y), xs)
