@@ -244,10 +244,10 @@ def resample(trajectory: Trajectory, rate_hz: float = UR3E.control_rate_hz) -> S
         g = np.interp(ts, t, g_src)
         how = "linear"
     else:
-        from scipy.interpolate import PchipInterpolator
+        from ..robot.spline import pchip
 
-        q = PchipInterpolator(t, q_src, axis=0)(ts)
-        g = np.clip(PchipInterpolator(t, g_src)(ts), g_src.min(), g_src.max())
+        q = pchip(t, q_src, ts)
+        g = np.clip(pchip(t, g_src, ts), g_src.min(), g_src.max())
         how = "pchip"
     q[-1] = q_src[-1]
     g[-1] = g_src[-1]
