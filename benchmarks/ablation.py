@@ -36,6 +36,27 @@ again (``--fresh`` starts over). One LLM error ends only its cell (recorded
 with the error, and run again on resume); Ctrl-C stops after printing the
 table of the cells done so far.
 
+Repairs vs LLM (``--repairs``, issue 13): the same three tasks, the model
+answering first with the naive program, each run in three modes:
+
+* **llm-only** — ``Loop(repairs=False)``: every Fix round sends the failing
+  critics' feedback to the model (the external condition above);
+* **repairs+llm** — ``Loop()``: each Fix round first applies the critics' own
+  repairs (:func:`robocritics.repair.repair`), then sends only what is left;
+* **repairs-only** — one request, then one Fix in ``manual`` automation: the
+  repairs alone, the model never asked to fix;
+
+plus the **careful** example program simulated as the reference. Every loop
+checks the task's goals (``task_outcome``: the objects in the right
+containers / on the plate), so a repair can never trade the task away.
+Columns: ``LLM calls`` (model replies, the task included), ``repairs``
+(accepted repair edits), ``final score`` (0–10, the last program that ran),
+``Error left`` (critics still at Error), ``cycle s`` (the final program's
+motion time, s), ``CPU s`` (this process's CPU time for the run: simulation,
+critics, repairs and the client; the loopback server's thread included),
+``goal``. With the scripted model the model's replies are the same in both
+modes, so the difference is the repairs' alone.
+
 Usage::
 
     python benchmarks/ablation.py --base-url https://api.openai.com/v1 --model gpt-4o-mini \\
@@ -43,6 +64,7 @@ Usage::
     python benchmarks/ablation.py --base-url http://127.0.0.1:8080/v1 --model smollm2 \\
         --context-tokens 2048 --max-tokens 512 --timeout 120     # a local llama.cpp server
     python benchmarks/ablation.py --selftest     # offline, against the scripted loopback server
+    python benchmarks/ablation.py --selftest --repairs    # repairs vs LLM, offline
 
 ``--selftest`` starts ``tests/llm_server.LLMServer`` on 127.0.0.1 with a
 scripted model that answers the task with the naive example program, answers
@@ -75,7 +97,7 @@ except ImportError:  # run from a checkout without installing
 from robocritics.errors import LLMError, RoboCriticsError  # noqa: E402
 from robocritics.llm.client import OpenAICompatible  # noqa: E402
 from robocritics.llm.limits import DEFAULT_MAX_TOKENS  # noqa: E402
-from robocritics.llm.loop import Attempt, Loop  # noqa: E402
+from robocritics.llm.loop import Attempt, Loop, NothingToFixError  # noqa: E402
 from robocritics.llm.prompts import REVIEW_INSTRUCTION  # noqa: E402
 from robocritics.scene import Scene  # noqa: E402
 
@@ -388,6 +410,125 @@ def scripted_responder(request: dict) -> str:
     return f"I slowed the robot down and made the approaches straight:\n\n```python\n{careful}```\n"
 
 
+# --- repairs vs LLM (--repairs) --------------------------------------------------------------------
+
+#: Modes of the repairs-vs-LLM table, in the order printed.
+REPAIR_MODES = ("llm-only", "repairs+llm", "repairs-only")
+
+
+def task_goals(task: str, scene: Scene) -> list[str]:
+    """The goals of ``task`` in ``scene`` as ``task_outcome`` goals, the same end state :func:`goal_reached` checks."""
+    if task == "recycling":
+        return [f"{o.id} in trash_bin" for o in scene.objects]
+    if task == "sorting":
+        return [f"{o.id} in {'brown_box' if o.attributes.get('ripeness') == 'ripe' else 'white_box'}"
+                for o in scene.objects]  # fmt: skip
+    if task == "breakfast":
+        return ["fork in trash_bin", "apple on plate", "cupcake on plate"]
+    raise ValueError(f"no goals for task {task!r}")
+
+
+@dataclass
+class RepairsResult:
+    task: str
+    mode: str
+    llm_calls: int | None  # model replies (None for the careful reference: no model)
+    repairs: int  # accepted repair edits
+    final_score: float
+    errors_left: list[str]  # critics at Error on the final program (["(did not run)"] when none ran)
+    cycle_time_s: float | None  # the final program's motion time, s
+    cpu_s: float  # process CPU time of the run, s
+    goal: bool | None
+
+
+def _summarise(task: str, mode: str, attempts: list[Attempt], llm_calls: int | None, cpu_s: float) -> RepairsResult:
+    ran = [a for a in attempts if a.report is not None and a.approved is not False]
+    final = ran[-1] if ran else None
+    return RepairsResult(
+        task=task,
+        mode=mode,
+        llm_calls=llm_calls,
+        repairs=sum(len(a.changes) for a in attempts if a.source == "repair" and a.approved is not False),
+        final_score=final.score if final is not None else 0.0,
+        errors_left=["(did not run)"] if final is None else [v.critic for v in final.report.verdicts
+                                                               if v.flag.name == "ERROR"],  # fmt: skip
+        cycle_time_s=final.execution.duration_s if final is not None else None,
+        cpu_s=cpu_s,
+        goal=goal_reached(task, final.execution) if final is not None else None,
+    )
+
+
+def run_repairs_one(model: Any, task: str, mode: str, *, max_attempts: int, model_options: dict | None = None,
+                    context_tokens: int | None = None, verbose: bool = False) -> RepairsResult:  # fmt: skip
+    """Run ``task`` in one mode of :data:`REPAIR_MODES` with a fresh conversation (no memory)."""
+    if mode not in REPAIR_MODES:
+        raise ValueError(f"mode must be one of {', '.join(REPAIR_MODES)}, got {mode!r}")
+    scene = Scene.builtin(task)
+
+    def show(attempt: Attempt) -> None:
+        if verbose:
+            print(f"  [{task}/{mode}] {attempt.summary()}", file=sys.stderr, flush=True)
+
+    loop = Loop(model, scene, goals=task_goals(task, scene), repairs=mode != "llm-only", max_attempts=max_attempts,
+                automation="manual" if mode == "repairs-only" else "guided", on_attempt=show,
+                model_options=model_options, context_tokens=context_tokens)  # fmt: skip
+    started = time.process_time()
+    if mode == "repairs-only":
+        loop.request(TASKS[task])
+        try:
+            loop.fix()  # manual automation: the repairs only, never the model
+        except NothingToFixError:
+            pass  # every critic passed already
+        except LLMError:
+            raise
+        except RoboCriticsError:
+            pass  # the program did not run, or no repair applied: the request's program stays
+        attempts = loop.attempts
+    else:
+        loop.run(TASKS[task])
+        attempts = loop.last_run
+    cpu_s = time.process_time() - started
+    return _summarise(task, mode, attempts, sum(1 for a in attempts if a.source == "llm"), cpu_s)
+
+
+def careful_reference(task: str) -> RepairsResult:
+    """The careful example program simulated and critiqued with the task's goals (no model, no repairs)."""
+    from robocritics.critic import critique
+    from robocritics.simulate import simulate
+
+    scene = Scene.builtin(task)
+    started = time.process_time()
+    execution = simulate(example_programs(task)[1], scene)
+    report = critique(execution, scene, goals=task_goals(task, scene))
+    cpu_s = time.process_time() - started
+    attempt = Attempt(index=1, kind="user", request=TASKS[task], prompt="", reply="", program="",
+                      execution=execution, report=report, score=report.score)  # fmt: skip
+    return _summarise(task, "careful", [attempt], None, cpu_s)
+
+
+def format_repairs_table(results: list[RepairsResult]) -> str:
+    """One row per task and mode: LLM calls, repairs, final score, Error left, cycle time s, CPU s, goal."""
+    header = ("task", "mode", "LLM calls", "repairs", "final score", "Error left", "cycle s", "CPU s", "goal")
+    rows = [
+        (
+            r.task,
+            r.mode,
+            "-" if r.llm_calls is None else str(r.llm_calls),
+            str(r.repairs),
+            f"{r.final_score:.1f}",
+            ",".join(r.errors_left) or "none",
+            "-" if r.cycle_time_s is None else f"{r.cycle_time_s:.2f}",
+            f"{r.cpu_s:.2f}",
+            _goal([r.goal]),
+        )
+        for r in results
+    ]
+    widths = [max(len(header[i]), *(len(row[i]) for row in rows)) for i in range(len(header))]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip(), "  ".join("-" * w for w in widths)]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip() for row in rows]
+    return "\n".join(lines)
+
+
 # --- command line ---------------------------------------------------------------------------------
 
 
@@ -418,6 +559,9 @@ def _parser() -> argparse.ArgumentParser:
                    f"{DEFAULT_RESULTS}; none with --selftest)")
     p.add_argument("--fresh", action="store_true", help="ignore (and replace) the cells already in --results")
     p.add_argument("--json", metavar="FILE", help="also write every run's results as one JSON list")
+    p.add_argument("--repairs", action="store_true",
+                   help="the repairs-vs-LLM table (llm-only, repairs+llm, repairs-only, careful) instead of the "
+                   "embedded/external protocol; --conditions, --repeats and --results do not apply")
     p.add_argument("-v", "--verbose", action="store_true", help="print each attempt as it happens (stderr)")
     return p
 
@@ -429,17 +573,21 @@ def _reproduce(args: argparse.Namespace, model_name: str, base_url: str) -> str:
         parts = ["python", "benchmarks/ablation.py", "--base-url", base_url, "--model", model_name]
         if args.api_key_env:
             parts += ["--api-key-env", args.api_key_env]
+    if args.repairs:
+        parts.append("--repairs")
     if args.tasks != ",".join(TASKS):
         parts += ["--tasks", args.tasks]
-    if args.conditions != ",".join(CONDITIONS):
+    if args.conditions != ",".join(CONDITIONS) and not args.repairs:
         parts += ["--conditions", args.conditions]
-    parts += ["--max-attempts", str(args.max_attempts), "--repeats", str(args.repeats)]
+    parts += ["--max-attempts", str(args.max_attempts)]
+    if not args.repairs:
+        parts += ["--repeats", str(args.repeats)]
     parts += ["--timeout", f"{args.timeout:g}", "--max-tokens", str(args.max_tokens)]
     if args.context_tokens is not None:
         parts += ["--context-tokens", str(args.context_tokens)]
     if args.no_stream:
         parts.append("--no-stream")
-    if args.results:
+    if args.results and not args.repairs:
         parts += ["--results", args.results]
     if args.temperature is not None:
         parts += ["--temperature", str(args.temperature)]
@@ -488,7 +636,15 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.max_tokens < 1 or (args.context_tokens is not None and args.context_tokens < 512):
         print("ablation: --max-tokens must be at least 1 and --context-tokens at least 512", file=sys.stderr)
+        if server is not None:
+            server.stop()
         return 2
+    if args.repairs:
+        try:
+            return _repairs_main(args, tasks, base_url, model_name, api_key, options)
+        finally:
+            if server is not None:
+                server.stop()
     results_path = Path(args.results) if args.results else (None if args.selftest else Path(DEFAULT_RESULTS))
     if args.results is None and results_path is not None:
         args.results = str(results_path)
@@ -584,6 +740,42 @@ def main(argv: list[str] | None = None) -> int:
     if failed:
         print(f"ablation: {failed} cell(s) ended with an LLM error; run the same command again to retry them",
               file=sys.stderr)  # fmt: skip
+        return 1
+    return 0
+
+
+def _repairs_main(args: argparse.Namespace, tasks: list[str], base_url: str, model_name: str, api_key: str | None,
+                  options: dict[str, Any]) -> int:  # fmt: skip
+    """``--repairs``: every task in every mode, then the table and the command that reproduces it."""
+    results: list[RepairsResult] = []
+    failed = 0
+    with OpenAICompatible(base_url=base_url, model=model_name, api_key=api_key, timeout_s=min(args.timeout, 120.0),
+                          deadline_s=args.timeout, max_tokens=args.max_tokens,
+                          stream=not args.no_stream) as client:  # fmt: skip
+        context = args.context_tokens if args.context_tokens is not None else client.server_context_tokens()
+        careful_reference(tasks[0])  # warm-up, not counted: the first simulation loads the robot model and caches
+        for task in tasks:
+            for mode in REPAIR_MODES:
+                try:
+                    results.append(run_repairs_one(client, task, mode, max_attempts=args.max_attempts,
+                                                   model_options=options, context_tokens=context,
+                                                   verbose=args.verbose))  # fmt: skip
+                except (LLMError, RoboCriticsError) as exc:  # the endpoint failed, or no prompt fits: this run only
+                    failed += 1
+                    print(f"  [{task}/{mode}] failed: {exc}", file=sys.stderr, flush=True)
+            results.append(careful_reference(task))
+    what = "scripted loopback model (self-test)" if args.selftest else f"{model_name} at {base_url}"
+    print(f"Repairs vs LLM on the naive programs: {what}; up to {args.max_attempts} model replies per run; "
+          "task goals checked (task_outcome)")  # fmt: skip
+    print()
+    print(format_repairs_table(results))
+    print()
+    print(f"Reproduce: {_reproduce(args, model_name, base_url)}")
+    if args.json:
+        Path(args.json).write_text(json.dumps([asdict(r) for r in results], indent=2))
+        print(f"Results written to {args.json}")
+    if failed:
+        print(f"ablation: {failed} run(s) ended with an LLM error", file=sys.stderr)
         return 1
     return 0
 

@@ -1,5 +1,6 @@
 """benchmarks/ablation.py keeps every finished cell: JSON lines written as cells complete, resumed, an LLM error
-ends only its cell, Ctrl-C loses nothing done; a runtime-error column; a reproduce line with every option."""
+ends only its cell, Ctrl-C loses nothing done; a runtime-error column; a reproduce line with every option.
+The repairs-vs-LLM table (--repairs): its modes on the same scripted replies, checked against repair() itself."""
 
 
 
@@ -158,3 +159,61 @@ def test_the_table_has_a_runtime_error_column_and_the_reproduce_line_every_optio
     for option in ("--timeout 30", "--max-tokens 700", "--context-tokens 8192", f"--results {results}",
                    "--max-attempts 2", "--conditions external"):  # fmt: skip
         assert option in reproduce
+
+
+# --- repairs vs LLM (--repairs) -----------------------------------------------------------------------
+
+
+def test_the_repairs_table_compares_the_modes_on_the_same_scripted_replies(ablation, llm_server, tmp_path, capsys):
+    from robocritics.repair import repair
+    from robocritics.scene import Scene
+
+    llm_server.responder = ablation.scripted_responder
+    out_json = tmp_path / "repairs.json"
+    argv = ["--base-url", llm_server.url, "--model", "scripted", "--repairs", "--tasks", "sorting",
+            "--max-attempts", "3", "--timeout", "30", "--json", str(out_json)]  # fmt: skip
+    assert ablation.main(argv) == 0
+    out = capsys.readouterr().out
+    rows = json.loads(out_json.read_text())
+    by = {r["mode"]: r for r in rows}
+    assert [r["mode"] for r in rows] == [*ablation.REPAIR_MODES, "careful"] and {r["task"] for r in rows} == {"sorting"}
+    # every model reply the table counts is a request the server answered (the careful row asks nothing)
+    assert sum(r["llm_calls"] for r in rows if r["llm_calls"] is not None) == len(llm_server.chat_requests())
+    assert by["careful"]["llm_calls"] is None and by["careful"]["repairs"] == 0
+    assert 1 <= by["repairs+llm"]["llm_calls"] <= by["llm-only"]["llm_calls"] <= 3
+    assert by["llm-only"]["repairs"] == 0 and by["repairs-only"]["llm_calls"] == 1
+    for r in rows:
+        assert r["cycle_time_s"] > 0 and r["cpu_s"] > 0 and 0 <= r["final_score"] <= 10
+        assert r["goal"] is True  # every mode still does the task (the loops check its goals)
+
+    # repairs-only is exactly repair() on the naive program with the task's goals (the reference)
+    scene = Scene.builtin("sorting")
+    reference = repair(ablation.example_programs("sorting")[0], scene, goal=ablation.task_goals("sorting", scene))
+    assert by["repairs-only"]["repairs"] == len(reference.changes)
+    assert by["repairs-only"]["final_score"] == reference.report.score
+    assert by["repairs-only"]["errors_left"] == [v.critic for v in reference.errors]
+    assert by["repairs-only"]["cycle_time_s"] == pytest.approx(reference.execution.duration_s)
+
+    lines_out = out.splitlines()
+    header = next(line for line in lines_out if line.startswith("task"))
+    for column in ("mode", "LLM calls", "repairs", "final score", "Error left", "cycle s", "CPU s", "goal"):
+        assert column in header
+    table_rows = [line.split()[:3] for line in lines_out if line.startswith("sorting")]
+    assert table_rows == [["sorting", r["mode"], "-" if r["llm_calls"] is None else str(r["llm_calls"])]
+                          for r in rows]  # fmt: skip
+    reproduce = next(line for line in lines_out if line.startswith("Reproduce:"))
+    assert "--repairs" in reproduce and "--tasks sorting" in reproduce and "--max-attempts 3" in reproduce
+    assert "--repeats" not in reproduce and "--results" not in reproduce  # options the table does not use
+
+
+def test_repairs_never_cost_model_calls_even_with_a_model_that_never_improves(ablation, llm_server):
+    naive = ablation.example_programs("sorting")[0]
+    llm_server.responder = lambda request: f"```python\n{naive}```"  # the naive program, whatever it is told
+    from robocritics.llm.client import OpenAICompatible
+
+    with OpenAICompatible(base_url=llm_server.url, model="stubborn", timeout_s=30) as client:
+        runs = {mode: ablation.run_repairs_one(client, "sorting", mode, max_attempts=3)
+                for mode in ("llm-only", "repairs+llm")}  # fmt: skip
+    assert runs["llm-only"].llm_calls == 3  # it never passes, so every reply is used
+    assert runs["repairs+llm"].llm_calls <= runs["llm-only"].llm_calls
+    assert runs["repairs+llm"].repairs > 0 and runs["llm-only"].repairs == 0
