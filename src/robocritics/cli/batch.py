@@ -92,12 +92,16 @@ def read_rows(path: str) -> Iterator[Any]:
             yield row
 
 
+#: Bytes :func:`count_rows` reads at a time.
+COUNT_CHUNK_BYTES = 1 << 20
+
+
 def count_rows(path: str) -> int:
-    """Non-blank lines of ``path`` (the progress total), read in 1 MiB chunks: a line of gigabytes (which
-    :func:`read_rows` skips as too long) is never held in memory."""
+    """Non-blank lines of ``path`` (the progress total), read in :data:`COUNT_CHUNK_BYTES` chunks: a line of
+    gigabytes (which :func:`read_rows` skips as too long) is never held in memory."""
     count, blank = 0, True  # blank: the current line holds only whitespace so far
     with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
+        while chunk := f.read(COUNT_CHUNK_BYTES):
             *ended, rest = chunk.split(b"\n")
             for part in ended:
                 count += not (blank and not part.strip())
@@ -130,14 +134,14 @@ def done_rows(path: Path) -> list[dict]:
     rows, end = [], 0
     with open(path, "rb+") as f:
         while line := f.readline(_MAX_OUT_LINE_BYTES):
+            over_long = False
+            while not line.endswith(b"\n") and len(line) == _MAX_OUT_LINE_BYTES:  # read an over-long line to its end
+                over_long, line = True, f.readline(_MAX_OUT_LINE_BYTES)
             if not line.endswith(b"\n"):
-                if len(line) < _MAX_OUT_LINE_BYTES:
-                    break  # the torn last line
-                while line and not line.endswith(b"\n"):
-                    line = f.readline(_MAX_OUT_LINE_BYTES)
-                end = f.tell()
-                continue
+                break  # the torn last line
             end = f.tell()
+            if over_long:
+                continue
             try:
                 row = json.loads(line)
             except ValueError:
