@@ -197,6 +197,7 @@ def run_one(
     loop = Loop(
         model,
         scene,
+        repairs=False,  # the paper's protocol: every fix is the model's (--repairs compares the two)
         embedded_rules=condition == "embedded",
         max_attempts=max_attempts,
         on_attempt=show,

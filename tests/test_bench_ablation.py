@@ -217,3 +217,12 @@ def test_repairs_never_cost_model_calls_even_with_a_model_that_never_improves(ab
     assert runs["llm-only"].llm_calls == 3  # it never passes, so every reply is used
     assert runs["repairs+llm"].llm_calls <= runs["llm-only"].llm_calls
     assert runs["repairs+llm"].repairs > 0 and runs["llm-only"].repairs == 0
+
+
+def test_the_paper_protocol_runs_without_repairs(ablation, llm_server, tmp_path):
+    llm_server.responder = ablation.scripted_responder
+    results = tmp_path / "cells.jsonl"
+    assert ablation.main(args(llm_server.url, results, "--tasks", "sorting")) == 0
+    (cell,) = lines(results)
+    # naive program, then the model's careful one: two replies, no repair in between (it would be a third attempt)
+    assert cell["attempts"] == 2 and len(cell["scores"]) == 2 and len(llm_server.chat_requests()) == 2
