@@ -4,7 +4,7 @@ Maths and units
 ---------------
 Let ``P = { p_{t,l} }`` be the origins (m, base frame) of every frame ``l`` of
 the robot at every sample ``t``. The space the motion sweeps is measured by the
-volume (m^3) of the convex hull ``conv(P)`` (scipy / Qhull); the allowed
+volume (m^3) of the convex hull ``conv(P)`` (coal's Qhull, already loaded for proximity); the allowed
 workspace ``W`` is ``scene.workspace`` (default: the UR3e's 0.5 m reach sphere
 around the shoulder, 0.523 m^3, as in the authors' prototype).
 
@@ -31,7 +31,8 @@ gives the exact hull. Identical consecutive points (a frame that does not
 move) are kept once. The workspace check always uses every point.
 
 Degenerate point sets (fewer than 4 distinct points, all coplanar or
-collinear) have volume 0.
+collinear) have volume 0; so do sets flat to a relative 1e-5 (see
+:mod:`robocritics.robot.hull`).
 """
 
 from __future__ import annotations
@@ -40,15 +41,14 @@ from functools import partial
 
 import numpy as np
 from pydantic import Field
-from scipy.spatial import ConvexHull, QhullError
 
 from .. import hookimpl
 from ..critic import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
+from ..robot.hull import convex_hull
 
 __all__ = ["SpaceUsageCritic", "register_critics", "hull_points", "hull_volume", "volume_error_bound"]
 
 BLOCK = 64
-
 
 class Params(CriticParams):
     warn_fraction: float = Field(
@@ -116,14 +116,15 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
 
 
 def hull_volume(P: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """``(volume m^3, area m^2, vertex indices)`` of the convex hull of ``P (N, 3)``; 0 for degenerate sets."""
+    """``(volume m^3, area m^2, vertex indices)`` of the convex hull of ``P (N, 3)``; 0 for degenerate sets.
+
+    See :func:`robocritics.robot.hull.convex_hull`: vertex indices ascend (the first of equal points); flat sets
+    (to a relative 1e-5) give ``(0, 0, [])``.
+    """
     if len(P) < 4:
         return 0.0, 0.0, np.arange(len(P))
-    try:
-        hull = ConvexHull(P)
-    except (QhullError, ValueError):  # coplanar / collinear / coincident points: no volume
-        return 0.0, 0.0, np.arange(0)
-    return float(hull.volume), float(hull.area), hull.vertices
+    hull = convex_hull(P)
+    return hull.volume_m3, hull.area_m2, hull.vertices
 
 
 def volume_error_bound(P: np.ndarray, area: float, tolerance_m: float) -> float:

@@ -1,0 +1,90 @@
+"""robot.hull: coal's hull and the numpy quickhull against scipy's Qhull (the slow reference, tests only)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial import ConvexHull
+
+from robocritics.robot.hull import convex_hull, quickhull
+
+IMPLEMENTATIONS = [convex_hull, quickhull]
+
+
+@st.composite
+def clouds(draw):
+    """Random 3-D point sets in general position: a Gaussian blob, a box, or points on a sphere (all vertices)."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    n = draw(st.integers(4, 400))
+    kind = draw(st.sampled_from(["normal", "box", "sphere"]))
+    rng = np.random.default_rng(seed)
+    P = rng.normal(size=(n, 3)) if kind != "box" else rng.uniform(-1, 1, size=(n, 3))
+    if kind == "sphere":
+        P /= np.linalg.norm(P, axis=1, keepdims=True)
+    scale = draw(st.sampled_from([0.01, 0.3, 1.0, 50.0]))
+    offset = np.array(draw(st.tuples(*[st.floats(-2, 2)] * 3)))
+    if draw(st.booleans()):  # repeated points (a robot frame visiting a place twice)
+        P = np.concatenate([P, P[rng.integers(0, n, size=n // 3)]])
+    return P * scale + offset
+
+
+@pytest.mark.parametrize("hull_of", IMPLEMENTATIONS)
+@settings(max_examples=150, deadline=None)
+@given(P=clouds())
+def test_matches_scipy(hull_of, P):
+    ref = ConvexHull(P)
+    got = hull_of(P)
+    assert got.volume_m3 == pytest.approx(ref.volume, rel=1e-9)
+    assert got.area_m2 == pytest.approx(ref.area, rel=1e-9)
+    # in general position the vertex sets agree; ours names the first of equal points
+    _, first = np.unique(P, axis=0, return_index=True)
+    first_of = {tuple(P[i]): i for i in first}
+    assert got.vertices.tolist() == sorted({first_of[tuple(P[i])] for i in ref.vertices})
+
+
+def _fan(n: int) -> np.ndarray:
+    """A bipyramid over an n-gon: each apex has n hull neighbours (coal refuses more than 255)."""
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.concatenate([np.c_[np.cos(a), np.sin(a), np.zeros(n)], [[0, 0, 1.0], [0, 0, -1.0]]])
+
+
+def test_a_vertex_with_many_neighbours_falls_back_to_quickhull():
+    P = _fan(1000)
+    ref = ConvexHull(P)
+    got = convex_hull(P)
+    assert got.volume_m3 == pytest.approx(ref.volume, rel=1e-9)
+    assert got.area_m2 == pytest.approx(ref.area, rel=1e-9)
+    assert got.vertices.tolist() == sorted(ref.vertices.tolist())
+
+
+rng = np.random.default_rng(7)
+FLAT = {
+    "three points": rng.normal(size=(3, 3)),
+    "one point repeated": np.ones((10, 3)),
+    "collinear": np.outer(np.linspace(-1, 1, 30), [0.3, -0.2, 0.9]),
+    "coplanar": np.c_[rng.normal(size=(50, 2)), np.zeros(50)] @ np.linalg.qr(rng.normal(size=(3, 3)))[0],
+    "1e-9 thin": np.c_[rng.normal(size=(50, 2)), 1e-9 * rng.normal(size=50)],  # crashed coal's Qhull
+    "1e-12 thin": np.c_[rng.normal(size=(50, 2)), 1e-12 * rng.normal(size=50)],
+}
+
+
+@pytest.mark.parametrize("hull_of", IMPLEMENTATIONS)
+@pytest.mark.parametrize("name", list(FLAT))
+def test_flat_sets_have_no_volume_and_do_not_crash(hull_of, name):
+    got = hull_of(FLAT[name])
+    assert got.volume_m3 == 0.0 and got.area_m2 == 0.0 and len(got.vertices) == 0
+
+
+@pytest.mark.parametrize("hull_of", IMPLEMENTATIONS)
+def test_non_finite_points_have_no_volume(hull_of):
+    P = np.random.default_rng(0).normal(size=(20, 3))
+    P[3, 1] = np.nan
+    assert hull_of(P).volume_m3 == 0.0
+
+
+def test_a_set_just_thick_enough_is_measured():
+    # 1e-4 relative thickness: above the flat cut-off (1e-5), coal measures it and agrees with scipy
+    P = np.c_[rng.uniform(-1, 1, size=(200, 2)), 1e-4 * rng.uniform(-1, 1, size=200)]
+    assert convex_hull(P).volume_m3 == pytest.approx(ConvexHull(P).volume, rel=1e-6)
