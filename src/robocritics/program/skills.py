@@ -436,23 +436,41 @@ def _dz(rec: Recorder, dz: Any, skill: str) -> float:
     return v
 
 
+#: Arm postures a joint-space move may ask for (see move_to); "nearest" is the default and is not recorded.
+POSTURES = ("nearest", "natural")
+
+
+def _posture(rec: Recorder, posture: Any, skill: str) -> dict[str, Any]:
+    """``{"posture": p}`` for a posture other than the default, ``{}`` for "nearest"; else a ProgramError."""
+    if not isinstance(posture, str) or posture not in POSTURES:
+        raise rec.error(
+            f"{skill}: posture must be one of {', '.join(repr(p) for p in POSTURES)}, got {_describe(posture)}"
+            f"{did_you_mean(posture, POSTURES) if isinstance(posture, str) else ''}"
+        )
+    return {} if posture == "nearest" else {"posture": posture}
+
+
 # --------------------------------------------------------------------------------------
 # the skills
 
 
-def move_to(x, y=None, z=None):
+def move_to(x, y=None, z=None, posture="nearest"):
     """Move the fingertip centre (TCP) to a point, fingers pointing down, along a joint-space path (fast, curved).
 
     Args:
         x, y, z: target in metres, robot base frame (x forward, y left, z up; table top z = 0).
             Instead of three numbers you may pass one point (x, y, z) or a scene object,
             which moves the fingertips to the object's centre (ready to close the gripper).
+        posture: "nearest" (default: the arm posture closest to its current joints, which may
+            reach back over the shoulder) or "natural" (shoulder facing the target, elbow up,
+            wrist down, as at home: the base turns as far as needed; use it against pinch points).
     Example:
         move_to(0.3, 0.1, 0.2)
         move_to(green_apple)
+        move_to(-0.1, -0.3, 0.1, posture="natural")
     """
     rec = _rec()
-    rec.record("move_to", _place(rec, "move_to", x, y, z))
+    rec.record("move_to", {**_place(rec, "move_to", x, y, z), **_posture(rec, posture, "move_to")})
 
 
 def move_linear(x, y=None, z=None):
@@ -469,13 +487,14 @@ def move_linear(x, y=None, z=None):
     rec.record("move_linear", _place(rec, "move_linear", x, y, z))
 
 
-def move_above(obj, height=0.1):
+def move_above(obj, height=0.1, posture="nearest"):
     """Move the fingertips to `height` metres above the top of an object or container (joint-space move).
 
     Args:
         obj: a scene object or container (e.g. green_apple, white_box), or a point (x, y, z),
             in which case the fingertips go to `height` m above that point.
         height: clearance above the object's top in metres (default 0.1, must be 0..1).
+        posture: "nearest" (default) or "natural" (shoulder facing the target, elbow up, wrist down), as for move_to.
     Example:
         move_above(green_apple)            # 10 cm above the apple
         move_above(white_box, height=0.05)
@@ -498,7 +517,7 @@ def move_above(obj, height=0.1):
             f"move_above takes a scene object or a point (x, y, z) and an optional height, got {_describe(obj)}; "
             f"e.g. move_above({rec._example()}, height=0.1) or move_above((0.3, 0.1, 0.0))"
         )
-    rec.record("move_above", args)
+    rec.record("move_above", {**args, **_posture(rec, posture, "move_above")})
 
 
 def move_up(dz):

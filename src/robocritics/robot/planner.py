@@ -557,12 +557,17 @@ class Planner:
             return [goal]
         return [np.array([a[0], a[1], max(safe_z, start[2])]), np.array([b[0], b[1], max(safe_z, goal[2])]), goal]
 
-    def posture_seed(self, point: np.ndarray, yaw: float | None = None) -> np.ndarray:
+    def posture_seed(self, point: np.ndarray, yaw: float | None = None, natural: bool = False) -> np.ndarray:
         """The home posture turned to face ``point``: an IK seed that keeps the arm in its
         natural branch (shoulder facing the target, elbow up, wrist down).
 
         Nearest-to-the-current-joints alone would let the arm lean back over itself for
-        a target behind it, folding the gripper onto the upper arm.
+        a target behind it, folding the gripper onto the upper arm. The seed's base
+        angle is the equivalent (``+ 2 pi k``) closest to where the base is now; when
+        that lies outside the base's limits, the closest branch may still be one that
+        reaches back over the shoulder. ``natural`` (the ``posture="natural"`` of a
+        move) takes the closest equivalent *within* the limits instead, so the natural
+        branch always wins, however far the base has to turn.
         """
         home = self.robot.home_q
         seed = home.copy()
@@ -570,6 +575,11 @@ class Planner:
         # the equivalent base angle closest to where the base is now
         seed[0] = home[0] + turn
         seed[0] += 2 * math.pi * round((self.q[0] - seed[0]) / (2 * math.pi))
+        if natural:
+            lo, hi = float(self.robot.lower[0]), float(self.robot.upper[0])
+            inside = [seed[0] + 2 * math.pi * k for k in (-2, -1, 0, 1, 2) if lo <= seed[0] + 2 * math.pi * k <= hi]
+            if inside:
+                seed[0] = min(inside, key=lambda b: abs(b - self.q[0]))
         # with the fingers down, turning the base by `turn` turns the fingers by +turn and
         # wrist 3 turns them by minus its angle: compensate both to keep the requested yaw
         seed[-1] = home[-1] + turn - (self.yaw if yaw is None else yaw)
@@ -578,8 +588,9 @@ class Planner:
 
     def move_joint_to_point(self, point: np.ndarray, call: SkillCall, step: int) -> None:
         start = self.tcp()[:3, 3]
+        natural = call.args.get("posture") == "natural"
         for via in self.routed_points(start, point):
-            self.joint_move(self.ik(via, call, seed=self.posture_seed(via)), step)
+            self.joint_move(self.ik(via, call, seed=self.posture_seed(via, natural=natural)), step)
 
     def line_move(self, goal: np.ndarray, call: SkillCall, step: int) -> None:
         start = self.tcp()[:3, 3]
