@@ -209,3 +209,25 @@ def test_a_simulate_hook_checks_the_repaired_program(llm_server, make_client, so
     fixed = loop.fix()
     assert checked == [NAIVE, reference.program]  # the repaired program went through the hook too
     assert fixed.passed and fixed.report.score == reference.report.score
+
+
+def test_an_endpoint_failure_after_the_repair_keeps_it_and_the_fix_can_be_repeated(llm_server, make_client,
+                                                                                   sorting):  # fmt: skip
+    from llm_server import Fail
+
+    from robocritics.errors import LLMError
+
+    llm_server.reply(fenced(NAIVE))
+    loop = Loop(make_client(max_retries=0), sorting, critics=[REPAIRABLE, DurationBudget()])
+    loop.request(TASK)
+    llm_server.script(Fail(400, body='{"error": {"message": "model crashed"}}'))
+    with pytest.raises(LLMError, match="model crashed"):
+        loop.fix()
+    repaired = loop.current
+    assert repaired.source == "repair" and [a.source for a in loop.attempts] == ["llm", "repair"]
+    llm_server.reply(fenced(NAIVE))
+    revision = loop.fix()  # the repaired program's remaining Error goes to the model; nothing is repaired twice
+    assert [a.source for a in loop.attempts] == ["llm", "repair", "llm"] and revision is loop.last
+    sent = llm_server.chat_requests()[-1].messages[-1]["content"]
+    assert sent.count("Automatic repairs were applied") == 1
+    assert repaired.report.verdict("duration_budget").feedback() in sent

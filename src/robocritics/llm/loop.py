@@ -20,7 +20,9 @@ from a critic's ``check``) are not exceptions for the caller: the attempt carrie
 runtime feedback (:func:`~robocritics.llm.prompts.runtime_feedback`) and that
 text is sent to the model with the next turn. Only :class:`LLMError` (the
 endpoint failed after the client's retries) propagates; the conversation is
-then left as it was before the call, so the call can simply be repeated.
+then left as it was before the call, so the call can simply be repeated (a
+repair made by the same :meth:`Loop.fix` stays applied: the repeated call
+sends the model what is left after it).
 
 Fix = repairs, then the model: :meth:`Loop.fix` (and each feedback round of
 :meth:`Loop.run`) first applies the critics' own repairs
