@@ -283,17 +283,6 @@ def test_cli_bad_usage_exits_2_with_one_line(tmp_path, args, message):
     assert len(result.stderr.strip().splitlines()) == 1
 
 
-def test_cli_parquet_without_pyarrow_names_it(tmp_path):
-    try:
-        import pyarrow  # noqa: F401
-    except ImportError:
-        (tmp_path / "in.jsonl").write_text("")
-        result = subprocess.run([*CLI, "batch", "in.jsonl", "-o", "out.parquet"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
-        assert result.returncode == 2 and "pyarrow" in result.stderr and not (tmp_path / "out.parquet").exists()
-    else:
-        pytest.skip("pyarrow is installed: the missing-pyarrow error cannot happen here")
-
-
 def test_done_rows_of_a_file_with_only_a_torn_line(tmp_path):
     out = tmp_path / "out.jsonl"
     out.write_text('{"id": "a", "sco')

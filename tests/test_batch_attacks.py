@@ -472,3 +472,62 @@ def test_progress_counts_rows_kept_by_resume_as_done_but_not_in_the_rate():
     assert stream.getvalue() == "robocritics batch: 3/4 rows (75 %), 2 kept from OUT, 0 error rows, 0.50 rows/s, ETA 2 s\n"
     progress.finish(interrupted=True)
     assert stream.getvalue().splitlines()[-1] == "robocritics batch: interrupted after 1 rows in 2.0 s, 0 error rows (2 kept from OUT)"
+
+
+def test_a_byte_order_mark_does_not_spoil_the_first_row(tmp_path):
+    path = tmp_path / "in.jsonl"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(_row(id="first")).encode() + b"\n\xef\xbb\xbf" + json.dumps(_row(id="second")).encode() + b"\n")
+    first, second = read_rows(str(path))
+    assert first["id"] == "first"
+    assert isinstance(second, RowError) and "input line 2" in str(second)  # only a file starts with a BOM
+
+
+def test_a_mistyped_worker_count_is_refused_before_starting_thousands_of_processes(capsys, tmp_path):
+    src = _write(tmp_path / "in.jsonl", [_row()])
+    children = set(multiprocessing.active_children())
+    code, cap = _main(capsys, "batch", str(src), "-o", str(tmp_path / "out.jsonl"), "--workers", "100000")
+    assert code == 2 and "--workers 100000: at most" in cap.err
+    assert set(multiprocessing.active_children()) == children and not (tmp_path / "out.jsonl").exists()
+
+
+def test_progress_on_a_stream_that_fails_never_stops_the_batch():
+    import io
+
+    stream = io.StringIO()
+    stream.close()  # e.g. stderr closed by the caller
+    progress = Progress(2, stream, every=1)
+    progress.update({"error": None})
+    progress.finish()
+    assert progress.done == 1 and progress.stream is None
+
+
+def test_sigterm_completes_the_parquet_file_and_resume_finishes_it_equal_to_jsonl(tmp_path):
+    pytest.importorskip("pyarrow")
+    slow = "for i in range(40):\n    move_to(0.25 + 0.001 * i, 0.15 - 0.002 * i, 0.25)\n    move_to(0.3, -0.1 + 0.001 * i, 0.3)\n"
+    rows = [_row(id=i if i % 3 else f"s{i}", program=slow if i % 2 else SHORT) for i in range(10)] + ["{torn"]
+    src, parquet, jsonl = _write(tmp_path / "in.jsonl", rows), tmp_path / "out.parquet", tmp_path / "out.jsonl"
+    proc = subprocess.Popen([*CLI, "batch", str(src), "-o", str(parquet), "--workers", "1"], stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stderr:  # a progress line per row: stop it after two rows
+            if line.startswith("robocritics batch: 2/"):
+                proc.send_signal(signal.SIGTERM)
+                break
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    first = cli_batch.parquet_rows(parquet)  # a complete Parquet file, not a .partial
+    assert 2 <= len(first) < len(rows) and not (tmp_path / "out.parquet.partial").exists()
+    for args in ([str(parquet), "--resume"], [str(jsonl)]):
+        done = subprocess.run([*CLI, "batch", str(src), "-o", *args, "--workers", "1"], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+    got, want = cli_batch.parquet_rows(parquet), _rows(jsonl)
+    assert got[: len(first)] == first
+
+    def key(r):
+        return json.dumps(r["id"]) + json.dumps(r["error"])
+
+    assert len(got) == len(want) == len(rows)
+    for g, w in zip(sorted(got, key=key), sorted(want, key=key)):
+        assert {**g, "duration_s": 0} == {**w, "duration_s": 0}  # equal but for the time each took

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -13,6 +15,8 @@ from typing import Any, TextIO
 
 from ._common import UsageError, bounded_float, one_line, path_label, positive_int, shown_path, subcommand
 
+#: Most local workers per CPU (``--workers``): a mistyped count must not start thousands of processes.
+MAX_WORKERS_PER_CPU = 4
 #: Longest input line, bytes: a program is at most 100,000 characters and a scene is bounded; a longer
 #: line is an error row, not read whole.
 MAX_LINE_BYTES = 4_000_000
@@ -76,8 +80,8 @@ def read_rows(path: str) -> Iterator[Any]:
                 continue
             if not raw.strip():
                 continue
-            try:
-                data = parse_json(raw.decode("utf-8"), f"input line {number}")
+            try:  # a file saved by a Windows editor starts with a byte-order mark: not part of the row
+                data = parse_json(raw.decode("utf-8-sig" if number == 1 else "utf-8"), f"input line {number}")
             except UnicodeDecodeError:
                 yield RowError(f"input line {number}: not UTF-8 text")
                 continue
@@ -281,7 +285,10 @@ class Progress:
 
     def __init__(self, total: int, stream: TextIO, clock: Callable[[], float] = time.monotonic, every: int | None = None):
         self.total, self.stream, self.clock = total, stream, clock
-        self.tty = bool(getattr(stream, "isatty", lambda: False)())
+        try:
+            self.tty = bool(stream.isatty())
+        except (AttributeError, OSError, ValueError):  # not a file, or a closed one
+            self.tty = False
         self.every = every or max(1, total // 20)
         self.started = clock()
         self.done = self.errors = self.skipped = 0
@@ -300,6 +307,17 @@ class Progress:
         kept = f", {self.skipped} kept from OUT" if self.skipped else ""
         return f"{finished}/{self.total} rows ({pct:.0f} %){kept}, {self.errors} error rows, {rate:.2f} rows/s, ETA {eta}"
 
+    def _say(self, text: str) -> None:
+        """Write ``text`` to the stream; a stream that fails (stderr closed, a full pipe) ends the progress,
+        never the batch."""
+        if self.stream is None:
+            return
+        try:
+            self.stream.write(text)
+            self.stream.flush()
+        except (OSError, ValueError):  # ValueError: a closed file object
+            self.stream = None
+
     def update(self, row: dict) -> None:
         self.done += 1
         self.errors += row.get("error") is not None
@@ -307,20 +325,16 @@ class Progress:
         if self.tty:
             width = 30
             filled = min(int(width * finished / self.total), width) if self.total else width
-            self.stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {self.text()}")
-            self.stream.flush()
+            self._say(f"\r[{'#' * filled}{'.' * (width - filled)}] {self.text()}")
         elif self.done % self.every == 0 or finished == self.total:
-            self.stream.write(f"robocritics batch: {self.text()}\n")
-            self.stream.flush()
+            self._say(f"robocritics batch: {self.text()}\n")
 
     def finish(self, interrupted: bool = False) -> None:
-        if self.tty:
-            self.stream.write("\n")
         elapsed = self.clock() - self.started
         how = "interrupted after " if interrupted else ""
         kept = f" ({self.skipped} kept from OUT)" if self.skipped else ""
-        self.stream.write(f"robocritics batch: {how}{self.done} rows in {elapsed:.1f} s, {self.errors} error rows{kept}\n")
-        self.stream.flush()
+        end = "\n" if self.tty else ""
+        self._say(f"{end}robocritics batch: {how}{self.done} rows in {elapsed:.1f} s, {self.errors} error rows{kept}\n")
 
 
 # --- the command ----------------------------------------------------------------------------------
@@ -341,6 +355,12 @@ def _check_output(out: Path, source: Path, resume: bool) -> None:
         raise UsageError(f"--output {shown}: the directory {path_label(parent)} does not exist")
 
 
+def _terminated(signum, frame) -> None:
+    """SIGTERM (a scheduler, ``timeout``, ``kill``) stops the batch as Ctrl-C does: the finished rows are
+    written (a Parquet file is completed), the workers stopped, the exit status 130."""
+    raise KeyboardInterrupt
+
+
 def _cmd_batch(args: argparse.Namespace) -> int:
     from ..batch import evaluate
     from ..batch.local import BatchError
@@ -348,6 +368,10 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     source = Path(args.input)
     if not source.is_file():
         raise UsageError(f"input {shown_path(args.input)} is not a file")
+    cpus = os.cpu_count() or 1
+    if args.engine == "local" and args.workers is not None and args.workers > MAX_WORKERS_PER_CPU * cpus:
+        raise UsageError(f"--workers {args.workers}: at most {MAX_WORKERS_PER_CPU * cpus} on this machine ({cpus} CPUs); "
+                         "each worker is a process with its own robot model, and more than the cores only queue for them")  # fmt: skip
     to_stdout = args.output == "-"
     out = Path(args.output)
     if to_stdout and args.resume:
@@ -381,6 +405,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         raise UsageError(f"--output {shown_path(args.output)}: cannot write it: {exc.strerror or exc}") from None
     rows = evaluate(pending(), args.engine, args.workers, timeout_s=args.timeout, ray_address=args.ray_address)
     failed = True
+    on_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminated) if on_main_thread else None
     try:
         for row in rows:
             if row["id"] is None and json.dumps(row["error"], sort_keys=True) in reported:
@@ -400,9 +426,11 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         progress.finish(interrupted=True)
         where = "" if to_stdout else f"; {shown_path(args.output)} holds every finished row: rerun with --resume"
-        print(f"robocritics batch: interrupted{where}", file=sys.stderr)
+        progress._say(f"robocritics batch: interrupted{where}\n")
         raise
     finally:
+        if on_main_thread:
+            signal.signal(signal.SIGTERM, previous)
         rows.close()  # stops the workers now, not when the generator is collected
         try:
             writer.close()
@@ -411,6 +439,6 @@ def _cmd_batch(args: argparse.Namespace) -> int:
                 raise UsageError(f"cannot write to --output {shown_path(args.output)}: {exc.strerror or exc}") from None
     progress.finish()
     if unmatched:
-        print(f"robocritics batch: note: {len(unmatched)} rows of {shown_path(args.output)} have ids that are not in "
-              f"{shown_path(args.input)} (from another input?); they were kept", file=sys.stderr)  # fmt: skip
+        progress._say(f"robocritics batch: note: {len(unmatched)} rows of {shown_path(args.output)} have ids that are "
+                      f"not in {shown_path(args.input)} (from another input?); they were kept\n")  # fmt: skip
     return 0
