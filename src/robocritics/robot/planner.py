@@ -426,10 +426,14 @@ class Planner:
     def ik(self, point: np.ndarray, call: SkillCall, yaw: float | None = None, seed=None, counted: bool = False) -> np.ndarray:
         if not counted:
             self.count_ik(call)
+        yaw_rad = self.yaw if yaw is None else yaw
         try:
-            return self.robot.ik(point, seed=self.q if seed is None else seed, yaw_rad=self.yaw if yaw is None else yaw)
+            return self.robot.ik(point, seed=self.q if seed is None else seed, yaw_rad=yaw_rad)
         except PlanningError as exc:
-            raise PlanningError(f"{call.describe()}: {exc.reason}", line=call.line) from None
+            err = PlanningError(f"{call.describe()}: {exc.reason}", line=call.line)
+            # what could not be reached, for repairs that look for the nearest reachable point
+            err.call, err.target_m, err.yaw_rad = call, tuple(float(v) for v in point), float(yaw_rad)
+            raise err from None
 
     # --- sample bookkeeping ---------------------------------------------------------------
 
