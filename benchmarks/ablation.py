@@ -50,11 +50,12 @@ plus the **careful** example program simulated as the reference. Every loop
 checks the task's goals (``task_outcome``: the objects in the right
 containers / on the plate), so a repair can never trade the task away.
 Columns: ``LLM calls`` (model replies, the task included), ``repairs``
-(accepted repair edits), ``final score`` (0–10, the last program that ran),
-``Error left`` (critics still at Error), ``cycle s`` (the final program's
-motion time, s), ``CPU s`` (this process's CPU time for the run: simulation,
-critics, repairs and the client; the loopback server's thread included),
-``goal``. With the scripted model the model's replies are the same in both
+(accepted repair edits); ``final score`` (0–10), ``Error left`` (critics
+still at Error), ``cycle s`` (motion time, s) and ``goal`` are those of the
+program the run hands back (:meth:`Loop.best`: no Error first, then the
+highest score); ``CPU s`` (this process's CPU time for the run: simulation,
+critics, repairs and the client; the loopback server's thread included).
+With the scripted model the model's replies are the same in both
 modes, so the difference is the repairs' alone.
 
 Usage::
@@ -65,12 +66,14 @@ Usage::
         --context-tokens 2048 --max-tokens 512 --timeout 120     # a local llama.cpp server
     python benchmarks/ablation.py --selftest     # offline, against the scripted loopback server
     python benchmarks/ablation.py --selftest --repairs    # repairs vs LLM, offline
+    python benchmarks/ablation.py --selftest --repairs --stubborn    # ... with a model that never improves
 
 ``--selftest`` starts ``tests/llm_server.LLMServer`` on 127.0.0.1 with a
 scripted model that answers the task with the naive example program, answers
 critic feedback with the careful example program, and says "PROGRAM COMPLETE"
 when asked to review its program or when it has nothing better — so the harness
-is demonstrably working end to end without any real LLM.
+is demonstrably working end to end without any real LLM. ``--stubborn``
+replaces it with one that answers everything with the naive program.
 """
 
 from __future__ import annotations
@@ -444,7 +447,7 @@ class RepairsResult:
 
 def _summarise(task: str, mode: str, attempts: list[Attempt], llm_calls: int | None, cpu_s: float) -> RepairsResult:
     ran = [a for a in attempts if a.report is not None and a.approved is not False]
-    final = ran[-1] if ran else None
+    final = Loop.best(ran) if ran else None  # the program the run hands back: no Error first, then best score
     return RepairsResult(
         task=task,
         mode=mode,
@@ -530,6 +533,15 @@ def format_repairs_table(results: list[RepairsResult]) -> str:
     return "\n".join(lines)
 
 
+def stubborn_responder(request: dict) -> str:
+    """A stand-in model that never improves: the naive program for the task, whatever it is told."""
+    messages = request.get("messages", [])
+    found = re.search(r"^# Scene: (\w+)", messages[0]["content"] if messages else "", re.MULTILINE)
+    if not found:
+        return "I do not know this scene."
+    return f"Here is a program for the task:\n\n```python\n{example_programs(found.group(1))[0]}```\n"
+
+
 # --- command line ---------------------------------------------------------------------------------
 
 
@@ -542,6 +554,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--model", metavar="NAME", help="chat model (default: $ROBOCRITICS_MODEL)")
     p.add_argument("--api-key-env", metavar="VAR", help="environment variable holding the API key")
     p.add_argument("--selftest", action="store_true", help="run offline against the scripted loopback server")
+    p.add_argument("--stubborn", action="store_true",
+                   help="with --selftest: the scripted model answers everything with the naive program (a model "
+                   "that never improves)")
     p.add_argument("--tasks", default=",".join(TASKS), help=f"comma-separated tasks (default: {','.join(TASKS)})")
     p.add_argument("--conditions", default=",".join(CONDITIONS), help="comma-separated conditions (default: both)")
     p.add_argument("--max-attempts", type=int, default=5, help="LLM generation attempts per run (paper: 5)")
@@ -569,7 +584,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _reproduce(args: argparse.Namespace, model_name: str, base_url: str) -> str:
     if args.selftest:
-        parts = ["python", "benchmarks/ablation.py", "--selftest"]
+        parts = ["python", "benchmarks/ablation.py", "--selftest"] + (["--stubborn"] if args.stubborn else [])
     else:
         parts = ["python", "benchmarks/ablation.py", "--base-url", base_url, "--model", model_name]
         if args.api_key_env:
@@ -605,6 +620,9 @@ def main(argv: list[str] | None = None) -> int:
     if bad or not tasks or not conditions:
         print(f"ablation: unknown or missing tasks/conditions: {', '.join(bad) or '(none given)'}", file=sys.stderr)
         return 2
+    if args.stubborn and not args.selftest:
+        print("ablation: --stubborn is a scripted model: use it with --selftest", file=sys.stderr)
+        return 2
     if args.max_attempts < 1 or args.repeats < 1:
         print("ablation: --max-attempts and --repeats must be at least 1", file=sys.stderr)
         return 2
@@ -614,8 +632,12 @@ def main(argv: list[str] | None = None) -> int:
         sys.path.insert(0, str(ROOT / "tests"))
         from llm_server import LLMServer  # the test suite's loopback server
 
-        server = LLMServer(responder=scripted_responder).start()
-        base_url, model_name, api_key = server.url, "scripted-naive-then-careful", None
+        if args.stubborn:
+            server = LLMServer(responder=stubborn_responder).start()
+            base_url, model_name, api_key = server.url, "scripted-always-naive", None
+        else:
+            server = LLMServer(responder=scripted_responder).start()
+            base_url, model_name, api_key = server.url, "scripted-naive-then-careful", None
     else:
         base_url = args.base_url or os.environ.get("ROBOCRITICS_BASE_URL")
         model_name = args.model or os.environ.get("ROBOCRITICS_MODEL")
@@ -720,7 +742,7 @@ def main(argv: list[str] | None = None) -> int:
         if server is not None:
             server.stop()
 
-    what = "scripted loopback model (self-test)" if args.selftest else f"{model_name} at {base_url}"
+    what = f"scripted loopback model {model_name} (self-test)" if args.selftest else f"{model_name} at {base_url}"
     print(
         f"RoboCritics validation protocol (paper Table 1): {what}; up to {args.max_attempts} attempts, "
         f"{args.repeats} run(s) per cell"
@@ -765,7 +787,7 @@ def _repairs_main(args: argparse.Namespace, tasks: list[str], base_url: str, mod
                     failed += 1
                     print(f"  [{task}/{mode}] failed: {exc}", file=sys.stderr, flush=True)
             results.append(careful_reference(task))
-    what = "scripted loopback model (self-test)" if args.selftest else f"{model_name} at {base_url}"
+    what = f"scripted loopback model {model_name} (self-test)" if args.selftest else f"{model_name} at {base_url}"
     print(f"Repairs vs LLM on the naive programs: {what}; up to {args.max_attempts} model replies per run; "
           "task goals checked (task_outcome)")  # fmt: skip
     print()

@@ -207,8 +207,7 @@ def test_the_repairs_table_compares_the_modes_on_the_same_scripted_replies(ablat
 
 
 def test_repairs_never_cost_model_calls_even_with_a_model_that_never_improves(ablation, llm_server):
-    naive = ablation.example_programs("sorting")[0]
-    llm_server.responder = lambda request: f"```python\n{naive}```"  # the naive program, whatever it is told
+    llm_server.responder = ablation.stubborn_responder  # the naive program, whatever it is told
     from robocritics.llm.client import OpenAICompatible
 
     with OpenAICompatible(base_url=llm_server.url, model="stubborn", timeout_s=30) as client:
@@ -217,6 +216,9 @@ def test_repairs_never_cost_model_calls_even_with_a_model_that_never_improves(ab
     assert runs["llm-only"].llm_calls == 3  # it never passes, so every reply is used
     assert runs["repairs+llm"].llm_calls <= runs["llm-only"].llm_calls
     assert runs["repairs+llm"].repairs > 0 and runs["llm-only"].repairs == 0
+    # the program handed back is never worse for the repairs (they never make a verdict worse)
+    assert len(runs["repairs+llm"].errors_left) <= len(runs["llm-only"].errors_left)
+    assert runs["repairs+llm"].final_score >= runs["llm-only"].final_score
 
 
 def test_the_paper_protocol_runs_without_repairs(ablation, llm_server, tmp_path):
@@ -226,3 +228,8 @@ def test_the_paper_protocol_runs_without_repairs(ablation, llm_server, tmp_path)
     (cell,) = lines(results)
     # naive program, then the model's careful one: two replies, no repair in between (it would be a third attempt)
     assert cell["attempts"] == 2 and len(cell["scores"]) == 2 and len(llm_server.chat_requests()) == 2
+
+
+def test_the_stubborn_model_is_only_a_self_test(ablation, capsys):
+    assert ablation.main(["--stubborn", "--base-url", "http://127.0.0.1:9/v1", "--model", "m"]) == 2
+    assert "--stubborn is a scripted model" in capsys.readouterr().err
