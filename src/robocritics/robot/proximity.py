@@ -883,43 +883,78 @@ def shape_shape(a: Shape, b: Shape, pose_a: Any = None, pose_b: Any = None, far_
             a, b, pose_a, pose_b = b, a, pose_b, pose_a
         _, c = _pose_parts(pose_a)
         return np.atleast_1d(sphere_shape(c, a.size[0], b, pose_b))
-    import coal
-
     Pa = pose_a.reshape(-1, 4, 4)
     Pb = pose_b.reshape(-1, 4, 4)
     T = max(len(Pa), len(Pb))
-    Pa = np.broadcast_to(Pa, (T, 4, 4))
-    Pb = np.broadcast_to(Pb, (T, 4, 4))
-    changed = np.ones(T, dtype=bool)
-    if T > 1:
-        changed[1:] = (Pa[1:] != Pa[:-1]).any(axis=(1, 2)) | (Pb[1:] != Pb[:-1]).any(axis=(1, 2))
+    return _coal_runs(a, b, Pa, Pb, _pose_changes(Pa, T) | _pose_changes(Pb, T), far_m)
+
+
+def _pose_changes(poses: np.ndarray, T: int) -> np.ndarray:
+    """``(T,)`` bool: sample 0 and every sample whose pose differs from the one before (``poses (1 or T, 4, 4)``)."""
+    changed = np.zeros(T, dtype=bool)
+    changed[0] = True
+    if len(poses) > 1:
+        changed[1:] = (poses[1:] != poses[:-1]).any(axis=(1, 2))
+    return changed
+
+
+def _coal_runs(a: Shape, b: Shape, Pa: np.ndarray, Pb: np.ndarray, changed: np.ndarray, far_m: float | None) -> np.ndarray:
+    """:func:`shape_shape` for two boxes/cylinders: ``coal.distance`` at the samples where ``changed`` (a run of
+    equal poses starts), copied along the run. ``Pa``, ``Pb`` ``(1 or T, 4, 4)``; ``changed (T,)``.
+
+    The per-sample work is four coal calls; a static pose is set once, and the rotations and translations of
+    the samples coal sees are gathered into contiguous arrays first (the loop does no numpy indexing).
+    """
+    import coal
+
+    T = len(changed)
     first = np.flatnonzero(changed)
     inverse = np.cumsum(changed) - 1
     vals = np.empty(len(first))
     todo = np.arange(len(first))
+    static_a, static_b = len(Pa) == 1, len(Pb) == 1
     if far_m is not None:
-        gap = np.linalg.norm(Pa[first, :3, 3] - Pb[first, :3, 3], axis=1)
+        ca = Pa[0, :3, 3] if static_a else Pa[first, :3, 3]
+        cb = Pb[0, :3, 3] if static_b else Pb[first, :3, 3]
+        gap = np.linalg.norm(np.broadcast_to(ca - cb, (len(first), 3)), axis=1)
         gap -= _bounding_radius(a.kind, a.size) + _bounding_radius(b.kind, b.size)
         far = gap > far_m
         vals[far] = gap[far]
         todo = np.flatnonzero(~far)
-    ga, gb = _coal_geometry(a.kind, a.size), _coal_geometry(b.kind, b.size)
-    solver = coal.ComputeDistance(ga, gb)  # keeps no reference: ga and gb must outlive it
-    req = coal.DistanceRequest()
-    req.gjk_tolerance = 1e-10
-    req.gjk_max_iterations = 1000
-    req.epa_max_iterations = 256
-    res = coal.DistanceResult()
-    ta, tb = coal.Transform3s(), coal.Transform3s()
-    for k in todo:
-        i = first[k]
-        ta.setRotation(np.ascontiguousarray(Pa[i, :3, :3]))
-        ta.setTranslation(np.ascontiguousarray(Pa[i, :3, 3]))
-        tb.setRotation(np.ascontiguousarray(Pb[i, :3, :3]))
-        tb.setTranslation(np.ascontiguousarray(Pb[i, :3, 3]))
-        res.clear()
-        vals[k] = solver(ta, tb, req, res)
-    del solver
+    if len(todo):
+        ga, gb = _coal_geometry(a.kind, a.size), _coal_geometry(b.kind, b.size)
+        solver = coal.ComputeDistance(ga, gb)  # keeps no reference: ga and gb must outlive it
+        req = coal.DistanceRequest()
+        req.gjk_tolerance = 1e-10
+        req.gjk_max_iterations = 1000
+        req.epa_max_iterations = 256
+        res = coal.DistanceResult()
+        ta, tb = coal.Transform3s(), coal.Transform3s()
+        at = first[todo]
+        moving = []
+        for tr, P, static in ((ta, Pa, static_a), (tb, Pb, static_b)):
+            if static:
+                tr.setRotation(np.ascontiguousarray(P[0, :3, :3]))
+                tr.setTranslation(np.ascontiguousarray(P[0, :3, 3]))
+            else:
+                moving.append((tr.setRotation, tr.setTranslation, np.ascontiguousarray(P[at, :3, :3]), np.ascontiguousarray(P[at, :3, 3])))
+        clear = res.clear
+        if len(moving) == 1:
+            (set_r, set_t, R, t), = moving
+            for i, k in enumerate(todo.tolist()):
+                set_r(R[i])
+                set_t(t[i])
+                clear()
+                vals[k] = solver(ta, tb, req, res)
+        else:
+            # both static (one sample) or both moving
+            for i, k in enumerate(todo.tolist()):
+                for set_r, set_t, R, t in moving:
+                    set_r(R[i])
+                    set_t(t[i])
+                clear()
+                vals[k] = solver(ta, tb, req, res)
+        del solver
     return vals[inverse]
 
 
@@ -1240,13 +1275,24 @@ class ProximityKernel:
         """Evaluate ``groups`` for segments ``P0 + t D`` ``(3, C, T)`` into the rows of ``buf (K, T)``."""
         T = P0.shape[2]
         hits: dict[str, list[tuple[np.ndarray, list[np.ndarray], np.ndarray]]] = {}
+        changes: dict[str, np.ndarray] = {}  # pose key -> where its pose changes, computed once for all its pairs
         for g in groups:
             if g.kind == "shape":
                 for col, i, j in zip(g.cols, g.ia, g.ib):
                     a, b = self.shapes[i], self.shapes[j]
-                    pa = poses.get(self._pose_key.get(a.name, ""), a.pose)
-                    pb = poses.get(self._pose_key.get(b.name, ""), b.pose)
-                    buf[col] = np.broadcast_to(shape_shape(a, b, pa, pb, far_m=far_m), (T,))
+                    ka, kb = self._pose_key.get(a.name, ""), self._pose_key.get(b.name, "")
+                    if a.kind == "sphere" or b.kind == "sphere" or not (ka in poses or kb in poses):
+                        buf[col] = np.broadcast_to(shape_shape(a, b, poses.get(ka, a.pose), poses.get(kb, b.pose), far_m=far_m), (T,))
+                        continue
+                    changed = np.zeros(T, dtype=bool)
+                    changed[0] = True
+                    for key in {ka, kb} & poses.keys():
+                        if key not in changes:
+                            changes[key] = _pose_changes(poses[key], T)
+                        changed |= changes[key]
+                    Pa = poses[ka] if ka in poses else np.asarray(a.pose, dtype=_FLOAT)[None]
+                    Pb = poses[kb] if kb in poses else np.asarray(b.pose, dtype=_FLOAT)[None]
+                    buf[col] = _coal_runs(a, b, Pa, Pb, changed, far_m)
                 continue
             width = len(g.caps) if g.product else len(g.cols)
             step = max(64, self.chunk // max(width, 1))
