@@ -71,6 +71,7 @@ def _row(**fields):
     [
         (parse_json('{"id": ' + "9" * 5000 + ', "scene": "sorting", "program": "home()"}', "row"), "5000-digit integer"),
         (_row(id="bad\ud800"), "lone surrogate"),
+        (_row(id=10**5000), "more than 20 digits"),  # from Python: str() of it would fail in the writer
         (_row(critics=[]), "'critics' is an empty list"),
         (_row(critics=""), "'critics' holds an empty name"),
         (_row(critics=",,"), "'critics' holds an empty name"),
@@ -107,9 +108,9 @@ def test_an_error_row_never_echoes_an_over_long_or_broken_id():
     from robocritics.batch.evaluate import jobs_of
 
     errors: list[dict] = []
-    rows = [_row(id="x" * 10_000), _row(id="bad\udcff"), _row(id=7, critics=[])]
+    rows = [_row(id="x" * 10_000), _row(id="bad\udcff"), _row(id=-(10**5000), program=5), _row(id=7, critics=[])]
     assert list(jobs_of(rows, errors)) == []
-    assert [e["id"] for e in errors] == [None, None, 7]
+    assert [e["id"] for e in errors] == [None, None, None, 7]
     assert all(len(json.dumps(e)) < 1000 for e in errors)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
-from .rows import MAX_ID_CHARS, Job, RowError, _is_text, check_row, error_row
+from .rows import Job, RowError, check_row, error_row, is_valid_id
 
 __all__ = ["evaluate", "jobs_of", "ENGINES"]
 
@@ -16,11 +16,7 @@ def _shown_id(row: Any) -> str | int | None:
     """The id an error row echoes: the row's own if it is a valid id, else None (an over-long or broken id
     is not copied into the output)."""
     row_id = row.get("id") if isinstance(row, Mapping) else None
-    if isinstance(row_id, bool) or not isinstance(row_id, (str, int)) or row_id == "":
-        return None
-    if isinstance(row_id, str) and (len(row_id) > MAX_ID_CHARS or not _is_text(row_id)):
-        return None
-    return row_id
+    return row_id if is_valid_id(row_id) else None
 
 
 def jobs_of(rows: Iterable[Any], errors: list[dict]) -> Iterator[Job]:

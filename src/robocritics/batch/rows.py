@@ -35,6 +35,8 @@ OUTPUT_KEYS = ("id", "score", "flags", "passed", "duration_s", "samples", "error
 _INPUT_KEYS = {"id", "scene", "program", "goal", "critics", "params"}
 #: Longest id accepted, characters (ids are echoed in every output row).
 MAX_ID_CHARS = 200
+#: Most digits of an integer id (as a JSON reader parses them; a 64-bit integer has 19 or 20).
+MAX_ID_DIGITS = 20
 #: Longest error message in an output row, characters: a plugin's exception (or any error quoting its input)
 #: could carry megabytes, copied into every output row and the progress of a batch.
 MAX_MESSAGE_CHARS = 2_000
@@ -103,6 +105,15 @@ def _is_text(value: str) -> bool:
     return True
 
 
+def is_valid_id(row_id: Any) -> bool:
+    """``row_id`` can be a row's id (see :func:`check_row`): an error row echoes no other."""
+    if isinstance(row_id, bool) or not isinstance(row_id, (str, int)) or row_id == "":
+        return False
+    if isinstance(row_id, int):
+        return abs(row_id) < 10**MAX_ID_DIGITS
+    return len(row_id) <= MAX_ID_CHARS and _is_text(row_id)
+
+
 def check_row(row: Any) -> Job:
     """The :class:`Job` of input ``row``; :class:`RowError` naming the field if it is not a valid row."""
     if not isinstance(row, Mapping):
@@ -116,6 +127,8 @@ def check_row(row: Any) -> Job:
         except (TypeError, ValueError):  # e.g. the parser's marker for an integer of thousands of digits
             shown = repr(row_id)
         raise RowError(f"'id' must be a non-empty string or an integer, got {shown[:60]}")
+    if isinstance(row_id, int) and abs(row_id) >= 10**MAX_ID_DIGITS:
+        raise RowError(f"'id' is an integer of more than {MAX_ID_DIGITS} digits")
     if isinstance(row_id, str) and len(row_id) > MAX_ID_CHARS:
         raise RowError(f"'id' is longer than {MAX_ID_CHARS} characters")
     if isinstance(row_id, str) and not _is_text(row_id):
