@@ -89,7 +89,8 @@ def test_faults_the_repairs_fix_are_fixed_without_a_model_call(llm_server, make_
     # The attempt's report is the repaired program's, re-simulated and re-critiqued from scratch.
     again = critique(simulate(fixed.program, sorting), critics=[REPAIRABLE])
     assert again.score == fixed.score and again.verdict(REPAIRABLE).flag == fixed.report.verdict(REPAIRABLE).flag
-    assert fixed.execution.duration_s == pytest.approx(first.execution.duration_s + sum(c.cost_s for c in fixed.changes))
+    cost_s = sum(c.cost_s for c in fixed.changes)  # each change's cycle-time cost adds up to the whole
+    assert fixed.execution.duration_s == pytest.approx(first.execution.duration_s + cost_s)
 
 
 def test_what_the_repairs_leave_is_all_the_model_is_sent(llm_server, make_client, sorting, tmp_path):

@@ -167,7 +167,9 @@ CREATE INDEX IF NOT EXISTS embeddings_by_space ON embeddings(model, dim, interac
 
 _COLUMNS = "id, session_id, request, program, feedback, score, created_s, source"
 # Added in version 3 to a file that has the interactions table without it (older rows: the model's).
-_SOURCE_COLUMN = "ALTER TABLE interactions ADD COLUMN source TEXT NOT NULL DEFAULT 'llm' CHECK (source IN ('llm', 'repair'))"
+_SOURCE_COLUMN = (
+    "ALTER TABLE interactions ADD COLUMN source TEXT NOT NULL DEFAULT 'llm' CHECK (source IN ('llm', 'repair'))"
+)
 
 
 class InteractionMemoryError(RoboCriticsError, ValueError):
