@@ -532,3 +532,21 @@ def test_sigterm_completes_the_parquet_file_and_resume_finishes_it_equal_to_json
     assert len(got) == len(want) == len(rows)
     for g, w in zip(sorted(got, key=key), sorted(want, key=key)):
         assert {**g, "duration_s": 0} == {**w, "duration_s": 0}  # equal but for the time each took
+
+
+def test_the_terminal_bar_overwrites_a_longer_earlier_bar():
+    import io
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    now = [0.0]
+    stream = Terminal()
+    progress = Progress(3, stream, clock=lambda: now[0])
+    for t in (5.0, 5.1, 5.2):  # ETA 10 s, then 3 s: the second bar is shorter than the first
+        now[0] = t
+        progress.update({"error": None})
+    bars = stream.getvalue().split("\r")[1:]
+    assert bars[0].endswith("ETA 10 s") and bars[1].rstrip().endswith("ETA 3 s")
+    assert [len(b) for b in bars] == sorted(len(b) for b in bars)  # each covers the one before

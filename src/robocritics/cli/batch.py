@@ -292,6 +292,7 @@ class Progress:
         self.every = every or max(1, total // 20)
         self.started = clock()
         self.done = self.errors = self.skipped = 0
+        self._shown = 0  # characters of the last bar on a terminal
 
     def skip(self) -> None:
         """One input row needs no work (its id is in OUT already)."""
@@ -325,7 +326,9 @@ class Progress:
         if self.tty:
             width = 30
             filled = min(int(width * finished / self.total), width) if self.total else width
-            self._say(f"\r[{'#' * filled}{'.' * (width - filled)}] {self.text()}")
+            bar = f"[{'#' * filled}{'.' * (width - filled)}] {self.text()}"
+            self._say(f"\r{bar.ljust(self._shown)}")  # spaces over the end of a longer earlier bar
+            self._shown = len(bar)
         elif self.done % self.every == 0 or finished == self.total:
             self._say(f"robocritics batch: {self.text()}\n")
 
@@ -429,14 +432,16 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         progress._say(f"robocritics batch: interrupted{where}\n")
         raise
     finally:
-        if on_main_thread:
-            signal.signal(signal.SIGTERM, previous)
-        rows.close()  # stops the workers now, not when the generator is collected
+        # the output first: a second Ctrl-C while the workers stop must not cost a Parquet file its rows
         try:
             writer.close()
         except OSError as exc:
             if not failed:  # else the error that stopped the batch is the one to report
                 raise UsageError(f"cannot write to --output {shown_path(args.output)}: {exc.strerror or exc}") from None
+        finally:
+            if on_main_thread:
+                signal.signal(signal.SIGTERM, previous)
+            rows.close()  # stops the workers now, not when the generator is collected
     progress.finish()
     if unmatched:
         progress._say(f"robocritics batch: note: {len(unmatched)} rows of {shown_path(args.output)} have ids that are "
