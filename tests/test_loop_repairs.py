@@ -232,3 +232,18 @@ def test_an_endpoint_failure_after_the_repair_keeps_it_and_the_fix_can_be_repeat
     sent = llm_server.chat_requests()[-1].messages[-1]["content"]
     assert sent.count("Automatic repairs were applied") == 1
     assert repaired.report.verdict("duration_budget").feedback() in sent
+
+
+def test_approve_raising_on_a_repair_changes_nothing(llm_server, make_client, sorting):
+    llm_server.reply(fenced(NAIVE))
+
+    def broken(program: str, diff: str) -> bool:
+        raise KeyboardInterrupt  # e.g. the user closed the approval dialog with Ctrl-C
+
+    memory = InteractionMemory(":memory:")
+    loop = Loop(make_client(), sorting, critics=[REPAIRABLE], approve=broken, memory=memory)
+    first = loop.request(TASK)
+    with pytest.raises(KeyboardInterrupt):
+        loop.fix()
+    assert loop.attempts == [first] and loop.current is first and len(memory) == 1
+    assert len(llm_server.chat_requests()) == 1
