@@ -103,3 +103,24 @@ def test_carried_object_pairs_are_exact_near_and_bounded_far(robot):
                 assert traj.proximity[t, k] == pytest.approx(ref, abs=1e-6)
             else:
                 assert CARRIED_EXACT_M < traj.proximity[t, k] <= ref + 1e-9
+
+
+def test_long_trajectories_run_fk_in_chunks_with_the_same_frames(robot, monkeypatch):
+    """FK of a trajectory longer than one chunk (kept under OpenBLAS's threading threshold) gives the frames
+    of one pass, and Pinocchio's at samples on both sides of every chunk boundary."""
+    import robocritics.robot.model as model
+
+    rng = np.random.default_rng(5)
+    T = 2 * model._FK_CHUNK + 37
+    q = rng.uniform(robot.lower, robot.upper, size=(T, robot.n))
+    opening = rng.uniform(0.0, robot.max_opening_m, size=T)
+    chunk = model._FK_CHUNK
+    chunked = robot.forward(q, opening)
+    monkeypatch.setattr(model, "_FK_CHUNK", T)
+    np.testing.assert_allclose(chunked, robot.forward(q, opening), rtol=0, atol=1e-15)
+    tcp = robot.frame_names.index(robot.tcp_frame)
+    for t in (0, T - 1, chunk - 1, chunk, 2 * chunk - 1, 2 * chunk):
+        pin.forwardKinematics(robot.model, robot.data, q[t])
+        fid = robot.model.getFrameId(robot.tcp_frame)
+        ref = pin.updateFramePlacement(robot.model, robot.data, fid).homogeneous
+        np.testing.assert_allclose(chunked[t, tcp], ref, atol=1e-12)

@@ -89,6 +89,11 @@ CONTINUOUS_LIMIT_RAD = 2 * math.pi
 _SAME_HOUSING_GAP_M = 0.06
 
 
+_FK_CHUNK = 4096
+"""Samples per batched forward-kinematics pass: below OpenBLAS's multi-threading threshold for the (4 T x 4) @
+(4 x 4) products (its threshold m n k <= 262144 is T <= 4096 here; ``benchmarks/bench_pipeline.py``)."""
+
+
 def _axis_rotations(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """``(T, 3, 3)`` rotations by angles ``q`` (rad) about the unit ``axis`` (Rodrigues)."""
     k = axis / np.linalg.norm(axis)
@@ -449,6 +454,15 @@ class Robot:
         if q.ndim != 2 or q.shape[1] != self.n:
             raise RobotModelError(f"q must have shape (T, {self.n}), got {q.shape}")
         T = q.shape[0]
+        if T > _FK_CHUNK:
+            # OpenBLAS goes multi-threaded on the batched 4x4 products above ~4k samples (m n k over its
+            # threshold), which costs 5-20x the CPU on a loaded 2-core machine; chunks stay single-threaded
+            opening = None if gripper_opening_m is None else np.broadcast_to(np.asarray(gripper_opening_m, float), (T,))
+            out = np.empty((T, len(self.frame_names), 4, 4))
+            for t0 in range(0, T, _FK_CHUNK):
+                t1 = min(T, t0 + _FK_CHUNK)
+                out[t0:t1] = self.forward(q[t0:t1], None if opening is None else opening[t0:t1])
+            return out
         oMi = np.empty((self.model.njoints, T, 4, 4))
         oMi[0] = np.eye(4)
         for j in range(1, self.model.njoints):
