@@ -15,6 +15,8 @@ import threading
 import time
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import pytest
 from llm_fixtures import TEST_EMBEDDING_MODEL, clean_llm_env, llm_server, make_client  # noqa: F401
 from llm_server import Fail, hashed_embedding
@@ -537,7 +539,8 @@ CREATE INDEX request_terms_by_session ON request_terms(session_id, term);
 CREATE TABLE corpus_stats (session_id TEXT PRIMARY KEY, documents INTEGER NOT NULL, tokens INTEGER NOT NULL);
 CREATE INDEX embeddings_by_space ON embeddings(model, dim, interaction_id);
 INSERT INTO sessions VALUES ('old', 0);
-INSERT INTO interactions VALUES (1, 'old', 'put the green apple in the white box', 'move_above(green_apple)', 'ok', 9.0, 0, 7);
+INSERT INTO interactions VALUES
+    (1, 'old', 'put the green apple in the white box', 'move_above(green_apple)', 'ok', 9.0, 0, 7);
 INSERT INTO request_terms VALUES ('green', 1, 'old', 1), ('apple', 1, 'old', 1), ('white', 1, 'old', 1),
     ('box', 1, 'old', 1), ('put', 1, 'old', 1), ('the', 1, 'old', 2), ('in', 1, 'old', 1);
 INSERT INTO corpus_stats VALUES ('', 1, 8), ('old', 1, 8);
@@ -574,3 +577,27 @@ def test_a_version_2_file_still_loads_its_rows_as_the_models_and_takes_new_sourc
         with pytest.raises(sqlite3.IntegrityError):
             raw.execute("INSERT INTO interactions (session_id, request, program, feedback, created_s, source) "
                         "VALUES ('old', 'r', 'p', 'f', 0, 'someone')")  # fmt: skip
+
+
+_V2_SCHEMA = VERSION_2.split("INSERT INTO sessions")[0]
+
+
+@settings(max_examples=25, deadline=None)
+@given(rows=st.lists(st.tuples(st.sampled_from(TASKS), st.text(max_size=40),
+                               st.one_of(st.none(), st.floats(0, 10, allow_nan=False))), max_size=12))  # fmt: skip
+def test_upgrading_a_version_2_file_keeps_every_row_as_it_was(tmp_path_factory, rows):
+    """Rows written by version 2's own statements read back unchanged after the upgrade, each as the model's."""
+    path = tmp_path_factory.mktemp("v2") / "memory.sqlite"
+    with sqlite3.connect(path) as raw:
+        raw.executescript(_V2_SCHEMA + "PRAGMA user_version = 2;")
+        raw.execute("INSERT INTO sessions VALUES ('old', 0)")
+        for i, (request, program, score) in enumerate(rows, start=1):
+            raw.execute("INSERT INTO interactions (session_id, request, program, feedback, score, created_s, "
+                        "request_tokens) VALUES ('old', ?, ?, 'f', ?, ?, 0)",
+                        (request, program, score, float(i)))  # fmt: skip
+    with InteractionMemory(path) as memory:
+        got = memory.history("old")
+    assert [(i.request, i.program, i.score, i.created_s) for i in got] == [
+        (request, program, score, float(i)) for i, (request, program, score) in enumerate(rows, start=1)
+    ]
+    assert {i.source for i in got} <= {"llm"}
