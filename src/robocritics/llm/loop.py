@@ -104,7 +104,7 @@ from ..errors import CriticError, LLMError, PlanningError, ProgramError, RoboCri
 from ..report import format_score
 from .client import ChatModel, ContextLengthError
 from .limits import DEFAULT_MAX_TOKENS, MAX_MESSAGE_CHARS, MIN_REPLY_TOKENS, clean_text, cut_text
-from .memory import MAX_SEARCH_K, Interaction, InteractionMemory
+from .memory import MAX_SEARCH_K, SOURCES, Interaction, InteractionMemory  # SOURCES: who wrote a program
 from .prompts import (
     REVIEW_INSTRUCTION,
     PromptError,
@@ -128,9 +128,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..scene import Scene
 
 __all__ = ["Attempt", "Loop", "NothingToFixError", "AUTOMATION_LEVELS", "SOURCES"]
-
-#: Who wrote an attempt's program: the chat model, or the critics' own repairs (also the memory's ``source``).
-SOURCES = ("llm", "repair")
 
 AUTOMATION_LEVELS = ("manual", "guided", "auto")
 Automation = Literal["manual", "guided", "auto"]
@@ -169,8 +166,8 @@ class Attempt:
     it: ``"request"`` (a task), ``"fix"`` (critic or runtime feedback),
     ``"refine"`` (the user's own words), ``"review"`` (the embedded
     condition's self-review) or ``"repair"`` (the critics' own repairs, no
-    model call). ``source`` is who wrote the program: ``"llm"`` or
-    ``"repair"``; a repair attempt's accepted edits are in ``changes``
+    model call). ``source`` is who wrote the program (:data:`SOURCES`:
+    ``"llm"`` or ``"repair"``, as in the memory); a repair attempt's accepted edits are in ``changes``
     (:class:`~robocritics.repair.Change`: critic, line, what, why, cycle-time
     cost in s; [] for the model's). ``prompt`` is the user message sent
     (including any runtime feedback or note carried over from the previous
