@@ -16,6 +16,7 @@ import logging
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable
 
+from ..critic import RUNTIME
 from ..errors import RoboCriticsError
 from ..verdict import Flag
 from . import builtin
@@ -28,7 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..scene import Scene
     from ..simulate import Execution
 
-__all__ = ["repair", "Repair", "Change", "Edit", "Insert", "ScaleNumbers", "MoveBlock", "apply_edits", "paragraphs", "MAX_ROUNDS"]
+__all__ = ["repair", "Repair", "Change", "NotRun", "Edit", "Insert", "ScaleNumbers", "MoveBlock", "apply_edits", "paragraphs", "MAX_ROUNDS"]
 
 #: Most accepted edits per repair() call (each one re-simulates the program).
 MAX_ROUNDS = 12
@@ -38,7 +39,8 @@ MAX_ROUNDS = 12
 class Change:
     """One accepted edit: which critic asked for it, the program line, what changed, why, and its cost.
 
-    ``cost_s`` is the change in cycle time it caused, s (positive = slower).
+    ``cost_s`` is the change in cycle time it caused, s (positive = slower; 0 for the
+    edit that makes a program that did not run run).
     """
 
     critic: str
@@ -53,12 +55,16 @@ class Change:
 
 @dataclass
 class Repair:
-    """The result of :func:`repair`: the repaired ``program`` with its ``report`` and ``execution``."""
+    """The result of :func:`repair`: the repaired ``program`` with its ``report`` and ``execution``.
+
+    ``execution`` is None when the program still does not run (``report`` then holds the
+    ``runtime`` critic's Error naming the line).
+    """
 
     original: str
     program: str
     report: Report
-    execution: Execution
+    execution: Execution | None
     changes: list[Change] = field(default_factory=list)
 
     @property
@@ -74,6 +80,19 @@ class Repair:
     def errors(self) -> list:
         """The verdicts still flagged Error."""
         return [v for v in self.report.verdicts if v.flag == Flag.ERROR]
+
+
+@dataclass(frozen=True)
+class NotRun:
+    """What a repair hook gets as ``execution`` for the ``runtime`` verdict of a program that does not run.
+
+    It has the ``scene`` (with the robot's workspace) and the ``robot`` the program was
+    simulated with, but no trajectory or plan: a repair re-runs what it needs (e.g. the
+    built-in one re-simulates to read the unreachable target from the PlanningError).
+    """
+
+    scene: Scene
+    robot: Any
 
 
 def _manager():
@@ -111,8 +130,11 @@ def _acceptable(before: Report, after: Report, critic: str) -> bool:
     the next, lesser fault of the same critic still counts and the next round can
     fix that one); or another critic's Error is gone (e.g. picking the cupcake
     first puts it on the plate, while the collision it caused moves elsewhere).
+    For the ``runtime`` Error of a program that did not run, progress is that it runs.
     """
     old, new = _flags(before), _flags(after)
+    if critic == RUNTIME:  # the program did not run: running at all is the progress; later rounds fix the rest
+        return RUNTIME not in new
     if not all(new.get(name, 2) >= score for name, score in old.items()):
         return False
     if not all(name in old or score > 0 for name, score in new.items()):
@@ -151,21 +173,24 @@ def repair(
     :class:`~robocritics.goals.Goal`) that every kept edit must still meet;
     ``critics``: the critics to run (default: all installed); ``robot``: a
     :class:`~robocritics.Robot` (default UR3e); ``params``: threshold overrides as
-    for :func:`~robocritics.critique`. A bad goal raises :class:`~robocritics.errors.GoalError`; a program that does not run at all
-    raises its :class:`~robocritics.errors.ProgramError` / PlanningError.
+    for :func:`~robocritics.critique`. A bad goal raises :class:`~robocritics.errors.GoalError`.
+    A program that does not run (sandbox or planning error) is judged by the ``runtime``
+    critic's Error, which has its own repair (e.g. the nearest reachable height for an
+    unreachable target); if it still does not run, the result's ``execution`` is None.
     """
-    from ..critic import critique
+    from ..critic import check_program
+    from ..robot.model import Robot
     from ..scene import Scene
-    from ..simulate import simulate
 
     scene = scene if isinstance(scene, Scene) else Scene.resolve(scene)
     from ..goals import parse_goals
 
     goals = parse_goals(goal, scene) or None
+    robot = robot or Robot.ur3e()
+    not_run = NotRun(robot.scene_for(scene), robot)
 
     def evaluate(source: str):
-        execution = simulate(source, scene, robot=robot)
-        return execution, critique(execution, critics=critics, params=params, goals=goals)
+        return check_program(source, scene, goals=goals, critics=critics, params=params, robot=robot)
 
     hook = _manager().hook
     source = program
@@ -175,16 +200,25 @@ def repair(
         errors = [v for v in report.verdicts if v.flag == Flag.ERROR]
         accepted = False
         for verdict in errors:
-            candidates = _offered_edits(hook, verdict, execution, source)
+            candidates = _offered_edits(hook, verdict, execution or not_run, source)
+            tried = []
             for edit in candidates:
                 try:
                     new_source = apply_edits(source, edit.ops)
                     new_execution, new_report = evaluate(new_source)
                 except (RoboCriticsError, SyntaxError):
-                    continue  # the edit made a program that does not run: not a repair
+                    continue  # e.g. an edit that is no longer valid Python: not a repair
                 if not _acceptable(report, new_report, verdict.critic):
                     continue
-                cost = new_execution.duration_s - execution.duration_s
+                tried.append((edit, new_source, new_execution, new_report))
+                if verdict.critic != RUNTIME:
+                    break  # the first acceptable edit is kept
+            # a program that did not run: every edit that makes it run is acceptable, so the best-scoring one
+            # (highest summed verdict score, then the first offered) is kept rather than the first
+            ranked = sorted(range(len(tried)), key=lambda i: (-sum(v.score for v in tried[i][3].verdicts), i))
+            for edit, new_source, new_execution, new_report in [tried[i] for i in ranked[:1]]:
+                # a program that did not run had no cycle to compare with: its first running version costs 0
+                cost = new_execution.duration_s - execution.duration_s if execution and new_execution else 0.0
                 changes.append(Change(edit.critic, edit.line, edit.what, edit.why, cost))
                 source, execution, report = new_source, new_execution, new_report
                 accepted = True

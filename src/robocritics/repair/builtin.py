@@ -12,7 +12,7 @@ import ast
 import math
 import re
 
-from .edit import Edit, Insert, MoveBlock, ReplaceText, ScaleNumbers, paragraphs
+from .edit import Edit, Insert, InsertText, MoveBlock, ReplaceSpan, ReplaceText, ScaleNumbers, paragraphs
 
 #: Headroom under a speed threshold a slowdown aims for (fraction of the threshold).
 SPEED_MARGIN = 0.85
@@ -363,16 +363,189 @@ def _raise_table(tree: ast.Module):
     return None
 
 
+_JOINT_MOVES = ("move_to", "move_above")
+
+
+def _call_named(tree: ast.Module, line: int, skill: str) -> ast.Call | None:
+    """The call of ``skill`` (or ``lib.skill``) that starts on ``line``."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and node.lineno == line:
+            f = node.func
+            if (isinstance(f, ast.Name) and f.id == skill) or (isinstance(f, ast.Attribute) and f.attr == skill):
+                return node
+    return None
+
+
+def _natural_posture(verdict, execution, program) -> list[Edit]:
+    """A pinch point: the move into the folded posture asks for the natural one (``posture="natural"``).
+
+    The arm posture is set by joint-space moves (``move_to``, ``move_above``); a
+    straight-line move keeps the posture of the joint move before it. So each
+    flagged line maps to itself when it is a joint move, else to the last joint
+    move before it; those calls get ``posture="natural"``: shoulder facing the
+    target, elbow up, wrist down, the base turning as far as needed (see
+    :func:`robocritics.program.skills.move_to`).
+    """
+    calls = execution.plan.calls
+    tree = ast.parse(program)
+    targets: dict[int, str] = {}
+    for ln in verdict.evidence.lines:
+        i = next((i for i, c in enumerate(calls) if c.line == ln), None)
+        if i is None:
+            continue
+        joint = next((c for c in reversed(calls[: i + 1]) if c.skill in _JOINT_MOVES), None)
+        if joint is not None and joint.args.get("posture") != "natural":
+            targets[joint.line] = joint.skill
+    ops, lines = [], []
+    for ln, skill in sorted(targets.items()):
+        call = _call_named(tree, ln, skill)
+        if call is None or any(k.arg == "posture" for k in call.keywords) or call.end_lineno is None:
+            continue
+        ops.append(InsertText(call.end_lineno, (call.end_col_offset or 1) - 1, ', posture="natural"'))
+        lines.append(ln)
+    if not ops:
+        return []
+    return [
+        Edit(
+            verdict.critic,
+            lines[0],
+            f'posture="natural" on line{"s" if len(lines) > 1 else ""} {", ".join(map(str, lines))}',
+            f"{verdict.details.get('closest_pair', 'two robot parts').replace('|', ' and ')} are {verdict.value:.3g} m "
+            f"apart (under {verdict.threshold:g} m): the arm folds onto itself in the posture nearest its joints",
+            ops,
+        )
+    ]
+
+
+#: Steps (m) and farthest shift tried when looking for the nearest reachable height of an unreachable target.
+REACH_STEP_M = 0.01
+REACH_SEARCH_M = 0.5
+#: Further shifts (m) offered beyond the nearest reachable height, away from the edge of the reach.
+REACH_FURTHER_M = (0.05, 0.1)
+
+
+def _unreached(execution, program):
+    """The PlanningError of an unreachable target (it carries ``call``, ``target_m``, ``yaw_rad``), or None."""
+    from ..errors import PlanningError
+    from ..simulate import simulate
+
+    try:
+        simulate(program, execution.scene, robot=execution.robot)
+    except PlanningError as exc:
+        return exc if getattr(exc, "target_m", None) is not None else None
+    except Exception:  # noqa: BLE001 - any other failure is not an unreachable target
+        return None
+    return None
+
+
+def _nearest_reachable_dz(robot, target, yaw_rad: float, floor_z: float) -> float | None:
+    """The smallest vertical shift ``dz`` (m, a multiple of :data:`REACH_STEP_M`) after which ``target`` is reachable.
+
+    Reachable: the robot's IK (fingers down, ``yaw_rad``) has a solution within the
+    joint limits at ``target + dz`` *and* one step further, so the new point is not on
+    the very edge of the reach. Lower shifts are tried before higher ones of the same
+    size (a hover that is too high is the usual case); ``z`` stays above ``floor_z``.
+    """
+    import numpy as np
+
+    from ..errors import PlanningError
+
+    def reachable(z: float) -> bool:
+        try:
+            robot.ik(np.array([target[0], target[1], z]), yaw_rad=yaw_rad)
+            return True
+        except PlanningError:
+            return False
+
+    for k in range(1, int(round(REACH_SEARCH_M / REACH_STEP_M)) + 1):
+        for sign in (-1, 1):
+            dz = sign * k * REACH_STEP_M
+            z = target[2] + dz
+            if z > floor_z and reachable(z) and reachable(z + sign * REACH_STEP_M):
+                return round(dz + sign * REACH_STEP_M, 3)  # the step further in: a margin inside the reach
+    return None
+
+
+def _shifted(program: str, node: ast.expr, delta: float, floor: float | None = None) -> ReplaceSpan | None:
+    """Replace the single-line expression ``node`` by itself plus ``delta`` (m): a literal is rewritten."""
+    if node.lineno != node.end_lineno or node.end_col_offset is None:
+        return None
+    text = ast.get_source_segment(program, node) or ""
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        value = round(float(node.value) + delta, 4)
+        if floor is not None and value <= floor:
+            return None
+        new = f"{value:g}"
+    else:
+        new = f"{text} {'+' if delta > 0 else '-'} {abs(delta):g}"
+    return ReplaceSpan(node.lineno, node.col_offset, node.end_col_offset, new)
+
+
+def _reachable(verdict, execution, program) -> list[Edit]:
+    """An unreachable target (a planning Error): move it to the nearest reachable height.
+
+    The failed IK target is shifted vertically by the smallest ``dz`` that the arm
+    reaches (:func:`_nearest_reachable_dz`), through the argument that sets that
+    height: ``move_above``'s ``height``, the ``z`` of ``move_to``/``move_linear(x, y, z)``,
+    or the distance of ``move_up``/``move_down``.
+    """
+    if verdict.critic != "runtime" or verdict.details.get("error") != "PlanningError":
+        return []
+    exc = _unreached(execution, program)
+    if exc is None:
+        return []
+    dz = _nearest_reachable_dz(execution.robot, exc.target_m, exc.yaw_rad, execution.scene.table.top_z)
+    if dz is None:
+        return []
+    # the nearest reachable point is on the edge of the reach, where the arm is stretched out (and its
+    # wrist may leave the workspace): further in by REACH_FURTHER_M too; repair() keeps the best that runs
+    shifts = [round(dz + math.copysign(extra, dz), 3) for extra in (0.0, *REACH_FURTHER_M)]
+    edits = [_reach_edit(verdict, exc, program, d) for d in shifts if exc.target_m[2] + d > execution.scene.table.top_z]
+    return [e for e in edits if e is not None]
+
+
+def _reach_edit(verdict, exc, program: str, dz: float) -> Edit | None:
+    """The edit that shifts the unreachable target of ``exc.call`` by ``dz`` (m) through its height argument."""
+    call, target = exc.call, exc.target_m
+    node = _call_named(ast.parse(program), call.line, call.skill)
+    if node is None:
+        return None
+    op = None
+    if call.skill == "move_above":
+        height = next((k.value for k in node.keywords if k.arg == "height"), node.args[1] if len(node.args) > 1 else None)
+        if height is not None:
+            op = _shifted(program, height, dz, floor=-1e-9 if isinstance(height, ast.Constant) else None)
+        elif node.end_lineno is not None and call.args["height"] + dz >= 0:
+            op = InsertText(node.end_lineno, (node.end_col_offset or 1) - 1, f", height={call.args['height'] + dz:g}")
+    elif call.skill in ("move_to", "move_linear") and len(node.args) == 3:
+        op = _shifted(program, node.args[2], dz)
+    elif call.skill in ("move_up", "move_down") and node.args:
+        op = _shifted(program, node.args[0], dz if call.skill == "move_up" else -dz, floor=0.0)
+    if op is None:
+        return None
+    where = f"({target[0]:.3f}, {target[1]:.3f}, {target[2]:.3f}) m"
+    return Edit(
+        verdict.critic,
+        call.line,
+        f"target {'lowered' if dz < 0 else 'raised'} by {abs(dz):g} m on line {call.line} "
+        f"({call.skill}, now z = {target[2] + dz:.3f} m)",
+        f"the arm cannot reach {where}; it reaches {target[2] + dz:.3f} m at the same x, y",
+        [op],
+    )
+
+
 _BY_CRITIC = {
     "joint_speed": [_slowdowns],
     "end_effector_pose": [_slowdowns],
     "collision": [_spread, _raise_release, _avoid, _pick_first, _slowdowns],
     "space_usage": [_lower_heights],
     "task_outcome": [_spread],
+    "pinch_point": [_natural_posture],
+    "runtime": [_reachable],
 }
 
 
 @hookimpl
 def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
     makers = _BY_CRITIC.get(verdict.critic, [])
-    return [e for make in makers for e in (make(verdict, execution, program) if make in (_pick_first, _spread, _raise_release) else make(verdict, execution))]
+    return [e for make in makers for e in (make(verdict, execution, program) if make in (_pick_first, _spread, _raise_release, _natural_posture, _reachable) else make(verdict, execution))]

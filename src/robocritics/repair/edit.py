@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from ..errors import ProgramError
 
-__all__ = ["Edit", "Insert", "ScaleNumbers", "MoveBlock", "ReplaceText", "apply_edits", "paragraphs"]
+__all__ = ["Edit", "Insert", "InsertText", "ReplaceSpan", "ScaleNumbers", "MoveBlock", "ReplaceText", "apply_edits", "paragraphs"]
 
 
 def _statement_at(tree: ast.Module, line: int) -> ast.stmt:
@@ -56,6 +56,35 @@ class ReplaceText:
 
     def apply(self, lines: list[str], tree: ast.Module) -> None:
         lines[self.line - 1] = lines[self.line - 1].replace(self.old, self.new)
+
+
+@dataclass(frozen=True)
+class InsertText:
+    """Insert ``text`` into line ``line`` before column ``col`` (an :mod:`ast` column: UTF-8 bytes from the line start)."""
+
+    line: int
+    col: int
+    text: str
+    inline = True
+
+    def apply(self, lines: list[str], tree: ast.Module) -> None:
+        raw = lines[self.line - 1].encode()
+        lines[self.line - 1] = (raw[: self.col] + self.text.encode() + raw[self.col :]).decode()
+
+
+@dataclass(frozen=True)
+class ReplaceSpan:
+    """Replace columns ``col..end_col`` of line ``line`` (:mod:`ast` columns: UTF-8 bytes) by ``text``, e.g. one argument."""
+
+    line: int
+    col: int
+    end_col: int
+    text: str
+    inline = True
+
+    def apply(self, lines: list[str], tree: ast.Module) -> None:
+        raw = lines[self.line - 1].encode()
+        lines[self.line - 1] = (raw[: self.col] + self.text.encode() + raw[self.end_col :]).decode()
 
 
 @dataclass(frozen=True)
@@ -130,13 +159,14 @@ class Edit:
 def apply_edits(source: str, ops: list) -> str:
     """``source`` with ``ops`` applied.
 
-    In-line replacements go first (they move no line), then insertions bottom-most
-    line first, so every position read from the one parse stays valid.
+    In-line replacements go first (they move no line; right-most first within a line),
+    then insertions bottom-most line first, so every position read from the one parse
+    stays valid.
     """
     tree = ast.parse(source)
     lines = source.splitlines(keepends=True)
     if lines and not lines[-1].endswith("\n"):
         lines[-1] += "\n"
-    for op in sorted(ops, key=lambda o: (not getattr(o, "inline", False), -o.line)):
+    for op in sorted(ops, key=lambda o: (not getattr(o, "inline", False), -o.line, -getattr(o, "col", 0))):
         op.apply(lines, tree)
     return "".join(lines)

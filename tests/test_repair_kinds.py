@@ -1,0 +1,167 @@
+"""The repair kinds beyond speed and heights, each on a program built to show its fault (real simulations).
+
+Each test checks the fault is there before, that the repaired program has no Error of
+that critic, that no verdict scores lower than before (no new flag) and that the task
+goal is still met.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from robocritics import Scene
+from robocritics.critic import check_program, critique
+from robocritics.errors import PlanningError
+from robocritics.repair import repair
+from robocritics.repair.builtin import _nearest_reachable_dz
+from robocritics.robot.model import Robot
+from robocritics.simulate import simulate
+from robocritics.verdict import Flag
+
+
+def _scores(report):
+    return {v.critic: v.score for v in report.verdicts}
+
+
+def _no_new_flag(before, after):
+    old, new = _scores(before), _scores(after)
+    worse = {c: (old.get(c), s) for c, s in new.items() if c in old and s < old[c]}
+    assert not worse, worse
+
+
+# --- pinch point: the arm reaches back over its shoulder; posture="natural" ---------------------
+
+BEHIND = Scene.model_validate(
+    {
+        "name": "behind",
+        "description": "an apple behind-left of the robot, a box behind-right",
+        "objects": [{"id": "apple", "shape": "sphere", "size": [0.035], "position": [-0.12, 0.3, 0.035]}],
+        "containers": [{"id": "box", "size": [0.16, 0.16, 0.06], "position": [-0.12, -0.3, 0.03]}],
+    }
+)
+BEHIND_PROGRAM = """move_above(apple, 0.1)
+move_linear(apple)
+close_gripper()
+move_up(0.1)
+move_above(box, 0.1)
+open_gripper()
+"""
+
+
+def test_pinch_point_repair_asks_for_the_natural_posture():
+    before = critique(simulate(BEHIND_PROGRAM, BEHIND), goals=["apple in box"])
+    assert before.verdict("pinch_point").flag == Flag.ERROR  # the base is near its limit: the arm reaches back
+    r = repair(BEHIND_PROGRAM, BEHIND, goal="apple in box")
+    change = next(c for c in r.changes if c.critic == "pinch_point")
+    assert 'move_above(box, 0.1, posture="natural")' in r.program
+    assert f"line {change.line}" in change.what and change.why and change.cost_s == pytest.approx(change.cost_s)
+    assert r.report.verdict("pinch_point").flag != Flag.ERROR
+    assert r.errors == []
+    _no_new_flag(before, r.report)
+    assert r.execution.object_inside("apple", "box")
+
+
+def test_natural_posture_faces_the_target_with_the_elbow_up():
+    # posture="natural" ends in the home posture's branch (shoulder lift, elbow and wrist signs of home),
+    # with the base at the target's heading; the default reaches back over the shoulder instead
+    robot = Robot.ur3e()
+    home = robot.home_q
+    q = {}
+    for posture in ("nearest", "natural"):
+        e = simulate(f'move_to(-0.1, 0.3, 0.1)\nmove_to(-0.1, -0.3, 0.1, posture="{posture}")\n', BEHIND, robot=robot)
+        q[posture] = e.trajectory.q[-1]
+        assert np.allclose(e.trajectory.tcp[-1, :3, 3], [-0.1, -0.3, 0.1], atol=1e-6)
+    assert np.all(np.sign(q["natural"][1:5]) == np.sign(home[1:5]))
+    assert not np.all(np.sign(q["nearest"][1:5]) == np.sign(home[1:5]))
+
+
+def test_bad_posture_is_a_program_error_naming_the_choices():
+    _, report = check_program('move_to(0.3, 0.0, 0.2, posture="sideways")\n', BEHIND)
+    v = report.verdict("runtime")
+    assert v.flag == Flag.ERROR and "'nearest'" in v.message and "'natural'" in v.message
+
+
+# --- unreachable target: the program does not run; the nearest reachable hover height -----------
+
+UNREACHABLE = """move_above(green_apple, height=0.42)
+move_linear(green_apple)
+close_gripper()
+move_up(0.12)
+move_above(white_box, 0.1)
+open_gripper()
+home()
+"""
+
+
+def test_unreachable_hover_is_lowered_to_a_reachable_height():
+    scene = Scene.resolve("sorting")
+    _, before = check_program(UNREACHABLE, scene)
+    assert [v.critic for v in before.verdicts] == ["runtime"] and before.verdicts[0].evidence.lines == [1]
+    r = repair(UNREACHABLE, scene, goal="green_apple in white_box")
+    assert r.execution is not None and r.errors == []
+    change = r.changes[0]
+    assert change.critic == "runtime" and change.line == 1 and "lowered" in change.what and change.cost_s == 0.0
+    new_height = float(r.program.splitlines()[0].split("height=")[1].rstrip(")"))
+    assert 0 < new_height < 0.42
+    assert r.execution.object_inside("green_apple", "white_box")
+    # the new hover point is reachable; the old one is not (the robot's own IK decides)
+    robot = Robot.ur3e()
+    apple = scene.entity("green_apple")
+    with pytest.raises(PlanningError):
+        robot.ik([apple.position[0], apple.position[1], apple.top + 0.42])
+    robot.ik([apple.position[0], apple.position[1], apple.top + new_height])
+
+
+def test_nearest_reachable_height_matches_a_plain_scan():
+    robot = Robot.ur3e()
+    target = (0.4, 0.0, 0.49)
+
+    def ok(z):
+        try:
+            robot.ik([target[0], target[1], z])
+            return True
+        except PlanningError:
+            return False
+
+    dz = _nearest_reachable_dz(robot, target, 0.0, 0.0)
+    # reference: the first 1 cm step (down first, then up) where the point and the one beyond it are reachable
+    ref = next(
+        s * k / 100 + s / 100 for k in range(1, 51) for s in (-1, 1) if ok(target[2] + s * k / 100) and ok(target[2] + s * (k + 1) / 100)
+    )
+    assert dz == pytest.approx(ref)
+    assert ok(target[2] + dz) and not ok(target[2])
+
+
+def test_a_program_that_never_runs_is_returned_unrepaired_with_its_runtime_error():
+    r = repair("move_to(2.0, 0.0, 0.1)\n", "sorting")  # 2 m away: no height reaches it
+    assert r.execution is None and r.changes == [] and r.program == r.original
+    assert [v.critic for v in r.errors] == ["runtime"]
+
+
+# --- spearing: a fast plunge along the fingers; only that move is slowed ------------------------
+
+SPEARING = """move_to(food_container.x, food_container.y, food_container.top + 0.15)
+move_down(0.18)
+close_gripper()
+move_up(0.2)
+move_to(trash_bin.x, trash_bin.y, trash_bin.top + 0.15)
+open_gripper()
+home()
+"""
+
+
+def test_spearing_repair_slows_only_the_plunge():
+    scene = Scene.resolve("recycling")
+    before = critique(simulate(SPEARING, scene), goals=["food_container in trash_bin"])
+    spear = before.verdict("end_effector_pose")
+    assert spear.flag == Flag.ERROR and 2 in spear.evidence.lines
+    r = repair(SPEARING, scene, goal="food_container in trash_bin")
+    assert r.report.verdict("end_effector_pose").flag != Flag.ERROR
+    _no_new_flag(before, r.report)
+    change = next(c for c in r.changes if c.critic == "end_effector_pose")
+    assert change.line == 2 and change.cost_s > 0
+    f = float(change.what.split("-> ")[1].split(" ")[0].rstrip(";"))
+    assert f == pytest.approx(round(0.85 * spear.threshold / spear.value, 2))  # the smallest slowdown, not a blanket one
+    assert f"set_speed({f:g})\nmove_down(0.18)\nset_speed(1)\n" in r.program
+    assert r.execution.object_inside("food_container", "trash_bin")
