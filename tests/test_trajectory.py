@@ -100,3 +100,23 @@ def test_the_tcp_frame_is_the_robots_and_survives_the_round_trip(execution):
     np.testing.assert_array_equal(other.tcp, kwargs["frames"][:, names.index("fingertips")])
     back = Trajectory.from_json(other.to_json())
     assert back.tcp_frame == "fingertips" and back.slice(0, 2).tcp_frame == "fingertips"
+
+
+def test_positions_are_the_frame_origins_shared_read_only_and_not_pickled(execution):
+    import pickle
+
+    traj = Trajectory.from_json(execution.trajectory.to_json())  # a fresh one: nothing cached yet
+    pos = traj.positions
+    np.testing.assert_array_equal(pos, traj.frames[:, :, :3, 3])
+    assert pos.flags.c_contiguous and not pos.flags.writeable
+    assert traj.positions is pos  # one copy for every critic
+    with pytest.raises(ValueError):
+        pos[0, 0, 0] = 1.0
+    blob = pickle.dumps(traj)
+    assert len(blob) == len(pickle.dumps(Trajectory.from_json(traj.to_json())))  # the cache is not shipped
+    again = pickle.loads(blob)
+    assert "_positions" not in again.__dict__
+    np.testing.assert_array_equal(again.positions, pos)
+    assert again.content_hash() == traj.content_hash()
+    part = traj.slice(3, 10)
+    np.testing.assert_array_equal(part.positions, pos[3:10])

@@ -88,7 +88,7 @@ def link_speeds(positions: np.ndarray, time: np.ndarray) -> np.ndarray:
 
     Row ``i`` is the speed reached at sample ``i + 1``: ``|p_{i+1} - p_i| / (tau_{i+1} - tau_i)``.
     """
-    p = np.ascontiguousarray(positions)  # one gather of the frame origins: faster than differencing a strided view
+    p = np.ascontiguousarray(positions)  # contiguous: faster to difference than a strided view (no copy if already)
     step = p[1:] - p[:-1]  # (T-1, L, 3) m
     speed = np.sqrt(np.einsum("tli,tli->tl", step, step))  # einsum: twice as fast as np.linalg.norm over xyz
     speed /= np.diff(time)[:, None]
@@ -106,9 +106,9 @@ class JointSpeedCritic:
         if params.frames:
             sel = [trajectory.frame_index(n) for n in params.frames]
             names = tuple(names[i] for i in sel)
-            positions = trajectory.frames[:, sel][:, :, :3, 3]
+            positions = trajectory.positions[:, sel]
         else:
-            positions = trajectory.frames[:, :, :3, 3]
+            positions = trajectory.positions  # (T, L, 3) m, shared with the other critics
         time = trajectory.time
         limits = np.asarray(trajectory.limits.velocity_rad_s, dtype=float)
         if T < 2 or positions.shape[1] == 0:
