@@ -20,14 +20,22 @@ argument or file, never a traceback; 130 interrupted (Ctrl-C).
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 
 from ..errors import CriticError, RoboCriticsError
-from . import batch, check, critics, deploy, fix, run, studio, ursim  # noqa: F401  (each registers its subcommand)
 from ._common import SUBCOMMANDS, UsageError, one_line
-from .ursim import ursim_command
 
 __all__ = ["main", "build_parser"]
+
+#: The built-in subcommands, each the module of that name here (in help order). A command line naming one
+#: imports only that module: ``robocritics check`` does not pay for batch, deploy, studio or the LLM client.
+BUILTIN = ("batch", "check", "critics", "deploy", "fix", "run", "studio", "ursim")
+
+
+def _register(names) -> None:
+    for name in names:
+        importlib.import_module(f"{__package__}.{name}")  # registers its builder in SUBCOMMANDS
 
 
 class _Parser(argparse.ArgumentParser):
@@ -37,14 +45,18 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every subcommand, or with ``only`` (a built-in's name) of that one and any registered
+    by other code."""
+    _register(BUILTIN if only not in BUILTIN else (only,))
     parser = _Parser(
         prog="robocritics",
         description="LLM robot programming with expert-informed motion critics.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for builder in SUBCOMMANDS.values():
-        builder(sub)
+    for name, builder in SUBCOMMANDS.items():
+        if only not in BUILTIN or name == only or name not in BUILTIN:
+            builder(sub)
     return parser
 
 
@@ -52,8 +64,10 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status (never raises for bad input)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["ursim"]:
+        from .ursim import ursim_command
+
         return ursim_command(argv[1:])
-    parser = build_parser()
+    parser = build_parser(argv[0] if argv else None)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, or argparse's own usage error (status 2)

@@ -1,0 +1,61 @@
+"""The check path imports only what it uses: no scipy, no HTTP client, no deploy/LLM/replay/batch code.
+
+Each case runs in a fresh interpreter (``sys.modules`` of this test process holds everything the suite has
+imported) and prints the modules loaded after the work is done.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PROGRAM = ROOT / "examples" / "programs" / "sorting_careful.py"
+
+#: Packages and robocritics subpackages that ``robocritics check`` and ``simulate() + critique()`` must not load.
+NOT_ON_THE_PATH = ("scipy", "httpx", "httpcore", "viser", "ray", "pyarrow", "sqlite3", "robocritics.deploy",
+                   "robocritics.llm", "robocritics.viz", "robocritics.batch", "robocritics.repair",
+                   "robocritics.testing")  # fmt: skip
+
+
+def loaded_after(code: str) -> set[str]:
+    script = f"{code}\nimport json, sys\nprint(json.dumps(sorted(sys.modules)), file=sys.stderr)"
+    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode in (0, 1), done.stderr[-2000:]
+    return set(json.loads(done.stderr.strip().splitlines()[-1]))
+
+
+def offenders(modules: set[str], banned=NOT_ON_THE_PATH) -> list[str]:
+    return sorted(m for m in modules if any(m == b or m.startswith(b + ".") for b in banned))
+
+
+def test_cli_check_loads_only_the_check_subcommand_and_no_heavy_extras():
+    mods = loaded_after(
+        "from robocritics.cli import main\n"
+        f"main(['check', {str(PROGRAM)!r}, '--scene', 'sorting', '--json'])"
+    )
+    assert "robocritics.robot.proximity" in mods and "robocritics.critics.space_usage" in mods  # it really ran
+    assert offenders(mods) == []
+    other_commands = {f"robocritics.cli.{c}" for c in ("batch", "critics", "deploy", "fix", "run", "studio", "ursim")}
+    assert sorted(mods & other_commands) == []
+
+
+def test_simulate_and_critique_do_not_load_scipy():
+    mods = loaded_after(
+        "from pathlib import Path\nfrom robocritics import Scene, critique, simulate\n"
+        f"critique(simulate(Path({str(PROGRAM)!r}).read_text(), Scene.builtin('sorting')))"
+    )
+    assert "robocritics.robot.hull" in mods
+    assert offenders(mods) == []
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["no-such-command"]])
+def test_help_and_unknown_commands_still_list_every_subcommand(argv):
+    done = subprocess.run([sys.executable, "-m", "robocritics.cli", *argv], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    text = done.stdout + done.stderr
+    for command in ("batch", "check", "critics", "deploy", "fix", "run", "studio", "ursim"):
+        assert command in text
