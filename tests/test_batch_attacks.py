@@ -226,15 +226,31 @@ def test_count_rows_equals_the_plain_count_at_any_chunk_size(tmp_path_factory, p
     assert got == sum(1 for _ in read_rows(str(path)))
 
 
-def test_done_rows_skips_garbage_and_over_long_lines_and_cuts_a_torn_one(tmp_path):
+def test_done_rows_cuts_a_torn_last_line(tmp_path):
     out = tmp_path / "out.jsonl"
     good = [error_row("a", "RowError", "m"), error_row(7, "RowError", "m")]
-    out.write_bytes(
-        json.dumps(good[0]).encode() + b"\nnot json\n[1, 2]\n" + b"x" * (3 << 20) + b"\n"
-        + json.dumps(good[1]).encode() + b'\n{"id": "torn", "sco'
-    )  # fmt: skip
-    assert done_rows(out) == good
-    assert out.read_bytes().endswith(json.dumps(good[1]).encode() + b"\n")
+    kept = "".join(json.dumps(r) + "\n" for r in good)
+    out.write_text(kept + '{"id": "torn", "sco')
+    assert done_rows(out) == good and out.read_text() == kept
+
+
+@pytest.mark.parametrize(
+    "lines, bad",
+    [
+        ([b"not json"], 2),
+        ([b"[1, 2]"], 2),
+        ([b'{"id": "a"}'], 2),  # an object, not an output row
+        ([b"x" * (3 << 20)], 2),  # over-long
+        ([b"2026-12-02 log line", json.dumps(error_row("b", "RowError", "m")).encode()], 2),
+    ],
+)
+def test_resume_refuses_an_output_file_that_is_not_a_batch_output_and_leaves_it_alone(tmp_path, lines, bad):
+    out = tmp_path / "app.log"
+    out.write_bytes(json.dumps(error_row("a", "RowError", "m")).encode() + b"\n" + b"\n".join(lines) + b"\npartial last line")
+    before = out.read_bytes()
+    with pytest.raises(cli_batch.UsageError, match=f"line {bad} of .* is not an output row"):
+        done_rows(out)
+    assert out.read_bytes() == before
 
 
 def test_parquet_round_trip_equals_the_jsonl_rows(tmp_path):

@@ -130,28 +130,31 @@ _MAX_OUT_LINE_BYTES = 1 << 20
 
 
 def done_rows(path: Path) -> list[dict]:
-    """The complete rows already in the JSONL file ``path``; a torn last line (an interrupted write) is cut off.
+    """The rows already in the JSONL output file ``path``; a torn last line (an interrupted write) is cut off.
 
-    Lines that are not output rows (garbage, over-long) are skipped, not kept as rows."""
+    Any other line that is not an output row means ``path`` is not a batch's output (a log, the wrong file):
+    a UsageError naming the line, and the file is left as it was."""
+    from ..batch.rows import OUTPUT_KEYS
+
     if not path.exists():
         return []
-    rows, end = [], 0
+    rows, end, number = [], 0, 0
     with open(path, "rb+") as f:
         while line := f.readline(_MAX_OUT_LINE_BYTES):
-            over_long = False
-            while not line.endswith(b"\n") and len(line) == _MAX_OUT_LINE_BYTES:  # read an over-long line to its end
-                over_long, line = True, f.readline(_MAX_OUT_LINE_BYTES)
-            if not line.endswith(b"\n"):
+            number += 1
+            row = None
+            if line.endswith(b"\n"):
+                try:
+                    row = json.loads(line)
+                except ValueError:
+                    pass
+            elif len(line) < _MAX_OUT_LINE_BYTES:  # readline stopped at the end of the file
                 break  # the torn last line
+            if not (isinstance(row, dict) and set(row) == set(OUTPUT_KEYS)):
+                raise UsageError(f"--resume: line {number} of {shown_path(path)} is not an output row of robocritics "
+                                 "batch; is it the right file? (it was not changed)")  # fmt: skip
+            rows.append(row)
             end = f.tell()
-            if over_long:
-                continue
-            try:
-                row = json.loads(line)
-            except ValueError:
-                continue
-            if isinstance(row, dict) and "id" in row and isinstance(row.get("error"), (dict, type(None))):
-                rows.append(row)
         f.truncate(end)  # drop a torn last line, so the next row starts on its own line
     return rows
 
@@ -412,7 +415,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     previous = signal.signal(signal.SIGTERM, _terminated) if on_main_thread else None
     try:
         for row in rows:
-            if row["id"] is None and json.dumps(row["error"], sort_keys=True) in reported:
+            if reported and row["id"] is None and json.dumps(row["error"], sort_keys=True) in reported:
                 progress.skip()
                 continue  # an unreadable line already reported before --resume
             try:
