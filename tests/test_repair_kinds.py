@@ -7,6 +7,8 @@ goal is still met.
 
 from __future__ import annotations
 
+import ast
+
 import numpy as np
 import pytest
 
@@ -165,3 +167,81 @@ def test_spearing_repair_slows_only_the_plunge():
     assert f == pytest.approx(round(0.85 * spear.threshold / spear.value, 2))  # the smallest slowdown, not a blanket one
     assert f"set_speed({f:g})\nmove_down(0.18)\nset_speed(1)\n" in r.program
     assert r.execution.object_inside("food_container", "trash_bin")
+
+
+# --- release higher: the vertical overlap measured in the trace, per object of a loop ------------
+
+RECYCLE_SPREAD = """release_spots = {'coffee_cup': (0.057, 0.0), 'food_container': (-0.029, 0.05), 'water_bottle': (-0.029, -0.05)}
+release_raise = {'coffee_cup': 0.0, 'food_container': 0.0, 'water_bottle': 0.0}  # m
+for item in [coffee_cup, food_container, water_bottle]:
+    move_to(item.x, item.y, item.top + 0.15)
+    move_down(0.18)
+    close_gripper()
+    move_to(trash_bin.x + release_spots[item.id][0], trash_bin.y + release_spots[item.id][1], trash_bin.top + release_raise[item.id])
+    open_gripper()
+home()
+"""
+
+
+def _reference_overlaps(execution, line):
+    """Per carried object, max over counted collision samples of ``line`` of top(b) - bottom(a): one sample at a time."""
+    from robocritics.critics.collision import counted_distances
+
+    traj = execution.trajectory
+    D = counted_distances(traj)
+    objects = {o.id: o for o in execution.scene.objects}
+    containers = {c.id: c for c in execution.scene.containers}
+    out = {}
+    for t in range(len(traj)):
+        step = int(traj.step[t])
+        if traj.steps[step].line != line:
+            continue
+        first = int(np.flatnonzero(traj.step == step)[0])
+        load = str(traj.attached[first]) or (str(traj.attached[first - 1]) if first else "")
+        for k, pair in enumerate(traj.pairs):
+            if D[t, k] > 0 or pair.group_a not in ("gripper", "attached") or pair.group_b not in ("object", "container"):
+                continue
+            b = pair.b_entity
+            if b in containers:
+                top = containers[b].top
+            elif b in execution.object_poses:
+                top = execution.object_poses[b][t, 2, 3] + objects[b].half_height
+            else:
+                top = objects[b].top
+            if pair.group_a == "attached":
+                bottom = execution.object_poses[pair.a][t, 2, 3] - objects[pair.a].half_height
+            else:
+                bottom = traj.tcp[t, 2, 3]
+            out[load] = max(out.get(load, 0.0), top - bottom, -D[t, k])
+    return out
+
+
+def test_vertical_overlaps_match_a_per_sample_reference():
+    from robocritics.repair.builtin import _vertical_overlaps
+
+    execution = simulate(RECYCLE_SPREAD, Scene.resolve("recycling"))
+    fast = _vertical_overlaps(execution, 7)
+    slow = _reference_overlaps(execution, 7)
+    assert fast.keys() == slow.keys() and fast  # something is hit on the release move
+    for key in slow:
+        assert fast[key] == pytest.approx(slow[key], abs=1e-12)
+
+
+def test_release_raise_table_is_updated_not_duplicated():
+    from robocritics.repair.builtin import RELEASE_CLEARANCE_M, _raise_release, _vertical_overlaps
+    from robocritics.repair import apply_edits
+
+    scene = Scene.resolve("recycling")
+    execution = simulate(RECYCLE_SPREAD, scene)
+    verdict = critique(execution, critics=["collision"]).verdict("collision")
+    assert verdict.flag == Flag.ERROR and 7 in verdict.evidence.lines
+    [edit] = _raise_release(verdict, execution, RECYCLE_SPREAD)
+    out = apply_edits(RECYCLE_SPREAD, edit.ops)
+    assert out.count("release_raise = ") == 1 and out.count("release_raise[item.id]") == 1
+    line = next(ln for ln in out.splitlines() if ln.startswith("release_raise = "))
+    table = ast.literal_eval(line.split("=", 1)[1].split("#")[0].strip())
+    need = _vertical_overlaps(execution, 7)
+    for oid, raise_m in table.items():
+        expected = 0.0 if oid not in need else np.ceil(round((need[oid] + RELEASE_CLEARANCE_M) * 100, 6)) / 100
+        assert raise_m == pytest.approx(expected)
+    assert max(table.values()) > 0
