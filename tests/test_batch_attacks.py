@@ -104,6 +104,18 @@ def test_check_row_accepts_a_scene_object_as_its_data_and_an_empty_goal_list_as_
     pickle.loads(pickle.dumps(job))  # it travels to a worker
 
 
+def test_numpy_integer_ids_from_a_dataframe_become_plain_integers():
+    np = pytest.importorskip("numpy")
+    from robocritics.batch.evaluate import jobs_of
+
+    assert type(check_row(_row(id=np.int64(3))).id) is int and check_row(_row(id=np.uint8(4))).id == 4
+    with pytest.raises(RowError):
+        check_row(_row(id=np.bool_(True)))
+    errors: list[dict] = []
+    list(jobs_of([_row(id=np.int64(5), program=None)], errors))
+    assert json.dumps(errors[0]["id"]) == "5"  # a writer can take the error row's id
+
+
 def test_an_error_row_never_echoes_an_over_long_or_broken_id():
     from robocritics.batch.evaluate import jobs_of
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
-from .rows import Job, RowError, check_row, error_row, is_valid_id
+from .rows import Job, RowError, check_row, error_row, plain_id
 
 __all__ = ["evaluate", "jobs_of", "ENGINES"]
 
@@ -15,8 +15,7 @@ ENGINES = ("local", "ray")
 def _shown_id(row: Any) -> str | int | None:
     """The id an error row echoes: the row's own if it is a valid id, else None (an over-long or broken id
     is not copied into the output)."""
-    row_id = row.get("id") if isinstance(row, Mapping) else None
-    return row_id if is_valid_id(row_id) else None
+    return plain_id(row.get("id")) if isinstance(row, Mapping) else None
 
 
 def jobs_of(rows: Iterable[Any], errors: list[dict]) -> Iterator[Job]:

@@ -20,6 +20,7 @@ None when the error is not in the program).
 from __future__ import annotations
 
 import json
+import numbers
 import pickle
 import time
 from collections import OrderedDict
@@ -105,13 +106,23 @@ def _is_text(value: str) -> bool:
     return True
 
 
-def is_valid_id(row_id: Any) -> bool:
-    """``row_id`` can be a row's id (see :func:`check_row`): an error row echoes no other."""
+def _plain(row_id: Any) -> Any:
+    """``row_id`` as a plain ``int`` or ``str`` if it is an integer or text of another type (a NumPy integer
+    from a DataFrame's records, a ``str`` subclass), which JSON and Parquet writers may not take; else as is."""
+    if isinstance(row_id, numbers.Integral) and not isinstance(row_id, bool):
+        return int(row_id)
+    return str(row_id) if isinstance(row_id, str) else row_id
+
+
+def plain_id(row_id: Any) -> str | int | None:
+    """``row_id`` as a plain ``str`` or ``int`` if it can be a row's id (see :func:`check_row`), else None:
+    an error row echoes no other id."""
+    row_id = _plain(row_id)
     if isinstance(row_id, bool) or not isinstance(row_id, (str, int)) or row_id == "":
-        return False
+        return None
     if isinstance(row_id, int):
-        return abs(row_id) < 10**MAX_ID_DIGITS
-    return len(row_id) <= MAX_ID_CHARS and _is_text(row_id)
+        return row_id if abs(row_id) < 10**MAX_ID_DIGITS else None
+    return row_id if len(row_id) <= MAX_ID_CHARS and _is_text(row_id) else None
 
 
 def check_row(row: Any) -> Job:
@@ -120,7 +131,7 @@ def check_row(row: Any) -> Job:
         raise RowError(f"a row must be an object with 'id', 'scene' and 'program', got {type(row).__name__}")
     if "id" not in row:
         raise RowError("the row has no 'id'")
-    row_id = row["id"]
+    row_id = _plain(row["id"])
     if isinstance(row_id, bool) or not isinstance(row_id, (str, int)) or row_id == "":
         try:
             shown = json.dumps(row_id)
