@@ -454,7 +454,7 @@ def _posture(rec: Recorder, posture: Any, skill: str) -> dict[str, Any]:
 # the skills
 
 
-def move_to(x, y=None, z=None, posture="nearest"):
+def move_to(x, y=None, z=None, *, posture="nearest"):
     """Move the fingertip centre (TCP) to a point, fingers pointing down, along a joint-space path (fast, curved).
 
     Args:
@@ -487,7 +487,7 @@ def move_linear(x, y=None, z=None):
     rec.record("move_linear", _place(rec, "move_linear", x, y, z))
 
 
-def move_above(obj, height=0.1, posture="nearest"):
+def move_above(obj, height=0.1, *, posture="nearest"):
     """Move the fingertips to `height` metres above the top of an object or container (joint-space move).
 
     Args:
@@ -713,6 +713,8 @@ SKILLS: dict[str, Callable[..., None]] = {
 _USAGE = {
     "move_to": "move_to(x, y, z)  |  move_to(point)  |  move_to(obj)",
     "move_linear": "move_linear(x, y, z)  |  move_linear(point)  |  move_linear(obj)",
+    # posture= (move_to, move_above) is in their docstrings; the short signature stays as before
+    "move_above": "move_above(obj, height=0.1)",
 }
 
 
