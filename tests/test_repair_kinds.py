@@ -245,3 +245,16 @@ def test_release_raise_table_is_updated_not_duplicated():
         expected = 0.0 if oid not in need else np.ceil(round((need[oid] + RELEASE_CLEARANCE_M) * 100, 6)) / 100
         assert raise_m == pytest.approx(expected)
     assert max(table.values()) > 0
+
+
+def test_an_unreachable_straight_lift_ends_where_the_line_is_still_reachable():
+    src = UNREACHABLE.replace("height=0.42", "height=0.1").replace("move_up(0.12)", "move_up(0.4)")
+    scene = Scene.resolve("sorting")
+    _, before = check_program(src, scene)
+    assert before.verdicts[0].critic == "runtime" and before.verdicts[0].evidence.lines == [4]
+    r = repair(src, scene, goal="green_apple in white_box")
+    assert r.errors == [] and r.execution.object_inside("green_apple", "white_box")
+    [change] = [c for c in r.changes if c.critic == "runtime"]
+    assert change.line == 4 and "move_up" in change.what
+    lift = next(ln for ln in r.program.splitlines() if ln.startswith("move_up("))
+    assert 0 < float(lift[len("move_up(") : -1]) < 0.4

@@ -487,7 +487,9 @@ def _reachable(verdict, execution, program) -> list[Edit]:
     The failed IK target is shifted vertically by the smallest ``dz`` that the arm
     reaches (:func:`_nearest_reachable_dz`), through the argument that sets that
     height: ``move_above``'s ``height``, the ``z`` of ``move_to``/``move_linear(x, y, z)``,
-    or the distance of ``move_up``/``move_down``.
+    or the distance of ``move_up``/``move_down``. A straight line fails at its first
+    unreachable point, so its end moves to that point's reachable height
+    (``target_z + dz - end_z`` for the end, from the error's ``goal_m``).
     """
     if verdict.critic != "runtime" or verdict.details.get("error") != "PlanningError":
         return []
@@ -499,14 +501,17 @@ def _reachable(verdict, execution, program) -> list[Edit]:
         return []
     # the nearest reachable point is on the edge of the reach, where the arm is stretched out (and its
     # wrist may leave the workspace): further in by REACH_FURTHER_M too; repair() keeps the best that runs
-    shifts = [round(dz + math.copysign(extra, dz), 3) for extra in (0.0, *REACH_FURTHER_M)]
-    edits = [_reach_edit(verdict, exc, program, d) for d in shifts if exc.target_m[2] + d > execution.scene.table.top_z]
+    # a straight line fails at its first unreachable point: its end moves to where that point became reachable
+    end_z = getattr(exc, "goal_m", exc.target_m)[2]
+    shifts = [dz + math.copysign(extra, dz) for extra in (0.0, *REACH_FURTHER_M)]
+    shifts = [round(exc.target_m[2] + d - end_z, 3) for d in shifts if exc.target_m[2] + d > execution.scene.table.top_z]
+    edits = [_reach_edit(verdict, exc, program, d) for d in shifts]
     return [e for e in edits if e is not None]
 
 
 def _reach_edit(verdict, exc, program: str, dz: float) -> Edit | None:
-    """The edit that shifts the unreachable target of ``exc.call`` by ``dz`` (m) through its height argument."""
-    call, target = exc.call, exc.target_m
+    """The edit that shifts the end of ``exc.call``'s motion by ``dz`` (m, vertically) through its height argument."""
+    call, target = exc.call, getattr(exc, "goal_m", exc.target_m)
     node = _call_named(ast.parse(program), call.line, call.skill)
     if node is None:
         return None
@@ -523,13 +528,14 @@ def _reach_edit(verdict, exc, program: str, dz: float) -> Edit | None:
         op = _shifted(program, node.args[0], dz if call.skill == "move_up" else -dz, floor=0.0)
     if op is None:
         return None
-    where = f"({target[0]:.3f}, {target[1]:.3f}, {target[2]:.3f}) m"
+    p = exc.target_m
+    unreached = f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
     return Edit(
         verdict.critic,
         call.line,
         f"target {'lowered' if dz < 0 else 'raised'} by {abs(dz):g} m on line {call.line} "
         f"({call.skill}, now z = {target[2] + dz:.3f} m)",
-        f"the arm cannot reach {where}; it reaches {target[2] + dz:.3f} m at the same x, y",
+        f"the arm cannot reach {unreached}; it reaches {target[2] + dz:.3f} m at the same x, y",
         [op],
     )
 

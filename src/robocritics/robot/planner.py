@@ -614,7 +614,11 @@ class Planner:
         q_grid = np.empty((n_grid, self.robot.n))
         seed = self.q
         for i, s in enumerate(grid):
-            seed = q_grid[i] = self.ik(start + s * direction, call, seed=seed, counted=True)
+            try:
+                seed = q_grid[i] = self.ik(start + s * direction, call, seed=seed, counted=True)
+            except PlanningError as exc:
+                exc.goal_m = tuple(float(v) for v in goal)  # the line's end, beyond the point that failed
+                raise
             if i and np.max(np.abs(q_grid[i] - q_grid[i - 1])) > self.settings.line_max_joint_step_rad:
                 raise PlanningError(
                     f"{call.describe()}: the straight line passes a singularity or a joint limit near "
