@@ -54,6 +54,7 @@ def test_auto_run_end_to_end(llm_server, capsys, tmp_path, monkeypatch):
         "--model", "cli-model",
         "--api-key-env", "MY_LLM_KEY",
         "--auto",
+        "--no-repairs",  # the paper's loop: every fix goes to the model
         "--max-attempts", "4",
         "--critics", SPEED_CRITICS,
         "--memory", str(memory),
@@ -73,6 +74,26 @@ def test_auto_run_end_to_end(llm_server, capsys, tmp_path, monkeypatch):
     assert "Joint speed" in requests[1].text and "fingers point" in requests[1].text  # both critics failed
     with InteractionMemory(memory) as stored:
         assert len(stored) == 2
+
+
+def test_auto_run_repairs_first_then_asks_the_model_with_what_is_left(llm_server, capsys):
+    from robocritics import Scene
+    from robocritics.repair import repair
+
+    llm_server.reply(fenced(NAIVE), fenced(CAREFUL), "PROGRAM COMPLETE")
+    code = run(TASK, "--scene", "sorting", "--base-url", llm_server.url, "--model", "m", "--auto",
+               "--critics", SPEED_CRITICS)  # fmt: skip
+    out = capsys.readouterr().out
+    repaired = repair(NAIVE, Scene.builtin("sorting"), critics=SPEED_CRITICS.split(","))
+    assert repaired.changes  # the naive program spears: the end-effector critic slows its approaches
+    assert "=== attempt 2 [repair] ===" in out and "--- critic repairs ---" in out
+    assert all(str(change) in out for change in repaired.changes)
+    # the repair lifts the Error; Warnings are left, and only they go to the model
+    assert not repaired.errors and {v.flag.value for v in repaired.report.verdicts} == {"WARNING"}
+    requests = llm_server.chat_requests()
+    assert len(requests) == 2 and "=== attempt 3 [fix] ===" in out
+    assert "Automatic repairs were applied" in requests[1].text
+    assert code == 0 and "final: attempt 3 of 3, score 10/10, no Error" in out
 
 
 def test_single_request_with_an_error_exits_1(llm_server, capsys):

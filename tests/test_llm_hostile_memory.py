@@ -401,7 +401,7 @@ def test_a_version_1_file_is_upgraded_and_searched_like_the_reference(tmp_path):
             requests[i] = " ".join(rng.choices(WORDS, k=rng.randint(1, 8)))
             raw.execute("INSERT INTO interactions VALUES (?, 'old', ?, 'p', 'f', NULL, 0)", (i, requests[i]))
     with InteractionMemory(path) as memory:
-        assert memory._read("PRAGMA user_version") == [(2,)]
+        assert memory._read("PRAGMA user_version") == [(3,)]
         for query in ("green apple box", "trash cup bottle", "wave"):
             got = [i.id for i in memory.search(query, k=8)]
             assert got == [i for i, _ in reference_ranking(requests, query, 8)]

@@ -284,18 +284,39 @@ def test_jobs_from_threads_are_serialised(evaluator, sorting):
 def test_loop_through_the_worker_scores_as_in_process(llm_server, make_client, sorting, evaluator):
     task = "sort the apples by ripeness"
     replies = (f"```python\n{NAIVE}```", f"```python\n{CAREFUL}```", "```python\nmove_to(0.95, 0.0, 0.2)\n```")
-    scores = []
-    errors = []
-    for simulate_hook in (None, evaluator.loop_simulate):
+    runs = []
+    # in process (simulate and repair here), then everything in the worker: the same attempts
+    for simulate_hook, repairs in ((None, True), (evaluator.loop_simulate, evaluator.loop_repair)):
         llm_server.reply(*replies)
-        loop = Loop(make_client(), sorting, critics=CRITICS, simulate=simulate_hook)
+        loop = Loop(make_client(), sorting, critics=CRITICS, simulate=simulate_hook, repairs=repairs)
         loop.request(task)
         loop.fix()
         loop.refine("move further out")
-        scores.append([a.score for a in loop.attempts])
-        errors.append([a.error for a in loop.attempts])
-    assert scores[0] == scores[1] and scores[0][0] is not None and scores[0][1] > scores[0][0]
-    assert errors[0] == errors[1] and errors[0][2] is not None and "line 1" in errors[0][2]
+        runs.append([(a.source, a.program, a.score, a.error, [str(c) for c in a.changes]) for a in loop.attempts])
+    assert runs[0] == runs[1]
+    sources = [source for source, *_ in runs[0]]
+    assert sources[:2] == ["llm", "repair"] and runs[0][1][4]  # the Fix's repair, with its changes
+    scores = [score for _, _, score, _, _ in runs[0]]
+    assert scores[0] is not None and scores[1] > scores[0]
+    last_error = runs[0][-1][3]
+    assert last_error is not None and "line 1" in last_error
+
+
+def test_a_repair_in_the_worker_equals_the_in_process_repair(evaluator, sorting):
+    from robocritics.repair import repair
+
+    here = repair(NAIVE, sorting, critics=CRITICS)
+    there = evaluator.loop_repair(NAIVE)
+    assert there.program == here.program != NAIVE
+    assert [str(c) for c in there.changes] == [str(c) for c in here.changes]
+    assert there.report.score == here.report.score
+
+
+def test_a_repair_over_the_cpu_limit_is_an_error(sorting):
+    with Evaluator(sorting, critics=CRITICS, cpu_s=0.05) as ev:
+        with pytest.raises(EvaluatorError, match="CPU limit") as raised:
+            ev.loop_repair(NAIVE)
+        assert raised.value.limit == "cpu_s" and ev.restarts == 1
 
 
 def test_the_child_runs_with_single_threaded_blas(evaluator):

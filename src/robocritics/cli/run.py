@@ -10,6 +10,9 @@ Without ``--auto`` the model is asked once and its program is checked; with
 ``--auto`` the critics' feedback goes back to the model until every critic is
 OK, the model says the program is complete, or ``--max-attempts`` replies were
 made (:meth:`robocritics.llm.loop.Loop.run`; the best attempt is the final one).
+Each fix first applies the critics' own repairs (an attempt of kind ``repair``,
+its changes listed) and sends the model only what is left; ``--no-repairs``
+sends everything to the model (the paper's loop).
 Each attempt's program, critic report and score are printed as they come.
 
 ``--base-url`` / ``--model`` fall back to ``ROBOCRITICS_BASE_URL`` /
@@ -94,6 +97,11 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
         help="embedding model for memory retrieval (default: $ROBOCRITICS_EMBEDDING_MODEL; without one, BM25)",
     )
     p.add_argument("--auto", action="store_true", help="iterate automatically with the critics' feedback")
+    p.add_argument(
+        "--no-repairs",
+        action="store_true",
+        help="send every fix to the model (default: the critics' own repairs first, the model gets what is left)",
+    )
     p.add_argument(
         "--max-attempts",
         metavar="N",
@@ -204,6 +212,10 @@ def _print_attempt(attempt, out: TextIO) -> None:
     elif not attempt.changed:
         _say(out, "The model sent the same program again.")
     elif attempt.program is not None:
+        if attempt.changes:
+            _say(out, "--- critic repairs ---")
+            for change in attempt.changes:
+                _say(out, cut_text(str(change), MAX_PRINTED_CHARS))
         _say(out, "--- program ---")
         _say(out, cut_text(attempt.program.rstrip("\n"), MAX_PRINTED_CHARS, "characters of the program"))
     if attempt.error:
@@ -285,6 +297,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
             model_options=options,
             context_tokens=context,
             goals=goals,
+            repairs=not args.no_repairs,
         )
         progress.loop = loop  # the prompt size of each call, for the progress line
         _say(out, f"robocritics run: {client.model} at {client.base_url}, scene {scene.name!r}")

@@ -291,9 +291,11 @@ class Loop:
     * ``automation`` — ``"manual"``, ``"guided"`` or ``"auto"`` (module docstring).
     * ``approve`` — ``approve(program, diff) -> bool`` for revisions, the model's and the repairs' (module docstring).
     * ``repairs`` — apply the critics' own repairs before asking the model to fix (module docstring);
-      False: every fix goes to the model. The repairs simulate in this process, with ``robot``,
-      ``critics``, ``params`` and ``goals`` (not through a ``simulate`` hook, which then re-checks the
-      repaired program like any revision).
+      False: every fix goes to the model. True: :func:`robocritics.repair.repair` in this process, with
+      ``robot``, ``critics``, ``params`` and ``goals``; or a callable ``repairs(program) -> Repair`` that
+      repairs elsewhere (e.g. :meth:`robocritics.viz.studio.worker.Evaluator.loop_repair`, in the
+      worker process). With a ``simulate`` hook the repaired program is then re-checked through it like
+      any revision.
     * ``session`` — the memory session id (default: a fresh one).
     * ``max_history_messages`` — user/assistant messages sent per call (>= 2).
     * ``max_attempts`` — model replies per :meth:`run` (and per request in ``auto``; repairs do not count).
@@ -339,7 +341,7 @@ class Loop:
         context_tokens: int | None = None,
         simulate: Callable[[str], tuple[Execution, Report]] | None = None,
         goals: Iterable[Any] | None = None,
-        repairs: bool = True,
+        repairs: bool | Callable[[str], Any] = True,
     ):
         from ..critic import select_critics
 
@@ -376,6 +378,7 @@ class Loop:
         self.automation: Automation = automation
         self.approve = approve
         self.repairs = bool(repairs)
+        self._repair_hook = repairs if callable(repairs) else None
         self.max_history_messages = int(max_history_messages)
         self.max_attempts = int(max_attempts)
         self.memory_k = int(memory_k)
@@ -632,8 +635,11 @@ class Loop:
         if not any(current.report.verdict(n).flag == Flag.ERROR for n in failing):
             return None  # repairs act on Errors only
         try:
-            result = repair(current.program, self.scene, goal=self.goals or None, critics=self._selection,
-                            robot=self._robot, params=self.params or None)  # fmt: skip
+            if self._repair_hook is not None:
+                result = self._repair_hook(current.program)
+            else:
+                result = repair(current.program, self.scene, goal=self.goals or None, critics=self._selection,
+                                robot=self._robot, params=self.params or None)  # fmt: skip
         except RoboCriticsError as exc:  # e.g. a plugin's repair broke the program: the model is asked instead
             log.warning("attempt %d: the critics' repairs failed (%s); asking the model", current.index, exc)
             return None
@@ -652,7 +658,7 @@ class Loop:
                 self._record(attempt)
                 return attempt
             attempt.approved = True
-        if self._simulate is None and self.sample_rate_hz is None and result.program == code:
+        if self._simulate is None and self._repair_hook is None and self.sample_rate_hz is None and result.program == code:
             # repair() checked exactly this program the way _check would (same simulate and critique calls)
             attempt.execution, attempt.report, attempt.score = result.execution, result.report, result.report.score
         else:

@@ -276,7 +276,8 @@ class Studio:
             raise StudioError(self.no_model_reason)
         if self._loop is None:
             self._loop = Loop(self.model, self.scene, critics=self.critics, goals=self.goals, approve=self._approve,
-                              simulate=self.evaluator.loop_simulate, on_attempt=self._on_attempt)
+                              simulate=self.evaluator.loop_simulate, repairs=self.evaluator.loop_repair,
+                              on_attempt=self._on_attempt)
         self._loop.automation = automation
         return self._loop
 

@@ -105,6 +105,7 @@ class Evaluation:
     error: dict[str, Any] | None = None
     duration_s: float = 0.0
     cpu_s: float = 0.0
+    repair: Any = None  # the Repair of a repair job (Evaluator.loop_repair)
 
     @property
     def ok(self) -> bool:
@@ -141,7 +142,11 @@ def _rebuild(error: Mapping[str, Any]) -> RoboCriticsError:
 
 
 def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_bytes) -> None:
-    """The child's main loop: set the limits, warm up, then answer ``(program, critics, params, cpu_s)`` jobs."""
+    """The child's main loop: set the limits, warm up, then answer ``(kind, program, critics, params, cpu_s)`` jobs.
+
+    ``kind`` is ``"check"`` (simulate and critique) or ``"repair"`` (:func:`robocritics.repair.repair`, whose
+    every re-simulation then runs under this process's limits too).
+    """
     limit_address_space(memory_bytes)
     try:
         from ...critic import critique
@@ -164,21 +169,29 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
             job = conn.recv()
         except EOFError:
             return
-        program, job_critics, job_params, cpu_s = job
+        kind, program, job_critics, job_params, cpu_s = job
         used = time.process_time()
         soft = math.ceil(used + cpu_s + CPU_BACKSTOP_S)
         resource.setrlimit(resource.RLIMIT_CPU, (soft if hard == resource.RLIM_INFINITY else min(soft, hard), hard))
         try:
-            execution = simulate(program, scene, robot, **rate)
-            report = critique(execution, scene, job_critics, job_params, goals=goals)
-            conn.send(("done", execution, report, None, time.process_time() - used))
+            repaired = None
+            if kind == "repair":
+                from ...repair import repair
+
+                repaired = repair(program, scene, goal=goals or None, critics=job_critics, robot=robot,
+                                  params=job_params or None)  # fmt: skip
+                execution, report = repaired.execution, repaired.report
+            else:
+                execution = simulate(program, scene, robot, **rate)
+                report = critique(execution, scene, job_critics, job_params, goals=goals)
+            conn.send(("done", execution, report, None, time.process_time() - used, repaired))
         except MemoryError:
             _out_of_memory(conn, time.process_time() - used)
         except Exception as exc:  # noqa: BLE001 - typed errors, a bug in a check, a result that does not pickle
             if not isinstance(exc, RoboCriticsError):
                 traceback.print_exc()
             try:
-                conn.send(("done", None, None, _error_dict(exc), time.process_time() - used))
+                conn.send(("done", None, None, _error_dict(exc), time.process_time() - used, None))
             except MemoryError:
                 _out_of_memory(conn, time.process_time() - used)
 
@@ -341,6 +354,9 @@ class Evaluator:
         ``critics``/``params`` default to the Evaluator's. Raises only for a closed Evaluator
         (EvaluatorError), a non-str program (TypeError) or unknown critics/parameters (CriticError).
         """
+        return self._job("check", program, critics, params)
+
+    def _job(self, kind: str, program: str, critics, params) -> Evaluation:
         from ...critic import select_critics
 
         if not isinstance(program, str):
@@ -360,7 +376,7 @@ class Evaluator:
             evaluation = Evaluation(program)
             try:
                 self._await_ready()
-                self._run(evaluation, (program, job_critics, job_params, self.cpu_s))
+                self._run(evaluation, (kind, program, job_critics, job_params, self.cpu_s))
             except EvaluatorError as exc:
                 evaluation.error = _error_dict(exc)
                 if not self._closed:
@@ -405,7 +421,7 @@ class Evaluator:
                 "memory_bytes",
                 self.memory_bytes,
             )
-        _, evaluation.execution, evaluation.report, evaluation.error, evaluation.cpu_s = answer
+        _, evaluation.execution, evaluation.report, evaluation.error, evaluation.cpu_s, evaluation.repair = answer
 
     def loop_simulate(self, program: str) -> tuple[Execution, Report]:
         """:meth:`evaluate` for ``Loop(..., simulate=evaluator.loop_simulate)``: the errors raised, typed.
@@ -423,3 +439,16 @@ class Evaluator:
         if isinstance(error, EvaluatorError):
             raise ProgramError(f"the program could not be checked: {error.reason}") from error
         raise error
+
+    def loop_repair(self, program: str):
+        """:func:`robocritics.repair.repair` of ``program`` in the child, for ``Loop(..., repairs=evaluator.loop_repair)``.
+
+        Returns the :class:`~robocritics.repair.Repair` (with this Evaluator's scene, critics, params and goals);
+        every re-simulation a repair makes runs under the child's limits, the whole repair within one job's
+        ``cpu_s`` and ``timeout_s``. A limit hit, a dead child or a program that does not run raises its typed
+        error (a :class:`~robocritics.errors.RoboCriticsError`: the Loop then asks the model instead).
+        """
+        evaluation = self._job("repair", program, None, None)
+        if evaluation.error is None:
+            return evaluation.repair
+        raise _rebuild(evaluation.error)
