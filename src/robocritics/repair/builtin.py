@@ -7,11 +7,11 @@ re-simulates it and keeps it only when it removes the flag without adding anothe
 
 from __future__ import annotations
 
-from ..hookspecs import hookimpl
 import ast
 import math
 import re
 
+from ..hookspecs import hookimpl
 from .edit import Edit, Insert, InsertText, MoveBlock, ReplaceSpan, ReplaceText, ScaleNumbers, paragraphs
 
 #: Headroom under a speed threshold a slowdown aims for (fraction of the threshold).
@@ -21,13 +21,12 @@ HEIGHT_FACTORS = (0.5,)
 _MOVES = {"move_to", "move_linear", "move_above", "move_down", "move_up", "home"}
 
 
-
 def _move_lines(verdict, execution) -> list[int]:
     skills = {c.line: c.skill for c in execution.plan.calls}
     return [ln for ln in verdict.evidence.lines if skills.get(ln) in _MOVES]
 
 
-def _slowdowns(verdict, execution) -> list[Edit]:
+def _slowdowns(verdict, execution, program) -> list[Edit]:
     """The smallest speed fraction on the offending moves that brings the peak under the threshold.
 
     Speed scales linearly with the speed fraction, so ``threshold / value`` (with
@@ -58,7 +57,7 @@ def _slowdowns(verdict, execution) -> list[Edit]:
     return edits
 
 
-def _avoid(verdict, execution) -> list[Edit]:
+def _avoid(verdict, execution, program) -> list[Edit]:
     """``avoid_collision(obj)`` before the first offending line for each object the robot hits."""
     pair = str(verdict.details.get("closest_pair", "")).split("|")
     ids = {o.id for o in execution.scene.objects} | {c.id for c in execution.scene.containers}
@@ -78,7 +77,7 @@ def _avoid(verdict, execution) -> list[Edit]:
     return edits
 
 
-def _lower_heights(verdict, execution) -> list[Edit]:
+def _lower_heights(verdict, execution, program) -> list[Edit]:
     """Lower the hover/transit heights (float literals) on the offending move lines."""
     lines = [ln for ln in _move_lines(verdict, execution)]
     return [
@@ -553,5 +552,5 @@ _BY_CRITIC = {
 
 @hookimpl
 def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
-    makers = _BY_CRITIC.get(verdict.critic, [])
-    return [e for make in makers for e in (make(verdict, execution, program) if make in (_pick_first, _spread, _raise_release, _natural_posture, _reachable) else make(verdict, execution))]
+    """Every built-in candidate for ``verdict``, in the order :data:`_BY_CRITIC` lists the makers."""
+    return [e for make in _BY_CRITIC.get(verdict.critic, []) for e in make(verdict, execution, program)]
