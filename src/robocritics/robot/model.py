@@ -496,9 +496,15 @@ class Robot:
         """Capsule endpoints ``(T, C, 3)`` each, m in the base frame, from ``frames (T, L, 4, 4)``."""
         F = frames[:, self._capsule_frame]  # (T, C, 4, 4)
         R, t = F[..., :3, :3], F[..., :3, 3]
-        p0 = np.einsum("tcij,cj->tci", R, self._capsule_p0) + t
-        p1 = np.einsum("tcij,cj->tci", R, self._capsule_p1) + t
-        return p0, p1
+        # R p + t as three column multiply-adds (einsum's generic loop over these 3x3 blocks is ~5x slower)
+        out = []
+        for p in (self._capsule_p0, self._capsule_p1):
+            x = R[..., 0] * p[:, 0, None]
+            x += R[..., 1] * p[:, 1, None]
+            x += R[..., 2] * p[:, 2, None]
+            x += t
+            out.append(x)
+        return out[0], out[1]
 
     def trajectory(self, q: np.ndarray, time: np.ndarray, scene, **kwargs):
         """The :class:`~robocritics.trajectory.Trajectory` of joint samples ``q`` at ``time`` in ``scene``.
