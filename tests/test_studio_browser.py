@@ -4,6 +4,8 @@ controller."""
 
 from __future__ import annotations
 
+import json
+
 import time
 from pathlib import Path
 
@@ -120,16 +122,23 @@ def test_fix_all_shows_the_diff_for_approval_then_the_new_score(driver):
             open_studio(driver, studio)
             press_run(driver)
             driver.execute_script("document.getElementById('fix-all').click()")
-            wait_for(driver, "return !document.getElementById('approval').hidden", what="the approval step")
+            # first the critics' own repairs (run in the studio's worker), then the model's revision: each approved
+            wait_for(driver, "return !document.getElementById('approval').hidden", what="the repair's approval")
+            repair_diff = driver.execute_script("return document.getElementById('approval-diff').textContent")
+            assert "(critic repairs)" in repair_diff and any(
+                line.startswith("+") and "set_speed" in line for line in repair_diff.splitlines())
+            driver.find_element("id", "approve").click()
+            wait_for(driver, "return !document.getElementById('approval').hidden && "
+                             f"document.getElementById('approval-diff').textContent !== {json.dumps(repair_diff)}",
+                     what="the model revision's approval")
             diff = driver.find_element("id", "approval-diff").text
-            assert any(line.startswith("+") for line in diff.splitlines())
-            assert "sorting_careful" in diff or len(diff.splitlines()) > 3
+            assert any(line.startswith("+") for line in diff.splitlines()) and "(critic repairs)" not in diff
             driver.find_element("id", "approve").click()
             expected = critique(simulate(CAREFUL, Scene.builtin("sorting"))).score
             wait_for(driver, f"return Math.abs(Number(document.getElementById('score').dataset.score) - {expected})"
                              " < 1e-9", what="the revision's score")
             assert driver.execute_script("return document.getElementById('editor').value") == studio.program
-            assert len(driver.find_elements("css selector", "#history li")) == 2
+            assert len(driver.find_elements("css selector", "#history li")) == 3  # run, repair, the model's fix
             # going back to the first attempt restores it
             driver.find_element("css selector", "#history li[data-index='1']").click()
             wait_for(driver, "return document.getElementById('editor').value.includes('')"
