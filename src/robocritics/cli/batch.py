@@ -31,14 +31,14 @@ def _build_batch(sub) -> None:
         "\"params\"?}) and write one output row per input row to OUT as each finishes ({\"id\", \"score\", \"flags\", "
         "\"passed\", \"duration_s\", \"samples\", \"error\"}). A bad row, scene or program, or a worker that dies "
         "or times out, is an error row. Progress goes to stderr. Exit status: 0 every row was evaluated (error "
-        "rows included: they are results), 2 bad usage, 130 interrupted (rerun with --resume).",
+        "rows included: they are results), 2 bad usage, 130 interrupted by Ctrl-C or SIGTERM (rerun with --resume).",
     )
     p.add_argument("input", metavar="IN.jsonl", help="input rows, one JSON object per line")
     p.add_argument("-o", "--output", metavar="OUT.jsonl", required=True,
                    help="output rows (JSON lines; Parquet when the name ends in .parquet, which needs pyarrow; - for standard output)")  # fmt: skip
     p.add_argument("--engine", choices=("local", "ray"), default="local",
                    help="local: worker processes on this machine (default); ray: Ray actors (robocritics[ray])")  # fmt: skip
-    p.add_argument("--workers", type=positive_int, metavar="N", help="worker processes or actors; default the CPUs")
+    p.add_argument("--workers", type=positive_int, metavar="N", help="worker processes or actors; default the CPUs (local: at most 4 per CPU)")
     p.add_argument("--ray-address", metavar="ADDR", help="a running Ray cluster (e.g. ray://head:10001); default a "
                    "local one on 127.0.0.1")  # fmt: skip
     p.add_argument("--resume", action="store_true", help="keep OUT's rows and evaluate only the ids not in it")
