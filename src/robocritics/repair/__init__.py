@@ -4,9 +4,11 @@
 an Error for candidate edits (the ``robocritics_repairs`` hook, see
 :mod:`robocritics.hookspecs`; the built-in critics' repairs are in
 :mod:`robocritics.repair.builtin`, registered the same way as a plugin's),
-re-simulates each candidate and keeps it only when it removes its flag
-without worsening any other verdict (or the task goal). It iterates until no
-Error is left or no candidate helps; no LLM is involved.
+re-simulates each candidate and keeps it only when it makes progress on an
+Error without worsening any verdict (or the task goal); see :func:`_acceptable`.
+A program that does not run is judged by the ``runtime`` critic's Error and
+repaired the same way. It iterates until no Error is left or no candidate
+helps; no LLM is involved.
 """
 
 from __future__ import annotations
@@ -58,7 +60,8 @@ class Repair:
     """The result of :func:`repair`: the repaired ``program`` with its ``report`` and ``execution``.
 
     ``execution`` is None when the program still does not run (``report`` then holds the
-    ``runtime`` critic's Error naming the line).
+    ``runtime`` critic's Error naming the line); that happens only with no ``changes``,
+    since the runtime repair is kept only when the program then runs.
     """
 
     original: str
