@@ -258,3 +258,34 @@ def test_an_unreachable_straight_lift_ends_where_the_line_is_still_reachable():
     assert change.line == 4 and "move_up" in change.what
     lift = next(ln for ln in r.program.splitlines() if ln.startswith("move_up("))
     assert 0 < float(lift[len("move_up(") : -1]) < 0.4
+
+
+# --- the in-line edits work on ast columns (UTF-8 bytes), also after non-ASCII text --------------
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    label=st.text(alphabet=st.characters(blacklist_categories=("Cs", "Cc"), blacklist_characters='"\\'), max_size=8),
+    z=st.floats(0.0, 0.5, allow_nan=False).map(lambda v: round(v, 3)),
+    delta=st.floats(-0.2, 0.2, allow_nan=False).map(lambda v: round(v, 3)).filter(lambda v: v != 0),
+)
+def test_span_edits_replace_exactly_the_argument(label, z, delta):
+    from robocritics.repair.builtin import _call_named, _shifted
+    from robocritics.repair import apply_edits
+    from robocritics.repair.edit import InsertText
+
+    src = f'print("{label}"); move_to(0.3, 0.1, {z!r})  # ok\n'
+    call = _call_named(ast.parse(src), 1, "move_to")
+    ops = [InsertText(1, call.end_col_offset - 1, ', posture="natural"')]
+    span = _shifted(src, call.args[2], delta)
+    ops += [span] if span is not None else []
+    out = apply_edits(src, ops)
+    new = _call_named(ast.parse(out), 1, "move_to")
+    assert [k.arg for k in new.keywords] == ["posture"] and new.keywords[0].value.value == "natural"
+    assert ast.literal_eval(new.args[0]) == 0.3 and ast.literal_eval(new.args[1]) == 0.1
+    # plain reference: the literal plus delta, rounded as the edit rounds it
+    assert ast.literal_eval(new.args[2]) == pytest.approx(round(z + delta, 4))
+    assert out.startswith(f'print("{label}"); ') and out.endswith("  # ok\n")
