@@ -105,22 +105,25 @@ def test_carried_object_pairs_are_exact_near_and_bounded_far(robot):
                 assert CARRIED_EXACT_M < traj.proximity[t, k] <= ref + 1e-9
 
 
-def test_long_trajectories_run_fk_in_chunks_with_the_same_frames(robot, monkeypatch):
-    """FK of a trajectory longer than one chunk (kept under OpenBLAS's threading threshold) gives the frames
-    of one pass, and Pinocchio's at samples on both sides of every chunk boundary."""
-    import robocritics.robot.model as model
-
+def test_long_trajectory_frames_match_pinocchio(robot):
+    """The batched FK (element-wise column products, no BLAS) of a trajectory past OpenBLAS's threading
+    threshold gives Pinocchio's frames, every frame at samples spread over it, fingers slid by the opening."""
     rng = np.random.default_rng(5)
-    T = 2 * model._FK_CHUNK + 37
+    T = 20_000
     q = rng.uniform(robot.lower, robot.upper, size=(T, robot.n))
-    opening = rng.uniform(0.0, robot.max_opening_m, size=T)
-    chunk = model._FK_CHUNK
-    chunked = robot.forward(q, opening)
-    monkeypatch.setattr(model, "_FK_CHUNK", T)
-    np.testing.assert_allclose(chunked, robot.forward(q, opening), rtol=0, atol=1e-15)
-    tcp = robot.frame_names.index(robot.tcp_frame)
-    for t in (0, T - 1, chunk - 1, chunk, 2 * chunk - 1, 2 * chunk):
+    frames = robot.forward(q)
+    assert frames.shape == (T, len(robot.frame_names), 4, 4)
+    for t in np.linspace(0, T - 1, 9).astype(int):
         pin.forwardKinematics(robot.model, robot.data, q[t])
-        fid = robot.model.getFrameId(robot.tcp_frame)
-        ref = pin.updateFramePlacement(robot.model, robot.data, fid).homogeneous
-        np.testing.assert_allclose(chunked[t, tcp], ref, atol=1e-12)
+        pin.updateFramePlacements(robot.model, robot.data)
+        for i, name in enumerate(robot.frame_names):
+            ref = robot.data.oMf[robot.model.getFrameId(name)].homogeneous
+            np.testing.assert_allclose(frames[t, i], ref, rtol=0, atol=1e-12)
+    opening = rng.uniform(0.0, robot.max_opening_m, size=T)
+    slid = robot.forward(q, opening)
+    moved = [robot.frame_names.index(f) for f in robot.finger_links]
+    still = [i for i in range(len(robot.frame_names)) if i not in moved]
+    np.testing.assert_array_equal(slid[:, still], frames[:, still])
+    gap = np.linalg.norm(slid[:, moved[0], :3, 3] - slid[:, moved[1], :3, 3], axis=1)
+    full = np.linalg.norm(frames[:, moved[0], :3, 3] - frames[:, moved[1], :3, 3], axis=1)
+    np.testing.assert_allclose(full - gap, robot.max_opening_m - opening, atol=1e-12)

@@ -89,9 +89,20 @@ CONTINUOUS_LIMIT_RAD = 2 * math.pi
 _SAME_HOUSING_GAP_M = 0.06
 
 
-_FK_CHUNK = 4096
-"""Samples per batched forward-kinematics pass: below OpenBLAS's multi-threading threshold for the (4 T x 4) @
-(4 x 4) products (its threshold m n k <= 262144 is T <= 4096 here; ``benchmarks/bench_pipeline.py``)."""
+def _rot_times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A (T, 3, 3) @ B (3, 3)``, as three column multiply-adds."""
+    out = A[:, :, 0, None] * B[0]
+    out += A[:, :, 1, None] * B[1]
+    out += A[:, :, 2, None] * B[2]
+    return out
+
+
+def _rot_apply(A: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``A (T, 3, 3) @ v (3,)``, as three column multiply-adds."""
+    out = A[:, :, 0] * v[0]
+    out += A[:, :, 1] * v[1]
+    out += A[:, :, 2] * v[2]
+    return out
 
 
 def _axis_rotations(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -454,26 +465,40 @@ class Robot:
         if q.ndim != 2 or q.shape[1] != self.n:
             raise RobotModelError(f"q must have shape (T, {self.n}), got {q.shape}")
         T = q.shape[0]
-        if T > _FK_CHUNK:
-            # OpenBLAS goes multi-threaded on the batched 4x4 products above ~4k samples (m n k over its
-            # threshold), which costs 5-20x the CPU on a loaded 2-core machine; chunks stay single-threaded
-            opening = None if gripper_opening_m is None else np.broadcast_to(np.asarray(gripper_opening_m, float), (T,))
-            out = np.empty((T, len(self.frame_names), 4, 4))
-            for t0 in range(0, T, _FK_CHUNK):
-                t1 = min(T, t0 + _FK_CHUNK)
-                out[t0:t1] = self.forward(q[t0:t1], None if opening is None else opening[t0:t1])
-            return out
-        oMi = np.empty((self.model.njoints, T, 4, 4))
-        oMi[0] = np.eye(4)
-        for j in range(1, self.model.njoints):
+        # rotations (T, 3, 3) and origins (T, 3) of every joint, then of every body frame; products of a batch
+        # with a constant matrix as column multiply-adds and a rotation about z (every UR joint) as a mix of two
+        # columns: element-wise work, no BLAS. (Batched 4x4 matmuls and einsum went to OpenBLAS, which goes
+        # multi-threaded above ~8k samples and then costs 3-10x the CPU on a loaded 2-core machine.)
+        J = self.model.njoints
+        R: list[np.ndarray] = [np.broadcast_to(np.eye(3), (T, 3, 3))] + [None] * (J - 1)  # type: ignore[list-item]
+        P: list[np.ndarray] = [np.zeros((T, 3))] + [None] * (J - 1)  # type: ignore[list-item]
+        for j in range(1, J):
             kind, axis = self._joint_motion[j]
-            X = np.broadcast_to(np.eye(4), (T, 4, 4)).copy()
-            if kind == "revolute":
-                X[:, :3, :3] = _axis_rotations(q[:, j - 1], axis)
+            parent = self._joint_parents[j]
+            M = self._joint_placements[j]
+            Rj = _rot_times(R[parent], M[:3, :3])
+            P[j] = _rot_apply(R[parent], M[:3, 3]) + P[parent]
+            qj = q[:, j - 1]
+            if kind != "revolute":
+                P[j] += _rot_apply(Rj, axis) * qj[:, None]
+            elif axis[0] == 0.0 and axis[1] == 0.0 and axis[2] > 0.0:
+                c, s = np.cos(qj)[:, None], np.sin(qj)[:, None]
+                x, y = Rj[:, :, 0].copy(), Rj[:, :, 1]
+                Rj[:, :, 0] *= c
+                Rj[:, :, 0] += y * s
+                y *= c
+                y -= x * s
             else:
-                X[:, :3, 3] = q[:, j - 1, None] * axis
-            oMi[j] = (oMi[self._joint_parents[j]] @ self._joint_placements[j]) @ X
-        frames = np.einsum("ftij,fjk->tfik", oMi[self._frame_parent], self._frame_placement, optimize=True)
+                Rj = np.einsum("tij,tjk->tik", Rj, _axis_rotations(qj, axis))
+            R[j] = Rj
+        L = len(self._frame_parent)
+        frames = np.empty((T, L, 4, 4))
+        frames[:, :, 3, :3] = 0.0
+        frames[:, :, 3, 3] = 1.0
+        for f in range(L):
+            parent, M = self._frame_parent[f], self._frame_placement[f]
+            frames[:, f, :3, :3] = _rot_times(R[parent], M[:3, :3])
+            frames[:, f, :3, 3] = _rot_apply(R[parent], M[:3, 3]) + P[parent]
         if self.finger_links and gripper_opening_m is not None:
             shift = (self.max_opening_m - np.broadcast_to(np.asarray(gripper_opening_m, float), (T,))) / 2
             y_axis = frames[:, self.tcp_index, :3, 1]
