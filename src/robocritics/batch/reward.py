@@ -12,9 +12,9 @@ that moves well but leaves the objects in the wrong place earns nothing: the mot
 once the task is done.
 
 A bad ``scene``, ``goal``, ``critics`` or ``params`` is the caller's mistake, the same for every program: it
-raises (:class:`~robocritics.batch.RowError` for a wrong type, :class:`~robocritics.errors.SceneError`, :class:`~robocritics.errors.GoalError`,
-:class:`~robocritics.errors.CriticError`) before any program runs, instead of silently scoring every
-program 0 (a trainer would learn nothing and not know why).
+raises (:class:`~robocritics.batch.RowError` for a wrong type, :class:`~robocritics.errors.SceneError`,
+:class:`~robocritics.errors.GoalError`, :class:`~robocritics.errors.CriticError`) before any program runs,
+instead of silently scoring every program 0 (a trainer would learn nothing and not know why).
 """
 
 from __future__ import annotations

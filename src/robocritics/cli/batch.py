@@ -35,10 +35,12 @@ def _build_batch(sub) -> None:
     )
     p.add_argument("input", metavar="IN.jsonl", help="input rows, one JSON object per line")
     p.add_argument("-o", "--output", metavar="OUT.jsonl", required=True,
-                   help="output rows (JSON lines; Parquet when the name ends in .parquet, which needs pyarrow; - for standard output)")  # fmt: skip
+                   help="output rows (JSON lines; Parquet when the name ends in .parquet, which needs pyarrow; "
+                   "- for standard output)")  # fmt: skip
     p.add_argument("--engine", choices=("local", "ray"), default="local",
                    help="local: worker processes on this machine (default); ray: Ray actors (robocritics[ray])")  # fmt: skip
-    p.add_argument("--workers", type=positive_int, metavar="N", help="worker processes or actors; default the CPUs (local: at most 4 per CPU)")
+    p.add_argument("--workers", type=positive_int, metavar="N",
+                   help="worker processes or actors; default the CPUs (local: at most 4 per CPU)")  # fmt: skip
     p.add_argument("--ray-address", metavar="ADDR", help="a running Ray cluster (e.g. ray://head:10001); default a "
                    "local one on 127.0.0.1")  # fmt: skip
     p.add_argument("--resume", action="store_true", help="keep OUT's rows and evaluate only the ids not in it")
@@ -376,8 +378,9 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         raise UsageError(f"input {shown_path(args.input)} is not a file")
     cpus = os.cpu_count() or 1
     if args.engine == "local" and args.workers is not None and args.workers > MAX_WORKERS_PER_CPU * cpus:
-        raise UsageError(f"--workers {args.workers}: at most {MAX_WORKERS_PER_CPU * cpus} on this machine ({cpus} CPUs); "
-                         "each worker is a process with its own robot model, and more than the cores only queue for them")  # fmt: skip
+        raise UsageError(f"--workers {args.workers}: at most {MAX_WORKERS_PER_CPU * cpus} on this machine ({cpus} "
+                         "CPUs); each worker is a process with its own robot model, and more than the cores only "
+                         "queue for them")  # fmt: skip
     to_stdout = args.output == "-"
     out = Path(args.output)
     if to_stdout and args.resume:
@@ -406,7 +409,10 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             yield row
 
     try:
-        writer = StdoutWriter() if to_stdout else ParquetWriter(out, old) if parquet else JsonlWriter(out, append=args.resume)
+        if to_stdout:
+            writer = StdoutWriter()
+        else:
+            writer = ParquetWriter(out, old) if parquet else JsonlWriter(out, append=args.resume)
     except OSError as exc:
         raise UsageError(f"--output {shown_path(args.output)}: cannot write it: {exc.strerror or exc}") from None
     rows = evaluate(pending(), args.engine, args.workers, timeout_s=args.timeout, ray_address=args.ray_address)
