@@ -313,8 +313,8 @@ def _raise_release(verdict, execution, program) -> list[Edit]:
         var = _loop_variable(tree, move)
         loads = [k for k in raise_by if k]
         why = (
-            f"on line {move} the robot sinks {max(need.values()):.3g} m into what is below "
-            f"(collision {-verdict.value:.3g} m deep)"
+            f"on line {move} what the robot carries (or its fingertips) sinks {max(need.values()):.3g} m "
+            f"below the top of what it hits (collision {-verdict.value:.3g} m deep)"
         )
         if var is not None and loads and len(loads) == len(raise_by):
             key = f"{RAISE_TABLE}[{var}.id]"
@@ -337,7 +337,10 @@ def _raise_release(verdict, execution, program) -> list[Edit]:
         else:
             d = max(raise_by.values())
             m = re.fullmatch(r"(.*) \+ (\d+(?:\.\d+)?)", z)
-            new_z = f"{m.group(1)} + {float(m.group(2)) + d:g}" if m else f"{z} + {d:g}"
+            if re.fullmatch(r"\d+(?:\.\d*)?", z):  # a literal height: write the new number
+                new_z = f"{round(float(z) + d, 4):g}"
+            else:
+                new_z = f"{m.group(1)} + {round(float(m.group(2)) + d, 4):g}" if m else f"{z} + {d:g}"
             ops = [ReplaceText(move, f", {z})", f", {new_z})")]
             what = f"release {d:g} m higher on line {move} ({z} -> {new_z})"
         edits.append(Edit(verdict.critic, move, what, why, ops))
