@@ -63,3 +63,11 @@ def test_fix_repairs_a_program_that_does_not_run(tmp_path, capsys):
     text = capsys.readouterr().out
     assert code == 0, text
     assert "changed: runtime (line 1): target lowered by" in text and "-move_above(green_apple, height=0.42)" in text
+
+
+def test_fix_of_a_program_the_sandbox_rejects_prints_the_runtime_error_and_exits_1(tmp_path, capsys):
+    src = tmp_path / "broken.py"
+    src.write_text("move_to(0.3, 0.0\n")
+    assert main(["fix", str(src), "--scene", "sorting"]) == 1
+    text = capsys.readouterr().out
+    assert "(no change)" in text and "runtime" in text and "syntax error" in text
