@@ -1,0 +1,137 @@
+"""CPU per program of the check pipeline: warm simulate()+critique() per bundled program, and a cold CLI check.
+
+Warm: one process, the UR3e loaded once, each of the six bundled programs simulated and critiqued in its own
+scene (default critics, 125 Hz) once to warm caches, then REPEATS times; the table shows the median CPU
+(``time.process_time``: user + system of the process, all threads) per program and the mean over programs.
+Programs/s per core is ``1000 / mean CPU ms``. Cold: ``robocritics check examples/programs/sorting_careful.py
+--scene sorting`` run as a child RUNS times, its user + system CPU from ``resource.getrusage(RUSAGE_CHILDREN)``,
+median. FK: ``Robot.forward`` of 20,000 random samples (median of 7), the case where one batched pass lets
+OpenBLAS go multi-threaded.
+
+Every measurement runs in a fresh child interpreter. The "before" column is fixed: this script run on the
+source tree of commit 063c8da (before issue 15 item 3; ``--before-src DIR`` with ``git archive 063c8da | tar
+-x -C DIR`` measures it again beside the current tree, in the same conditions).
+
+Run:
+    .venv/bin/python benchmarks/bench_pipeline.py [REPEATS] [RUNS] [--before-src DIR]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PROGRAMS = ROOT / "examples" / "programs"
+
+#: Measured at commit 063c8da with this script (``--before-src``), see the module docstring.
+BEFORE: dict[str, float] = {}
+
+
+def warm(repeats: int) -> dict[str, float]:
+    """Median CPU ms of simulate()+critique() per bundled program in one warm process."""
+    from robocritics import Robot, Scene, critique, simulate
+
+    robot = Robot.ur3e()
+    out = {}
+    for path in sorted(PROGRAMS.glob("*.py")):
+        source, scene = path.read_text(), Scene.builtin(path.stem.split("_")[0])
+        critique(simulate(source, scene, robot))  # warm-up: collision models, caches
+        times = []
+        for _ in range(repeats):
+            t0 = time.process_time()
+            critique(simulate(source, scene, robot))
+            times.append(time.process_time() - t0)
+        out[path.stem] = 1000 * statistics.median(times)
+    return out
+
+
+def cli_cold(runs: int, src: Path) -> float:
+    """Median user + system CPU s of one cold ``robocritics check`` child (of the tree on ``PYTHONPATH``)."""
+    cmd = [sys.executable, "-m", "robocritics.cli", "check", str(PROGRAMS / "sorting_careful.py"), "--scene", "sorting"]
+    cpu = []
+    for _ in range(runs):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=os.environ)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    return statistics.median(cpu)
+
+
+def fk_cpu_ms(samples: int = 20000) -> float:
+    import numpy as np
+
+    from robocritics import Robot
+
+    robot = Robot.ur3e()
+    q = np.random.default_rng(0).uniform(-3, 3, size=(samples, robot.n))
+    robot.forward(q, 0.05)
+    times = []
+    for _ in range(7):
+        t0 = time.process_time()
+        robot.forward(q, 0.05)
+        times.append(time.process_time() - t0)
+    return 1000 * statistics.median(times)
+
+
+def measure(src: Path | None, repeats: int, runs: int) -> dict[str, float]:
+    """Run the measurements in a child interpreter on source tree ``src`` (None: this checkout)."""
+    env = dict(os.environ)
+    if src is not None:
+        env["PYTHONPATH"] = str(Path(src) / "src")
+    done = subprocess.run(
+        [sys.executable, __file__, "--child", str(repeats), str(runs), str(src or ROOT)],
+        env=env, cwd=ROOT, capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def child(repeats: int, runs: int, src: Path) -> None:
+    out = {f"{k} CPU ms": v for k, v in warm(repeats).items()}
+    out["FK 20k samples CPU ms"] = fk_cpu_ms()
+    out["robocritics check, cold CPU s"] = cli_cold(runs, src)
+    print(json.dumps(out))
+
+
+def main() -> None:
+    args = [a for a in sys.argv[1:]]
+    if args[:1] == ["--child"]:
+        child(int(args[1]), int(args[2]), Path(args[3]))
+        return
+    before_src = None
+    if "--before-src" in args:
+        i = args.index("--before-src")
+        before_src = Path(args[i + 1])
+        del args[i : i + 2]
+    repeats = int(args[0]) if args else 15
+    runs = int(args[1]) if len(args) > 1 else 7
+    before = measure(before_src, repeats, runs) if before_src else dict(BEFORE)
+    now = measure(None, repeats, runs)
+    for d in (before, now):
+        ms = [v for k, v in d.items() if k.endswith(" CPU ms") and not k.startswith("FK")]
+        if ms:
+            d["mean CPU per program ms"] = statistics.fmean(ms)
+            d["programs/s per core"] = 1000 / d["mean CPU per program ms"]
+    order = [k for k in now if k.endswith(" CPU ms") and not k.startswith("FK")]
+    order += ["mean CPU per program ms", "programs/s per core", "FK 20k samples CPU ms", "robocritics check, cold CPU s"]
+    w = max(map(len, order))
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(f"bench_pipeline — warm median of {repeats}, cold median of {runs}; {os.cpu_count()} CPUs, load average {load}")
+    print(f"{'':<{w}}  {'before':>9}  {'now':>9}  {'before/now':>10}")
+    for k in order:
+        b, n = before.get(k), now[k]
+        ratio = (n / b if k.startswith("programs/s") else b / n) if b else None
+        bs = f"{b:9.3f}" if b is not None else f"{'-':>9}"
+        print(f"{k:<{w}}  {bs}  {n:9.3f}  {ratio:10.2f}" if ratio else f"{k:<{w}}  {bs}  {n:9.3f}")
+    print("before: commit 063c8da" + (f" measured now from {before_src}" if before_src else " (fixed numbers, see docstring)"))
+    print(f"reproduce: .venv/bin/python benchmarks/bench_pipeline.py {' '.join(sys.argv[1:])}")
+
+
+if __name__ == "__main__":
+    main()
