@@ -65,8 +65,7 @@ FLAT = {
     "one point repeated": np.ones((10, 3)),
     "collinear": np.outer(np.linspace(-1, 1, 30), [0.3, -0.2, 0.9]),
     "coplanar": np.c_[rng.normal(size=(50, 2)), np.zeros(50)] @ np.linalg.qr(rng.normal(size=(3, 3)))[0],
-    "1e-9 thin": np.c_[rng.normal(size=(50, 2)), 1e-9 * rng.normal(size=50)],  # crashed coal's Qhull
-    "1e-12 thin": np.c_[rng.normal(size=(50, 2)), 1e-12 * rng.normal(size=50)],
+    "1e-14 thin": np.c_[rng.normal(size=(50, 2)), 1e-14 * rng.normal(size=50)],  # below quickhull's 1e-12
 }
 
 
@@ -84,7 +83,8 @@ def test_non_finite_points_have_no_volume(hull_of):
     assert hull_of(P).volume_m3 == 0.0
 
 
-def test_a_set_just_thick_enough_is_measured():
-    # 1e-4 relative thickness: above the flat cut-off (1e-5), coal measures it and agrees with scipy
-    P = np.c_[rng.uniform(-1, 1, size=(200, 2)), 1e-4 * rng.uniform(-1, 1, size=200)]
+@pytest.mark.parametrize("thickness", [1e-4, 1e-6, 1e-9])
+def test_thin_sets_are_measured(thickness):
+    # 1e-4 relative: coal measures it; 1e-6 and 1e-9 (below FLAT_RATIO; 1e-9 crashed coal): quickhull does
+    P = np.c_[rng.uniform(-1, 1, size=(200, 2)), thickness * rng.uniform(-1, 1, size=200)]
     assert convex_hull(P).volume_m3 == pytest.approx(ConvexHull(P).volume, rel=1e-6)

@@ -1,4 +1,4 @@
-r"""Convex hull volume, area and vertices of a 3-D point set, without scipy.
+r"""Convex hull volume, area and vertices of a 3-D point set.
 
 ``convex_hull(P)`` for ``P (N, 3)`` (m) returns the hull's volume (m^3), surface area (m^2) and the ascending
 indices of the input points that are its vertices (the first of equal points).
@@ -6,20 +6,32 @@ indices of the input points that are its vertices (the first of equal points).
 Two implementations, one answer:
 
 * coal's Qhull (``coal.ConvexBase.convexHull``; coal is loaded anyway for proximity), the fast path. It is
-  fragile: on a flat input it crashes the process instead of raising, and it refuses a hull with a vertex of
-  more than 255 neighbours ("Too many neighbors", a fan of thin triangles around a point).
+  fragile: this build's Qhull writes every message (an error such as "initial simplex is flat", a precision
+  warning, the output of an option such as ``Tv``) through a ``FILE *`` it never opened, so any message kills
+  the process with a segfault instead of raising; and coal refuses a hull with a vertex of more than 254
+  neighbours ("Too many neighbors", a fan of thin triangles around a point), after building it.
 * :func:`quickhull`, a plain incremental hull in numpy (Clarkson-Shor / Barber et al. with conflict lists):
-  used when coal refuses, and the reference coal is tested against (with scipy's Qhull as a third).
+  used for every set coal might crash on or refuses, and the reference coal is tested against (with scipy's
+  Qhull as a third).
 
-Flat sets never reach either: if the smallest singular value of the centred points is below
-:data:`FLAT_RATIO` times the largest (all points on one plane, line or point, to that relative precision), the
-set has no volume and the result is ``(0, 0, [])``; such a set's true volume is below
-``FLAT_RATIO * extent^3 * sqrt(N)``. This matches scipy's "initial simplex is flat" error, which callers
-treated as volume 0. Non-finite coordinates give the same empty hull (scipy raised ``ValueError`` for them).
+Both see the points *normalised*: ``Q = (P 2^-a - m) 2^-b`` with ``m`` the bounding-box centre of the scaled
+points and powers of two ``2^a``, ``2^b`` chosen so that ``|P 2^-a| < 1`` and ``|Q| < 1``. Scaling by a power
+of two is exact, and for a set far from the origin (``|P| >> extent``) so is the subtraction (Sterbenz), so
+``Q`` is the input moved and scaled, not rounded: a 1 mm motion 1000 km from the origin is measured as well as
+one at the origin (Qhull on the raw coordinates loses the digits to the offset, gives volumes off by orders of
+magnitude or negative, and crashes). The volume is ``vol(Q) 2^{3(a+b)}``, the area ``area(Q) 2^{2(a+b)}``.
+
+Thin sets go to quickhull: if the smallest singular value of the mean-centred ``Q`` is at most
+:data:`FLAT_RATIO` times the largest, coal is not called. Quickhull measures them (a straight-line tool path,
+0.5 mm^3, is not rounded to 0) and reports volume 0 only when no point is more than ``_EPS`` (relative to the
+set's extent) off the plane of its initial triangle: sets flat to rounding (three points, all points on one
+plane or line, one point repeated) give ``(0, 0, [])``. Non-finite coordinates give the same empty hull (scipy
+raised ``ValueError`` for them).
 """
 
 from __future__ import annotations
 
+import heapq
 from typing import NamedTuple
 
 import numpy as np
@@ -27,13 +39,18 @@ import numpy as np
 __all__ = ["Hull", "FLAT_RATIO", "convex_hull", "quickhull"]
 
 FLAT_RATIO = 1e-5
-"""Point sets whose centred points' smallest/largest singular value is below this are flat: volume 0. coal 3.0's
-Qhull crashes on a set 1e-9 (relative) thick and copes at 1e-6; 1e-5 keeps a margin. A robot's swept hull is
-centimetres thick in every direction (ratio above 1e-2)."""
+"""Sets whose mean-centred normalised points have smallest/largest singular value at most this are thin: they go
+to :func:`quickhull`, never to coal. coal 3.0's Qhull crashes on a set 1e-9 (relative) thick and copes at 1e-6;
+1e-5 keeps a margin. A robot's swept hull of all its frames is centimetres thick in every direction (ratio above
+1e-2); a single frame moving along a line is thin."""
 
 _EPS = 1e-12
-"""Relative distance tolerance of :func:`quickhull`: a point within ``_EPS * extent`` of a facet's plane is on it
-(not outside), so coplanar points do not become vertices."""
+"""Distance tolerance of :func:`quickhull` in normalised coordinates (``|Q| < 1``, so relative to the set's
+extent): a point within ``_EPS`` of a facet's plane is on it (not outside), so coplanar points do not become
+vertices, and a set within ``_EPS`` of a plane has no volume. Rounding in a facet's plane is ~1e-16."""
+
+_QHULL_OPTIONS = "Qt Pp"
+"""Qt: triangulated output (coal needs triangles). Pp: do not print precision warnings (every print crashes)."""
 
 
 class Hull(NamedTuple):
@@ -46,158 +63,196 @@ def _empty() -> Hull:
     return Hull(0.0, 0.0, np.arange(0, dtype=np.int64))
 
 
-def _is_flat(P: np.ndarray) -> bool:
-    centred = P - P.mean(axis=0)
-    sv2 = np.linalg.eigvalsh(centred.T @ centred)  # squared singular values, ascending
-    return not sv2[-1] > 0 or sv2[0] < FLAT_RATIO**2 * sv2[-1]
+def _normalised(P: np.ndarray) -> tuple[np.ndarray, int] | None:
+    """``(Q, e)`` with ``Q = (P - c) 2^-e`` for a centre ``c`` and ``|Q| < 1`` (see the module docstring); None if
+    there are fewer than 4 points, a non-finite coordinate, or all points are equal."""
+    if len(P) < 4 or not np.isfinite(P).all():
+        return None
+    a = int(np.frexp(np.abs(P).max())[1])  # 2^(a-1) <= max|P| < 2^a
+    S = np.ldexp(P, -a)  # exact: scaling by a power of two; |S| < 1, so the centring below cannot overflow
+    lo, hi = S.min(axis=0), S.max(axis=0)
+    C = S - (lo + (hi - lo) / 2)  # bounding-box centre, computed without overflow
+    top = float(np.abs(C).max())
+    if top == 0.0:
+        return None
+    b = int(np.frexp(top)[1])
+    return np.ldexp(C, -b), a + b
+
+
+def _thin(Q: np.ndarray) -> bool:
+    s = np.linalg.svd(Q - Q.mean(axis=0), compute_uv=False)  # descending; Q is O(1), no overflow or underflow
+    return not s[2] > FLAT_RATIO * s[0]
+
+
+def _measure(V: np.ndarray, tri: np.ndarray) -> tuple[float, float]:
+    """Volume and area of the closed triangle mesh ``V[tri]`` of a convex body.
+
+    Volume ``sum_f |det(a_f - o, b_f - o, c_f - o)| / 6`` for ``o`` the mean of the vertices (inside the body,
+    so every tetrahedron ``(o, f)`` is positively oriented and the absolute value only guards a degenerate
+    triangle's orientation), area ``sum_f |(b - a) x (c - a)| / 2``.
+    """
+    o = V.mean(axis=0)
+    a, b, c = V[tri[:, 0]] - o, V[tri[:, 1]] - o, V[tri[:, 2]] - o
+    volume = float(np.abs(np.einsum("ij,ij->i", np.cross(b, c), a)).sum()) / 6.0
+    area = 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    return volume, area
+
+
+def _first_of_equal(Q: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """Ascending indices of the first row of ``Q`` equal to each row of ``W``."""
+    # candidates by x (about as few as W's rows), then the whole row; the first index of a row wins
+    wanted = set(map(tuple, W.tolist()))
+    first: dict[tuple[float, float, float], int] = {}
+    for i in np.flatnonzero(np.isin(Q[:, 0], W[:, 0])).tolist():
+        key = tuple(Q[i].tolist())
+        if key in wanted and key not in first:
+            first[key] = i
+    return np.array(sorted(first.values()), dtype=np.int64)
+
+
+def _hull(Q: np.ndarray, e: int, V: np.ndarray, tri: np.ndarray) -> Hull:
+    """The hull of ``Q 2^e`` from its triangles ``V[tri]`` (``V``: rows of ``Q``, the vertices)."""
+    volume, area = _measure(V, tri)
+    return Hull(float(np.ldexp(volume, 3 * e)), float(np.ldexp(area, 2 * e)), _first_of_equal(Q, V))
 
 
 def convex_hull(P: np.ndarray) -> Hull:
     """Volume (m^3), area (m^2) and vertex indices of ``conv(P)``, ``P (N, 3)`` in m; flat or tiny sets: empty."""
     P = np.ascontiguousarray(P, dtype=float).reshape(-1, 3)
-    if len(P) < 4 or not np.isfinite(P).all() or _is_flat(P):
+    norm = _normalised(P)
+    if norm is None:
         return _empty()
+    Q, e = norm
+    if _thin(Q):  # coal's Qhull may crash the process on it
+        return _quickhull(Q, e)
     import coal  # noqa: PLC0415 - the proximity model loads it; kept out of this module's import
 
     points = coal.StdVec_Vec3s()
-    points.extend(P)
+    points.extend(Q)
     try:
-        hull = coal.ConvexBase.convexHull(points, True, None)  # keepTriangles: a coal.Convex of outward triangles
-    except RuntimeError:  # "Too many neighbors": a vertex with more than 255 hull neighbours
-        return quickhull(P)
-    V = np.array(hull.points(), dtype=float)
+        hull = coal.ConvexBase.convexHull(points, True, _QHULL_OPTIONS)  # a coal.Convex of triangles
+    except RuntimeError:  # "Too many neighbors": a vertex with more than 254 hull neighbours
+        return _quickhull(Q, e)
+    V = np.array(hull.points(), dtype=float)  # the vertices: bit-exact copies of rows of Q
     tri = np.array([(t[0], t[1], t[2]) for t in map(hull.polygons, range(hull.num_polygons))], dtype=np.int64)
-    a, b, c = V[tri[:, 0]], V[tri[:, 1]], V[tri[:, 2]]
-    area = 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
-    # coal's hull points are bit-exact copies of input points: find candidates by x, confirm the whole row, keep
-    # the first of equal points; the candidates are about as few as the vertices
-    hull_rows = set(map(tuple, V.tolist()))
-    vertices, seen = [], set()
-    for i in np.flatnonzero(np.isin(P[:, 0], V[:, 0])).tolist():
-        key = tuple(P[i].tolist())
-        if key in hull_rows and key not in seen:
-            seen.add(key)
-            vertices.append(i)
-    return Hull(float(hull.computeVolume()), area, np.array(vertices, dtype=np.int64))
+    return _hull(Q, e, V, tri)
 
 
 def quickhull(P: np.ndarray) -> Hull:
     """The hull by incremental construction with conflict lists, in numpy (the reference; slower than coal).
 
-    Start from a tetrahedron of extreme points; every point outside some facet (signed distance above
-    ``_EPS * extent``) is assigned to the facet it is farthest outside. Repeatedly take a facet's farthest
-    point ``p``, delete the facets ``p`` sees, join ``p`` to the horizon (edges of deleted facets whose twin
-    was kept) and reassign the deleted facets' points to the new facets. Volume
-    ``sum_f det(a_f - o, b_f - o, c_f - o) / 6`` for an interior point ``o``, area ``sum_f |(b-a) x (c-a)| / 2``.
+    On the normalised points ``Q`` (module docstring): start from a tetrahedron of extreme points; every point
+    outside some facet (signed distance above ``_EPS``) is in the conflict list of the facet it is farthest
+    outside. Repeatedly take the point farthest outside its facet, over all facets, ``p``; delete the facets
+    ``p`` sees (grown from its own facet across shared edges); join ``p`` to the horizon (edges of deleted
+    facets whose twin was kept) and share the deleted facets' conflict points among the new facets. Each step
+    costs the points it moves, not all points. Volume and area: :func:`_measure`.
     """
     P = np.ascontiguousarray(P, dtype=float).reshape(-1, 3)
-    if len(P) < 4 or not np.isfinite(P).all() or _is_flat(P):
+    norm = _normalised(P)
+    if norm is None:
         return _empty()
-    extent = float(np.max(P.max(axis=0) - P.min(axis=0)))
-    eps = _EPS * max(extent, float(np.abs(P).max()))
+    return _quickhull(*norm)
 
+
+def _quickhull(Q: np.ndarray, e: int) -> Hull:
+    eps = _EPS
     # --- initial tetrahedron: extreme in x, farthest from it, from their line, from their plane
-    i0 = int(np.argmin(P[:, 0]))
-    i1 = int(np.argmax(np.einsum("ij,ij->i", P - P[i0], P - P[i0])))
-    u = P[i1] - P[i0]
-    cr = np.cross(P - P[i0], u)
-    i2 = int(np.argmax(np.einsum("ij,ij->i", cr, cr)))
-    n = np.cross(P[i1] - P[i0], P[i2] - P[i0])
-    h = (P - P[i0]) @ n
-    i3 = int(np.argmax(np.abs(h)))
-    if abs(h[i3]) <= eps * np.linalg.norm(n):
+    i0 = int(np.argmin(Q[:, 0]))
+    d = Q - Q[i0]
+    i1 = int(np.argmax(np.einsum("ij,ij->i", d, d)))
+    u = Q[i1] - Q[i0]
+    cr = np.cross(d, u)
+    cr2 = np.einsum("ij,ij->i", cr, cr)
+    i2 = int(np.argmax(cr2))
+    if not np.sqrt(cr2[i2]) > eps * np.linalg.norm(u):  # all points within eps of a line (|Q| < 1, so |u| <= 2)
         return _empty()
-    inside = P[[i0, i1, i2, i3]].mean(axis=0)
+    n = np.cross(u, d[i2])  # its direction is good to ~1e-16 / eps: the triangle is more than eps wide
+    h = d @ (n / np.linalg.norm(n))
+    i3 = int(np.argmax(np.abs(h)))
+    if abs(h[i3]) <= eps:  # all points within eps of a plane
+        return _empty()
+    inside = Q[[i0, i1, i2, i3]].mean(axis=0)
 
     facets: list[tuple[int, int, int]] = []
     for f in ((i0, i1, i2), (i0, i1, i3), (i0, i2, i3), (i1, i2, i3)):
-        a, b, c = P[list(f)]
+        a, b, c = Q[list(f)]
         if np.dot(np.cross(b - a, c - a), inside - a) > 0:  # orient outward (normal away from the interior)
             f = (f[0], f[2], f[1])
         facets.append(f)
 
-    cap = 64
-    F = np.zeros((cap, 3), dtype=np.int64)  # every facet made so far; alive marks the current ones
-    normals = np.zeros((cap, 3))
-    offsets = np.zeros(cap)
-    alive = np.zeros(cap, dtype=bool)
+    F: list[tuple[int, int, int]] = []  # every facet made so far; dead ones stay (ids are list positions)
+    normals: list[np.ndarray] = []
+    offsets: list[float] = []
+    alive: list[bool] = []
     edge_facet: dict[tuple[int, int], int] = {}  # directed edge (a, b) of a live facet -> that facet
-    count = 0
+    conflict: dict[int, np.ndarray] = {}  # live facet -> the points farthest outside it (point indices)
+    heap: list[tuple[float, int, int]] = []  # (-distance, facet, point): the farthest point of each conflict list
 
-    def add(new: np.ndarray) -> np.ndarray:
-        """Append facets ``new (m, 3)`` (outward order); returns their ids."""
-        nonlocal F, normals, offsets, alive, count, cap
-        m = len(new)
-        while count + m > cap:
-            cap *= 2
-            F, normals, offsets, alive = (np.resize(x, (cap,) + x.shape[1:]) for x in (F, normals, offsets, alive))
-            alive[count:] = False
-        ids = np.arange(count, count + m)
-        a, b, c = P[new[:, 0]], P[new[:, 1]], P[new[:, 2]]
+    def add(new: list[tuple[int, int, int]], pts: np.ndarray) -> None:
+        """Append facets ``new`` (outward order) and share ``pts`` among them (each to the facet it is farthest
+        outside, if more than eps)."""
+        ids = list(range(len(F), len(F) + len(new)))
+        nv = np.array(new, dtype=np.int64)
+        a, b, c = Q[nv[:, 0]], Q[nv[:, 1]], Q[nv[:, 2]]
         nrm = np.cross(b - a, c - a)
-        nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-        F[ids], normals[ids], offsets[ids], alive[ids] = new, nrm, np.einsum("ij,ij->i", nrm, a), True
-        for fid, (u, v, w) in zip(ids.tolist(), new.tolist()):
+        length = np.linalg.norm(nrm, axis=1, keepdims=True)
+        nrm = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)  # a zero-area facet sees nothing
+        off = np.einsum("ij,ij->i", nrm, a)
+        for fid, f, m, o in zip(ids, new, nrm, off.tolist()):
+            F.append(f)
+            normals.append(m)
+            offsets.append(o)
+            alive.append(True)
+            u, v, w = f
             edge_facet[(u, v)] = edge_facet[(v, w)] = edge_facet[(w, u)] = fid
-        count += m
-        return ids
+        if len(pts) == 0:
+            return
+        dist = Q[pts] @ nrm.T - off
+        best = np.argmax(dist, axis=1)
+        bd = dist[np.arange(len(pts)), best]
+        out = bd > eps
+        pts, best, bd = pts[out], best[out], bd[out]
+        order = np.argsort(best, kind="stable")
+        pts, best, bd = pts[order], best[order], bd[order]
+        if len(pts) == 0:
+            return
+        cuts = np.flatnonzero(np.diff(best)) + 1
+        for s, group, dg in zip(np.r_[0, cuts].tolist(), np.split(pts, cuts), np.split(bd, cuts)):
+            fid = ids[int(best[s])]
+            conflict[fid] = group
+            k = int(np.argmax(dg))
+            heapq.heappush(heap, (-float(dg[k]), fid, int(group[k])))
 
-    def assign(idx: np.ndarray, cand: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Points ``idx`` against candidate facets ``cand``: (outside points, their facet, their distance)."""
-        d = P[idx] @ normals[cand].T - offsets[cand]
-        best = np.argmax(d, axis=1)
-        dist = d[np.arange(len(idx)), best]
-        out = dist > eps
-        return idx[out], cand[best[out]], dist[out]
-
-    pts, owner, dist = assign(np.arange(len(P)), add(np.array(facets, dtype=np.int64)))
-    while len(pts):
-        k = int(np.argmax(dist))  # the farthest outside point of all: keeps the hull well shaped
-        p = int(pts[k])
-        height = P[p] @ normals[:count].T - offsets[:count]  # signed distance of p to every facet made so far
+    add(facets, np.arange(len(Q)))
+    while heap:
+        _, start, p = heapq.heappop(heap)
+        if not alive[start]:
+            continue
+        qp = Q[p]
         # visible region: facets p sees, grown from p's own facet across shared edges (connected, so its
         # boundary, the horizon, is one loop even when rounding makes a far facet look visible)
-        start = int(owner[k])
         visible, stack, horizon = {start}, [start], []
         while stack:
             f = stack.pop()
-            u, v, w = F[f].tolist()
+            u, v, w = F[f]
             for a, b in ((u, v), (v, w), (w, u)):
                 g = edge_facet[(b, a)]
                 if g in visible:
                     continue
-                if height[g] > eps:
+                if float(qp @ normals[g]) - offsets[g] > eps:
                     visible.add(g)
                     stack.append(g)
                 else:
                     horizon.append((a, b))
-        vis = np.fromiter(visible, dtype=np.int64, count=len(visible))
-        for f in vis.tolist():
-            u, v, w = F[f].tolist()
-            for e in ((u, v), (v, w), (w, u)):
-                del edge_facet[e]
-        alive[vis] = False
-        ids = add(np.array([(a, b, p) for a, b in horizon], dtype=np.int64))
-        was_visible = np.zeros(count, dtype=bool)
-        was_visible[vis] = True
-        orphan = was_visible[owner]
-        keep = ~orphan
-        orphan[k] = keep[k] = False  # p is now a vertex
-        new_pts, new_owner, new_dist = assign(pts[orphan], ids)
-        pts = np.concatenate([pts[keep], new_pts])
-        owner = np.concatenate([owner[keep], new_owner])
-        dist = np.concatenate([dist[keep], new_dist])
+        orphans = [conflict.pop(f) for f in visible if f in conflict]
+        for f in visible:
+            alive[f] = False
+            u, v, w = F[f]
+            del edge_facet[(u, v)], edge_facet[(v, w)], edge_facet[(w, u)]
+        pts = np.concatenate(orphans) if orphans else np.arange(0, dtype=np.int64)
+        add([(a, b, p) for a, b in horizon], pts[pts != p])
 
-    F = F[:count]
-    alive = alive[:count]
-    Fa = F[alive]
-    a, b, c = P[Fa[:, 0]], P[Fa[:, 1]], P[Fa[:, 2]]
-    cr = np.cross(b - a, c - a)
-    volume = float(np.einsum("ij,ij->i", cr, a - inside).sum()) / 6.0
-    area = 0.5 * float(np.linalg.norm(cr, axis=1).sum())
-    # the first of equal points: a vertex's index may be a later duplicate of an earlier point
-    verts = np.unique(Fa)
-    _, first_of = np.unique(P, axis=0, return_index=True)
-    key = {tuple(P[i].tolist()): int(i) for i in first_of}
-    vertices = np.unique([key[tuple(P[i].tolist())] for i in verts.tolist()]).astype(np.int64)
-    return Hull(volume, area, vertices)
+    tri = np.array([f for f, live in zip(F, alive) if live], dtype=np.int64)
+    used, tri = np.unique(tri, return_inverse=True)
+    return _hull(Q, e, Q[used], tri.reshape(-1, 3))
