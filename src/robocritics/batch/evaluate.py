@@ -18,13 +18,14 @@ def _shown_id(row: Any) -> str | int | None:
     return plain_id(row.get("id")) if isinstance(row, Mapping) else None
 
 
-def jobs_of(rows: Iterable[Any], errors: list[dict]) -> Iterator[Job]:
+def jobs_of(rows: Iterable[Any]) -> Iterator[Job | dict]:
     """The :class:`Job` of each input row, read lazily; a bad row (or a :class:`RowError` item, a reader's way
-    of reporting an unreadable line) is appended to ``errors`` as an error row instead."""
+    of reporting an unreadable line) is its error row (a dict) instead, in its place: the engines pass such rows
+    straight through, so a million bad lines are never held in memory at once."""
     seen: set = set()
     for row in rows:
         if isinstance(row, RowError):
-            errors.append(error_row(getattr(row, "row_id", None), "RowError", str(row)))
+            yield error_row(getattr(row, "row_id", None), "RowError", str(row))
             continue
         try:
             job = check_row(row)
@@ -33,7 +34,7 @@ def jobs_of(rows: Iterable[Any], errors: list[dict]) -> Iterator[Job]:
         except RowError as exc:
             shown = _shown_id(row)
             where = getattr(row, "input_line", 0)  # a reader's line number (robocritics batch)
-            errors.append(error_row(shown, "RowError", f"input line {where}: {exc}" if where else str(exc)))
+            yield error_row(shown, "RowError", f"input line {where}: {exc}" if where else str(exc))
             continue
         seen.add(job.id)
         yield job
@@ -69,14 +70,12 @@ def evaluate(
         what = "one row (a mapping): pass a list of rows, [row]" if isinstance(rows, Mapping) else type(rows).__name__
         raise TypeError(f"rows must be an iterable of input rows, got {what}")
     if not isinstance(engine, str):  # an open engine, reused: the caller closes it
-        errors: list[dict] = []
-        yield from engine.run(jobs_of(rows, errors), errors)
+        yield from engine.run(jobs_of(rows))
         return
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     timeout_s = DEFAULT_TIMEOUT_S if timeout_s is None else timeout_s
-    errors: list[dict] = []
-    jobs = jobs_of(rows, errors)
+    jobs = jobs_of(rows)
     if engine == "local":
         pool = LocalEngine(
             workers,
@@ -90,4 +89,4 @@ def evaluate(
 
         pool = RayEngine(workers, robot=robot, timeout_s=timeout_s, sample_rate_hz=sample_rate_hz, address=ray_address)
     with pool:
-        yield from pool.run(jobs, errors)
+        yield from pool.run(jobs)

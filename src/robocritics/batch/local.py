@@ -143,22 +143,23 @@ class LocalEngine:
 
     # --- rows ---
 
-    def run(self, jobs: Iterator[Job], side: list[dict] | None = None) -> Iterator[dict]:
-        """Evaluate ``jobs``, yielding one output row per job as each finishes (not in input order), and the
-        rows appended to ``side`` (error rows of bad input) as they appear."""
-        side = [] if side is None else side
+    def run(self, jobs: Iterator[Job | dict]) -> Iterator[dict]:
+        """Evaluate ``jobs``, yielding one output row per job as each finishes (not in input order); a dict
+        among them (the error row of a bad input row, :func:`~robocritics.batch.evaluate.jobs_of`) is yielded
+        as it is read."""
         while len(self._pool) < self.workers:
             self._pool.append(self._spawn())
         queue: deque[Job] = deque()
         exhausted = False
         try:
             while True:
-                while side:
-                    yield side.pop(0)
                 for w in self._pool:  # give every idle, ready worker a job
                     if w.ready and w.job is None:
                         if not queue and not exhausted:
                             nxt = next(jobs, None)
+                            while isinstance(nxt, dict):  # a bad input row's error row: out at once
+                                yield nxt
+                                nxt = next(jobs, None)
                             exhausted = nxt is None
                             if nxt is not None:
                                 queue.append(nxt)
@@ -167,7 +168,6 @@ class LocalEngine:
                                 w.job, w.job_started = queue.popleft(), time.monotonic()
                             w.conn.send(w.job)
                 if exhausted and not queue and all(w.job is None for w in self._pool):
-                    yield from side
                     return
                 ready = set(wait([w.conn for w in self._pool] + [w.process.sentinel for w in self._pool], _TICK_S))
                 now = time.monotonic()

@@ -134,22 +134,22 @@ class RayEngine:
         """``{actor pid: id of the row it is evaluating}`` right now (for monitoring; no call to the actors)."""
         return {self._pid_of[a]: row_id for a, row_id in list(self._running.items()) if a in self._pid_of}
 
-    def run(self, jobs: Iterator[Job], side: list[dict] | None = None) -> Iterator[dict]:
+    def run(self, jobs: Iterator[Job | dict]) -> Iterator[dict]:
         """See :meth:`_run`; a run abandoned early cancels its rows still in flight."""
         flight: dict[Any, tuple[Any, Job, float]] = {}
         try:
-            yield from self._run(jobs, side, flight)
+            yield from self._run(jobs, flight)
         finally:
             for ref in flight:
                 self._ray.cancel(ref)
             self._running.clear()
 
-    def _run(self, jobs: Iterator[Job], side: list[dict] | None, flight: dict) -> Iterator[dict]:
-        """Evaluate ``jobs``, yielding output rows as they finish, and the rows appended to ``side``.
+    def _run(self, jobs: Iterator[Job | dict], flight: dict) -> Iterator[dict]:
+        """Evaluate ``jobs``, yielding output rows as they finish, and a dict among them (a bad input row's
+        error row) as it is read.
 
         A row's timeout starts when it is sent to an actor that has started (loaded the robot)."""
         ray = self._ray
-        side = [] if side is None else side
         while len(self._actors) < self.workers:
             self._actors.append(self._spawn())
         idle: list = []
@@ -158,10 +158,11 @@ class RayEngine:
         # flight: ObjectRef -> (actor, job, started)
         exhausted = False
         while True:
-            while side:
-                yield side.pop(0)
             while idle and not exhausted:
                 job = next(jobs, None)
+                while isinstance(job, dict):  # a bad input row's error row: out at once
+                    yield job
+                    job = next(jobs, None)
                 if job is None:
                     exhausted = True
                     break
@@ -169,7 +170,6 @@ class RayEngine:
                 flight[actor.evaluate.remote(job)] = (actor, job, time.monotonic())
                 self._running[actor._actor_id.hex()] = job.id
             if exhausted and not flight:
-                yield from side
                 return
             done, _ = ray.wait([*starting, *flight], num_returns=1, timeout=_TICK_S)
             now = time.monotonic()
