@@ -31,7 +31,7 @@ def clouds(draw):
 
 
 @pytest.mark.parametrize("hull_of", IMPLEMENTATIONS)
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=150, deadline=None, derandomize=True)
 @given(P=clouds())
 def test_matches_scipy(hull_of, P):
     ref = ConvexHull(P)

@@ -33,14 +33,14 @@ def close(a, b, y):
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * scale)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300, deadline=None, derandomize=True)
 @given(knots())
 def test_cubic_spline_matches_scipy_not_a_knot(data):
     x, y, xs = data
     close(cubic_spline(x, y, xs), CubicSpline(x, y, axis=0)(xs), y)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300, deadline=None, derandomize=True)
 @given(knots())
 def test_pchip_matches_scipy(data):
     x, y, xs = data
