@@ -14,6 +14,7 @@ ROOT_NAMES = {
     "Trajectory",
     "simulate",
     "critique",
+    "repair",
     "Report",
     "Verdict",
     "Flag",
@@ -52,14 +53,17 @@ def test_each_root_name_is_the_object_its_module_defines():
     from robocritics.trajectory import Trajectory
     from robocritics.verdict import Flag, Verdict
 
+    from robocritics.repair import builtin  # noqa: F401  (submodules import under the function's name)
     import robocritics.simulate as _  # noqa: F401  (the module, not the function the root binds)
 
     simulate_module = sys.modules["robocritics.simulate"]
+    repair_package = sys.modules["robocritics.repair"]
     expected = {
         "Robot": Robot,
         "Scene": Scene,
         "Trajectory": Trajectory,
         "simulate": simulate_module.simulate,
+        "repair": repair_package.repair,
         "critique": critique,
         "Report": Report,
         "Verdict": Verdict,
@@ -72,6 +76,8 @@ def test_each_root_name_is_the_object_its_module_defines():
     for name, obj in expected.items():
         assert getattr(robocritics, name) is obj, name
     assert callable(robocritics.simulate) and robocritics.simulate.__module__ == "robocritics.simulate"
+    assert callable(robocritics.repair) and "Repair" in robocritics.repair.__doc__
+    assert repair_package.Repair is sys.modules["robocritics.repair.search"].Repair  # the package's lazy names
     for name in ERROR_NAMES:
         cls = getattr(robocritics, name)
         assert cls is getattr(errors, name), name

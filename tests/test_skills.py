@@ -328,3 +328,14 @@ def test_skill_errors_quote_huge_values_briefly():
         with pytest.raises(ProgramError) as info:
             run_program(call + "\n", SORTING)
         assert len(info.value.reason) < 400, call
+
+
+def test_describe_names_a_posture_that_is_not_the_default():
+    from robocritics import Scene, simulate
+
+    program = 'move_to(0.3, 0.1, 0.2, posture="natural")\nmove_above(green_apple, 0.1, posture="natural")\nhome()\n'
+    described = [c.describe() for c in simulate(program, Scene.builtin("sorting")).plan.calls]
+    assert described[:2] == ["move_to(x=0.3, y=0.1, z=0.2, posture='natural')",
+                             "move_above(green_apple, height=0.1, posture='natural')"]  # fmt: skip
+    default = simulate("move_to(0.3, 0.1, 0.2)\n", Scene.builtin("sorting")).plan.calls[0].describe()
+    assert "posture" not in default

@@ -4,7 +4,8 @@ A language model writes a program against a small skill API; :func:`simulate`
 turns it into a physically timed motion trace (:class:`Trajectory`); expert-informed
 critics (:func:`critique`) flag joint speed, space usage, collision, spearing
 and pinch-point problems with explanations and fix hints (:class:`Report`);
-:class:`Loop` sends that feedback back to the model; only a verified trace is
+:func:`repair` applies the critics' own fixes, verified by simulation;
+:class:`Loop` sends what is left back to the model; only a verified trace is
 deployed to a UR3e (:mod:`robocritics.deploy`).
 
 The root holds the names most programs need; everything else lives in its
@@ -49,9 +50,10 @@ _MOVED = {
     "OpenAICompatible": "robocritics.llm",
 }
 
-# Eager, and cheap (its heavy imports are inside the function): the submodule
-# `robocritics.simulate` would otherwise shadow the function of the same name.
+# Eager, and cheap (their heavy imports are inside the functions): the submodules
+# `robocritics.simulate` and `robocritics.repair` would otherwise shadow the functions of the same names.
 from .simulate import simulate  # noqa: E402
+from .repair import repair  # noqa: E402
 from .errors import (  # noqa: E402
     CriticError,
     DeployError,
@@ -78,7 +80,7 @@ _ERRORS = (
     "RTDEError",
 )
 
-__all__ = [*_EXPORTS, "simulate", *_ERRORS]
+__all__ = [*_EXPORTS, "simulate", "repair", *_ERRORS]
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), moved=_MOVED)

@@ -45,7 +45,9 @@ def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped
     """Candidate repairs for one flagged ``verdict``: a list of :class:`robocritics.repair.Edit`.
 
     ``execution`` is the :class:`~robocritics.simulate.Execution` the verdict judged
-    (its ``plan`` maps skill calls to program lines), ``program`` the source text.
+    (its ``plan`` maps skill calls to program lines), or for the ``runtime`` critic's
+    verdict (a program that does not run) a :class:`robocritics.repair.NotRun` (its
+    ``scene`` and ``robot``, no trajectory); ``program`` is the source text.
     Return ``[]`` for verdicts of other critics. Candidates are re-simulated by
     :func:`robocritics.repair.repair` and kept only when they remove the flag
     without adding another or breaking a goal.

@@ -37,7 +37,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from .. import hookimpl
+from ..hookspecs import hookimpl  # not `from .. import`: the root imports the repairs, which import this module
 from ..critic import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["CollisionCritic", "register_critics", "Counted", "counted_distances"]

@@ -12,9 +12,11 @@ times in seconds, speeds as a fraction of full speed):
 =====================  ===========================================================
 skill                  args
 =====================  ===========================================================
-``move_to``            ``{"target": (x, y, z)}`` or ``{"object": id}`` (object centre)
-``move_linear``        same as ``move_to``
-``move_above``         ``{"object": id, "height": h}`` or ``{"target": (x, y, z), "height": h}``
+``move_to``            ``{"target": (x, y, z)}`` or ``{"object": id}`` (object centre); ``"posture": "natural"``
+                       when asked for (absent: the default, ``"nearest"``)
+``move_linear``        ``{"target": (x, y, z)}`` or ``{"object": id}`` (no posture: the line fixes it)
+``move_above``         ``{"object": id, "height": h}`` or ``{"target": (x, y, z), "height": h}``, and
+                       ``"posture"`` as for ``move_to``
 ``move_up``            ``{"dz": dz}`` (``0 < dz <= 1``)
 ``move_down``          ``{"dz": dz}`` (``0 < dz <= 1``)
 ``open_gripper``       ``{}``
@@ -126,6 +128,8 @@ class SkillCall:
                 else:
                     parts.append(f"{k}={v}")
             inner = ", ".join(parts)
+        if s in ("move_to", "move_above") and "posture" in a:
+            inner += f", posture={a['posture']!r}"
         return f"{s}({inner})"
 
     def to_dict(self) -> dict[str, Any]:

@@ -445,8 +445,9 @@ class Evaluator:
 
         Returns the :class:`~robocritics.repair.Repair` (with this Evaluator's scene, critics, params and goals);
         every re-simulation a repair makes runs under the child's limits, the whole repair within one job's
-        ``cpu_s`` and ``timeout_s``. A limit hit, a dead child or a program that does not run raises its typed
-        error (a :class:`~robocritics.errors.RoboCriticsError`: the Loop then asks the model instead).
+        ``cpu_s`` and ``timeout_s``. A program that does not run and that no repair makes run comes back as
+        :func:`~robocritics.repair.repair` returns it (no changes, the runtime report); a limit hit or a dead
+        child raises :class:`EvaluatorError` (a RoboCriticsError: the Loop then asks the model instead).
         """
         evaluation = self._job("repair", program, None, None)
         if evaluation.error is None:

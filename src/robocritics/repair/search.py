@@ -1,0 +1,215 @@
+"""The repair search: simulate, ask the critics that flag an Error for edits, keep those simulation verifies.
+
+See :mod:`robocritics.repair` for the whole story; this module is its implementation.
+"""
+
+from __future__ import annotations
+
+import difflib
+import logging
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Iterable
+
+from ..critic import RUNTIME
+from ..errors import RoboCriticsError
+from ..verdict import Flag
+from . import builtin
+
+log = logging.getLogger(__name__)
+from .edit import Edit, Insert, MoveBlock, ScaleNumbers, apply_edits, paragraphs
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..report import Report
+    from ..scene import Scene
+    from ..simulate import Execution
+
+__all__ = ["repair", "Repair", "Change", "NotRun", "Edit", "Insert", "ScaleNumbers", "MoveBlock", "apply_edits", "paragraphs", "MAX_ROUNDS"]
+
+#: Most accepted edits per repair() call (each one re-simulates the program).
+MAX_ROUNDS = 12
+
+
+@dataclass(frozen=True)
+class Change:
+    """One accepted edit: which critic asked for it, the program line, what changed, why, and its cost.
+
+    ``cost_s`` is the change in cycle time it caused, s (positive = slower; 0 for the
+    edit that makes a program that did not run run).
+    """
+
+    critic: str
+    line: int
+    what: str
+    why: str
+    cost_s: float
+
+    def __str__(self) -> str:
+        return f"{self.critic} (line {self.line}): {self.what} -- {self.why} [{self.cost_s:+.2f} s]"
+
+
+@dataclass
+class Repair:
+    """The result of :func:`repair`: the repaired ``program`` with its ``report`` and ``execution``.
+
+    ``execution`` is None when the program still does not run (``report`` then holds the
+    ``runtime`` critic's Error naming the line); that happens only with no ``changes``,
+    since the runtime repair is kept only when the program then runs.
+    """
+
+    original: str
+    program: str
+    report: Report
+    execution: Execution | None
+    changes: list[Change] = field(default_factory=list)
+
+    @property
+    def diff(self) -> str:
+        """A unified diff from the original program to the repaired one."""
+        return "".join(
+            difflib.unified_diff(
+                self.original.splitlines(keepends=True), self.program.splitlines(keepends=True), "original", "repaired"
+            )
+        )
+
+    @property
+    def errors(self) -> list:
+        """The verdicts still flagged Error."""
+        return [v for v in self.report.verdicts if v.flag == Flag.ERROR]
+
+
+@dataclass(frozen=True)
+class NotRun:
+    """What a repair hook gets as ``execution`` for the ``runtime`` verdict of a program that does not run.
+
+    It has the ``scene`` (with the robot's workspace) and the ``robot`` the program was
+    simulated with, but no trajectory or plan: a repair re-runs what it needs (e.g. the
+    built-in one re-simulates to read the unreachable target from the PlanningError).
+    """
+
+    scene: Scene
+    robot: Any
+
+
+def _manager():
+    from ..plugins import load_plugins, pm
+
+    load_plugins()
+    if not pm.is_registered(builtin):
+        pm.register(builtin, name="robocritics.repair.builtin")
+    return pm
+
+
+def _flags(report: Report) -> dict[str, int]:
+    return {v.critic: v.score for v in report.verdicts}
+
+
+#: Fraction by which an Error's distance from its threshold must shrink to count as progress.
+PROGRESS = 0.25
+
+
+def _progress(before: Report, after: Report, critic: str) -> bool:
+    old = next((v for v in before.verdicts if v.critic == critic), None)
+    new = next((v for v in after.verdicts if v.critic == critic), None)
+    if old is None or new is None or None in (old.value, old.threshold, new.value) or old.threshold != new.threshold:
+        return False
+    gap_old, gap_new = old.value - old.threshold, new.value - new.threshold
+    return gap_old * gap_new > 0 and abs(gap_new) <= (1 - PROGRESS) * abs(gap_old)
+
+
+def _acceptable(before: Report, after: Report, critic: str) -> bool:
+    """``after`` scores no verdict lower than ``before`` and makes progress on an Error.
+
+    Progress is one of: ``critic`` is out of Error; its Error is clearly smaller
+    (:data:`PROGRESS`: the measured value moved toward the threshold by that
+    fraction, e.g. a 6 cm penetration that became 2.9 cm, so a repair that uncovers
+    the next, lesser fault of the same critic still counts and the next round can
+    fix that one); or another critic's Error is gone (e.g. picking the cupcake
+    first puts it on the plate, while the collision it caused moves elsewhere).
+    For the ``runtime`` Error of a program that did not run, progress is that it runs.
+    """
+    old, new = _flags(before), _flags(after)
+    if critic == RUNTIME:  # the program did not run: running at all is the progress; later rounds fix the rest
+        return RUNTIME not in new
+    if not all(new.get(name, 2) >= score for name, score in old.items()):
+        return False
+    if not all(name in old or score > 0 for name, score in new.items()):
+        return False
+    if new.get(critic, 2) > 0 or _progress(before, after, critic):
+        return True
+    return sum(s == 0 for s in new.values()) < sum(s == 0 for s in old.values())
+
+
+def _offered_edits(hook, verdict, execution, source: str) -> list:
+    """Every plugin's edits for ``verdict``; a plugin whose hook raises is logged by name and skipped."""
+    edits: list = []
+    for impl in hook.robocritics_repairs.get_hookimpls():
+        try:
+            offered = impl.function(verdict=verdict, execution=execution, program=source)
+        except Exception as exc:  # noqa: BLE001 - third-party code: report it, keep repairing with the others
+            log.warning("repair plugin %s failed on %s and was skipped: %s: %s",
+                        impl.plugin_name, verdict.critic, type(exc).__name__, str(exc)[:200])  # fmt: skip
+            continue
+        edits += [e for e in offered or [] if isinstance(e, Edit)]
+    return edits
+
+
+def repair(
+    program: str,
+    scene: Scene | str,
+    *,
+    goal: str | Iterable[Any] | None = None,
+    critics: Iterable[str] | str | None = None,
+    robot: Any = None,
+    params: Any = None,
+) -> Repair:
+    """:func:`robocritics.repair.repair` (documented there)."""
+    from ..critic import check_program
+    from ..robot.model import Robot
+    from ..scene import Scene
+
+    scene = scene if isinstance(scene, Scene) else Scene.resolve(scene)
+    from ..goals import parse_goals
+
+    goals = parse_goals(goal, scene) or None
+    robot = robot or Robot.ur3e()
+    not_run = NotRun(robot.scene_for(scene), robot)
+
+    def evaluate(source: str):
+        return check_program(source, scene, goals=goals, critics=critics, params=params, robot=robot)
+
+    hook = _manager().hook
+    source = program
+    execution, report = evaluate(source)
+    changes: list[Change] = []
+    for _ in range(MAX_ROUNDS):
+        errors = [v for v in report.verdicts if v.flag == Flag.ERROR]
+        accepted = False
+        for verdict in errors:
+            candidates = _offered_edits(hook, verdict, execution or not_run, source)
+            tried = []
+            for edit in candidates:
+                try:
+                    new_source = apply_edits(source, edit.ops)
+                    new_execution, new_report = evaluate(new_source)
+                except (RoboCriticsError, SyntaxError):
+                    continue  # e.g. an edit that is no longer valid Python: not a repair
+                if not _acceptable(report, new_report, verdict.critic):
+                    continue
+                tried.append((edit, new_source, new_execution, new_report))
+                if verdict.critic != RUNTIME:
+                    break  # the first acceptable edit is kept
+            # a program that did not run: every edit that makes it run is acceptable, so the best-scoring one
+            # (highest summed verdict score, then the first offered) is kept rather than the first
+            ranked = sorted(range(len(tried)), key=lambda i: (-sum(v.score for v in tried[i][3].verdicts), i))
+            for edit, new_source, new_execution, new_report in [tried[i] for i in ranked[:1]]:
+                # a program that did not run had no cycle to compare with: its first running version costs 0
+                cost = new_execution.duration_s - execution.duration_s if execution and new_execution else 0.0
+                changes.append(Change(edit.critic, edit.line, edit.what, edit.why, cost))
+                source, execution, report = new_source, new_execution, new_report
+                accepted = True
+                break
+            if accepted:
+                break
+        if not accepted:
+            break
+    return Repair(program, source, report, execution, changes)
