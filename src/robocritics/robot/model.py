@@ -89,20 +89,28 @@ CONTINUOUS_LIMIT_RAD = 2 * math.pi
 _SAME_HOUSING_GAP_M = 0.06
 
 
+_BLAS_MNK = 131072
+"""Largest ``m n k`` of one BLAS product in FK: OpenBLAS goes multi-threaded above 262,144 (measured here: an
+(m x 3) @ (3 x 3) gemm is single-threaded at m = 22,200 and threaded at 60,000), and threaded, one 20k-sample
+product costs 50-70x the CPU on this 2-core machine (``benchmarks/bench_pipeline.py``). Under it, chunked BLAS
+is ~7x faster than element-wise numpy."""
+
+
 def _rot_times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``A (T, 3, 3) @ B (3, 3)``, as three column multiply-adds."""
-    out = A[:, :, 0, None] * B[0]
-    out += A[:, :, 1, None] * B[1]
-    out += A[:, :, 2, None] * B[2]
+    """``A (T, 3, 3) @ B (3, k)`` -> ``(T, 3, k)``, as BLAS products small enough to stay single-threaded."""
+    T, k = A.shape[0], B.shape[1]
+    rows = np.ascontiguousarray(A).reshape(3 * T, 3)
+    out = np.empty((T, 3, k))
+    flat = out.reshape(3 * T, k)
+    chunk = max(1, _BLAS_MNK // (3 * k))
+    for i in range(0, 3 * T, chunk):
+        np.matmul(rows[i : i + chunk], B, out=flat[i : i + chunk])
     return out
 
 
 def _rot_apply(A: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``A (T, 3, 3) @ v (3,)``, as three column multiply-adds."""
-    out = A[:, :, 0] * v[0]
-    out += A[:, :, 1] * v[1]
-    out += A[:, :, 2] * v[2]
-    return out
+    """``A (T, 3, 3) @ v (3,)`` -> ``(T, 3)``."""
+    return _rot_times(A, v.reshape(3, 1))[:, :, 0]
 
 
 def _axis_rotations(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -495,10 +503,14 @@ class Robot:
         frames = np.empty((T, L, 4, 4))
         frames[:, :, 3, :3] = 0.0
         frames[:, :, 3, 3] = 1.0
-        for f in range(L):
-            parent, M = self._frame_parent[f], self._frame_placement[f]
-            frames[:, f, :3, :3] = _rot_times(R[parent], M[:3, :3])
-            frames[:, f, :3, 3] = _rot_apply(R[parent], M[:3, 3]) + P[parent]
+        for parent in np.unique(self._frame_parent).tolist():
+            # every frame on one joint in one product: R_parent @ [R_f1 t_f1 R_f2 t_f2 ...]
+            idx = np.flatnonzero(self._frame_parent == parent)
+            k = len(idx)
+            local = self._frame_placement[idx, :3, :].transpose(1, 0, 2).reshape(3, 4 * k)  # (3, 4k)
+            prod = _rot_times(R[parent], local).reshape(T, 3, k, 4).transpose(0, 2, 1, 3)  # (T, k, 3, 4)
+            prod[..., 3] += P[parent][:, None, :]
+            frames[:, idx, :3, :] = prod
         if self.finger_links and gripper_opening_m is not None:
             shift = (self.max_opening_m - np.broadcast_to(np.asarray(gripper_opening_m, float), (T,))) / 2
             y_axis = frames[:, self.tcp_index, :3, 1]
