@@ -247,3 +247,45 @@ def test_approve_raising_on_a_repair_changes_nothing(llm_server, make_client, so
         loop.fix()
     assert loop.attempts == [first] and loop.current is first and len(memory) == 1
     assert len(llm_server.chat_requests()) == 1
+
+
+UNREACHABLE = """move_above(green_apple, height=0.42)
+move_down(0.42)
+close_gripper()
+move_up(0.12)
+move_above(white_box, 0.1)
+open_gripper()
+home()
+"""
+
+
+def test_a_program_that_does_not_run_is_repaired_before_the_model_hears_of_its_error(llm_server, make_client):
+    scene = Scene.builtin("sorting")
+    reference = repair(UNREACHABLE, scene)
+    assert reference.changes and reference.execution is not None  # the runtime Error's repair makes it run
+    llm_server.reply(fenced(UNREACHABLE), fenced(UNREACHABLE.replace("0.42", "0.1")))
+    loop = Loop(make_client(), scene)
+    first = loop.request(TASK)
+    assert first.report is None and "line 1" in first.error  # out of reach: it did not run
+    loop.fix()
+    repaired = loop.attempts[1]
+    assert repaired.source == "repair" and repaired.program == reference.program
+    assert repaired.error is None and repaired.report is not None and repaired.report.score == reference.report.score
+    # the repaired motion still collides (no repair helps there): the model hears of that, not of the runtime error
+    assert reference.errors
+    requests = llm_server.chat_requests()
+    assert len(requests) == 2 and "Automatic repairs were applied" in requests[1].text
+    assert all(v.message[:40] in requests[1].text for v in reference.errors)
+    assert "does not run" not in requests[1].text.split("Automatic repairs")[-1]
+
+
+def test_a_program_no_repair_can_make_run_goes_to_the_model_with_its_error(llm_server, make_client):
+    scene = Scene.builtin("sorting")
+    broken = "move_to(2.0, 0.0, 0.2)\nhome()\n"  # 2 m away: no height reaches it
+    assert repair(broken, scene).execution is None
+    llm_server.reply(fenced(broken), fenced("home()\n"))
+    loop = Loop(make_client(), scene)
+    loop.request(TASK)
+    loop.fix()
+    assert [a.source for a in loop.attempts] == ["llm", "llm"]
+    assert "line 1" in llm_server.chat_requests()[1].text  # the runtime feedback, as without repairs

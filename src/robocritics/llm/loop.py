@@ -442,8 +442,10 @@ class Loop:
         Error is sent to the model; with none left, no model call is made.
         ``critics`` restricts both to some critics (default: the loop's
         critics; a repair still changes only what makes no verdict worse).
-        If the last reply could not be run (sandbox, planning, no code), its
-        runtime feedback is what is sent (there is nothing to repair).
+        If the last program could not be run (sandbox or planning error: the
+        ``runtime`` critic's Error), the repairs first try to make it run (e.g.
+        an unreachable hover lowered to the nearest reachable height); if none
+        does, or the reply had no code, its runtime feedback is what is sent.
 
         Returns the latest attempt: the model's revision, or the repair when
         the model was not asked. Raises :class:`NothingToFixError` when there
@@ -579,7 +581,7 @@ class Loop:
         """One Fix round: repairs (when on and an Error is selected), then the model with what is left."""
         message = self._fix_message(critics)  # NothingToFixError before anything is done
         repaired: Attempt | None = None
-        if self.repairs and self._pending_error is None:
+        if self.repairs and (self._pending_error is None or self._did_not_run()):
             repaired = self._repair(critics)
             if repaired is not None and repaired.approved is not False:
                 try:
@@ -621,6 +623,11 @@ class Loop:
         assert current.report is not None
         return fix_prompt(current.report, failing, program=current.program)
 
+    def _did_not_run(self) -> bool:
+        """The current attempt is a program that did not run (sandbox or planning error), not a missing one."""
+        c = self.current
+        return c is not None and c.program is not None and c.report is None and c.execution is None and bool(c.error)
+
     def _repair(self, critics: Iterable[str] | str | None) -> Attempt | None:
         """Apply the critics' repairs to the current program as a new attempt (approved, checked, stored).
 
@@ -630,10 +637,15 @@ class Loop:
         from ..repair import repair
         from ..verdict import Flag
 
-        current, failing = self._failing(critics)
-        assert current.report is not None and current.program is not None
-        if not any(current.report.verdict(n).flag == Flag.ERROR for n in failing):
-            return None  # repairs act on Errors only
+        did_not_run = self._did_not_run()  # the runtime critic's Error: e.g. an unreachable target
+        if did_not_run:
+            current = self.current
+        else:
+            current, failing = self._failing(critics)
+            assert current.report is not None
+            if not any(current.report.verdict(n).flag == Flag.ERROR for n in failing):
+                return None  # repairs act on Errors only
+        assert current is not None and current.program is not None
         try:
             if self._repair_hook is not None:
                 result = self._repair_hook(current.program)
@@ -644,8 +656,8 @@ class Loop:
             log.warning("attempt %d: the critics' repairs failed (%s); asking the model", current.index, exc)
             return None
         code = _normalise(result.program)
-        if not result.changes or code == current.program:
-            return None
+        if not result.changes or code == current.program or result.execution is None:
+            return None  # nothing changed, or a program that did not run still does not
         assert self.task is not None
         index = len(self.attempts) + 1
         attempt = Attempt(index=index, kind="repair", request=self.task, prompt="", reply="", program=code,
@@ -658,6 +670,8 @@ class Loop:
                 self._record(attempt)
                 return attempt
             attempt.approved = True
+        if did_not_run:
+            self._pending_error = None  # the repaired program runs: the model is owed critic feedback instead
         if self._simulate is None and self._repair_hook is None and self.sample_rate_hz is None and result.program == code:
             # repair() checked exactly this program the way _check would (same simulate and critique calls)
             attempt.execution, attempt.report, attempt.score = result.execution, result.report, result.report.score
