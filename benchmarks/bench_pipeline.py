@@ -5,13 +5,14 @@ scene (default critics, 125 Hz) once to warm caches, then REPEATS times; the tab
 (``time.process_time``: user + system of the process, all threads) per program and the mean over programs.
 Programs/s per core is ``1000 / mean CPU ms``. Cold: ``robocritics check examples/programs/sorting_careful.py
 --scene sorting`` run as a child RUNS times, its user + system CPU from ``resource.getrusage(RUSAGE_CHILDREN)``,
-median. FK: ``Robot.forward`` of 20,000 random samples (median of 7), the case where one batched pass lets
-OpenBLAS go multi-threaded.
+median; with a bytecode cache (as an installed package has) and without (every module compiled from source:
+``PYTHONDONTWRITEBYTECODE=1``, as this machine's environment sets). FK: ``Robot.forward`` of 20,000 random
+samples (median of 7), the case where one batched BLAS pass lets OpenBLAS go multi-threaded.
 
 Every measurement runs in a fresh child interpreter, three rounds (alternating the two trees with
-``--before-src``), and the table shows each number's least over the rounds. The "before" column is fixed: this script run on the
-source tree of commit 063c8da (before issue 15 item 3; ``--before-src DIR`` with ``git archive 063c8da | tar
--x -C DIR`` measures it again beside the current tree, in the same conditions).
+``--before-src``), and the table shows each number's least over the rounds. The "before" column is fixed: this
+script run on the source tree of commit 063c8da (before issue 15 item 3); ``--before-src DIR``, with
+``git archive 063c8da | tar -x -C DIR``, measures it again beside the current tree, in the same conditions.
 
 Run:
     .venv/bin/python benchmarks/bench_pipeline.py [REPEATS] [RUNS] [--before-src DIR]
@@ -53,15 +54,31 @@ def warm(repeats: int) -> dict[str, float]:
     return out
 
 
-def cli_cold(runs: int, src: Path) -> float:
-    """Median user + system CPU s of one cold ``robocritics check`` child (of the tree on ``PYTHONPATH``)."""
+def cli_cold(runs: int, src: Path, bytecode_cache: bool) -> float:
+    """Median user + system CPU s of one cold ``robocritics check`` child (of the tree on ``PYTHONPATH``).
+
+    ``bytecode_cache``: the children share a bytecode cache (``PYTHONPYCACHEPREFIX`` in a temporary directory,
+    filled by one untimed run), as an installed package has; else they compile every robocritics module from
+    source (``PYTHONDONTWRITEBYTECODE=1``, this machine's default).
+    """
+    import tempfile
+
     cmd = [sys.executable, "-m", "robocritics.cli", "check", str(PROGRAMS / "sorting_careful.py"), "--scene", "sorting"]
-    cpu = []
-    for _ in range(runs):
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=os.environ)
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    env = dict(os.environ)
+    with tempfile.TemporaryDirectory() as cache:
+        if bytecode_cache:
+            env.pop("PYTHONDONTWRITEBYTECODE", None)
+            env["PYTHONPYCACHEPREFIX"] = cache
+            subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=env)
+        else:
+            env["PYTHONDONTWRITEBYTECODE"] = "1"
+            env.pop("PYTHONPYCACHEPREFIX", None)
+        cpu = []
+        for _ in range(runs):
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=env)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
     return statistics.median(cpu)
 
 
@@ -96,7 +113,8 @@ def measure(src: Path | None, repeats: int, runs: int) -> dict[str, float]:
 def child(repeats: int, runs: int, src: Path) -> None:
     out = {f"{k} CPU ms": v for k, v in warm(repeats).items()}
     out["FK 20k samples CPU ms"] = fk_cpu_ms()
-    out["robocritics check, cold CPU s"] = cli_cold(runs, src)
+    out["check, cold CPU s (bytecode cached)"] = cli_cold(runs, src, True)
+    out["check, cold CPU s (no bytecode)"] = cli_cold(runs, src, False)
     print(json.dumps(out))
 
 
@@ -128,7 +146,8 @@ def main() -> None:
             d["mean CPU per program ms"] = statistics.fmean(ms)
             d["programs/s per core"] = 1000 / d["mean CPU per program ms"]
     order = [k for k in now if k.endswith(" CPU ms") and not k.startswith("FK")]
-    order += ["mean CPU per program ms", "programs/s per core", "FK 20k samples CPU ms", "robocritics check, cold CPU s"]
+    order += ["mean CPU per program ms", "programs/s per core", "FK 20k samples CPU ms"]
+    order += ["check, cold CPU s (bytecode cached)", "check, cold CPU s (no bytecode)"]
     w = max(map(len, order))
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     print(
