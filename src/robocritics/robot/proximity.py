@@ -1364,7 +1364,9 @@ class ProximityKernel:
         """
         T = buf.shape[1]
         n = a.shape[2]
-        if pose is not None:  # R^T (p - c) per sample, broadcast over the capsules
+        if pose is not None and g.kind == "sphere":  # a ball has no orientation: p - c per sample is enough
+            a = a - np.ascontiguousarray(pose[:, :3, 3].T)[:, None, :]
+        elif pose is not None:  # R^T (p - c) per sample, broadcast over the capsules
             R, c = pose[:, :3, :3], pose[:, :3, 3]
             a = np.stack(_to_local(a[0], a[1], a[2], R, c))
             d = np.stack(_to_local(d[0], d[1], d[2], R, c, translate=False))
