@@ -97,12 +97,12 @@ is ~7x faster than element-wise numpy."""
 
 
 def _rot_times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``A (T, 3, 3) @ B (3, k)`` -> ``(T, 3, k)``, as BLAS products small enough to stay single-threaded."""
-    T, k = A.shape[0], B.shape[1]
-    rows = np.ascontiguousarray(A).reshape(3 * T, 3)
+    """``A (T, 3, m) @ B (m, k)`` -> ``(T, 3, k)``, as BLAS products small enough to stay single-threaded."""
+    T, m, k = A.shape[0], A.shape[2], B.shape[1]
+    rows = np.ascontiguousarray(A).reshape(3 * T, m)
     out = np.empty((T, 3, k))
     flat = out.reshape(3 * T, k)
-    chunk = max(1, _BLAS_MNK // (3 * k))
+    chunk = max(1, _BLAS_MNK // (m * k))
     for i in range(0, 3 * T, chunk):
         np.matmul(rows[i : i + chunk], B, out=flat[i : i + chunk])
     return out
@@ -531,17 +531,17 @@ class Robot:
 
     def capsule_segments(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Capsule endpoints ``(T, C, 3)`` each, m in the base frame, from ``frames (T, L, 4, 4)``."""
-        F = frames[:, self._capsule_frame]  # (T, C, 4, 4)
-        R, t = F[..., :3, :3], F[..., :3, 3]
-        # R p + t as three column multiply-adds (einsum's generic loop over these 3x3 blocks is ~5x slower)
-        out = []
-        for p in (self._capsule_p0, self._capsule_p1):
-            x = R[..., 0] * p[:, 0, None]
-            x += R[..., 1] * p[:, 1, None]
-            x += R[..., 2] * p[:, 2, None]
-            x += t
-            out.append(x)
-        return out[0], out[1]
+        T, C = frames.shape[0], len(self._capsule_frame)
+        p0, p1 = np.empty((T, C, 3)), np.empty((T, C, 3))
+        for f in sorted(set(self._capsule_frame.tolist())):
+            # [R t] (T, 3, 4) of the frame times the homogeneous endpoints [p; 1] of its capsules: one BLAS product
+            cs = np.flatnonzero(self._capsule_frame == f)
+            ends = np.concatenate([self._capsule_p0[cs], self._capsule_p1[cs]])  # (2k, 3)
+            ends_h = np.vstack([ends.T, np.ones(len(ends))])  # (4, 2k)
+            world = _rot_times(frames[:, f, :3, :], ends_h)  # (T, 3, 2k)
+            p0[:, cs] = world[:, :, : len(cs)].transpose(0, 2, 1)
+            p1[:, cs] = world[:, :, len(cs) :].transpose(0, 2, 1)
+        return p0, p1
 
     def trajectory(self, q: np.ndarray, time: np.ndarray, scene, **kwargs):
         """The :class:`~robocritics.trajectory.Trajectory` of joint samples ``q`` at ``time`` in ``scene``.
