@@ -32,8 +32,19 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PROGRAMS = ROOT / "examples" / "programs"
 
-#: Measured at commit 063c8da with this script (``--before-src``), see the module docstring.
-BEFORE: dict[str, float] = {}
+#: Measured at commit 063c8da with this script (``--before-src``, 7 repeats, 5 runs, least of 3 rounds) on this
+#: 2-core machine at load ~2 (other sessions' tests running), 2026-12-02 06:14 UTC; see the module docstring.
+BEFORE: dict[str, float] = {
+    "breakfast_careful CPU ms": 129.963,
+    "breakfast_naive CPU ms": 31.093,
+    "recycling_careful CPU ms": 102.553,
+    "recycling_naive CPU ms": 38.967,
+    "sorting_careful CPU ms": 91.825,
+    "sorting_naive CPU ms": 31.987,
+    "FK 20k samples CPU ms": 147.477,
+    "check, cold CPU s (bytecode cached)": 0.883,
+    "check, cold CPU s (no bytecode)": 0.963,
+}
 
 
 def warm(repeats: int) -> dict[str, float]:
