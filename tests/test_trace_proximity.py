@@ -127,3 +127,42 @@ def test_long_trajectory_frames_match_pinocchio(robot):
     gap = np.linalg.norm(slid[:, moved[0], :3, 3] - slid[:, moved[1], :3, 3], axis=1)
     full = np.linalg.norm(frames[:, moved[0], :3, 3] - frames[:, moved[1], :3, 3], axis=1)
     np.testing.assert_allclose(full - gap, robot.max_opening_m - opening, atol=1e-12)
+
+
+def _forward_4x4(robot, q):
+    """The plain reference: per sample, per joint, parent @ placement @ joint motion as 4x4 products."""
+    T = len(q)
+    frames = np.empty((T, len(robot.frame_names), 4, 4))
+    for t in range(T):
+        oMi = [np.eye(4)]
+        for j in range(1, robot.model.njoints):
+            kind, axis = robot._joint_motion[j]
+            X = np.eye(4)
+            if kind == "revolute":
+                k = axis / np.linalg.norm(axis)
+                K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+                X[:3, :3] = np.eye(3) + np.sin(q[t, j - 1]) * K + (1 - np.cos(q[t, j - 1])) * (K @ K)
+            else:
+                X[:3, 3] = q[t, j - 1] * axis
+            oMi.append(oMi[robot._joint_parents[j]] @ robot._joint_placements[j] @ X)
+        for f, (parent, placement) in enumerate(zip(robot._frame_parent, robot._frame_placement)):
+            frames[t, f] = oMi[parent] @ placement
+    return frames
+
+
+@pytest.mark.parametrize(
+    "motions",
+    [
+        {},  # the UR3e as it is: every joint about +z
+        {2: ("revolute", np.array([1.0, 0.0, 0.0])), 4: ("revolute", np.array([0.0, -1.0, 0.0]))},
+        {3: ("revolute", np.array([0.3, -0.4, 0.866])), 5: ("revolute", np.array([0.0, 0.0, -1.0]))},
+        {1: ("prismatic", np.array([0.0, 0.0, 1.0])), 6: ("prismatic", np.array([0.6, 0.0, -0.8]))},
+    ],
+)
+def test_batched_fk_matches_the_plain_4x4_products_for_any_joint_axis(motions):
+    """The batched FK's branches (z rotations as column mixes, other axes by Rodrigues, prismatic joints)
+    against the plain per-sample 4x4 product chain."""
+    robot = Robot.ur3e()
+    robot._joint_motion = [motions.get(j, m) for j, m in enumerate(robot._joint_motion)]
+    q = np.random.default_rng(len(motions)).uniform(-3, 3, size=(25, robot.n))
+    np.testing.assert_allclose(robot.forward(q), _forward_4x4(robot, q), rtol=0, atol=1e-13)
