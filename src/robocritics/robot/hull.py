@@ -84,18 +84,67 @@ def _thin(Q: np.ndarray) -> bool:
     return not s[2] > FLAT_RATIO * s[0]
 
 
-def _measure(V: np.ndarray, tri: np.ndarray) -> tuple[float, float]:
-    """Volume and area of the closed triangle mesh ``V[tri]`` of a convex body.
+def _measure(V: np.ndarray, tri: np.ndarray, normals: np.ndarray) -> tuple[float, float]:
+    """Volume and area of the closed, consistently oriented triangle mesh ``V[tri]`` of a convex body whose
+    triangle ``f`` lies in a face with outward unit normal ``normals[f]``.
 
-    Volume ``sum_f |det(a_f - o, b_f - o, c_f - o)| / 6`` for ``o`` the mean of the vertices (inside the body,
-    so every tetrahedron ``(o, f)`` is positively oriented and the absolute value only guards a degenerate
-    triangle's orientation), area ``sum_f |(b - a) x (c - a)| / 2``.
+    Volume ``sum_f det(a_f - o, b_f - o, c_f - o) / 6`` for ``o`` the mean of the vertices, area
+    ``sum_f n_f . ((b_f - a_f) x (c_f - a_f)) / 2``: both signed, so a triangle that folds back over its face
+    (a fan over a merged face whose vertices are not in convex position) cancels what it covers twice.
     """
     o = V.mean(axis=0)
     a, b, c = V[tri[:, 0]] - o, V[tri[:, 1]] - o, V[tri[:, 2]] - o
-    volume = float(np.abs(np.einsum("ij,ij->i", np.cross(b, c), a)).sum()) / 6.0
-    area = 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    volume = float(np.einsum("ij,ij->i", np.cross(b, c), a).sum()) / 6.0
+    area = 0.5 * float(np.einsum("ij,ij->i", np.cross(b - a, c - a), normals).sum())
     return volume, area
+
+
+def _orient_merged(V: np.ndarray, tri: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """coal's triangles, oriented as one surface.
+
+    coal turns each triangle to face away from the hull's centre, one by one. That is right for a hull facet,
+    but Qhull merges nearly coplanar facets and (option Qt) triangulates the merged face as a fan, whose
+    triangles may fold back over each other; turned one by one they all count positively and the volume and
+    area come out too large (4e-4 relative on jittered box faces). The triangles of a merged face share its
+    hyperplane bit for bit: within each such group, orient the triangles consistently across shared edges
+    (an edge is walked in opposite directions by its two triangles) and then the whole group so its signed
+    area along the face's normal is positive.
+    """
+    _, group, counts = np.unique(normals, axis=0, return_inverse=True, return_counts=True)
+    group = group.reshape(-1)
+    merged = np.flatnonzero(counts[group] > 1)
+    if merged.size == 0:
+        return tri
+    tri = tri.copy()
+    by_edge: dict[tuple[int, int], list[int]] = {}  # undirected edge -> merged triangles of the same group
+    for f in merged.tolist():
+        u, v, w = tri[f].tolist()
+        for a, b in ((u, v), (v, w), (w, u)):
+            by_edge.setdefault((min(a, b), max(a, b), group[f]), []).append(f)
+    done = np.zeros(len(tri), dtype=bool)
+    for seed in merged.tolist():
+        if done[seed]:
+            continue
+        done[seed] = True
+        component, stack = [seed], [seed]
+        while stack:
+            f = stack.pop()
+            u, v, w = tri[f].tolist()
+            for a, b in ((u, v), (v, w), (w, u)):
+                for g in by_edge[(min(a, b), max(a, b), group[f])]:
+                    if done[g]:
+                        continue
+                    x, y, z = tri[g].tolist()
+                    if (a, b) in ((x, y), (y, z), (z, x)):  # walks the edge the same way: turn it over
+                        tri[g] = (x, z, y)
+                    done[g] = True
+                    component.append(g)
+                    stack.append(g)
+        idx = np.array(component)
+        a, b, c = V[tri[idx, 0]], V[tri[idx, 1]], V[tri[idx, 2]]
+        if np.einsum("ij,ij->i", np.cross(b - a, c - a), normals[idx]).sum() < 0:
+            tri[idx] = tri[idx][:, [0, 2, 1]]
+    return tri
 
 
 def _first_of_equal(Q: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -110,9 +159,9 @@ def _first_of_equal(Q: np.ndarray, W: np.ndarray) -> np.ndarray:
     return np.array(sorted(first.values()), dtype=np.int64)
 
 
-def _hull(Q: np.ndarray, e: int, V: np.ndarray, tri: np.ndarray) -> Hull:
-    """The hull of ``Q 2^e`` from its triangles ``V[tri]`` (``V``: rows of ``Q``, the vertices)."""
-    volume, area = _measure(V, tri)
+def _hull(Q: np.ndarray, e: int, V: np.ndarray, tri: np.ndarray, normals: np.ndarray) -> Hull:
+    """The hull of ``Q 2^e`` from its triangles ``V[tri]`` (``V``: rows of ``Q``, the vertices; see _measure)."""
+    volume, area = _measure(V, tri, normals)
     return Hull(float(np.ldexp(volume, 3 * e)), float(np.ldexp(area, 2 * e)), _first_of_equal(Q, V))
 
 
@@ -135,7 +184,8 @@ def convex_hull(P: np.ndarray) -> Hull:
         return _quickhull(Q, e)
     V = np.array(hull.points(), dtype=float)  # the vertices: bit-exact copies of rows of Q
     tri = np.array([(t[0], t[1], t[2]) for t in map(hull.polygons, range(hull.num_polygons))], dtype=np.int64)
-    return _hull(Q, e, V, tri)
+    normals = np.array(hull.normals(), dtype=float).reshape(-1, 3)  # Qhull's outward unit normal of each triangle
+    return _hull(Q, e, V, _orient_merged(V, tri, normals), normals)
 
 
 def quickhull(P: np.ndarray) -> Hull:
@@ -253,6 +303,6 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
         pts = np.concatenate(orphans) if orphans else np.arange(0, dtype=np.int64)
         add([(a, b, p) for a, b in horizon], pts[pts != p])
 
-    tri = np.array([f for f, live in zip(F, alive) if live], dtype=np.int64)
-    used, tri = np.unique(tri, return_inverse=True)
-    return _hull(Q, e, Q[used], tri.reshape(-1, 3))
+    live = [i for i, x in enumerate(alive) if x]
+    used, tri = np.unique(np.array([F[i] for i in live], dtype=np.int64), return_inverse=True)
+    return _hull(Q, e, Q[used], tri.reshape(-1, 3), np.array([normals[i] for i in live]))
