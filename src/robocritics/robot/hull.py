@@ -49,6 +49,9 @@ _EPS = 1e-12
 extent): a point within ``_EPS`` of a facet's plane is on it (not outside), so coplanar points do not become
 vertices, and a set within ``_EPS`` of a plane has no volume. Rounding in a facet's plane is ~1e-16."""
 
+_U = 2.0**-53
+"""Unit roundoff of float64."""
+
 _QHULL_OPTIONS = "Qt Pp"
 """Qt: triangulated output (coal needs triangles). Pp: do not print precision warnings (every print crashes)."""
 
@@ -222,18 +225,16 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
     i3 = int(np.argmax(np.abs(h)))
     if abs(h[i3]) <= eps:  # all points within eps of a plane
         return _empty()
-    inside = Q[[i0, i1, i2, i3]].mean(axis=0)
-
-    facets: list[tuple[int, int, int]] = []
-    for f in ((i0, i1, i2), (i0, i1, i3), (i0, i2, i3), (i1, i2, i3)):
-        a, b, c = Q[list(f)]
-        if np.dot(np.cross(b - a, c - a), inside - a) > 0:  # orient outward (normal away from the interior)
-            f = (f[0], f[2], f[1])
-        facets.append(f)
+    if h[i3] < 0:  # make (i0, i1, i2, i3) positively oriented: i3 on the side of (i1 - i0) x (i2 - i0)
+        i1, i2 = i2, i1
+    # outward faces of a positive tetrahedron, consistent by construction (each edge walked both ways); the
+    # only geometric decision is the sign of h[i3], which is more than eps from 0
+    facets = [(i0, i2, i1), (i0, i1, i3), (i1, i2, i3), (i0, i3, i2)]
 
     F: list[tuple[int, int, int]] = []  # every facet made so far; dead ones stay (ids are list positions)
     normals: list[np.ndarray] = []
     offsets: list[float] = []
+    tols: list[float] = []  # a facet's distance tolerance: eps, or its plane's rounding error if larger
     alive: list[bool] = []
     edge_facet: dict[tuple[int, int], int] = {}  # directed edge (a, b) of a live facet -> that facet
     conflict: dict[int, np.ndarray] = {}  # live facet -> the points farthest outside it (point indices)
@@ -241,27 +242,35 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
 
     def add(new: list[tuple[int, int, int]], pts: np.ndarray) -> None:
         """Append facets ``new`` (outward order) and share ``pts`` among them (each to the facet it is farthest
-        outside, if more than eps)."""
+        outside, if more than that facet's tolerance)."""
         ids = list(range(len(F), len(F) + len(new)))
         nv = np.array(new, dtype=np.int64)
         a, b, c = Q[nv[:, 0]], Q[nv[:, 1]], Q[nv[:, 2]]
-        nrm = np.cross(b - a, c - a)
+        e1, e2 = b - a, c - a
+        nrm = np.cross(e1, e2)
         length = np.linalg.norm(nrm, axis=1, keepdims=True)
         nrm = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)  # a zero-area facet sees nothing
         off = np.einsum("ij,ij->i", nrm, a)
-        for fid, f, m, o in zip(ids, new, nrm, off.tolist()):
+        # the cross product's rounding error is ~3u |e1||e2|, so the unit normal's is that over |e1 x e2| and a
+        # distance (|Q| < 1: lever arm <= 2) is off by ~8u |e1||e2| / |e1 x e2|: large for a sliver, whose
+        # plane then decides nothing; the volume this can miss is ~tol * area = 4u |e1||e2| per facet
+        spread = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tol = np.where(length[:, 0] > 0, np.maximum(eps, 8 * _U * spread / length[:, 0]), np.inf)
+        for fid, f, m, o, t in zip(ids, new, nrm, off.tolist(), tol.tolist()):
             F.append(f)
             normals.append(m)
             offsets.append(o)
+            tols.append(t)
             alive.append(True)
             u, v, w = f
             edge_facet[(u, v)] = edge_facet[(v, w)] = edge_facet[(w, u)] = fid
         if len(pts) == 0:
             return
-        dist = Q[pts] @ nrm.T - off
+        dist = Q[pts] @ nrm.T - off - tol  # beyond the tolerance
         best = np.argmax(dist, axis=1)
         bd = dist[np.arange(len(pts)), best]
-        out = bd > eps
+        out = bd > 0
         pts, best, bd = pts[out], best[out], bd[out]
         order = np.argsort(best, kind="stable")
         pts, best, bd = pts[order], best[order], bd[order]
@@ -290,11 +299,22 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
                 g = edge_facet[(b, a)]
                 if g in visible:
                     continue
-                if float(qp @ normals[g]) - offsets[g] > eps:
+                if float(qp @ normals[g]) - offsets[g] > tols[g]:
                     visible.add(g)
                     stack.append(g)
                 else:
                     horizon.append((a, b))
+        if not _one_loop(horizon):
+            horizon = _mend(visible, horizon, F, edge_facet)
+        if not horizon:  # no consistent cone from p: leave p out (it is within rounding of the hull)
+            rest = conflict.pop(start)
+            rest = rest[rest != p]
+            if len(rest):
+                conflict[start] = rest
+                dr = Q[rest] @ normals[start] - offsets[start] - tols[start]
+                k = int(np.argmax(dr))
+                heapq.heappush(heap, (-float(dr[k]), start, int(rest[k])))
+            continue
         orphans = [conflict.pop(f) for f in visible if f in conflict]
         for f in visible:
             alive[f] = False
@@ -306,3 +326,54 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
     live = [i for i, x in enumerate(alive) if x]
     used, tri = np.unique(np.array([F[i] for i in live], dtype=np.int64), return_inverse=True)
     return _hull(Q, e, Q[used], tri.reshape(-1, 3), np.array([normals[i] for i in live]))
+
+
+def _one_loop(horizon: list[tuple[int, int]]) -> bool:
+    """Whether the directed edges ``horizon`` form one simple cycle (each vertex once)."""
+    nxt = dict(horizon)
+    if not horizon or len(nxt) != len(horizon):
+        return False
+    first = x = horizon[0][0]
+    for i in range(len(horizon)):
+        x = nxt.get(x)
+        if x is None or (x == first) != (i == len(horizon) - 1):
+            return False
+    return True
+
+
+def _mend(visible: set[int], horizon: list[tuple[int, int]], F: list, edge_facet: dict) -> list[tuple[int, int]]:
+    """A horizon that is one simple loop, by adding facets to ``visible`` (in place); [] if none is found.
+
+    With exact arithmetic the facets a point sees form a disk. With the eps test, facets nearly coplanar with
+    the point may be seen or not in a pattern that pinches the region at a vertex (the vertex is twice on the
+    horizon) or leaves an unseen island in it (two loops); coning either to the point would make a surface
+    that is not a sphere. Those facets are within rounding of being seen: add the unseen facets across the
+    horizon edges at the offending vertices (for two loops, the vertices of all but the longest loop) and
+    look again, a few times.
+    """
+    for _ in range(8):
+        nxt: dict[int, list[int]] = {}
+        for a, b in horizon:
+            nxt.setdefault(a, []).append(b)
+        bad = {a for a, bs in nxt.items() if len(bs) > 1}
+        if not bad:  # loops without pinches: keep the longest
+            loops, seen = [], set()
+            for a, _b in horizon:
+                if a in seen:
+                    continue
+                loop, x = [], a
+                while x not in seen:
+                    seen.add(x)
+                    loop.append(x)
+                    x = nxt[x][0]
+                loops.append(loop)
+            loops.sort(key=len)
+            bad = {x for loop in loops[:-1] for x in loop}
+        visible.update(edge_facet[(b, a)] for a, b in horizon if a in bad or b in bad)
+        horizon = [
+            (a, b) for f in visible for a, b in ((F[f][0], F[f][1]), (F[f][1], F[f][2]), (F[f][2], F[f][0]))
+            if edge_facet[(b, a)] not in visible
+        ]
+        if _one_loop(horizon):
+            return horizon
+    return []
