@@ -290,7 +290,9 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
             continue
         qp = Q[p]
         # visible region: facets p sees, grown from p's own facet across shared edges (connected, so its
-        # boundary, the horizon, is one loop even when rounding makes a far facet look visible)
+        # boundary, the horizon, is one loop even when rounding makes a far facet look visible). A neighbour
+        # counts as seen unless p is clearly below it (by eps): coning p to the edge of a facet p is within
+        # eps of would fold the new triangle flat over that facet (area counted twice)
         visible, stack, horizon = {start}, [start], []
         while stack:
             f = stack.pop()
@@ -299,7 +301,7 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
                 g = edge_facet[(b, a)]
                 if g in visible:
                     continue
-                if float(qp @ normals[g]) - offsets[g] > tols[g]:
+                if float(qp @ normals[g]) - offsets[g] > -eps:
                     visible.add(g)
                     stack.append(g)
                 else:
@@ -325,7 +327,8 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
 
     live = [i for i, x in enumerate(alive) if x]
     used, tri = np.unique(np.array([F[i] for i in live], dtype=np.int64), return_inverse=True)
-    return _hull(Q, e, Q[used], tri.reshape(-1, 3), np.array([normals[i] for i in live]))
+    V, tri = Q[used], tri.reshape(-1, 3)
+    return _hull(Q, e, V, tri, _face_normals(V, tri))
 
 
 def _one_loop(horizon: list[tuple[int, int]]) -> bool:
@@ -377,3 +380,46 @@ def _mend(visible: set[int], horizon: list[tuple[int, int]], F: list, edge_facet
         if _one_loop(horizon):
             return horizon
     return []
+
+
+def _face_normals(V: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """The outward unit normal of the face each triangle of the closed, consistently oriented mesh lies in.
+
+    A face is a set of edge-connected triangles with parallel normals (to 1e-10, about 1e-5 rad), or
+    antiparallel ones where one faces the inside (a fold), zero-area triangles joining any. quickhull cones a point to the edge of the coplanar facets around
+    it, and where that region is not star-shaped from the point the new triangles fold back over each other
+    in the plane: each is a triangle of the face, but the face's area is ``|sum of the triangles' oriented
+    area vectors|`` (the folds cancel), its normal that sum's direction. Signed areas along it (_measure) then
+    add up to the face's area.
+    """
+    a, b, c = V[tri[:, 0]], V[tri[:, 1]], V[tri[:, 2]]
+    G = np.cross(b - a, c - a)  # oriented area vectors (twice the area)
+    L = np.linalg.norm(G, axis=1)
+    N = np.divide(G, L[:, None], out=np.zeros_like(G), where=L[:, None] > 0)
+    parent = list(range(len(tri)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    owner = {}
+    for f, (u, v, w) in enumerate(tri.tolist()):
+        for edge in ((u, v), (v, w), (w, u)):
+            owner[edge] = f
+    # a fold faces the body's inside; a thin body's two sides (also antiparallel across its rim) both face out
+    inward = np.einsum("ij,ij->i", N, a - V.mean(axis=0)) < 0
+    for (u, v), f in owner.items():
+        g = owner.get((v, u))
+        if g is None or f > g:
+            continue
+        cos = float(N[f] @ N[g])
+        if L[f] == 0 or L[g] == 0 or cos > 1 - 1e-10 or (cos < 1e-10 - 1 and (inward[f] or inward[g])):
+            parent[root(f)] = root(g)
+    comp = np.array([root(f) for f in range(len(tri))])
+    S = np.zeros_like(G)
+    np.add.at(S, comp, G)
+    S = S[comp]
+    length = np.linalg.norm(S, axis=1, keepdims=True)
+    return np.divide(S, length, out=np.zeros_like(S), where=length > 0)
