@@ -23,6 +23,7 @@ import argparse
 import importlib
 import sys
 
+from .._threads import single_threaded_blas
 from ..errors import CriticError, RoboCriticsError
 from ._common import SUBCOMMANDS, UsageError, one_line
 
@@ -61,7 +62,12 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit status (never raises for bad input)."""
+    """Run the command line; returns the exit status (never raises for bad input).
+
+    A process started as the command checks one program at a time: before anything loads numpy, BLAS is set
+    to one thread (:mod:`robocritics._threads`; a value in the environment wins).
+    """
+    single_threaded_blas()
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["ursim"]:
         from .ursim import ursim_command
