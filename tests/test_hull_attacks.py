@@ -139,6 +139,10 @@ def sphere(n: int) -> np.ndarray:
     return P / np.linalg.norm(P, axis=1, keepdims=True)
 
 
+def clusters(r: np.random.Generator, k: int, m: int, spread: float) -> np.ndarray:
+    return np.repeat(r.normal(size=(k, 3)), m, axis=0) + spread * r.normal(size=(k * m, 3))
+
+
 #: Each of these crashed the process, raised, or gave a volume off by orders of magnitude (or negative) before.
 CANDIDATES = {
     # crashed coal (segfault): thick enough relative to the extent, flat to Qhull's offset-sized rounding
@@ -171,6 +175,8 @@ CANDIDATES = {
     # quickhull raised KeyError: a 1e-8 cloud and a far point (a needle: its initial tetrahedron was misoriented)
     "needle": np.r_[1e-8 * rng.normal(size=(800, 3)), rng.normal(size=(1, 3))],
     "subnormal": 1e-310 * rng.normal(size=(100, 3)),
+    # crashed coal (segfault): Qhull merged nearly coincident points into a twisted facet and printed a warning
+    "21 clusters of 125 points 1e-13 apart": clusters(np.random.default_rng(6), 21, 125, 1e-13),
 }
 
 

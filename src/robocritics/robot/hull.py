@@ -52,8 +52,12 @@ vertices, and a set within ``_EPS`` of a plane has no volume. Rounding in a face
 _U = 2.0**-53
 """Unit roundoff of float64."""
 
-_QHULL_OPTIONS = "Qt Pp"
-"""Qt: triangulated output (coal needs triangles). Pp: do not print precision warnings (every print crashes)."""
+_GRID_EXP = -40
+"""coal sees the normalised points rounded to multiples of 2^-40 (9.1e-13, about _EPS)."""
+
+_QHULL_OPTIONS = "Qt Pp Q12"
+"""Qt: triangulated output (coal needs triangles). Pp: do not print precision warnings (every print crashes).
+Q12: do not stop with an error on a wide merge (nearly coincident points)."""
 
 
 class Hull(NamedTuple):
@@ -179,16 +183,20 @@ def convex_hull(P: np.ndarray) -> Hull:
         return _quickhull(Q, e)
     import coal  # noqa: PLC0415 - the proximity model loads it; kept out of this module's import
 
+    # nearly coincident points (1e-15 apart) make Qhull merge facets into twisted ones and print a precision
+    # warning (a crash): snap to a grid of _GRID, so distinct points are at least _GRID apart; this moves a
+    # point by at most _GRID / 2, as little as quickhull's tolerance leaves out
+    S = np.ldexp(np.round(np.ldexp(Q, -_GRID_EXP)), _GRID_EXP)
     points = coal.StdVec_Vec3s()
-    points.extend(Q)
+    points.extend(S)
     try:
         hull = coal.ConvexBase.convexHull(points, True, _QHULL_OPTIONS)  # a coal.Convex of triangles
     except RuntimeError:  # "Too many neighbors": a vertex with more than 254 hull neighbours
         return _quickhull(Q, e)
-    V = np.array(hull.points(), dtype=float)  # the vertices: bit-exact copies of rows of Q
+    V = np.array(hull.points(), dtype=float)  # the vertices: bit-exact copies of rows of S
     tri = np.array([(t[0], t[1], t[2]) for t in map(hull.polygons, range(hull.num_polygons))], dtype=np.int64)
     normals = np.array(hull.normals(), dtype=float).reshape(-1, 3)  # Qhull's outward unit normal of each triangle
-    return _hull(Q, e, V, _orient_merged(V, tri, normals), normals)
+    return _hull(S, e, V, _orient_merged(V, tri, normals), normals)
 
 
 def quickhull(P: np.ndarray) -> Hull:
@@ -232,7 +240,7 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
     facets = [(i0, i2, i1), (i0, i1, i3), (i1, i2, i3), (i0, i3, i2)]
 
     F: list[tuple[int, int, int]] = []  # every facet made so far; dead ones stay (ids are list positions)
-    normals: list[np.ndarray] = []
+    normals: list[list[float]] = []  # unit outward normals
     offsets: list[float] = []
     tols: list[float] = []  # a facet's distance tolerance: eps, or its plane's rounding error if larger
     alive: list[bool] = []
@@ -244,20 +252,24 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
         """Append facets ``new`` (outward order) and share ``pts`` among them (each to the facet it is farthest
         outside, if more than that facet's tolerance)."""
         ids = list(range(len(F), len(F) + len(new)))
-        nv = np.array(new, dtype=np.int64)
-        a, b, c = Q[nv[:, 0]], Q[nv[:, 1]], Q[nv[:, 2]]
-        e1, e2 = b - a, c - a
-        nrm = np.cross(e1, e2)
-        length = np.linalg.norm(nrm, axis=1, keepdims=True)
-        nrm = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)  # a zero-area facet sees nothing
-        off = np.einsum("ij,ij->i", nrm, a)
+        T = Q[np.array(new, dtype=np.int64)]  # (m, 3 corners, 3)
+        e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
+        nrm = np.empty_like(e1)  # e1 x e2, written out: np.cross costs more than the rest for a few facets
+        nrm[:, 0] = e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1]
+        nrm[:, 1] = e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2]
+        nrm[:, 2] = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        length = np.sqrt((nrm * nrm).sum(axis=1))
+        positive = length > 0
+        nrm[positive] /= length[positive, None]
+        nrm[~positive] = 0.0  # a zero-area facet sees nothing
+        off = (nrm * T[:, 0]).sum(axis=1)
         # the cross product's rounding error is ~3u |e1||e2|, so the unit normal's is that over |e1 x e2| and a
         # distance (|Q| < 1: lever arm <= 2) is off by ~8u |e1||e2| / |e1 x e2|: large for a sliver, whose
         # plane then decides nothing; the volume this can miss is ~tol * area = 4u |e1||e2| per facet
-        spread = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tol = np.where(length[:, 0] > 0, np.maximum(eps, 8 * _U * spread / length[:, 0]), np.inf)
-        for fid, f, m, o, t in zip(ids, new, nrm, off.tolist(), tol.tolist()):
+        spread = np.sqrt((e1 * e1).sum(axis=1) * (e2 * e2).sum(axis=1))
+        tol = np.full(len(new), np.inf)
+        tol[positive] = np.maximum(eps, 8 * _U * spread[positive] / length[positive])
+        for fid, f, m, o, t in zip(ids, new, nrm.tolist(), off.tolist(), tol.tolist()):
             F.append(f)
             normals.append(m)
             offsets.append(o)
@@ -267,28 +279,29 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
             edge_facet[(u, v)] = edge_facet[(v, w)] = edge_facet[(w, u)] = fid
         if len(pts) == 0:
             return
-        dist = Q[pts] @ nrm.T - off - tol  # beyond the tolerance
+        dist = Q[pts] @ nrm.T - (off + tol)  # beyond the tolerance
         best = np.argmax(dist, axis=1)
         bd = dist[np.arange(len(pts)), best]
         out = bd > 0
+        if not out.any():
+            return
         pts, best, bd = pts[out], best[out], bd[out]
         order = np.argsort(best, kind="stable")
         pts, best, bd = pts[order], best[order], bd[order]
-        if len(pts) == 0:
-            return
-        cuts = np.flatnonzero(np.diff(best)) + 1
-        for s, group, dg in zip(np.r_[0, cuts].tolist(), np.split(pts, cuts), np.split(bd, cuts)):
-            fid = ids[int(best[s])]
+        bounds = [0, *(np.flatnonzero(best[1:] != best[:-1]) + 1).tolist(), len(pts)]
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            fid = ids[int(best[lo])]
+            group = pts[lo:hi]
             conflict[fid] = group
-            k = int(np.argmax(dg))
-            heapq.heappush(heap, (-float(dg[k]), fid, int(group[k])))
+            k = int(np.argmax(bd[lo:hi]))
+            heapq.heappush(heap, (-float(bd[lo + k]), fid, int(group[k])))
 
     add(facets, np.arange(len(Q)))
     while heap:
         _, start, p = heapq.heappop(heap)
         if not alive[start]:
             continue
-        qp = Q[p]
+        px, py, pz = Q[p].tolist()
         # visible region: facets p sees, grown from p's own facet across shared edges (connected, so its
         # boundary, the horizon, is one loop even when rounding makes a far facet look visible). A neighbour
         # counts as seen unless p is clearly below it (by eps): coning p to the edge of a facet p is within
@@ -301,7 +314,8 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
                 g = edge_facet[(b, a)]
                 if g in visible:
                     continue
-                if float(qp @ normals[g]) - offsets[g] > -eps:
+                nx, ny, nz = normals[g]
+                if px * nx + py * ny + pz * nz - offsets[g] > -eps:
                     visible.add(g)
                     stack.append(g)
                 else:
@@ -313,7 +327,7 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
             rest = rest[rest != p]
             if len(rest):
                 conflict[start] = rest
-                dr = Q[rest] @ normals[start] - offsets[start] - tols[start]
+                dr = Q[rest] @ np.array(normals[start]) - offsets[start] - tols[start]
                 k = int(np.argmax(dr))
                 heapq.heappush(heap, (-float(dr[k]), start, int(rest[k])))
             continue
