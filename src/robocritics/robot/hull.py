@@ -303,9 +303,9 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
             continue
         px, py, pz = Q[p].tolist()
         # visible region: facets p sees, grown from p's own facet across shared edges (connected, so its
-        # boundary, the horizon, is one loop even when rounding makes a far facet look visible). A neighbour
-        # counts as seen unless p is clearly below it (by eps): coning p to the edge of a facet p is within
-        # eps of would fold the new triangle flat over that facet (area counted twice)
+        # boundary, the horizon, is one loop even when rounding makes a far facet look visible). Coning p to
+        # the edge of a coplanar facet may fold the new triangle over it: _face_normals measures such faces.
+        # (Counting facets p is within eps of as seen instead deletes and re-cones faces of a grid: +2.5 %)
         visible, stack, horizon = {start}, [start], []
         while stack:
             f = stack.pop()
@@ -315,7 +315,7 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
                 if g in visible:
                     continue
                 nx, ny, nz = normals[g]
-                if px * nx + py * ny + pz * nz - offsets[g] > -eps:
+                if px * nx + py * ny + pz * nz - offsets[g] > tols[g]:
                     visible.add(g)
                     stack.append(g)
                 else:
@@ -422,8 +422,12 @@ def _face_normals(V: np.ndarray, tri: np.ndarray) -> np.ndarray:
     for f, (u, v, w) in enumerate(tri.tolist()):
         for edge in ((u, v), (v, w), (w, u)):
             owner[edge] = f
-    # a fold faces the body's inside; a thin body's two sides (also antiparallel across its rim) both face out
-    inward = np.einsum("ij,ij->i", N, a - V.mean(axis=0)) < 0
+    # a fold faces the body's inside; a thin body's two sides (also antiparallel across its rim) both face out.
+    # Only a clear answer counts: a sliver's normal is off by up to its tolerance (see _quickhull's add)
+    e1, e2 = b - a, c - a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tol = np.maximum(_EPS, 8 * _U * np.sqrt((e1 * e1).sum(axis=1) * (e2 * e2).sum(axis=1)) / L)
+    inward = np.einsum("ij,ij->i", N, a - V.mean(axis=0)) < -tol
     for (u, v), f in owner.items():
         g = owner.get((v, u))
         if g is None or f > g:
