@@ -1,15 +1,17 @@
 r"""Convex hull volume, area and vertices of a 3-D point set.
 
 ``convex_hull(P)`` for ``P (N, 3)`` (m) returns the hull's volume (m^3), surface area (m^2) and the ascending
-indices of the input points that are its vertices (the first of equal points).
+indices of the input points that are its vertices (the first of equal points; on the coal path, of points equal
+after the snapping below).
 
 Two implementations, one answer:
 
 * coal's Qhull (``coal.ConvexBase.convexHull``; coal is loaded anyway for proximity), the fast path. It is
   fragile: this build's Qhull writes every message (an error such as "initial simplex is flat", a precision
-  warning, the output of an option such as ``Tv``) through a ``FILE *`` it never opened, so any message kills
-  the process with a segfault instead of raising; and coal refuses a hull with a vertex of more than 254
-  neighbours ("Too many neighbors", a fan of thin triangles around a point), after building it.
+  warning such as "point above twisted facet", the output of an option such as ``Tv``) through a ``FILE *`` it
+  never opened, so any message kills the process with a segfault instead of raising; and coal refuses a hull
+  with a vertex of more than 254 neighbours ("Too many neighbors", a fan of thin triangles around a point, as
+  a robot turning its base sweeps with the exact hull), after building it.
 * :func:`quickhull`, a plain incremental hull in numpy (Clarkson-Shor / Barber et al. with conflict lists):
   used for every set coal might crash on or refuses, and the reference coal is tested against (with scipy's
   Qhull as a third).
@@ -21,12 +23,25 @@ of two is exact, and for a set far from the origin (``|P| >> extent``) so is the
 one at the origin (Qhull on the raw coordinates loses the digits to the offset, gives volumes off by orders of
 magnitude or negative, and crashes). The volume is ``vol(Q) 2^{3(a+b)}``, the area ``area(Q) 2^{2(a+b)}``.
 
-Thin sets go to quickhull: if the smallest singular value of the mean-centred ``Q`` is at most
-:data:`FLAT_RATIO` times the largest, coal is not called. Quickhull measures them (a straight-line tool path,
-0.5 mm^3, is not rounded to 0) and reports volume 0 only when no point is more than ``_EPS`` (relative to the
-set's extent) off the plane of its initial triangle: sets flat to rounding (three points, all points on one
-plane or line, one point repeated) give ``(0, 0, [])``. Non-finite coordinates give the same empty hull (scipy
-raised ``ValueError`` for them).
+What keeps Qhull quiet (so coal alive), each found by a crash:
+
+* thin sets never reach it: if the smallest singular value of the mean-centred ``Q`` is at most
+  :data:`FLAT_RATIO` times the largest, quickhull measures the set (a straight-line tool path, 0.5 mm^3, is not
+  rounded to 0);
+* coal sees ``Q`` snapped to multiples of ``2^-40`` (:data:`_GRID_EXP`), so distinct points are at least that
+  far apart: clusters of points 1e-13 apart made Qhull merge facets into twisted ones and warn;
+* options ``Pp`` (no precision warnings) and ``Q12`` (no error on a wide merge).
+
+Volume and area are measured from the triangles as signed sums, the triangles of a face oriented as one
+surface (:func:`_orient_merged`, :func:`_face_normals`): both Qhull's fan over a merged face and quickhull's cone
+over coplanar facets can fold triangles back over each other.
+
+Accuracy: coal's result is Qhull's to ~1e-12 relative (the snapping); quickhull leaves out points within
+``_EPS`` of the extent (or a sliver's plane rounding) of a facet, so its volume is short by at most about
+``4 _EPS extent area + 1e-12 extent^3``, and reports volume 0 when no point is more than ``_EPS`` off the plane
+of its initial triangle: sets flat to rounding (three points, all points on one plane or line, one point
+repeated) give ``(0, 0, [])``. Non-finite coordinates give the same empty hull (scipy raised ``ValueError``);
+coordinates near 1e300 m give an infinite volume. tests/test_hull_attacks.py holds the hostile sets.
 """
 
 from __future__ import annotations
