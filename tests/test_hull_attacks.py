@@ -234,7 +234,8 @@ def hostile(draw):
         P += 10.0 ** r.uniform(-17, -10) * r.normal(size=P.shape)
     elif kind == "fan":
         a = np.linspace(0, 2 * np.pi, n, endpoint=False)
-        P = np.r_[np.c_[np.cos(a), np.sin(a), 10.0 ** r.uniform(-16, -3) * r.normal(size=n)], [[0, 0, 1.0]], [[0, 0, -0.3]]]
+        rim = np.c_[np.cos(a), np.sin(a), 10.0 ** r.uniform(-16, -3) * r.normal(size=n)]
+        P = np.r_[rim, [[0, 0, 1.0]], [[0, 0, -0.3]]]
     elif kind == "curves":  # arcs and helices, like frames of a robot turning its base
         parts = []
         for _ in range(draw(st.integers(1, 4))):

@@ -415,11 +415,11 @@ def _face_normals(V: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """The outward unit normal of the face each triangle of the closed, consistently oriented mesh lies in.
 
     A face is a set of edge-connected triangles with parallel normals (to 1e-10, about 1e-5 rad), or
-    antiparallel ones where one faces the inside (a fold), zero-area triangles joining any. quickhull cones a point to the edge of the coplanar facets around
-    it, and where that region is not star-shaped from the point the new triangles fold back over each other
-    in the plane: each is a triangle of the face, but the face's area is ``|sum of the triangles' oriented
-    area vectors|`` (the folds cancel), its normal that sum's direction. Signed areas along it (_measure) then
-    add up to the face's area.
+    antiparallel ones where one faces the inside (a fold), zero-area triangles joining any. quickhull cones a
+    point to the edge of the coplanar facets around it, and where that region is not star-shaped from the
+    point the new triangles fold back over each other in the plane: each is a triangle of the face, but the
+    face's area is ``|sum of the triangles' oriented area vectors|`` (the folds cancel), its normal that sum's
+    direction. Signed areas along it (_measure) then add up to the face's area.
     """
     a, b, c = V[tri[:, 0]], V[tri[:, 1]], V[tri[:, 2]]
     G = np.cross(b - a, c - a)  # oriented area vectors (twice the area)
