@@ -308,3 +308,22 @@ def test_register_validates_at_once_and_refuses_an_installed_name(notebook_criti
         notebook_critics(impostor)
     assert get_critics()["joint_speed"].__class__.__module__ == "robocritics.critics.joint_speed"
     assert "slow_motion" not in get_critics()
+
+
+def test_a_distributions_metadata_is_read_once_for_all_its_entry_points(tmp_path):
+    from importlib.metadata import PathDistribution
+
+    info = tmp_path / "demo_critics-1.2.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: demo-critics\nVersion: 1.2\n")
+    (info / "entry_points.txt").write_text("[robocritics]\nfirst = demo_first\nsecond = demo_second\n")
+    first, second = PathDistribution(info).entry_points
+    assert first.dist is second.dist  # one distribution object for a package's entry points
+    assert plugins._dist_of(first) == ("demo-critics", "1.2")
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: renamed\nVersion: 9\n")
+    assert plugins._dist_of(second) == ("demo-critics", "1.2")  # the same distribution: not parsed again
+    (again,) = [ep for ep in PathDistribution(info).entry_points if ep.name == "first"]
+    assert plugins._dist_of(again) == ("renamed", "9")  # another distribution object reads its own file
+    (info / "METADATA").unlink()
+    (bare,) = [ep for ep in PathDistribution(info).entry_points if ep.name == "first"]
+    assert plugins._dist_of(bare) == ("", "")  # no metadata: an unknown package, as before

@@ -139,14 +139,28 @@ def load_plugins() -> None:
         _plugin_dist[ep.name] = dist
 
 
+_dist_cache: dict[int, tuple[Any, tuple[str, str]]] = {}  # id(distribution) -> (it, (name, version))
+
+
 def _dist_of(ep) -> tuple[str, str]:
+    """``(name, version)`` of the distribution that declared ``ep`` (``("", "")`` if unknown).
+
+    Read once per distribution: every ``dist.name`` or ``dist.version`` parses its whole METADATA file (with
+    the package's long description) again, and the entry points of one package share one distribution.
+    """
     dist = getattr(ep, "dist", None)
     if dist is None:
         return ("", "")
+    cached = _dist_cache.get(id(dist))
+    if cached is not None and cached[0] is dist:
+        return cached[1]
     try:
-        return (dist.name or "", dist.version or "")
+        metadata = dist.metadata  # what dist.name and dist.version read
+        info = (metadata["Name"] or "", metadata["Version"] or "")
     except Exception:  # noqa: BLE001 - malformed metadata
-        return ("", "")
+        info = ("", "")
+    _dist_cache[id(dist)] = (dist, info)  # holding dist keeps its id from being reused
+    return info
 
 
 def validate_critic(critic: Any) -> None:

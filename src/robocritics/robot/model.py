@@ -613,7 +613,7 @@ class Robot:
                 parent_of[f.name] = f.parentJoint
         frames = self.forward(np.zeros((1, self.n)))
         p0, p1 = self.capsule_segments(frames)
-        pairs = []
+        candidates = []
         C = len(self.capsules)
         for i in range(C):
             for j in range(i + 1, C):
@@ -623,11 +623,15 @@ class Robot:
                 ji, jj = parent_of[ci.frame], parent_of[cj.frame]
                 if ji == jj or self.model.parents[ji] == jj or self.model.parents[jj] == ji:
                     continue
-                d = capsule_capsule(p0[:, i], p1[:, i], ci.radius_m, p0[:, j], p1[:, j], cj.radius_m)[0]
-                if d < _SAME_HOUSING_GAP_M:
-                    continue
-                pairs.append((ci.name, cj.name))
-        return tuple(pairs)
+                candidates.append((i, j))
+        if not candidates:
+            return ()
+        # every candidate pair in one call (element-wise, so each distance is what a call per pair gives)
+        i, j = np.array(candidates).T
+        d = capsule_capsule(p0[0, i], p1[0, i], self.capsule_radii[i], p0[0, j], p1[0, j], self.capsule_radii[j])
+        return tuple(
+            (self.capsules[a].name, self.capsules[b].name) for (a, b), gap in zip(candidates, d) if not gap < _SAME_HOUSING_GAP_M
+        )
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, {self.n} joints, tcp={self.tcp_frame!r}, {len(self.capsules)} capsules)"
@@ -705,7 +709,8 @@ def _bundled(name: str) -> Robot:
         )
         # home: TCP in front of the base and above the table, fingers down, elbow up; 0.25 m and 0.25 m on
         # the UR3e, scaled by reach on the larger arms
-        scale = ur_reach(spec.dh) / ur_reach(UR3E.dh)
+        # (ur_reach grids 200k wrist angles, ~7 ms on first use: the UR3e's own ratio is 1 without it)
+        scale = 1.0 if spec.dh == UR3E.dh else ur_reach(spec.dh) / ur_reach(UR3E.dh)
         upright = np.array([math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0])
         robot.home_q = robot.ik((0.25 * scale, 0.0, 0.25 * scale), seed=upright)
         _BUNDLED[name] = robot
