@@ -602,6 +602,48 @@ def test_shape_shape_far_cutoff_is_a_lower_bound():
     assert exact.min() < 0  # passes through
 
 
+@settings(max_examples=20, **SETTINGS)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    far=st.sampled_from([0.0, 0.03, 0.1, 0.25]),
+    n_tight=st.integers(0, 3),
+    T=st.integers(1, 300),
+)
+def test_kernel_far_cutoff_is_exact_within_and_a_lower_bound_beyond(seed, far, n_tight, T):
+    """``far_m`` and ``exact_min_of`` against the same kernel with every value exact (itself checked against the
+    per-pair functions): a value within ``max(far_m, least exact value of the exact_min_of columns)`` at its
+    sample is exact, every other one is a lower bound above ``far_m``, and the per-sample minimum over the
+    exact_min_of columns is exact. Static, tilted, yawed-container and moving boxes and cylinders; capsules
+    that stand still (a base) and short trajectories (one partial block)."""
+    rng = np.random.default_rng(seed)
+    C = 5
+    p0, p1 = _trajectory(T, C, seed=seed % 1000)
+    p0[:, 0], p1[:, 0] = p0[:1, 0], p1[:1, 0]  # capsule 0 stands still
+    caps = [(f"link{i}", float(rng.uniform(0.005, 0.05))) for i in range(C)]
+    shapes = _scene_shapes(seed % 7)
+    held = Shape("held", "held", "cylinder" if seed % 2 else "box", (0.03, 0.04, 0.05)[: 2 if seed % 2 else 3], np.eye(4))
+    pose = np.tile(np.eye(4), (T, 1, 1))
+    pose[:, :3, 3] = p1[:, 1] + [0.0, 0.0, 0.05]  # rides near capsule 1
+    pose[:, :3, :3] = rpy_matrix(tuple(rng.uniform(-1, 1, 3)))
+    shapes = shapes + [held]
+    pairs = [(c, sh.name) for c, _ in caps for sh in shapes] + [("link1", "link3")]
+    kern = P.ProximityKernel(caps, shapes, pairs, moving={"held"})
+    exact = kern.distances(p0, p1, poses={"held": pose})
+    env = [k for k, (a, b) in enumerate(pairs) if b in {sh.name for sh in shapes}]
+    tight = sorted(rng.choice(env, size=min(n_tight * 10, len(env)), replace=False).tolist())
+    D = kern.distances(p0, p1, poses={"held": pose}, far_m=far, exact_min_of=tight or None)
+    within = np.full(T, far)
+    if tight:
+        within = np.maximum(within, exact[:, tight].min(axis=1))
+    inside = exact <= within[:, None]
+    np.testing.assert_allclose(D[inside], exact[inside], rtol=0, atol=1e-12)
+    assert (D[~inside] > far).all() and (D[~inside] <= exact[~inside] + 1e-12).all()
+    if tight:
+        np.testing.assert_allclose(D[:, tight].min(axis=1), exact[:, tight].min(axis=1), rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="far_m"):
+        kern.distances(p0, p1, poses={"held": pose}, far_m=-0.01)
+
+
 def test_kernel_rejects_bad_input():
     shapes = _scene_shapes()
     with pytest.raises(ValueError, match="not a capsule"):
@@ -620,15 +662,16 @@ def test_kernel_rejects_bad_input():
 
 def _shape_shape_plain(a, b, pose_a, pose_b, far_m=None):
     """The slow obvious reference for a carried object: every sample, both poses set, one ``coal.distance`` call
-    (GJK 1e-10 when apart, EPA when overlapping); with ``far_m``, a bounding-sphere gap above it is reported
-    instead of calling coal."""
+    (GJK 1e-10 when apart, EPA when overlapping); with ``far_m``, a bounding-ball gap above it (one shape's
+    bounding ball against the other shape) is reported instead of calling coal."""
     T = max(len(np.atleast_3d(pose_a).reshape(-1, 4, 4)), len(np.atleast_3d(pose_b).reshape(-1, 4, 4)))
     Pa = np.broadcast_to(np.asarray(pose_a, float).reshape(-1, 4, 4), (T, 4, 4))
     Pb = np.broadcast_to(np.asarray(pose_b, float).reshape(-1, 4, 4), (T, 4, 4))
     ra, rb = (P._bounding_radius(s.kind, s.size) for s in (a, b))
     out = np.empty(T)
     for t in range(T):
-        gap = float(np.linalg.norm(Pa[t, :3, 3] - Pb[t, :3, 3])) - ra - rb
+        # each shape lies in its bounding ball: the other's distance from its centre, less its radius, bounds below
+        gap = max(float(P.point_shape(Pa[t, :3, 3], b, Pb[t])) - ra, float(P.point_shape(Pb[t, :3, 3], a, Pa[t])) - rb)
         if far_m is not None and gap > far_m:
             out[t] = gap
             continue

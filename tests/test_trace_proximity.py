@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from robocritics import Robot, Scene
-from robocritics.robot.trace import CARRIED_EXACT_M
+from robocritics.robot.trace import EXACT_WITHIN_M
 
 
 @pytest.fixture(scope="module")
@@ -60,22 +60,32 @@ def test_every_pair_matches_coal(robot, q, scene_name):
     q = robot.home_q + 0.6 * q / 3.2  # around the working posture, where objects are near
     traj = robot.trajectory(q, np.arange(3) * 0.008, scene)
     shapes = scene.shapes()
+    arm = [k for k, p in enumerate(traj.pairs) if p.kind == "environment" and p.group_a == "arm"]
     for t in range(3):
+        refs = []
         for k, pair in enumerate(traj.pairs):
             ga, ta = capsule_geometry(robot, pair.a, traj.frames[t])
             if pair.kind == "self":
                 gb, tb = capsule_geometry(robot, pair.b, traj.frames[t])
-                ref = coal_distance(ga, ta, gb, tb)
+                refs.append(coal_distance(ga, ta, gb, tb))
             else:
-                ref = min(coal_distance(ga, ta, coal_shape(s), tf(s.pose)) for s in shapes if s.owner == pair.b_entity)
+                refs.append(min(coal_distance(ga, ta, coal_shape(s), tf(s.pose)) for s in shapes if s.owner == pair.b_entity))
+        # exact within EXACT_WITHIN_M and within the arm's closest distance; beyond, a lower bound beyond both
+        exact_within = max(EXACT_WITHIN_M, min(refs[k] for k in arm))
+        for k, (pair, ref) in enumerate(zip(traj.pairs, refs)):
             ours = traj.proximity[t, k]
-            if ref > 1e-9:
+            if pair.kind == "environment" and ref > exact_within:
+                assert exact_within - 1e-6 < ours <= ref + 1e-9, (pair.name, t, ours, ref)
+            elif ref > 1e-9:
                 assert ours == pytest.approx(ref, abs=1e-6), (pair.name, t)
             else:
                 assert ours <= 1e-9, (pair.name, t, ours, ref)  # touching or penetrating: never positive
+        # so the closest environment distance of the arm (and of any set of pairs holding it) is exact
+        assert traj.proximity[t, arm].min() == pytest.approx(min(refs[k] for k in arm), abs=1e-6)
 
 
 def test_carried_object_pairs_are_exact_near_and_bounded_far(robot):
+    """A carried cup's distances are exact within EXACT_WITHIN_M and the arm's closest distance, lower bounds beyond."""
     from robocritics import simulate
 
     execution = simulate(
@@ -90,19 +100,25 @@ def test_carried_object_pairs_are_exact_near_and_bounded_far(robot):
     tcp = traj.tcp
     held = np.flatnonzero(traj.attached == "coffee_cup")
     offset = np.linalg.inv(tcp[held[0]]) @ cup.pose
-    for k in cols:
-        pair = traj.pairs[k]
-        for t in held[:: max(1, len(held) // 6)]:
-            pose = tcp[t] @ offset
+    arm = [k for k, p in enumerate(traj.pairs) if p.kind == "environment" and p.group_a == "arm"]
+    checked = {"exact": 0, "bound": 0}
+    for t in held[:: max(1, len(held) // 6)]:
+        # the arm's own distances at t are exact up to its closest one (test_every_pair_matches_coal)
+        exact_within = max(EXACT_WITHIN_M, traj.proximity[t, arm].min())
+        pose = tcp[t] @ offset
+        for k in cols:
             ref = min(
                 coal_distance(coal_shape(cup), tf(pose), coal_shape(s), tf(s.pose))
                 for s in execution.scene.shapes()
-                if s.owner == pair.b_entity
+                if s.owner == traj.pairs[k].b_entity
             )
-            if ref <= CARRIED_EXACT_M:
+            if ref <= exact_within:
                 assert traj.proximity[t, k] == pytest.approx(ref, abs=1e-6)
+                checked["exact"] += 1
             else:
-                assert CARRIED_EXACT_M < traj.proximity[t, k] <= ref + 1e-9
+                assert exact_within < traj.proximity[t, k] <= ref + 1e-9
+                checked["bound"] += 1
+    assert checked["exact"] and checked["bound"]
 
 
 def test_long_trajectory_frames_match_pinocchio(robot):

@@ -8,7 +8,12 @@ frames and ``K`` proximity pairs holds
   the frame named ``tcp`` sits at the fingertip centre, and its **z axis is
   the finger direction** (the way the fingers point);
 * ``proximity`` ``(T, K)`` signed distances, m, of the named pairs in ``pairs``
-  (P_t; <= 0 on penetration);
+  (P_t; <= 0 on penetration). Self pairs are exact; an environment pair's value
+  is exact when it is at most 0.10 m (:data:`robocritics.robot.trace.EXACT_WITHIN_M`)
+  or at most the arm's closest environment distance at that sample, and otherwise
+  a lower bound beyond both (far pairs are not measured exactly). So every
+  threshold up to 0.10 m, and the closest distance over any set of environment
+  pairs that includes the arm links' at each sample, are exact;
 * ``time`` ``(T,)`` seconds on the physical time axis the robot executes (tau_t);
 * ``gripper_opening_m`` ``(T,)`` distance between the fingers, m;
 * ``attached`` ``(T,)`` id of the object held by the gripper at each sample ('' for none);

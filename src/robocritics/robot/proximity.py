@@ -871,10 +871,11 @@ def shape_shape(a: Shape, b: Shape, pose_a: Any = None, pose_b: Any = None, far_
     tolerance when apart: exact to ~1e-10 m; EPA when overlapping: boxes exact to
     rounding, cylinders to about 1e-5 m), once per run of samples in which neither
     pose changes (an object at rest, or carried at a fixed grip while the other rests
-    costs one call per sample), about 1-3 us per call. With ``far_m`` set, samples
-    whose bounding spheres are more than ``far_m`` apart are not sent to coal and get
-    that bounding-sphere gap instead: a *lower bound* (> ``far_m``), not the
-    distance. Result shape ``(T,)`` (``(1,)`` for two static poses).
+    costs one call per sample), about 1-3 us per call. With ``far_m`` set (m, a
+    scalar or one cutoff per sample), samples where one shape's centre is more than
+    ``far_m`` plus its bounding radius outside the other (:func:`_shape_gap`) are
+    not sent to coal and get that gap instead: a *lower bound* (> ``far_m``), not
+    the distance. Result shape ``(T,)`` (``(1,)`` for two static poses).
     """
     pose_a = np.asarray(a.pose if pose_a is None else pose_a, dtype=_FLOAT)
     pose_b = np.asarray(b.pose if pose_b is None else pose_b, dtype=_FLOAT)
@@ -887,6 +888,18 @@ def shape_shape(a: Shape, b: Shape, pose_a: Any = None, pose_b: Any = None, far_
     Pb = pose_b.reshape(-1, 4, 4)
     T = max(len(Pa), len(Pb))
     return _coal_runs(a, b, Pa, Pb, _pose_changes(Pa, T) | _pose_changes(Pb, T), far_m)
+
+
+def _shape_gap(a: Shape, b: Shape, pose_a: np.ndarray, pose_b: np.ndarray, n: int) -> np.ndarray:
+    """``(n,)`` lower bound (m) of the distance between shapes ``a`` and ``b`` where it is positive.
+
+    ``a`` lies in the ball of radius ``R_a`` (:func:`_bounding_radius`) about its centre ``c_a``, so
+    ``dist(a, b) >= sd(c_a, b) - R_a`` whenever that is positive, and the same with the roles swapped;
+    the larger of the two (each exact in closed form, :func:`point_shape`). Poses ``(4, 4)`` or ``(n, 4, 4)``.
+    """
+    gap_a = point_shape(pose_a[..., :3, 3], b, pose_b) - _bounding_radius(a.kind, a.size)
+    gap_b = point_shape(pose_b[..., :3, 3], a, pose_a) - _bounding_radius(b.kind, b.size)
+    return np.broadcast_to(np.maximum(gap_a, gap_b), (n,))
 
 
 def _pose_changes(poses: np.ndarray, T: int) -> np.ndarray:
@@ -914,11 +927,10 @@ def _coal_runs(a: Shape, b: Shape, Pa: np.ndarray, Pb: np.ndarray, changed: np.n
     todo = np.arange(len(first))
     static_a, static_b = len(Pa) == 1, len(Pb) == 1
     if far_m is not None:
-        ca = Pa[0, :3, 3] if static_a else Pa[first, :3, 3]
-        cb = Pb[0, :3, 3] if static_b else Pb[first, :3, 3]
-        gap = np.linalg.norm(np.broadcast_to(ca - cb, (len(first), 3)), axis=1)
-        gap -= _bounding_radius(a.kind, a.size) + _bounding_radius(b.kind, b.size)
-        far = gap > far_m
+        # a run's value stands for all its samples: it may be a bound only where it beats every cutoff of the run
+        limit = np.maximum.reduceat(far_m, first) if np.ndim(far_m) else far_m
+        gap = _shape_gap(a, b, Pa[0] if static_a else Pa[first], Pb[0] if static_b else Pb[first], len(first))
+        far = gap > limit
         vals[far] = gap[far]
         todo = np.flatnonzero(~far)
     if len(todo):
@@ -1024,6 +1036,38 @@ def reduce_min(distances: np.ndarray, groups: Sequence[Sequence[int]] | Mapping[
 
 
 _DEPTH = {"box": _seg_box_depth, "cylinder": _seg_cyl_depth}
+
+#: Samples per block of the far-pair bounds (:meth:`ProximityKernel._bounds`): a capsule far from a shape over a
+#: block is not evaluated there; shorter blocks bound tighter, longer ones cost less.
+_BLOCK = 32
+
+
+def _capsule_balls(P0: np.ndarray, D: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per capsule and block of :data:`_BLOCK` samples, balls ``(centre (3, C, nb), radius (C, nb))`` m holding
+    the segment midpoints (the radius grown by the farthest one's half length: the ball holds the segments),
+    the start points and the end points of segments ``P0 + t D`` ``(3, C, T)``. Centre: the block's middle sample.
+    """
+    T = P0.shape[2]
+    nb = -(-T // _BLOCK)
+    half = _blocks(0.5 * np.sqrt(np.einsum("icn,icn->cn", D, D)), nb)
+    out = []
+    for p, h in ((P0 + 0.5 * D, half), (P0, None), (P0 + D, None)):
+        pb = _blocks(p, nb)  # (3, C, nb, B)
+        c = np.ascontiguousarray(pb[..., _BLOCK // 2])  # padding repeats real samples: any index will do
+        diff = pb - c[..., None]
+        dist = np.sqrt(np.einsum("icnb,icnb->cnb", diff, diff))
+        if h is not None:
+            dist += h
+        out.append((c, dist.max(axis=2)))
+    return out
+
+
+def _blocks(x: np.ndarray, nb: int) -> np.ndarray:
+    """``x (..., n)`` as ``(..., nb, _BLOCK)``, the last block padded with copies of the last sample."""
+    n = x.shape[-1]
+    if nb * _BLOCK != n:
+        x = np.concatenate([x, np.repeat(x[..., -1:], nb * _BLOCK - n, axis=-1)], axis=-1)
+    return x.reshape(*x.shape[:-1], nb, _BLOCK)
 
 
 def _as_slice(rows: np.ndarray) -> slice | None:
@@ -1214,20 +1258,26 @@ class ProximityKernel:
         p1: Any,
         poses: Mapping[str, Any] | None = None,
         far_m: float | None = None,
+        exact_min_of: Sequence[int] | None = None,
     ) -> np.ndarray:
         """Signed distances ``(T, K)`` in m for capsule endpoints ``p0``, ``p1`` ``(T, C, 3)`` (base frame).
 
         ``poses`` gives the per-sample pose ``(T, 4, 4)`` of every ``moving`` name. The
         result is column-major (Fortran-ordered): each pair's column is contiguous.
 
-        ``far_m=None`` (the default): every value is exact. With ``far_m`` set (m),
-        values above ``far_m`` may instead be a *lower bound* that is itself above
-        ``far_m``; every value at or below ``far_m`` stays exact, so any threshold test
-        at or below ``far_m`` gives the same answer. Capsule/box and capsule/cylinder
-        pairs use the bound ``dist(segment midpoint, shape) - |d|/2 - r`` to skip the
-        exact evaluation for a capsule over a whole chunk of samples when it is far;
-        box/cylinder shape pairs skip coal where bounding spheres are far apart
-        (:func:`shape_shape`). Capsule-capsule and sphere pairs are always exact.
+        ``far_m=None`` (the default): every value is exact. With ``far_m >= 0`` set (m),
+        the cutoff at sample t is ``c_t = far_m``, raised to ``max(far_m, u_t)`` when
+        ``exact_min_of`` lists columns: ``u_t`` is an upper bound of their least distance
+        at t. Every value at or below ``c_t`` is exact; a value above it may instead be a
+        *lower bound* that is itself above ``c_t``. So any threshold test at or below
+        ``far_m`` gives the exact answer, and the per-sample minimum over any set of
+        columns that includes ``exact_min_of`` is exact at every sample (the pair that
+        attains it is within ``u_t``). The bounds, for a capsule (segment midpoint ``m``,
+        direction ``d``, radius ``r``) and a box or cylinder, with ``e(m)`` the distance of
+        ``m`` outside the shape: ``e(m) - |d|/2 - r <= d <= e(m) - r``, decided per pair and
+        sample, so only pairs that can be within ``c_t`` are evaluated exactly; for two
+        boxes/cylinders (:func:`shape_shape`), the distance of one's centre outside the
+        other minus its bounding radius. Capsule-capsule and sphere pairs are always exact.
         """
         p0 = np.asarray(p0, dtype=_FLOAT)
         p1 = np.asarray(p1, dtype=_FLOAT)
@@ -1235,6 +1285,12 @@ class ProximityKernel:
         if p0.ndim != 3 or p0.shape[1:] != (C, 3) or p1.shape != p0.shape:
             raise ValueError(f"p0 and p1 must both be (T, {C}, 3) (one segment per capsule), got {p0.shape} and {p1.shape}")
         T = p0.shape[0]
+        if far_m is not None and not far_m >= 0.0:
+            raise ValueError(f"far_m must be >= 0 m (or None: every value exact), got {far_m}")
+        tight = None
+        if far_m is not None and exact_min_of is not None:
+            tight = np.zeros(len(self.pairs), dtype=bool)
+            tight[np.asarray(exact_min_of, dtype=np.int64)] = True
         poses = dict(poses or {})
         for key in self.moving:
             if key not in poses:
@@ -1263,26 +1319,56 @@ class ProximityKernel:
                         groups.append(_subgroup(g, ~s) if s.any() else g)
                 if once:
                     buf1 = np.empty((len(self.pairs), 1))
-                    self._run(once, P0[:, :, :1], D[:, :, :1], {}, far_m, buf1)
+                    self._run(once, P0[:, :, :1], D[:, :, :1], {}, None, buf1)  # one sample: exact
                     for g in once:
                         for rr in g.rows:
                             rr = rr[rr >= 0]
                             buf[rr] = buf1[rr]
-        self._run(groups, P0, D, poses, far_m, buf)
+        self._run(groups, P0, D, poses, far_m, buf, tight)
         return buf.T
 
-    def _run(self, groups: list[_Group], P0: np.ndarray, D: np.ndarray, poses: dict, far_m: float | None, buf: np.ndarray) -> None:
-        """Evaluate ``groups`` for segments ``P0 + t D`` ``(3, C, T)`` into the rows of ``buf (K, T)``."""
+    def _run(
+        self,
+        groups: list[_Group],
+        P0: np.ndarray,
+        D: np.ndarray,
+        poses: dict,
+        far_m: float | None,
+        buf: np.ndarray,
+        tight: np.ndarray | None = None,
+    ) -> None:
+        """Evaluate ``groups`` for segments ``P0 + t D`` ``(3, C, T)`` into the rows of ``buf (K, T)``.
+
+        With ``far_m``, a first pass writes every capsule/box and capsule/cylinder pair's lower bound into
+        ``buf`` (:meth:`_bounds`) and sets the per-sample cutoff ``c_t = max(far_m, u_t)``, ``u_t`` the least
+        upper bound over the rows ``tight`` (bool ``(K,)``); the second pass replaces the bounds that are
+        ``<= c_t`` by exact values, sample by sample.
+        """
         T = P0.shape[2]
+        cut = None
+        lbs: dict[tuple[int, int], list] = {}
+        if far_m is not None:
+            # u_t: +inf (every value exact) until a bound of a `tight` row lowers it; without `tight`, c_t = far_m
+            upper = np.full(T, np.inf if tight is not None else far_m)
+            balls = None
+            for gi, g in enumerate(groups):
+                if g.product and g.kind != "sphere":
+                    if balls is None:
+                        balls = _capsule_balls(P0, D)
+                    for t0, t1, pose in self._chunks(g, T, poses):
+                        lbs[gi, t0] = self._bounds(g, balls, t1 - t0, pose, buf, t0, upper, tight)
+            cut = np.maximum(upper, far_m)
         hits: dict[str, list[tuple[np.ndarray, list[np.ndarray], np.ndarray]]] = {}
         changes: dict[str, np.ndarray] = {}  # pose key -> where its pose changes, computed once for all its pairs
-        for g in groups:
+        for gi, g in enumerate(groups):
             if g.kind == "shape":
                 for col, i, j in zip(g.cols, g.ia, g.ib):
                     a, b = self.shapes[i], self.shapes[j]
                     ka, kb = self._pose_key.get(a.name, ""), self._pose_key.get(b.name, "")
                     if a.kind == "sphere" or b.kind == "sphere" or not (ka in poses or kb in poses):
-                        buf[col] = np.broadcast_to(shape_shape(a, b, poses.get(ka, a.pose), poses.get(kb, b.pose), far_m=far_m), (T,))
+                        # one value for every sample (or closed form): exact up to the largest cutoff
+                        far = None if cut is None else float(cut.max())
+                        buf[col] = np.broadcast_to(shape_shape(a, b, poses.get(ka, a.pose), poses.get(kb, b.pose), far_m=far), (T,))
                         continue
                     changed = np.zeros(T, dtype=bool)
                     changed[0] = True
@@ -1292,19 +1378,19 @@ class ProximityKernel:
                         changed |= changes[key]
                     Pa = poses[ka] if ka in poses else np.asarray(a.pose, dtype=_FLOAT)[None]
                     Pb = poses[kb] if kb in poses else np.asarray(b.pose, dtype=_FLOAT)[None]
-                    buf[col] = _coal_runs(a, b, Pa, Pb, changed, far_m)
+                    buf[col] = _coal_runs(a, b, Pa, Pb, changed, cut)
                 continue
-            width = len(g.caps) if g.product else len(g.cols)
-            step = max(64, self.chunk // max(width, 1))
+            if g.product:
+                for t0, t1, pose in self._chunks(g, T, poses):
+                    c = None if cut is None or g.kind == "sphere" else cut[t0:t1]
+                    self._product(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], buf, t0, hits, c, pose, lbs.get((gi, t0)))
+                continue
+            step = max(64, self.chunk // max(len(g.cols), 1))
             for t0 in range(0, T, step):
                 t1 = min(T, t0 + step)
-                if g.product:
-                    pose = poses[g.pose_key][t0:t1] if g.pose_key is not None else None
-                    self._product(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], buf, t0, hits, far_m, pose)
-                else:
-                    a, d = P0[:, g.ia, t0:t1], D[:, g.ia, t0:t1]
-                    b, e = P0[:, g.ib, t0:t1], D[:, g.ib, t0:t1]
-                    buf[g.cols, t0:t1] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r
+                a, d = P0[:, g.ia, t0:t1], D[:, g.ia, t0:t1]
+                b, e = P0[:, g.ib, t0:t1], D[:, g.ib, t0:t1]
+                buf[g.cols, t0:t1] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r
         flat = buf.reshape(-1)
         pending = hits.pop("cylinder-inner", None)
         if pending:
@@ -1322,29 +1408,120 @@ class ProximityKernel:
             r = np.concatenate([e[2] for e in entries])
             flat[where] = -_DEPTH[kind](*args) - r
 
+    def _chunks(self, g: _Group, T: int, poses: dict):
+        """``(t0, t1, pose)`` chunks of a product group: about ``chunk`` pair-samples each, keeping temporaries in cache."""
+        step = max(64, self.chunk // max(len(g.caps), 1)) // _BLOCK * _BLOCK
+        for t0 in range(0, T, step):
+            t1 = min(T, t0 + step)
+            yield t0, t1, (poses[g.pose_key][t0:t1] if g.pose_key is not None else None)
+
     @staticmethod
-    def _collect(hits, kind, sq, rows, t0, T, a, d, c, size, r):
-        """Record the samples where a segment meets a shape (``sq == 0``) for the batched depth pass."""
+    def _local(g: _Group, a: np.ndarray, d: np.ndarray, pose: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Segment starts and directions ``(3, Cg, n)`` in the frame of the group's shapes."""
+        if pose is not None and g.kind == "sphere":  # a ball has no orientation: p - c per sample is enough
+            return a - np.ascontiguousarray(pose[:, :3, 3].T)[:, None, :], d
+        if pose is not None:  # R^T (p - c) per sample, broadcast over the capsules
+            R, c = pose[:, :3, :3], pose[:, :3, 3]
+            return np.stack(_to_local(a[0], a[1], a[2], R, c)), np.stack(_to_local(d[0], d[1], d[2], R, c, translate=False))
+        if g.rot is not None:
+            return np.tensordot(g.rot.T, a, axes=1), np.tensordot(g.rot.T, d, axes=1)  # R^T p: into the shapes' frame
+        return a, d
+
+    def _bounds(self, g, balls_all, n_chunk, pose, buf, t0, upper, tight) -> list:
+        """Block bounds of a box or cylinder product group for the samples ``t0 ..`` (base frame ``a``, ``d``).
+
+        Per capsule and block of :data:`_BLOCK` samples, the balls ``(c, rho)`` that hold the segment
+        midpoints (``rho``: their farthest one plus its half length) and the start and end points. Every
+        point of the capsule is then within ``rho + r`` of ``c``, and the capsule holds the ball of radius
+        ``r`` about each of those points; ``e`` (the distance outside the shape, 0 inside) is 1-Lipschitz, so
+        at every sample of the block::
+
+            e(c_mid) - rho_mid - r  <=  signed distance  <=  min over mid, start, end of e(c) + rho' - r
+
+        (``rho'`` without the half length; the left side is used only where it is positive). A shape that
+        moves is bounded by the ball of its centre's path over the block plus its bounding radius. The lower
+        bound goes to ``buf`` (and is returned per shape, ``(Cg, blocks)``); the upper bound, over the rows
+        ``tight``, lowers ``upper (T,)``.
+        """
+        n = n_chunk
+        b0, nb = t0 // _BLOCK, -(-n // _BLOCK)  # chunks start on a block
+        balls = [(c[:, g.caps, b0 : b0 + nb], rho[g.caps, b0 : b0 + nb]) for c, rho in balls_all]
+        if pose is not None:  # the shape's centre over each block: a ball about the middle of its extent
+            sc = _blocks(np.ascontiguousarray(pose[:, :3, 3].T)[:, None, :], nb)[:, 0]  # (3, nb, B)
+            s_c = 0.5 * (sc.min(axis=2) + sc.max(axis=2))
+            s_rho = np.sqrt(np.einsum("inb,inb->nb", sc - s_c[..., None], sc - s_c[..., None])).max(axis=1)
+            s_rho += _bounding_radius(g.kind, self._size_of(g))
+        elif g.rot is not None:
+            balls = [(np.tensordot(g.rot.T, c, axes=1), rho) for c, rho in balls]
+        r = g.r
+        out = []
+        for s in range(len(g.centre[0])):
+            rows = g.rows[s]
+            keep = rows >= 0
+            if pose is not None:
+                e = [np.maximum(np.sqrt(np.einsum("icn,icn->cn", c - s_c[:, None], c - s_c[:, None])) - s_rho, 0.0) for c, _ in balls]
+                e_ub = [np.sqrt(np.einsum("icn,icn->cn", c - s_c[:, None], c - s_c[:, None])) + s_rho for c, _ in balls]
+            else:
+                e = [self._outside(g.kind, c, g, s) for c, _ in balls]
+                e_ub = e
+            lb = e[0] - balls[0][1] - r
+            buf[rows[keep], t0 : t0 + n] = np.repeat(lb[keep], _BLOCK, axis=1)[:, :n]
+            out.append(lb)
+            if tight is not None:
+                sel = keep.copy()
+                sel[keep] = tight[rows[keep]]
+                if sel.any():
+                    ub = np.minimum.reduce([(x + rho)[sel] for x, (_, rho) in zip(e_ub, balls)]) - r[sel]
+                    ub = np.repeat(ub.min(axis=0), _BLOCK)[:n]
+                    np.minimum(upper[t0 : t0 + n], ub, out=upper[t0 : t0 + n])
+        return out
+
+    @staticmethod
+    def _size_of(g: _Group) -> list[float]:
+        """The size of a moving group's one shape, as :class:`Shape` gives it (full extents, radius, ...)."""
+        if g.kind == "box":
+            return [2.0 * v[0] for v in g.size]
+        if g.kind == "cylinder":
+            return [g.size[0][0], 2.0 * g.size[1][0]]
+        return [g.size[0][0]]
+
+    @staticmethod
+    def _outside(kind: str, p, g: _Group, s: int) -> np.ndarray:
+        """Distance (m) of the points ``p`` (x, y, z in the group's frame) outside shape ``s`` of ``g``, 0 inside."""
+        ex = [np.abs(v - ci[s]) for v, ci in zip(p, g.centre)]
+        if kind == "box":
+            out = sum(np.maximum(e - h[s], 0.0) ** 2 for e, h in zip(ex, g.size))
+        else:
+            rad = np.maximum(np.sqrt(ex[0] ** 2 + ex[1] ** 2) - g.size[0][s], 0.0)
+            out = rad * rad + np.maximum(ex[2] - g.size[1][s], 0.0) ** 2
+        return np.sqrt(out, out=out)
+
+    @staticmethod
+    def _collect(hits, kind, sq, loc, a, d, c, size, r):
+        """Record the samples where a segment meets a shape (``sq == 0``) for the batched depth pass.
+
+        ``loc(ci, ti)``: the flat output indices of the entries ``(ci, ti)`` of ``sq`` (-1: not requested).
+        """
         ci, ti = np.nonzero(sq == 0.0)
-        keep = rows[ci] >= 0
+        where = loc(ci, ti)
+        keep = where >= 0
         if not keep.all():
-            ci, ti = ci[keep], ti[keep]
+            ci, ti, where = ci[keep], ti[keep], where[keep]
         if not ci.size:
             return
-        where = rows[ci] * T + (t0 + ti)
         args = [np.broadcast_to(a[i], sq.shape)[ci, ti] - c[i] for i in range(3)]
         args += [np.broadcast_to(d[i], sq.shape)[ci, ti] for i in range(3)]
         args += [np.broadcast_to(np.asarray(v, dtype=_FLOAT), sq.shape)[ci, ti] for v in size]
         hits.setdefault(kind, []).append((where, args, np.broadcast_to(r, sq.shape)[ci, ti]))
 
     @staticmethod
-    def _defer_inner(hits, pending, rows, t0, T, r, shape):
+    def _defer_inner(hits, pending, loc, r, shape):
         """Record the cylinder pairs whose minimiser is interior for the batched Newton pass."""
         (ci, ti), sub = pending
-        keep = rows[ci] >= 0
+        where = loc(ci, ti)
+        keep = where >= 0
         if not keep.all():
-            ci, ti, sub = ci[keep], ti[keep], [v[keep] for v in sub]
-        where = rows[ci] * T + (t0 + ti)
+            ci, ti, where, sub = ci[keep], ti[keep], where[keep], [v[keep] for v in sub]
         hits.setdefault("cylinder-inner", []).append((where, sub, np.broadcast_to(r, shape)[ci, ti]))
 
     def _product(
@@ -1355,82 +1532,81 @@ class ProximityKernel:
         buf: np.ndarray,
         t0: int,
         hits: dict,
-        far_m: float | None,
+        cut: np.ndarray | None,
         pose: np.ndarray | None,
+        lbs: list | None = None,
     ) -> None:
         """Evaluate one product group for the samples ``t0 ..``; ``a``, ``d``: ``(3, Cg, n)`` segment starts, directions.
 
-        ``pose (n, 4, 4)``: the per-sample pose of a moving group's shape.
+        ``pose (n, 4, 4)``: the per-sample pose of a moving group's shape. ``cut (n,)``: :meth:`_bounds` has
+        written block lower bounds ``lbs`` into ``buf``; only the blocks whose bound is ``<= cut`` somewhere in
+        the block are evaluated exactly (gathered into one flat batch per shape), the others keep their bound.
         """
         T = buf.shape[1]
         n = a.shape[2]
-        if pose is not None and g.kind == "sphere":  # a ball has no orientation: p - c per sample is enough
-            a = a - np.ascontiguousarray(pose[:, :3, 3].T)[:, None, :]
-        elif pose is not None:  # R^T (p - c) per sample, broadcast over the capsules
-            R, c = pose[:, :3, :3], pose[:, :3, 3]
-            a = np.stack(_to_local(a[0], a[1], a[2], R, c))
-            d = np.stack(_to_local(d[0], d[1], d[2], R, c, translate=False))
-        elif g.rot is not None:
-            a = np.tensordot(g.rot.T, a, axes=1)  # R^T p: into the shapes' frame
-            d = np.tensordot(g.rot.T, d, axes=1)
-        ax, ay, az = a
-        dx, dy, dz = d
-        cx, cy, cz = g.centre
         r = g.r
-        if g.kind == "box":
-            aux = _box_prep(dx, dy, dz)
-        elif g.kind == "cylinder":
-            aux = dx * dx
-            aux += dy * dy
-        else:
-            aux = dx * dx
-            aux += dy * dy
-            aux += dz * dz
-            aux += 1e-300
-            np.divide(1.0, aux, out=aux)
-        cull = far_m is not None and g.kind != "sphere"
-        if cull:
-            # bounding balls: every point of a capsule is within |d|/2 + r of its segment's midpoint
-            mid = (ax + 0.5 * dx, ay + 0.5 * dy, az + 0.5 * dz)
-            reach = np.sqrt(dx * dx + dy * dy + dz * dz)
-            reach *= 0.5
-            reach += r
-        for s in range(len(cx)):
-            c = (cx[s], cy[s], cz[s])
+        if cut is not None:
+            flat = buf.reshape(-1)
+            cut_b = _blocks(cut[None], lbs[0].shape[1])[0].max(axis=1)
+            for s, lb in enumerate(lbs):
+                rows = g.rows[s]
+                near = lb <= cut_b
+                near &= (rows >= 0)[:, None]
+                ci, bi = np.nonzero(near)
+                if not ci.size:
+                    continue
+                ti = (bi[:, None] * _BLOCK + np.arange(_BLOCK)).ravel()
+                ci = np.repeat(ci, _BLOCK)
+                if n % _BLOCK:  # the last block is short
+                    ok = ti < n
+                    ci, ti = ci[ok], ti[ok]
+                ga, gd = a[:, ci, ti], d[:, ci, ti]  # (3, m): one flat batch of (capsule, sample) entries
+                if pose is not None:
+                    R, c0 = pose[ti, :3, :3], pose[ti, :3, 3]
+                    ga, gd = np.stack(_to_local(*ga, R, c0)), np.stack(_to_local(*gd, R, c0, translate=False))
+                elif g.rot is not None:
+                    ga, gd = g.rot.T @ ga, g.rot.T @ gd
+                ga, gd = ga[:, None, :], gd[:, None, :]
+                where = rows[ci] * T + t0 + ti
+                o = np.empty((1, len(where)))
+                c = tuple(v[s] for v in g.centre)
+                size = tuple(v[s] for v in g.size)
+                self._shape_eval(g.kind, ga, gd, self._prep(g.kind, gd), c, size, r[ci, 0][None], lambda ci, ti: where[ti], hits, o)
+                flat[where] = o[0]
+            return
+        a, d = self._local(g, a, d, pose)
+        aux = self._prep(g.kind, d)
+        for s in range(len(g.centre[0])):
+            c = tuple(ci[s] for ci in g.centre)
             size = tuple(v[s] for v in g.size)
-            view = g.views[s]
             rows = g.rows[s]
-            sub = None
-            if cull:
-                ex = [np.abs(m - ci) for m, ci in zip(mid, c)]
-                if g.kind == "box":
-                    lb = sum(np.maximum(e - h, 0.0) ** 2 for e, h in zip(ex, size))
-                else:
-                    rad = np.maximum(np.sqrt(ex[0] ** 2 + ex[1] ** 2) - size[0], 0.0)
-                    lb = rad * rad + np.maximum(ex[2] - size[1], 0.0) ** 2
-                lb = np.sqrt(lb)
-                lb -= reach  # <= the signed distance of every sample
-                near = (lb <= far_m).any(axis=1)
-                if not near.all():
-                    keep = rows >= 0
-                    buf[rows[keep], t0 : t0 + n] = lb[keep]
-                    if not near.any():
-                        continue
-                    sub = np.flatnonzero(near)
-            if sub is None:
-                o = buf[view, t0 : t0 + n] if view is not None else np.empty((len(rows), n))
-                self._shape_eval(g.kind, a, d, aux, c, size, r, rows, t0, T, hits, o)
-                if view is None:
-                    keep = rows >= 0
-                    buf[rows[keep], t0 : t0 + n] = o[keep]
-            else:
-                aux_s = _take_prep(aux, sub) if g.kind == "box" else aux[sub]
-                o = np.empty((len(sub), n))
-                self._shape_eval(g.kind, a[:, sub], d[:, sub], aux_s, c, size, r[sub], rows[sub], t0, T, hits, o)
-                keep = rows[sub] >= 0
-                buf[rows[sub][keep], t0 : t0 + n] = o[keep]
+            view = g.views[s]
+            o = buf[view, t0 : t0 + n] if view is not None else np.empty((len(rows), n))
 
-    def _shape_eval(self, kind, a, d, aux, c, size, r, rows, t0, T, hits, o) -> None:
+            def loc(ci, ti, rows=rows):
+                rr = rows[ci]
+                return np.where(rr >= 0, rr * T + t0 + ti, -1)
+
+            self._shape_eval(g.kind, a, d, aux, c, size, r, loc, hits, o)
+            if view is None:
+                keep = rows >= 0
+                buf[rows[keep], t0 : t0 + n] = o[keep]
+
+    @staticmethod
+    def _prep(kind: str, d: np.ndarray):
+        """The per-segment terms of a kind's kernel for directions ``d (3, ...)``."""
+        dx, dy, dz = d
+        if kind == "box":
+            return _box_prep(dx, dy, dz)
+        aux = dx * dx
+        aux += dy * dy
+        if kind == "cylinder":
+            return aux
+        aux += dz * dz
+        aux += 1e-300
+        return np.divide(1.0, aux, out=aux)
+
+    def _shape_eval(self, kind, a, d, aux, c, size, r, loc, hits, o) -> None:
         """Signed distances ``o (k, n)`` of segments ``a + t d`` ``(3, k, n)`` (shape frame) to one shape."""
         ax, ay, az = a
         dx, dy, dz = d
@@ -1439,12 +1615,12 @@ class ProximityKernel:
         elif kind == "cylinder":
             sq, pending = _cyl_sq(ax, ay, az, dx, dy, dz, aux, *c, *size, defer=True)
             if pending is not None:
-                self._defer_inner(hits, pending, rows, t0, T, r, sq.shape)
+                self._defer_inner(hits, pending, loc, r, sq.shape)
         else:
             sq = _point_seg_sq(*c, ax, ay, az, dx, dy, dz, aux)
         np.sqrt(sq, out=o)
         if kind == "sphere":
             o -= size[0]
         elif sq.min() == 0.0:
-            self._collect(hits, kind, sq, rows, t0, T, a, d, c, size, r)
+            self._collect(hits, kind, sq, loc, a, d, c, size, r)
         o -= r

@@ -9,8 +9,12 @@ distance (m, <= 0 on penetration) of every proximity pair:
   object, a container - the minimum over its floor and walls -, the table), and
   every object the gripper carries at some point against every other entity.
 
-Robot distances are exact at any range; a carried object's distances are exact up
-to :data:`CARRIED_EXACT_M` (beyond it, a lower bound that is itself larger).
+A distance is exact when it is at most :data:`EXACT_WITHIN_M` or at most the arm's
+closest distance to the scene at that sample; beyond both, it may be a lower bound
+that is itself larger (what lies that far needs no exact value). So every threshold
+test up to ``EXACT_WITHIN_M`` is exact, and so is, at every sample, the closest
+distance over any set of environment pairs that includes the arm links' (the
+collision critic's ``D_t``).
 
 Objects that the program moves have a pose per sample (``object_poses``):
 at rest, carried with the TCP, at rest again where they were released, so
@@ -27,12 +31,12 @@ from ..scene import Scene, Shape
 from ..trajectory import Pair, Step, Trajectory
 from . import proximity as prox
 
-__all__ = ["build_trajectory", "CARRIED_EXACT_M"]
+__all__ = ["build_trajectory", "EXACT_WITHIN_M"]
 
-#: Distances between a carried object and the scene are exact up to this many metres
-#: (twice the collision critic's warning distance); larger ones are reported as a lower
-#: bound that is itself larger. Robot capsule distances are exact at every distance.
-CARRIED_EXACT_M = 0.10
+#: Distances (robot capsules and carried objects against the scene) are exact up to this many metres
+#: (twice the collision critic's warning distance) and up to the arm's closest distance at each sample;
+#: larger ones may be a lower bound that is itself larger (:meth:`ProximityKernel.distances`).
+EXACT_WITHIN_M = 0.10
 
 
 def _entity_groups(scene: Scene) -> list[tuple[str, str, list[Shape]]]:
@@ -114,20 +118,23 @@ def build_trajectory(
             )
             members.append([(oid, shape.name) for shape in shapes])
 
-    # robot pairs are exact at every distance; carried-object pairs (box and cylinder pairs
-    # go through coal sample by sample) are exact up to CARRIED_EXACT_M and a lower bound
-    # above it, far beyond every critic threshold
-    split = len(members) - sum(1 for p in pairs if p.group_a == "attached")
+    # one kernel for robot and carried-object pairs: exact within EXACT_WITHIN_M and within the arm's closest
+    # distance at each sample (its columns' minimum stays exact); farther values are bounds, never evaluated
+    flat = [pair for group in members for pair in group]
+    bounds = np.cumsum([0] + [len(g) for g in members])
+    arm = [
+        j
+        for k, p in enumerate(pairs)
+        if p.kind == "environment" and p.group_a == "arm"
+        for j in range(bounds[k], bounds[k + 1])
+    ]
     capsules = [(name, float(r)) for name, r in zip(robot.capsule_names, robot.capsule_radii)]
     poses = {oid: np.asarray(pose, float) for oid, pose in object_poses.items()}
     blocks = []
-    for part, far in ((members[:split], None), (members[split:], CARRIED_EXACT_M)):
-        flat = [pair for group in part for pair in group]
-        if flat:
-            kernel = prox.ProximityKernel(capsules, scene.shapes(), flat, moving=list(object_poses))
-            blocks.append(kernel.distances(p0, p1, poses=poses, far_m=far))
+    if flat:
+        kernel = prox.ProximityKernel(capsules, scene.shapes(), flat, moving=list(object_poses))
+        blocks.append(kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=arm))
     distances = np.concatenate(blocks, axis=1) if blocks else np.zeros((T, 0))
-    bounds = np.cumsum([0] + [len(g) for g in members])
     columns = [
         distances[:, bounds[k]] if bounds[k + 1] - bounds[k] == 1 else distances[:, bounds[k] : bounds[k + 1]].min(axis=1)
         for k in range(len(members))
