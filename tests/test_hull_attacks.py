@@ -254,3 +254,27 @@ def hostile(draw):
 @given(P=hostile())
 def test_property_coal_quickhull_and_scipy_agree_and_nothing_crashes(child, P):
     agree(P, child.hull(P))
+
+
+PROGRAMS = {
+    "a straight line": "lib.move_linear(0.3, 0.1, 0.3)\nlib.move_linear(0.3, -0.1, 0.3)",
+    "1 mm up and down": "lib.move_up(0.001)\nlib.move_down(0.001)",
+    "waiting": "lib.wait(0.5)",
+    "a base sweep": "lib.set_speed(0.2)\nlib.move_to(0.2, 0.2, 0.25)\nlib.move_to(-0.2, 0.2, 0.25)",
+}
+
+
+@pytest.mark.parametrize("name", list(PROGRAMS))
+def test_point_sets_of_real_motions(child, name):
+    """What space_usage hulls for motions that barely move or move along a line, simulated for real: the whole
+    robot (default decimation and the exact hull) and the TCP alone (a straight path is thin: it was rounded to
+    0; the exact sweep has vertices with hundreds of neighbours, which coal refuses)."""
+    from robocritics import Scene, simulate
+    from robocritics.critics.space_usage import hull_points
+
+    X = simulate(PROGRAMS[name], Scene.builtin("sorting")).trajectory.positions
+    for frames in (slice(None), slice(-1, None)):
+        for tolerance_m in (0.0005, 0.0):
+            P, _, _ = hull_points(np.ascontiguousarray(X[:, frames]), tolerance_m)
+            if len(P) >= 4:
+                agree(P, child.hull(P))
