@@ -102,3 +102,22 @@ def test_ruckig_edge_case_is_timed():
     s, times, duration = time_path_1d(0.08000000000000007, 0.6755520111743515, 4.0, 40.0, 125.0)
     assert duration == pytest.approx(0.4, rel=1e-5)
     assert s[0] == 0 and np.all(np.diff(s) >= 0) and s[-1] < 0.08000000000000007
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(start=configs, goal=configs, fraction=st.floats(0.05, 1.0), nudge=st.booleans())
+def test_sampled_positions_are_ruckigs_at_time(start, goal, fraction, nudge):
+    """Profile.position (every phase of every DOF evaluated at once) against ruckig's own at_time per sample,
+    at the 125 Hz instants, phase boundaries and the end; nearly-equal start and goal give tiny profiles."""
+    from robocritics.robot.motion import profile_joint_move, profile_path_1d
+
+    if nudge:
+        goal = start + 1e-4 * np.sign(goal - start + 0.5)
+    for prof in (profile_joint_move(start, goal, LIMITS, fraction), profile_path_1d(0.3, 0.25 * fraction + 0.01, 1.0, 5.0)):
+        if prof._traj is None:
+            continue
+        ends = np.concatenate([np.cumsum(p.t) for p in prof._traj.profiles[0]])
+        times = np.concatenate([np.arange(0.0, prof.duration_s, 1 / 125.0), ends[ends <= prof.duration_s], [prof.duration_s]])
+        ours = prof.position(times)
+        ref = np.array([prof._traj.at_time(float(t))[0] for t in times]).reshape(len(times), -1)
+        np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-12)
