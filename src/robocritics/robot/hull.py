@@ -414,8 +414,10 @@ def _mend(visible: set[int], horizon: list[tuple[int, int]], F: list, edge_facet
 def _face_normals(V: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """The outward unit normal of the face each triangle of the closed, consistently oriented mesh lies in.
 
-    A face is a set of edge-connected triangles with parallel normals (to 1e-10, about 1e-5 rad), or
-    antiparallel ones where one faces the inside (a fold), zero-area triangles joining any. quickhull cones a
+    A face is a set of edge-connected triangles with parallel normals (to 1e-15 in the cosine, 4.5e-8 rad: a
+    fold needs facets within a tolerance ~1e-12 of coplanar; looser, a chain of slightly bent facets of a
+    finely sampled curved surface joins and its area shrinks), or antiparallel ones where one faces the inside
+    (a fold), zero-area triangles joining any. quickhull cones a
     point to the edge of the coplanar facets around it, and where that region is not star-shaped from the
     point the new triangles fold back over each other in the plane: each is a triangle of the face, but the
     face's area is ``|sum of the triangles' oriented area vectors|`` (the folds cancel), its normal that sum's
@@ -448,7 +450,7 @@ def _face_normals(V: np.ndarray, tri: np.ndarray) -> np.ndarray:
         if g is None or f > g:
             continue
         cos = float(N[f] @ N[g])
-        if L[f] == 0 or L[g] == 0 or cos > 1 - 1e-10 or (cos < 1e-10 - 1 and (inward[f] or inward[g])):
+        if L[f] == 0 or L[g] == 0 or cos > 1 - 1e-15 or (cos < 1e-15 - 1 and (inward[f] or inward[g])):
             parent[root(f)] = root(g)
     comp = np.array([root(f) for f in range(len(tri))])
     S = np.zeros_like(G)
