@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull, QhullError
 
-from robocritics.robot.hull import _EPS
+from robocritics.robot.hull import _EPS, convex_hull, quickhull
 
 #: The child: for each line "path" on stdin, the hull of np.load(path) by both implementations, as one JSON line.
 WORKER = r"""
@@ -278,3 +278,16 @@ def test_point_sets_of_real_motions(child, name):
             P, _, _ = hull_points(np.ascontiguousarray(X[:, frames]), tolerance_m)
             if len(P) >= 4:
                 agree(P, child.hull(P))
+
+
+@pytest.mark.parametrize("hull_of", [convex_hull, quickhull])
+@pytest.mark.parametrize("shape", [(12, 2), (4, 4), ()])
+def test_points_of_the_wrong_shape_are_refused(hull_of, shape):
+    # (12, 2) used to be read as 8 points of 3 coordinates; it fails before coal is called
+    with pytest.raises(ValueError, match=r"shape \(N, 3\)"):
+        hull_of(np.ones(shape) if shape else np.float64(1.0))
+
+
+def test_points_of_shape_t_l_3_are_read_as_n_3():
+    P = np.random.default_rng(3).normal(size=(10, 4, 3))
+    assert quickhull(P).volume_m3 == pytest.approx(ConvexHull(P.reshape(-1, 3)).volume, rel=1e-9)

@@ -85,6 +85,14 @@ def _empty() -> Hull:
     return Hull(0.0, 0.0, np.arange(0, dtype=np.int64))
 
 
+def _points(P: np.ndarray) -> np.ndarray:
+    """``P (..., 3)`` as a contiguous ``(N, 3)`` float array; ValueError naming the shape otherwise."""
+    P = np.asarray(P, dtype=float)
+    if P.ndim == 0 or P.shape[-1] != 3:
+        raise ValueError(f"hull points must have shape (N, 3) (m), got shape {P.shape}")
+    return np.ascontiguousarray(P.reshape(-1, 3))
+
+
 def _normalised(P: np.ndarray) -> tuple[np.ndarray, int] | None:
     """``(Q, e)`` with ``Q = (P - c) 2^-e`` for a centre ``c`` and ``|Q| < 1`` (see the module docstring); None if
     there are fewer than 4 points, a non-finite coordinate, or all points are equal."""
@@ -189,7 +197,7 @@ def _hull(Q: np.ndarray, e: int, V: np.ndarray, tri: np.ndarray, normals: np.nda
 
 def convex_hull(P: np.ndarray) -> Hull:
     """Volume (m^3), area (m^2) and vertex indices of ``conv(P)``, ``P (N, 3)`` in m; flat or tiny sets: empty."""
-    P = np.ascontiguousarray(P, dtype=float).reshape(-1, 3)
+    P = _points(P)
     norm = _normalised(P)
     if norm is None:
         return _empty()
@@ -224,7 +232,7 @@ def quickhull(P: np.ndarray) -> Hull:
     facets whose twin was kept) and share the deleted facets' conflict points among the new facets. Each step
     costs the points it moves, not all points. Volume and area: :func:`_measure`.
     """
-    P = np.ascontiguousarray(P, dtype=float).reshape(-1, 3)
+    P = _points(P)
     norm = _normalised(P)
     if norm is None:
         return _empty()
