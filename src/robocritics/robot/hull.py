@@ -11,7 +11,8 @@ Two implementations, one answer:
   warning such as "point above twisted facet", the output of an option such as ``Tv``) through a ``FILE *`` it
   never opened, so any message kills the process with a segfault instead of raising; and coal refuses a hull
   with a vertex of more than 254 neighbours ("Too many neighbors", a fan of thin triangles around a point, as
-  a robot turning its base sweeps with the exact hull), after building it.
+  a robot turning its base sweeps), after building it and without freeing it: about 0.5 MB lost per refusal
+  of a 3000-point fan (benchmarks/bench_hull.py's sweep is refused even decimated).
 * :func:`quickhull`, a plain incremental hull in numpy (Clarkson-Shor / Barber et al. with conflict lists):
   used for every set coal might crash on or refuses, and the reference coal is tested against (with scipy's
   Qhull as a third).
