@@ -68,6 +68,12 @@ def _run_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.cumsum(change) - 1, values[starts]
 
 
+def _row_min(P: np.ndarray, cols) -> np.ndarray:
+    """``(T,)`` minimum of ``P[:, cols]`` per row, +inf for no columns."""
+    sub = P[:, cols]
+    return sub.min(axis=1) if sub.shape[1] else np.full(len(P), np.inf)
+
+
 class Counted:
     """Which proximity pairs count for the collision critic, per sample.
 
@@ -122,14 +128,20 @@ class Counted:
         return mask
 
     def closest(self, P: np.ndarray) -> np.ndarray:
-        """``(T,)`` closest counted distance per sample, m (+inf where nothing counts)."""
-        if self.intended is None:
-            return np.min(P, axis=1, where=self.columns, initial=np.inf)
+        """``(T,)`` closest counted distance per sample, m (+inf where nothing counts).
+
+        The counted columns are gathered and reduced by a plain row minimum: a masked ``where=`` reduction
+        over ``(T, K)`` is about 4x slower.
+        """
         always = self.columns.copy()
-        always[self.gcols] = False
-        out = np.min(P, axis=1, where=always, initial=np.inf)
-        gripper = np.min(np.take(P, self.gcols, axis=1), axis=1, where=~self.intended, initial=np.inf)
-        return np.minimum(out, gripper, out=out)
+        if self.intended is not None:
+            always[self.gcols] = False
+        out = _row_min(P, np.flatnonzero(always))
+        if self.intended is not None:
+            gripper = np.take(P, self.gcols, axis=1)
+            gripper[self.intended] = np.inf
+            np.minimum(out, _row_min(gripper, slice(None)), out=out)
+        return out
 
 
 def counted_distances(trajectory, ignore_pairs=()) -> np.ndarray:
