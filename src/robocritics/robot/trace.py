@@ -130,17 +130,12 @@ def build_trajectory(
     ]
     capsules = [(name, float(r)) for name, r in zip(robot.capsule_names, robot.capsule_radii)]
     poses = {oid: np.asarray(pose, float) for oid, pose in object_poses.items()}
-    blocks = []
+    proximity = np.zeros((T, 0))
     if flat:
         kernel = prox.ProximityKernel(capsules, scene.shapes(), flat, moving=list(object_poses))
-        blocks.append(kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=arm))
-    distances = np.concatenate(blocks, axis=1) if blocks else np.zeros((T, 0))
-    columns = [
-        distances[:, bounds[k]] if bounds[k + 1] - bounds[k] == 1 else distances[:, bounds[k] : bounds[k + 1]].min(axis=1)
-        for k in range(len(members))
-    ]
-
-    proximity = np.stack(columns, axis=1) if columns else np.zeros((T, 0))
+        by_pair = kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=arm).T  # (K', T) C-order
+        # each reported pair is the least of its consecutive kernel rows (an entity's shapes): one reduceat
+        proximity = np.ascontiguousarray(np.minimum.reduceat(by_pair, bounds[:-1], axis=0).T)
     return Trajectory(
         q=q,
         time=time,
