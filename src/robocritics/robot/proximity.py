@@ -1047,12 +1047,12 @@ def _capsule_balls(P0: np.ndarray, D: np.ndarray) -> list[tuple[np.ndarray, np.n
     the segment midpoints (the radius grown by the farthest one's half length: the ball holds the segments),
     the start points and the end points of segments ``P0 + t D`` ``(3, C, T)``. Centre: the block's middle sample.
     """
-    T = P0.shape[2]
-    nb = -(-T // _BLOCK)
-    half = _blocks(0.5 * np.sqrt(np.einsum("icn,icn->cn", D, D)), nb)
+    nb = -(-P0.shape[2] // _BLOCK)
+    start, d = _blocks(P0, nb), _blocks(D, nb)  # (3, C, nb, B), padded once
+    half = np.sqrt(np.einsum("icnb,icnb->cnb", d, d))
+    half *= 0.5
     out = []
-    for p, h in ((P0 + 0.5 * D, half), (P0, None), (P0 + D, None)):
-        pb = _blocks(p, nb)  # (3, C, nb, B)
+    for pb, h in ((start + 0.5 * d, half), (start, None), (start + d, None)):
         c = np.ascontiguousarray(pb[..., _BLOCK // 2])  # padding repeats real samples: any index will do
         diff = pb - c[..., None]
         dist = np.sqrt(np.einsum("icnb,icnb->cnb", diff, diff))
