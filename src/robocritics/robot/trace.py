@@ -134,8 +134,16 @@ def build_trajectory(
     if flat:
         kernel = prox.ProximityKernel(capsules, scene.shapes(), flat, moving=list(object_poses))
         by_pair = kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=arm).T  # (K', T) C-order
-        # each reported pair is the least of its consecutive kernel rows (an entity's shapes): one reduceat
-        proximity = np.ascontiguousarray(np.minimum.reduceat(by_pair, bounds[:-1], axis=0).T)
+        # each reported pair is the least of its consecutive kernel rows (an entity's shapes), row by row
+        # (np.minimum.reduceat along axis 0 is 15x slower)
+        rows = np.empty((len(members), T))
+        for k in range(len(members)):
+            lo, hi = bounds[k], bounds[k + 1]
+            if hi - lo == 1:
+                rows[k] = by_pair[lo]
+            else:
+                np.min(by_pair[lo:hi], axis=0, out=rows[k])
+        proximity = np.ascontiguousarray(rows.T)
     return Trajectory(
         q=q,
         time=time,
