@@ -211,7 +211,7 @@ def test_a_plugin_registered_at_runtime_is_picked_up(registered):
     assert r.flag_of("echo") is Flag.OK
 
 
-def test_a_plugin_whose_hook_fails_is_skipped_with_a_warning(registered):
+def test_a_plugin_whose_hook_fails_is_skipped_with_a_warning(registered, caplog):
     def boom(register):
         raise RuntimeError("cannot start")
 
@@ -220,6 +220,9 @@ def test_a_plugin_whose_hook_fails_is_skipped_with_a_warning(registered):
         critics = get_critics()
     assert set(BUILTIN_CRITICS) <= set(critics)
     assert any(e.name == "exploding_plugin" for e in plugins.plugin_errors)
+    # and it is logged, on the plugins' logger
+    logged = [r for r in caplog.records if r.name == "robocritics.plugins" and r.levelname == "WARNING"]
+    assert any("exploding_plugin" in r.getMessage() and "cannot start" in r.getMessage() for r in logged)
 
 
 def test_bad_and_duplicate_critics_are_rejected_by_name(registered):
