@@ -953,8 +953,12 @@ def _coal_runs(a: Shape, b: Shape, Pa: np.ndarray, Pb: np.ndarray, changed: np.n
         clear = res.clear
         if len(moving) == 1:
             (set_r, set_t, R, t), = moving
-            for i, k in enumerate(todo.tolist()):
-                set_r(R[i])
+            # a carried object keeps its orientation along a straight line: set a rotation only when it changes
+            turned = np.ones(len(R), dtype=bool)
+            turned[1:] = (R[1:] != R[:-1]).any(axis=(1, 2))
+            for i, (k, new_r) in enumerate(zip(todo.tolist(), turned.tolist())):
+                if new_r:
+                    set_r(R[i])
                 set_t(t[i])
                 clear()
                 vals[k] = solver(ta, tb, req, res)
