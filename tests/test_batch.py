@@ -325,3 +325,17 @@ def test_a_batch_abandoned_early_does_not_leak_its_rows_into_the_next(engine):
     assert first["id"].startswith("old")
     out = list(evaluate([{"id": "new", "scene": "sorting", "program": SHORT}], engine))
     assert [r["id"] for r in out] == ["new"] and out[0]["error"] is None
+
+
+def test_a_worker_is_replaced_by_a_fresh_one_after_max_rows_per_worker_rows():
+    # a native library's per-program leak (coal's refused hulls) must not grow without bound in a warm worker
+    rows = [{"id": i, "scene": "sorting", "program": SHORT} for i in range(5)]
+    with LocalEngine(1, max_rows_per_worker=2) as pool:
+        pids = []
+        for row in evaluate(rows, pool):
+            assert row["error"] is None
+            pids.append(pool._pool[0].pid)  # the worker that will take the next row
+        assert pool.recycled == 2 and pool.restarts == 0  # after rows 2 and 4; not counted as failures
+        assert pids[0] != pids[1] == pids[2] != pids[3] == pids[4] and len(set(pids)) == 3
+    with pytest.raises(ValueError, match="max_rows_per_worker"):
+        LocalEngine(1, max_rows_per_worker=0)

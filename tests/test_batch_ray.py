@@ -163,3 +163,13 @@ def test_a_ray_batch_abandoned_early_does_not_leak_into_the_next(engine):
     rows.close()
     out = list(evaluate([{"id": "new", "scene": "sorting", "program": SHORT}], engine))
     assert [r["id"] for r in out] == ["new"] and out[0]["error"] is None and engine.running() == {}
+
+
+def test_a_ray_actor_is_replaced_by_a_fresh_one_after_max_rows_per_worker(engine):
+    restarts, recycled, engine.max_rows_per_worker = engine.restarts, engine.recycled, 2
+    try:
+        out = list(evaluate([{"id": i, "scene": "sorting", "program": SHORT} for i in range(4)], engine))
+    finally:
+        engine.max_rows_per_worker = 1000
+    assert [r["error"] for r in out] == [None] * 4
+    assert engine.recycled >= recycled + 1 and engine.restarts == restarts  # 4 rows on 2 actors: 1 or 2 recycled

@@ -324,3 +324,15 @@ def test_the_child_runs_with_single_threaded_blas(evaluator):
     assert evaluator.evaluate(SHORT).error is None
     environ = Path(f"/proc/{evaluator.pid}/environ").read_bytes().split(b"\0")
     assert b"OMP_NUM_THREADS=1" in environ and b"OPENBLAS_NUM_THREADS=1" in environ
+
+
+def test_the_child_is_replaced_by_a_fresh_one_after_max_jobs(sorting):
+    # a native library's per-program leak must not grow without bound in the warm child (robocritics.child)
+    with Evaluator(sorting, critics=CRITICS) as ev:
+        ev.max_jobs = 2
+        pids = []
+        for _ in range(5):
+            assert ev.evaluate(SHORT).error is None
+            pids.append(ev.pid)
+        assert pids[0] != pids[1] == pids[2] != pids[3] == pids[4] and len(set(pids)) == 3
+        assert ev.recycled == 2 and ev.restarts == 0

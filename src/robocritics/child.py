@@ -24,7 +24,12 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 
-__all__ = ["Child", "SINGLE_THREADED_ENV", "cpu_seconds", "limit_address_space"]
+__all__ = ["Child", "MAX_JOBS_PER_CHILD", "SINGLE_THREADED_ENV", "cpu_seconds", "limit_address_space"]
+
+#: Jobs a warm child runs before a fresh one replaces it (between jobs; not a failure). Native libraries may leak
+#: per program (coal's Qhull leaks the hull it refuses: ~0.5 MB for a 3,000-point fan), and a leak must not grow
+#: until an innocent job hits the address-space limit; a restart (~1-2 s) over this many jobs costs a few per cent.
+MAX_JOBS_PER_CHILD = 1000
 
 #: Environment a child starts with: one BLAS/OpenMP thread. A checking process runs one program at a time,
 #: and numpy's multi-threaded matmul on long trajectories costs 5-8x the CPU of the single-threaded one here.

@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from multiprocessing.connection import wait
 from typing import Any
 
-from ..child import SINGLE_THREADED_ENV, Child, limit_address_space
+from ..child import MAX_JOBS_PER_CHILD, SINGLE_THREADED_ENV, Child, limit_address_space
 from ..errors import RoboCriticsError
 from .rows import Job, SceneCache, error_row, evaluate_job
 
@@ -33,6 +33,8 @@ WORKER_ENV = SINGLE_THREADED_ENV
 DEFAULT_TIMEOUT_S = 60.0
 #: Address-space limit of a worker, bytes (a checked bundled program peaks near 0.5 GB of address space).
 DEFAULT_MEMORY_BYTES = 3 * 1024**3
+#: Rows a worker evaluates before a fresh one replaces it (not counted as a restart; see MAX_JOBS_PER_CHILD).
+MAX_ROWS_PER_WORKER = MAX_JOBS_PER_CHILD
 #: Wall-clock seconds a worker may take to start (imports, the robot model).
 STARTUP_TIMEOUT_S = 120.0
 #: Workers in a row that may fail to start before the batch stops with a BatchError.
@@ -80,6 +82,7 @@ class _Worker(Child):
         self.ready = False
         self.job: Job | None = None
         self.job_started = 0.0
+        self.rows_done = 0
 
 
 class LocalEngine:
@@ -87,7 +90,8 @@ class LocalEngine:
 
     ``robot`` (default the UR3e, loaded in each worker) is pickled to each worker once;
     ``timeout_s`` is the wall-clock limit per row, s; ``memory_bytes`` a worker's address-space
-    limit, bytes; ``sample_rate_hz`` the trajectories' sample rate, Hz. Use it as a context manager.
+    limit, bytes; ``sample_rate_hz`` the trajectories' sample rate, Hz; ``max_rows_per_worker`` the rows a
+    worker evaluates before a fresh one replaces it (:data:`MAX_ROWS_PER_WORKER`). Use it as a context manager.
     """
 
     def __init__(
@@ -98,13 +102,18 @@ class LocalEngine:
         timeout_s: float = DEFAULT_TIMEOUT_S,
         memory_bytes: int = DEFAULT_MEMORY_BYTES,
         sample_rate_hz: float = 125.0,
+        max_rows_per_worker: int = MAX_ROWS_PER_WORKER,
     ):
         workers = (os.cpu_count() or 1) if workers is None else workers
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise ValueError(f"workers must be a whole number of at least 1, got {workers!r}")
         if not timeout_s > 0 or not memory_bytes > 0:
             raise ValueError(f"timeout_s and memory_bytes must be positive, got {timeout_s}, {memory_bytes}")
+        if isinstance(max_rows_per_worker, bool) or not isinstance(max_rows_per_worker, int) or max_rows_per_worker < 1:
+            raise ValueError(f"max_rows_per_worker must be a whole number of at least 1, got {max_rows_per_worker!r}")
         self.workers = workers
+        self.max_rows_per_worker = max_rows_per_worker
+        self.recycled = 0  # workers replaced after max_rows_per_worker rows
         self.timeout_s = float(timeout_s)
         self.memory_bytes = int(memory_bytes)
         self._args = (robot, self.memory_bytes, float(sample_rate_hz))
@@ -135,11 +144,14 @@ class LocalEngine:
     def _spawn(self) -> _Worker:
         return _Worker(*self._args)
 
-    def _replace(self, worker: _Worker) -> None:
+    def _replace(self, worker: _Worker, recycle: bool = False) -> None:
         worker.kill()
         with self._lock:
             self._pool[self._pool.index(worker)] = self._spawn()
-        self.restarts += 1
+        if recycle:
+            self.recycled += 1
+        else:
+            self.restarts += 1
 
     # --- rows ---
 
@@ -199,6 +211,9 @@ class LocalEngine:
             if kind == "row":
                 with self._lock:
                     w.job = None
+                w.rows_done += 1
+                if w.rows_done >= self.max_rows_per_worker:
+                    self._replace(w, recycle=True)
                 return value
             if kind == "failed" or not w.ready:
                 self._start_failure(w, value or f"the worker died while starting ({w.death()})")

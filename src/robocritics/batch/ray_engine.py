@@ -14,7 +14,7 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
-from .local import DEFAULT_TIMEOUT_S, MAX_START_FAILURES, STARTUP_TIMEOUT_S, WORKER_ENV, BatchError
+from .local import DEFAULT_TIMEOUT_S, MAX_ROWS_PER_WORKER, MAX_START_FAILURES, STARTUP_TIMEOUT_S, WORKER_ENV, BatchError
 from .rows import Job, SceneCache, error_row, evaluate_job
 
 __all__ = ["RayEngine", "import_ray"]
@@ -83,6 +83,7 @@ class RayEngine:
         timeout_s: float = DEFAULT_TIMEOUT_S,
         sample_rate_hz: float = 125.0,
         address: str | None = None,
+        max_rows_per_worker: int = MAX_ROWS_PER_WORKER,
     ):
         ray = self._ray = import_ray(loopback=address is None)
         if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
@@ -98,6 +99,9 @@ class RayEngine:
         self.workers = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
         self.timeout_s = float(timeout_s)
         self.restarts = 0
+        self.max_rows_per_worker = int(max_rows_per_worker)
+        self.recycled = 0  # actors replaced after max_rows_per_worker rows
+        self._rows_done: dict[str, int] = {}  # actor id -> rows it has evaluated
         self._robot_ref = ray.put(robot)
         self._sample_rate_hz = float(sample_rate_hz)
         self._remote = ray.remote(num_cpus=1, max_restarts=0)(_Actor)
@@ -205,7 +209,12 @@ class RayEngine:
                     fresh = self._replace(actor)
                     starting[fresh.pid.remote()] = fresh
                     continue
-                idle.append(actor)
+                done = self._rows_done[actor._actor_id.hex()] = self._rows_done.get(actor._actor_id.hex(), 0) + 1
+                if done >= self.max_rows_per_worker:  # a fresh actor: a native leak must not grow without bound
+                    fresh = self._replace(actor, recycle=True)
+                    starting[fresh.pid.remote()] = fresh
+                else:
+                    idle.append(actor)
                 yield row
             if starting and not idle and not flight and now - waiting_since > STARTUP_TIMEOUT_S:
                 raise BatchError(
@@ -222,9 +231,13 @@ class RayEngine:
                     fresh = self._replace(actor)
                     starting[fresh.pid.remote()] = fresh
 
-    def _replace(self, actor):
+    def _replace(self, actor, recycle: bool = False):
         self._ray.kill(actor, no_restart=True)
+        self._rows_done.pop(actor._actor_id.hex(), None)
         fresh = self._spawn()
         self._actors[self._actors.index(actor)] = fresh
-        self.restarts += 1
+        if recycle:
+            self.recycled += 1
+        else:
+            self.restarts += 1
         return fresh

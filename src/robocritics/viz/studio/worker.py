@@ -39,7 +39,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from ...child import Child, cpu_seconds, limit_address_space
+from ...child import MAX_JOBS_PER_CHILD, Child, cpu_seconds, limit_address_space
 from ...errors import CriticError, PlanningError, ProgramError, RoboCriticsError, SceneError, TrajectoryError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -250,6 +250,8 @@ class Evaluator:
         self.cpu_s = float(cpu_s)
         self.memory_bytes = int(memory_bytes)
         self.restarts = 0  # children replaced after a crash or a limit
+        self.recycled = 0  # children replaced after max_jobs jobs
+        self.max_jobs = MAX_JOBS_PER_CHILD  # jobs a child runs before a fresh one replaces it (robocritics.child)
         self._lock = threading.Lock()
         self._closed = False
         self._child: Child | None = None
@@ -278,6 +280,7 @@ class Evaluator:
         args = (self.scene, self.robot, self.critics, self.params, self.goals, self.sample_rate_hz, self.memory_bytes)
         self._child = Child(_serve, args, name="robocritics-evaluator")
         self._ready = False
+        self._jobs_done = 0
 
     def _stop(self) -> None:
         child, self._child = self._child, None
@@ -377,6 +380,11 @@ class Evaluator:
             try:
                 self._await_ready()
                 self._run(evaluation, (kind, program, job_critics, job_params, self.cpu_s))
+                self._jobs_done += 1
+                if self._jobs_done >= self.max_jobs and not self._closed:  # bound any native leak
+                    self._stop()
+                    self._start()
+                    self.recycled += 1
             except EvaluatorError as exc:
                 evaluation.error = _error_dict(exc)
                 if not self._closed:
