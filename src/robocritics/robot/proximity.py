@@ -71,8 +71,16 @@ capsules, the scene shapes, the pairs and the names of the shapes that move,
 its :meth:`~ProximityKernel.distances` returns ``(T, K)`` signed distances for
 capsule endpoints ``(T, C, 3)``. On a 10,000-sample UR3e trajectory (10
 capsules, 27 self pairs, 150 capsule-shape pairs in the breakfast scene) it
-takes about 50 ms on one core, and about 35 ms with ``far_m=0.1``
-(``benchmarks/bench_proximity.py``).
+takes about 40 ms on one core, and about 30 ms with ``far_m=0.1``
+(``benchmarks/bench_proximity.py``: random motions, where most pairs are near).
+
+**Far pairs** (``far_m``): per capsule and block of 32 samples, bounding balls of
+the segments give a lower bound of every capsule/box and capsule/cylinder pair's
+distance; a pair is evaluated exactly only in the blocks where that bound is
+within the cutoff, so on a real program (a few per cent of the pairs near) most
+of the exact work is skipped. The cutoff rises per sample to an upper bound of the
+least distance of chosen columns (``exact_min_of``), which keeps their minimum
+exact: see :meth:`ProximityKernel.distances`.
 """
 
 from __future__ import annotations
