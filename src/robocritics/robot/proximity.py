@@ -1284,12 +1284,12 @@ class ProximityKernel:
         *lower bound* that is itself above ``c_t``. So any threshold test at or below
         ``far_m`` gives the exact answer, and the per-sample minimum over any set of
         columns that includes ``exact_min_of`` is exact at every sample (the pair that
-        attains it is within ``u_t``). The bounds, for a capsule (segment midpoint ``m``,
-        direction ``d``, radius ``r``) and a box or cylinder, with ``e(m)`` the distance of
-        ``m`` outside the shape: ``e(m) - |d|/2 - r <= d <= e(m) - r``, decided per pair and
-        sample, so only pairs that can be within ``c_t`` are evaluated exactly; for two
-        boxes/cylinders (:func:`shape_shape`), the distance of one's centre outside the
-        other minus its bounding radius. Capsule-capsule and sphere pairs are always exact.
+        attains it is within ``u_t``). The bounds of a capsule/box or capsule/cylinder pair
+        hold for a block of 32 samples (:meth:`_bounds`: balls about the segments'
+        midpoints, starts and ends over the block), so only the blocks that can be within
+        the cutoff are evaluated exactly; for two boxes/cylinders (:func:`shape_shape`),
+        the distance of one's centre outside the other minus its bounding radius.
+        Capsule-capsule and sphere pairs are always exact.
         """
         p0 = np.asarray(p0, dtype=_FLOAT)
         p1 = np.asarray(p1, dtype=_FLOAT)
