@@ -51,3 +51,43 @@ def test_each_ur_arms_home_is_the_ur3e_home_scaled_by_reach(name):
     scale = ur_reach(ARMS[name].dh) / ur_reach(UR3E.dh)
     np.testing.assert_allclose(robot.tcp_pose(robot.home_q)[:3, 3], [0.25 * scale, 0.0, 0.25 * scale], atol=1e-9)
     assert (scale == 1.0) == (name == "ur3e")
+
+
+def test_the_command_freezes_its_objects_at_exit_and_still_finishes_every_output(tmp_path):
+    """Run as the process's command (argv None), main() ends with gc.freeze(): the report, the --html file,
+    atexit handlers and a weakref.finalize callback all still complete, and the exit status is kept."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "replay.html"
+    script = f"""
+import atexit, gc, sys, weakref
+class Held: pass
+held = Held()
+weakref.finalize(held, print, "finalized", file=sys.stderr)
+atexit.register(print, "atexit ran", file=sys.stderr)
+sys.argv = ["robocritics", "check", {str(root / 'examples/programs/sorting_careful.py')!r}, "--scene", "sorting",
+            "--html", {str(out)!r}]
+from robocritics.cli import main
+status = main()
+print("frozen", gc.get_freeze_count() > 0, file=sys.stderr)
+sys.exit(status)
+"""
+    done = subprocess.run([sys.executable, "-c", script], cwd=root, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.startswith("RoboCritics report: score 10/10")
+    assert "frozen True" in done.stderr and "atexit ran" in done.stderr and "finalized" in done.stderr
+    assert out.read_text().rstrip().endswith("</html>")
+
+
+def test_main_with_an_argv_leaves_the_callers_garbage_collector_alone(capsys):
+    import gc
+
+    from robocritics.cli import main
+
+    before = gc.get_freeze_count()
+    assert main(["critics"]) == 0
+    assert "space_usage" in capsys.readouterr().out
+    assert gc.get_freeze_count() == before
