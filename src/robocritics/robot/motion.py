@@ -215,7 +215,11 @@ class Profile:
             if prof.brake.duration != 0.0:  # never for a move that starts at rest; keep ruckig's own evaluation
                 return np.array([self._traj.at_time(float(t))[0] for t in times]).reshape(len(times), -1)
             t_sum = np.cumsum(prof.t)
-            p, v, a, j = (np.append(np.asarray(x, dtype=float)[:7], y) for x, y in ((prof.p, prof.pf), (prof.v, prof.vf), (prof.a, prof.af), (prof.j, 0.0)))
+            # the state at each phase start, and the final state (constant) for times past the last phase
+            p, v, a, j = (
+                np.append(np.asarray(x, dtype=float)[:7], y)
+                for x, y in ((prof.p, prof.pf), (prof.v, prof.vf), (prof.a, prof.af), (prof.j, 0.0))
+            )
             k = np.searchsorted(t_sum, times, side="right")  # std::upper_bound; 7: past the end
             dt = times - np.concatenate(([0.0], t_sum))[k]
             out[:, dof] = p[k] + dt * (v[k] + dt * (a[k] / 2 + dt * j[k] / 6))
