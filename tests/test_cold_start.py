@@ -91,3 +91,30 @@ def test_main_with_an_argv_leaves_the_callers_garbage_collector_alone(capsys):
     assert main(["critics"]) == 0
     assert "space_usage" in capsys.readouterr().out
     assert gc.get_freeze_count() == before
+
+
+def test_check_runs_with_the_collector_paused_and_restores_it():
+    """In a fresh interpreter, a check's imports create tens of thousands of objects (a hundred collections
+    with the collector on): paused, at most the one due when it is back on runs."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    script = f"""
+import gc, sys
+from robocritics.cli import main
+collections = []
+gc.callbacks.append(lambda phase, info: phase == "start" and collections.append(info["generation"]))
+status = main(["check", {str(root / 'examples/programs/sorting_naive.py')!r}, "--scene", "sorting"])
+print(status, gc.isenabled(), len(collections), file=sys.stderr)
+gc.disable()
+main(["check", {str(root / 'examples/programs/sorting_naive.py')!r}, "--scene", "sorting"])
+print(gc.isenabled(), file=sys.stderr)
+"""
+    done = subprocess.run([sys.executable, "-c", script], cwd=root, capture_output=True, text=True, timeout=300)
+    first, second = done.stderr.strip().splitlines()[-2:]
+    status, enabled, collections = first.split()
+    assert (status, enabled) == ("1", "True")  # sorting_naive has an Error; the collector is back on
+    assert int(collections) <= 1
+    assert second == "False"  # a caller that turned it off keeps it off
