@@ -964,12 +964,15 @@ def _coal_runs(a: Shape, b: Shape, Pa: np.ndarray, Pb: np.ndarray, changed: np.n
             # a carried object keeps its orientation along a straight line: set a rotation only when it changes
             turned = np.ones(len(R), dtype=bool)
             turned[1:] = (R[1:] != R[:-1]).any(axis=(1, 2))
-            for i, (k, new_r) in enumerate(zip(todo.tolist(), turned.tolist())):
+            out = []
+            put = out.append
+            for Ri, ti, new_r in zip(R, t, turned.tolist()):
                 if new_r:
-                    set_r(R[i])
-                set_t(t[i])
-                clear()
-                vals[k] = solver(ta, tb, req, res)
+                    set_r(Ri)
+                set_t(ti)
+                clear()  # the result keeps the least distance of every call until cleared
+                put(solver(ta, tb, req, res))
+            vals[todo] = out
         else:
             # both static (one sample) or both moving
             for i, k in enumerate(todo.tolist()):
