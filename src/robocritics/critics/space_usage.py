@@ -31,7 +31,8 @@ gives the exact hull. Identical consecutive points (a frame that does not
 move) are kept once. The workspace check always uses every point.
 
 Degenerate point sets (fewer than 4 distinct points, all coplanar or
-collinear) have volume 0; so do sets flat to a relative 1e-5 (see
+collinear to rounding, about 1e-12 of their size) have volume 0; thinner
+sets than coal's Qhull copes with are measured by the numpy quickhull (see
 :mod:`robocritics.robot.hull`).
 """
 
@@ -118,8 +119,8 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
 def hull_volume(P: np.ndarray) -> tuple[float, float, np.ndarray]:
     """``(volume m^3, area m^2, vertex indices)`` of the convex hull of ``P (N, 3)``; 0 for degenerate sets.
 
-    See :func:`robocritics.robot.hull.convex_hull`: vertex indices ascend (the first of equal points); flat sets
-    (to a relative 1e-5) give ``(0, 0, [])``.
+    See :func:`robocritics.robot.hull.convex_hull`: vertex indices ascend (the first of equal points); sets flat
+    to rounding give ``(0, 0, [])``.
     """
     if len(P) < 4:
         return 0.0, 0.0, np.arange(len(P))
