@@ -11,7 +11,6 @@ Run:
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
@@ -24,15 +23,9 @@ PROGRAMS = Path(__file__).resolve().parent.parent / "examples" / "programs"
 
 def cpu_of(pids) -> float:
     """utime + stime of the processes ``pids``, s."""
-    total = 0.0
-    for pid in pids:
-        try:
-            with open(f"/proc/{pid}/stat", "rb") as f:
-                fields = f.read().rsplit(b")", 1)[1].split()
-            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-        except (OSError, IndexError):
-            pass
-    return total
+    from robocritics.child import cpu_seconds
+
+    return sum(cpu_seconds(pid) for pid in pids)
 
 
 def make_rows(n: int) -> list[dict]:
