@@ -24,6 +24,8 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 
+from ._threads import SINGLE_THREADED_ENV
+
 __all__ = ["Child", "MAX_JOBS_PER_CHILD", "SINGLE_THREADED_ENV", "cpu_seconds", "limit_address_space"]
 
 #: Jobs a warm child runs before a fresh one replaces it (between jobs; not a failure). Native libraries may leak
@@ -31,15 +33,6 @@ __all__ = ["Child", "MAX_JOBS_PER_CHILD", "SINGLE_THREADED_ENV", "cpu_seconds", 
 #: until an innocent job hits the address-space limit; a restart (~1-2 s) over this many jobs costs a few per cent.
 MAX_JOBS_PER_CHILD = 1000
 
-#: Environment a child starts with: one BLAS/OpenMP thread. A checking process runs one program at a time,
-#: and numpy's multi-threaded matmul on long trajectories costs 5-8x the CPU of the single-threaded one here.
-SINGLE_THREADED_ENV = {
-    "OMP_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "VECLIB_MAXIMUM_THREADS": "1",
-    "NUMEXPR_NUM_THREADS": "1",
-}
 # os.environ is process-wide: a child is started with its environment under this lock.
 _ENV_LOCK = threading.Lock()
 
