@@ -687,6 +687,47 @@ def ur_ik(
     raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_why_no_solution(dh, t, sd, lo, hi, chain, tol)}")
 
 
+def ur_ik_line(
+    dh: DH, flange_poses: np.ndarray, seed: Any, lower: Any, upper: Any, *, tol: float = _VERIFY_TOL
+) -> tuple[np.ndarray, PlanningError | None]:
+    """:func:`ur_ik` along a path, each pose seeded by the previous solution.
+
+    ``flange_poses`` ``(n, 4, 4)`` (m); ``seed``, ``lower``, ``upper`` ``(6,)`` rad. Row ``i`` of the result is
+    exactly ``ur_ik(dh, flange_poses[i], q[i - 1], lower, upper, tol=tol)`` (``q[-1]`` is ``seed``), without
+    the per-call conversions. Returns ``(q (m, 6) rad, error)``: ``m = n`` and ``error`` None when every pose
+    is solved, else the ``m`` solved rows and the :class:`PlanningError` :func:`ur_ik` raises for pose ``m``.
+    """
+    k = dh._ur
+    poses = np.asarray(flange_poses, dtype=float)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+        raise PlanningError(f"ur_ik_line: flange_poses must have shape (n, 4, 4), got {poses.shape}")
+    sd = [float(v) for v in np.asarray(seed, dtype=float).ravel()]
+    lo = [float(v) for v in np.asarray(lower, dtype=float).ravel()]
+    hi = [float(v) for v in np.asarray(upper, dtype=float).ravel()]
+    if len(sd) != 6 or len(lo) != 6 or len(hi) != 6:
+        raise PlanningError("ur_ik_line: seed, lower and upper must each have 6 values")
+    w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    chain = _Chain(dh)
+
+    def reproduces_pose(q: list[float]) -> bool:
+        dp, dr = chain.error(q, t)
+        return dp <= tol and dr <= tol
+
+    out: list[list[float]] = []
+    for t in poses[:, :3].reshape(-1, 12).tolist():
+        best = _nearest_solution(k, t, sd, lo, hi, w)
+        if best is not None and not reproduces_pose(best):
+            best = _nearest_solution(k, t, sd, lo, hi, w, reproduces_pose)
+        if best is None:
+            reason = _why_no_solution(dh, t, sd, lo, hi, chain, tol)
+            return np.array(out, dtype=float).reshape(-1, 6), PlanningError(
+                f"cannot reach flange target {_fmt_pos(t)}: {reason}"
+            )
+        out.append(best)
+        sd = best
+    return np.array(out, dtype=float).reshape(-1, 6), None
+
+
 def _why_no_solution(
     dh: DH, t: Sequence[float], sd: Sequence[float], lo: Sequence[float], hi: Sequence[float], chain: _Chain, tol: float
 ) -> str:

@@ -593,6 +593,42 @@ class Robot:
                 f"cannot put the TCP at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m {pose}: {exc.reason}"
             ) from None
 
+    def ik_line(self, positions, seed: np.ndarray | None = None, *, yaw_rad: float = 0.0) -> tuple[np.ndarray, PlanningError | None]:
+        """:meth:`ik` with the fingers down (turned by ``yaw_rad``) at each of ``positions`` ``(n, 3)`` m in turn,
+        each seeded by the previous solution (the first by ``seed``, default the home pose).
+
+        Returns ``(q (m, 6) rad, error)``: row ``i`` is what ``ik(positions[i], seed=q[i - 1], yaw_rad=yaw_rad)``
+        returns; ``m = n`` and ``error`` None when every position is solved, else the ``m`` solved rows and the
+        :class:`PlanningError` :meth:`ik` raises for position ``m``. For UR arms the closed form runs without
+        the per-call conversions (one stacked matmul for the flange poses).
+        """
+        from . import ik as _ik
+
+        p = np.asarray(positions, dtype=float).reshape(-1, 3)
+        seed = self.home_q if seed is None else np.asarray(seed, float)
+        if self.dh is None or self.tcp_in_flange is None:
+            rows: list[np.ndarray] = []
+            for point in p:
+                try:
+                    seed = self.ik(point, seed=seed, yaw_rad=yaw_rad)
+                except PlanningError as exc:
+                    return np.array(rows, dtype=float).reshape(-1, self.n), exc
+                rows.append(seed)
+            return np.array(rows, dtype=float).reshape(-1, self.n), None
+        finite = np.isfinite(p).all(axis=1)
+        n_ok = len(p) if finite.all() else int(np.argmin(finite))
+        target = np.empty((n_ok, 4, 4))
+        target[:] = np.eye(4)
+        target[:, :3, :3], target[:, :3, 3] = fingers_down(yaw_rad), p[:n_ok]
+        # the same per-pose products as ik()'s ``target @ self._flange_in_tcp`` (matmul per stacked slice)
+        q, exc = _ik.ur_ik_line(self.dh, target @ self._flange_in_tcp, seed, self.lower, self.upper)
+        if exc is None and n_ok < len(p):
+            exc = PlanningError(f"target {p[n_ok].tolist()} is not a finite position")
+        elif exc is not None:
+            x, y, z = p[len(q)]
+            exc = PlanningError(f"cannot put the TCP at ({x:.3f}, {y:.3f}, {z:.3f}) m with the fingers down: {exc.reason}")
+        return q, exc
+
     # --- self-collision pairs ---------------------------------------------------------
 
     def _default_self_pairs(self) -> tuple[tuple[str, str], ...]:

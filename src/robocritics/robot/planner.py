@@ -611,21 +611,25 @@ class Planner:
         n_grid = max(2, int(math.ceil(length / self.settings.line_step_m)) + 1)
         self.count_ik(call, n_grid)  # before solving any of them
         grid = np.linspace(0.0, length, n_grid)
-        q_grid = np.empty((n_grid, self.robot.n))
-        seed = self.q
-        for i, s in enumerate(grid):
-            try:
-                seed = q_grid[i] = self.ik(start + s * direction, call, seed=seed, counted=True)
-            except PlanningError as exc:
-                exc.goal_m = tuple(float(v) for v in goal)  # the line's end, beyond the point that failed
-                raise
-            if i and np.max(np.abs(q_grid[i] - q_grid[i - 1])) > self.settings.line_max_joint_step_rad:
-                raise PlanningError(
-                    f"{call.describe()}: the straight line passes a singularity or a joint limit near "
-                    f"({(start + s * direction)[0]:.3f}, {(start + s * direction)[1]:.3f}, {(start + s * direction)[2]:.3f}) m; "
-                    "use move_to for this move",
-                    line=call.line,
-                )
+        points = start + grid[:, None] * direction
+        # every grid point seeded by the previous one's solution, in one call; then the errors in the order a
+        # point-by-point walk meets them: a joint jump before the first point that has no solution
+        q_grid, failure = self.robot.ik_line(points, seed=self.q, yaw_rad=self.yaw)
+        jumps = np.flatnonzero(np.max(np.abs(np.diff(q_grid, axis=0)), axis=1) > self.settings.line_max_joint_step_rad)
+        if len(jumps):
+            x, y, z = points[jumps[0] + 1]
+            raise PlanningError(
+                f"{call.describe()}: the straight line passes a singularity or a joint limit near "
+                f"({x:.3f}, {y:.3f}, {z:.3f}) m; use move_to for this move",
+                line=call.line,
+            )
+        if failure is not None:
+            point = points[len(q_grid)]
+            err = PlanningError(f"{call.describe()}: {failure.reason}", line=call.line)
+            # what could not be reached, for repairs that look for the nearest reachable point
+            err.call, err.target_m, err.yaw_rad = call, tuple(float(v) for v in point), float(self.yaw)
+            err.goal_m = tuple(float(v) for v in goal)  # the line's end, beyond the point that failed
+            raise err
         dq_ds = np.max(np.abs(np.diff(q_grid, axis=0)), axis=0) / (length / (n_grid - 1))
         joint_cap = np.min(JOINT_SPEED_MARGIN * self.limits.velocity / np.maximum(dq_ds, _STILL_JOINT_RAD_PER_M))
         f = self.speed

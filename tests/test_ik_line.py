@@ -1,0 +1,92 @@
+"""Robot.ik_line (one call for a straight line's grid) against the point-by-point Robot.ik walk it replaces."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from robocritics import Robot, Scene, simulate
+from robocritics.errors import PlanningError
+
+ROBOT = Robot.ur3e()
+PROGRAMS = Path(__file__).resolve().parents[1] / "examples" / "programs"
+
+
+def sequential(robot: Robot, points: np.ndarray, seed: np.ndarray, yaw: float):
+    """The reference: Robot.ik at each point in turn, seeded by the previous solution."""
+    rows = []
+    for p in points:
+        try:
+            seed = robot.ik(p, seed=seed, yaw_rad=yaw)
+        except PlanningError as exc:
+            return np.array(rows).reshape(-1, robot.n), exc
+        rows.append(seed)
+    return np.array(rows).reshape(-1, robot.n), None
+
+
+def assert_same(robot, points, seed, yaw):
+    q, err = robot.ik_line(points, seed=seed, yaw_rad=yaw)
+    q_ref, err_ref = sequential(robot, points, seed, yaw)
+    assert q.shape == q_ref.shape
+    if len(q):
+        assert np.max(np.abs(q - q_ref)) <= 1e-12
+    assert (err is None) == (err_ref is None)
+    if err is not None:
+        assert str(err) == str(err_ref)
+    return q, err
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    start=st.tuples(*(st.floats(-0.45, 0.45),) * 2, st.floats(-0.1, 0.5)),
+    step=st.tuples(*(st.floats(-0.4, 0.4),) * 3),
+    yaw=st.floats(-3.0, 3.0),
+    n=st.integers(2, 120),
+)
+def test_ik_line_equals_the_point_by_point_walk(start, step, yaw, n):
+    points = np.asarray(start) + np.linspace(0.0, 1.0, n)[:, None] * np.asarray(step)
+    assert_same(ROBOT, points, ROBOT.home_q, yaw)
+
+
+def test_ik_line_stops_at_the_first_unreachable_point_with_ik_s_error():
+    # from a reachable point straight out beyond the arm's reach
+    points = np.array([0.3, 0.1, 0.2]) + np.linspace(0.0, 1.0, 80)[:, None] * np.array([0.8, 0.0, 0.0])
+    q, err = assert_same(ROBOT, points, ROBOT.home_q, 0.0)
+    assert 0 < len(q) < len(points)
+    assert isinstance(err, PlanningError) and "cannot put the TCP at" in err.reason
+
+
+def test_ik_line_non_finite_point_is_a_typed_error():
+    points = np.array([[0.3, 0.1, 0.2], [0.3, 0.1, np.nan]])
+    q, err = ROBOT.ik_line(points)
+    assert len(q) == 1 and isinstance(err, PlanningError) and "not a finite position" in err.reason
+
+
+def test_bundled_programs_lines_equal_the_point_by_point_walk(monkeypatch):
+    calls = []
+    real = Robot.ik_line
+
+    def checked(self, positions, seed=None, *, yaw_rad=0.0):
+        q, err = real(self, positions, seed=seed, yaw_rad=yaw_rad)
+        q_ref, err_ref = sequential(self, np.asarray(positions), self.home_q if seed is None else seed, yaw_rad)
+        calls.append((len(q), float(np.max(np.abs(q - q_ref), initial=0.0)), str(err) == str(err_ref)))
+        return q, err
+
+    monkeypatch.setattr(Robot, "ik_line", checked)
+    for path in sorted(PROGRAMS.glob("*.py")):
+        simulate(path.read_text(), Scene.builtin(path.stem.split("_")[0]), ROBOT)
+    assert len(calls) >= 6
+    assert all(same_err and diff <= 1e-12 for _, diff, same_err in calls)
+    assert sum(n for n, _, _ in calls) > 500
+
+
+@pytest.mark.parametrize("shape", [(4, 4), (2, 3, 4)])
+def test_ur_ik_line_rejects_bad_pose_shapes(shape):
+    from robocritics.robot.ik import ur_ik_line
+
+    with pytest.raises(PlanningError, match="shape"):
+        ur_ik_line(ROBOT.dh, np.zeros(shape), ROBOT.home_q, ROBOT.lower, ROBOT.upper)
