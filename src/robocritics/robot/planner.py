@@ -468,11 +468,11 @@ class Planner:
     def grasp_candidate(self, tcp: np.ndarray) -> str | None:
         """The graspable object whose centre lies between the fingers at TCP pose ``tcp``."""
         best, best_d = None, math.inf
-        inv = np.linalg.inv(tcp)
+        R, t = tcp[:3, :3], tcp[:3, 3]
         for oid, o in self.objects.items():
             if oid == self.attached or not o.graspable:
                 continue
-            local = inv[:3, :3] @ np.asarray(o.position) + inv[:3, 3]
+            local = (np.asarray(o.position) - t) @ R  # R^T (p - t): the rigid inverse, no general 4x4 inverse
             # local z: along the fingers (+ beyond the tips); y: closing axis; x: finger width
             if abs(local[0]) > self.settings.grasp_region_m or abs(local[1]) > self.robot.max_opening_m / 2:
                 continue
