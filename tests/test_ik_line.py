@@ -90,3 +90,42 @@ def test_ur_ik_line_rejects_bad_pose_shapes(shape):
 
     with pytest.raises(PlanningError, match="shape"):
         ur_ik_line(ROBOT.dh, np.zeros(shape), ROBOT.home_q, ROBOT.lower, ROBOT.upper)
+
+
+@settings(max_examples=40, deadline=None)
+@given(q=st.lists(st.tuples(*(st.floats(-6.2, 6.2),) * 6), min_size=1, max_size=8), shift=st.floats(-1e-6, 1e-6))
+def test_flange_errors_equal_pinocchio_s_check(q, shift):
+    from robocritics.robot.ik import _Chain, _flange_errors, dh_forward
+
+    q = np.array(q)
+    poses = dh_forward(ROBOT.dh, q + shift)  # targets near, not at, the poses of q
+    dp, dr = _flange_errors(ROBOT.dh, q, poses)
+    chain = _Chain(ROBOT.dh)
+    ref = np.array([chain.error(qi.tolist(), P[:3].ravel().tolist()) for qi, P in zip(q, poses)])
+    assert np.max(np.abs(dp - ref[:, 0])) <= 1e-13
+    assert np.max(np.abs(dr - ref[:, 1])) <= 1e-13
+
+
+@pytest.mark.parametrize("tol", [1e-9, 5e-16, 3e-16])
+def test_ur_ik_line_equals_ur_ik_per_pose_whatever_the_tolerance(tol):
+    # tiny tolerances reject some (or all) fast rows: the per-pose fallback must then give what ur_ik gives
+    from robocritics.robot.ik import ur_ik, ur_ik_line
+    from robocritics.robot.model import fingers_down
+
+    points = np.array([0.25, -0.1, 0.15]) + np.linspace(0.0, 1.0, 40)[:, None] * np.array([0.05, 0.2, 0.1])
+    targets = np.broadcast_to(np.eye(4), (len(points), 4, 4)).copy()
+    targets[:, :3, :3], targets[:, :3, 3] = fingers_down(0.3), points
+    flanges = targets @ ROBOT._flange_in_tcp
+    q, err = ur_ik_line(ROBOT.dh, flanges, ROBOT.home_q, ROBOT.lower, ROBOT.upper, tol=tol)
+    seed, rows, err_ref = ROBOT.home_q, [], None
+    for F in flanges:
+        try:
+            seed = ur_ik(ROBOT.dh, F, seed, ROBOT.lower, ROBOT.upper, tol=tol)
+        except PlanningError as exc:
+            err_ref = exc
+            break
+        rows.append(seed)
+    assert q.shape == (len(rows), 6)
+    if rows:
+        assert np.max(np.abs(q - np.array(rows))) <= 1e-12
+    assert str(err) == str(err_ref)

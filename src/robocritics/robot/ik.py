@@ -713,8 +713,27 @@ def ur_ik_line(
         dp, dr = chain.error(q, t)
         return dp <= tol and dr <= tol
 
-    out: list[list[float]] = []
-    for t in poses[:, :3].reshape(-1, 12).tolist():
+    targets = poses[:, :3].reshape(-1, 12).tolist()
+    seed0 = sd
+    # First the nearest branches unverified (each seeded by the previous), then one vectorised FK check of them
+    # all: rows it puts within tol / 2 (the FKs agree to ~1e-15) are what ur_ik's own check accepts, so they
+    # stand; from the first other row on, ur_ik's steps exactly (check per pose, the verified search if needed).
+    fast: list[list[float]] = []
+    for t in targets:
+        best = _nearest_solution(k, t, sd, lo, hi, w)
+        if best is None:
+            break
+        fast.append(best)
+        sd = best
+    good = len(fast)
+    if fast:
+        dp, dr = _flange_errors(dh, np.array(fast), poses[: len(fast)])
+        bad = np.flatnonzero(~((dp <= 0.5 * tol) & (dr <= 0.5 * tol)))
+        if len(bad):
+            good = int(bad[0])
+    out = fast[:good]
+    sd = out[-1] if out else seed0
+    for t in targets[good:]:
         best = _nearest_solution(k, t, sd, lo, hi, w)
         if best is not None and not reproduces_pose(best):
             best = _nearest_solution(k, t, sd, lo, hi, w, reproduces_pose)
@@ -726,6 +745,26 @@ def ur_ik_line(
         out.append(best)
         sd = best
     return np.array(out, dtype=float).reshape(-1, 6), None
+
+
+def _flange_errors(dh: DH, q: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(position error m, rotation error rad) ``(n,)`` each of the flange at ``q (n, 6)`` rad against ``poses
+    (n, 4, 4)``, as :func:`_pose_error`: ``T_06 = prod_i Rz(q_i) Tz(d_i) Tx(a_i) Rx(alpha_i)`` in numpy."""
+    n = len(q)
+    T = np.broadcast_to(np.eye(4), (n, 4, 4))
+    A = np.zeros((n, 4, 4))
+    A[:, 3, 3] = 1.0
+    for i in range(6):
+        ct, st = np.cos(q[:, i]), np.sin(q[:, i])
+        ca, sa = math.cos(dh.alpha[i]), math.sin(dh.alpha[i])
+        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 0, 3] = ct, -st * ca, st * sa, dh.a[i] * ct
+        A[:, 1, 0], A[:, 1, 1], A[:, 1, 2], A[:, 1, 3] = st, ct * ca, -ct * sa, dh.a[i] * st
+        A[:, 2, 1], A[:, 2, 2], A[:, 2, 3] = sa, ca, dh.d[i]
+        T = T @ A
+    e = T[:, :3] - poses[:, :3]
+    dp = np.sqrt((e[:, :, 3] ** 2).sum(axis=1))
+    dr = np.sqrt(0.5 * (e[:, :, :3] ** 2).sum(axis=(1, 2)))
+    return dp, dr
 
 
 def _why_no_solution(
