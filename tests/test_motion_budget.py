@@ -171,8 +171,17 @@ def test_the_fastest_rate_and_the_longest_motion_meet_the_memory_limit_first():
     assert peak < 60e6
 
 
-def test_the_memory_estimate_is_above_the_measured_peak():
-    # the planner refuses on the estimate, so the estimate must not be below what simulate really takes
+@pytest.mark.parametrize("exact_everywhere", [False, True])
+def test_the_memory_estimate_is_above_the_measured_peak(monkeypatch, exact_everywhere):
+    # the planner refuses on the estimate, so the estimate must not be below what simulate really takes. The
+    # worst case is every pair measured exactly (far pairs otherwise get cheap lower bounds, robot.trace): there
+    # the estimate must also be tight; with the far-pair bounds the peak is only lower
+    if exact_everywhere:
+        import math
+
+        import robocritics.robot.trace as trace
+
+        monkeypatch.setattr(trace, "EXACT_WITHIN_M", math.inf)
     robot = Robot.ur3e()
     carry = (
         "move_above(red_apple_1, 0.1)\nmove_to(red_apple_1)\nclose_gripper()\nmove_up(0.1)\n"
@@ -191,7 +200,9 @@ def test_the_memory_estimate_is_above_the_measured_peak():
         execution, peak = peak_bytes(lambda program=program, scene=scene: simulate(program, scene))
         assert not isinstance(execution, Exception), execution
         estimate = trajectory_bytes_per_sample(robot, scene, carried) * len(execution.trajectory)
-        assert peak < estimate < 1.6 * peak, (scene.name, peak, estimate)
+        assert peak < estimate, (scene.name, peak, estimate)
+        if exact_everywhere:
+            assert estimate < 1.6 * peak, (scene.name, peak, estimate)
 
 
 def test_a_program_far_over_budget_is_timed_within_a_bounded_amount_of_work(monkeypatch):
@@ -216,13 +227,18 @@ def test_a_program_far_over_budget_is_timed_within_a_bounded_amount_of_work(monk
 def test_ik_work_is_capped_before_solving(monkeypatch):
     # a straight line is solved every 5 mm: the count is checked before a line's grid is solved
     solves = []
-    original = Robot.ik
+    original, original_line = Robot.ik, Robot.ik_line
 
     def counting(self, *args, **kwargs):
         solves.append(1)
         return original(self, *args, **kwargs)
 
+    def counting_line(self, positions, *args, **kwargs):  # a line's grid in one call: count its points
+        solves.extend([1] * len(positions))
+        return original_line(self, positions, *args, **kwargs)
+
     monkeypatch.setattr(Robot, "ik", counting)
+    monkeypatch.setattr(Robot, "ik_line", counting_line)
     # lines of 0.203 m: 42 grid points each, whatever the last digit of the start pose
     program = "move_to(0.3, 0.1, 0.2)\nmove_linear(0.3, -0.103, 0.2)\nmove_linear(0.3, 0.1, 0.2)\n"
     error = pytest.raises(MotionBudgetError, simulate, program, SORTING, settings=PlannerSettings(max_ik_solves=60)).value

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import difflib  # at import, not in a program's error path: a sandboxed run must import nothing
+
 from typing import Iterable
 
 __all__ = ["did_you_mean"]
@@ -13,8 +15,6 @@ def did_you_mean(name: object, choices: Iterable[object], n: int = 1) -> str:
     ``""`` when none is close (difflib's similarity ratio below 0.6), so callers append it to a message
     unconditionally: ``f"unknown critic {name!r}{did_you_mean(name, names)}"``.
     """
-    import difflib  # only when a name is wrong: not on every import
-
     close = difflib.get_close_matches(str(name), [str(c) for c in choices], n=n)
     if not close:
         return ""

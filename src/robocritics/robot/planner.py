@@ -95,7 +95,7 @@ MAX_LINE_M = 2 * math.sqrt(3) * MAX_COORD_M
 # estimate stays 15-40 % above every measurement (tests/test_motion_budget.py checks it).
 _BYTES_PER_SAMPLE_FIXED = 2_560  # q, time, opening, step, attached, planner bookkeeping
 _BYTES_PER_FRAME = 16 * 8  # a 4x4 float64 link pose
-_BYTES_PER_KERNEL_PAIR = 20  # the distance of one (capsule or carried object, shape) pair, with its temporaries
+_BYTES_PER_KERNEL_PAIR = 14  # the distance of one (capsule or carried object, shape) pair, with its temporaries (measured with every pair exact: tests/test_motion_budget.py)
 _BYTES_PER_REPORTED_PAIR = 8  # one proximity column (a minimum over an entity's shapes)
 _BYTES_PER_CARRIED_POSE = 2 * 16 * 8  # a carried object's 4x4 pose, and its temporary
 
