@@ -53,9 +53,9 @@ def repair(
     critic's Error, which has its own repair (e.g. the nearest reachable height for an
     unreachable target); if it still does not run, the result's ``execution`` is None.
     """
-    from .search import repair as _repair
+    from .search import search
 
-    return _repair(program, scene, goal=goal, critics=critics, robot=robot, params=params)
+    return search(program, scene, goal, critics, robot, params)
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

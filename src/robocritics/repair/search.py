@@ -8,7 +8,7 @@ from __future__ import annotations
 import difflib
 import logging
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Iterable
+from typing import TYPE_CHECKING, Any
 
 from ..critic import RUNTIME
 from ..errors import RoboCriticsError
@@ -23,7 +23,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..scene import Scene
     from ..simulate import Execution
 
-__all__ = ["repair", "Repair", "Change", "NotRun", "Edit", "Insert", "ScaleNumbers", "MoveBlock", "apply_edits", "paragraphs", "MAX_ROUNDS"]
+__all__ = ["search", "Repair", "Change", "NotRun", "Edit", "Insert", "ScaleNumbers", "MoveBlock", "apply_edits", "paragraphs", "MAX_ROUNDS"]
 
 #: Most accepted edits per repair() call (each one re-simulates the program).
 MAX_ROUNDS = 12
@@ -153,16 +153,8 @@ def _offered_edits(hook, verdict, execution, source: str) -> list:
     return edits
 
 
-def repair(
-    program: str,
-    scene: Scene | str,
-    *,
-    goal: str | Iterable[Any] | None = None,
-    critics: Iterable[str] | str | None = None,
-    robot: Any = None,
-    params: Any = None,
-) -> Repair:
-    """:func:`robocritics.repair.repair` (documented there)."""
+def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any, params: Any) -> Repair:
+    """The body of :func:`robocritics.repair.repair` (its arguments and result are documented there)."""
     from ..critic import check_program
     from ..robot.model import Robot
     from ..scene import Scene
