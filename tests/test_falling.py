@@ -115,3 +115,24 @@ def test_the_careful_breakfast_takes_the_cupcake_off_first_so_nothing_falls(brea
     execution = simulate(source, breakfast)
     assert not [e for e in execution.events if e.kind == "fall"]
     assert execution.object_on("cupcake", "plate") and execution.object_on("apple", "plate")
+
+
+def test_the_grasp_takes_the_object_at_the_tcp_not_a_rounding_tie():
+    # in a stack every centre lies on the finger axis: the lateral distances tie up to rounding, and the
+    # grasped object must be the one whose centre is at the TCP (here the middle one), whatever the noise
+    for x, y in ((0.3, 0.0), (0.27, -0.11), (0.21, 0.17)):
+        scene = Scene.model_validate(
+            {
+                "name": "stack",
+                "objects": [
+                    {"id": "bottom", "shape": "box", "size": [0.04, 0.04, 0.04], "position": [x, y, 0.02]},
+                    {"id": "middle", "shape": "box", "size": [0.04, 0.04, 0.03], "position": [x, y, 0.055]},
+                    {"id": "top_box", "shape": "box", "size": [0.04, 0.04, 0.02], "position": [x, y, 0.08]},
+                ],
+            }
+        )
+        program = "lib.open_gripper()\nlib.move_above(middle, 0.12)\nlib.move_linear(middle.x, middle.y, middle.z)\n" \
+                  "lib.close_gripper()\n"
+        execution = simulate(program, scene)
+        (grasp,) = [e for e in execution.events if e.kind == "grasp"]
+        assert grasp.detail == "grasped middle", (x, y, grasp.detail)

@@ -466,7 +466,7 @@ class Planner:
     # --- intended contacts ---------------------------------------------------------------
 
     def grasp_candidate(self, tcp: np.ndarray) -> str | None:
-        """The graspable object whose centre lies between the fingers at TCP pose ``tcp``."""
+        """The graspable object whose centre lies between the fingers at TCP pose ``tcp`` (the nearest to the TCP)."""
         best, best_d = None, math.inf
         R, t = tcp[:3, :3], tcp[:3, 3]
         for oid, o in self.objects.items():
@@ -478,7 +478,9 @@ class Planner:
                 continue
             if not (-self.settings.grasp_depth_m <= local[2] <= o.half_height + self.settings.grasp_tip_gap_m):
                 continue
-            d = float(np.hypot(local[0], local[1]))
+            # the centre nearest the TCP: in a stack every centre is on the finger axis (lateral distances tie,
+            # up to rounding), and the one the fingers close on is the one at the TCP's height
+            d = math.hypot(local[0], local[1], local[2])
             if d < best_d:
                 best, best_d = oid, d
         return best
