@@ -59,20 +59,6 @@ class ReplaceText:
 
 
 @dataclass(frozen=True)
-class InsertText:
-    """Insert ``text`` into line ``line`` before column ``col`` (an :mod:`ast` column: UTF-8 bytes from the line start)."""
-
-    line: int
-    col: int
-    text: str
-    inline = True
-
-    def apply(self, lines: list[str], tree: ast.Module) -> None:
-        raw = lines[self.line - 1].encode()
-        lines[self.line - 1] = (raw[: self.col] + self.text.encode() + raw[self.col :]).decode()
-
-
-@dataclass(frozen=True)
 class ReplaceSpan:
     """Replace columns ``col..end_col`` of line ``line`` (:mod:`ast` columns: UTF-8 bytes) by ``text``, e.g. one argument."""
 
@@ -85,6 +71,12 @@ class ReplaceSpan:
     def apply(self, lines: list[str], tree: ast.Module) -> None:
         raw = lines[self.line - 1].encode()
         lines[self.line - 1] = (raw[: self.col] + self.text.encode() + raw[self.end_col :]).decode()
+
+
+def InsertText(line: int, col: int, text: str) -> ReplaceSpan:  # noqa: N802 - used as the edit type it builds
+    """Insert ``text`` into line ``line`` before column ``col`` (an :mod:`ast` column: UTF-8 bytes from the line
+    start): the empty span ``col..col`` replaced."""
+    return ReplaceSpan(line, col, col, text)
 
 
 @dataclass(frozen=True)

@@ -14,16 +14,16 @@ from ..critic import RUNTIME
 from ..errors import RoboCriticsError
 from ..verdict import Flag
 from . import builtin
+from .edit import Edit, apply_edits
 
 log = logging.getLogger(__name__)
-from .edit import Edit, Insert, MoveBlock, ScaleNumbers, apply_edits, paragraphs
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..report import Report
     from ..scene import Scene
     from ..simulate import Execution
 
-__all__ = ["search", "Repair", "Change", "NotRun", "Edit", "Insert", "ScaleNumbers", "MoveBlock", "apply_edits", "paragraphs", "MAX_ROUNDS"]
+__all__ = ["search", "Repair", "Change", "NotRun", "MAX_ROUNDS"]
 
 #: Most accepted edits per repair() call (each one re-simulates the program).
 MAX_ROUNDS = 12
