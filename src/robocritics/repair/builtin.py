@@ -205,11 +205,11 @@ RAISE_TABLE = "release_raise"
 
 def _load_per_step(trajectory) -> dict[int, str]:
     """The object each step carries: held at its first sample, or (a release) just before it."""
-    first = {}
-    for row, step in enumerate(trajectory.step.tolist()):
-        first.setdefault(step, row)
+    import numpy as np
+
+    steps, first = np.unique(trajectory.step, return_index=True)  # each step's first sample
     held = trajectory.attached
-    return {s: str(held[r]) or (str(held[r - 1]) if r > 0 else "") for s, r in first.items()}
+    return {s: str(held[r]) or (str(held[r - 1]) if r > 0 else "") for s, r in zip(steps.tolist(), first.tolist())}
 
 
 def _vertical_overlaps(execution, line: int) -> dict[str, float]:
