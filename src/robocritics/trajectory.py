@@ -35,6 +35,7 @@ from typing import Iterator, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from ._arrays import unique_values
 from .errors import TrajectoryError
 
 __all__ = ["Pair", "Step", "RobotLimits", "State", "Trajectory"]
@@ -233,7 +234,7 @@ class Trajectory:
         if not self.steps:
             return []
         idx = self.step if samples is None else self.step[np.asarray(samples)]
-        return sorted({self.steps[int(i)].line for i in np.unique(idx) if self.steps[int(i)].line > 0})
+        return sorted({self.steps[int(i)].line for i in unique_values(idx).tolist() if self.steps[int(i)].line > 0})
 
     def skills(self, samples: np.ndarray | None = None) -> list[str]:
         """Distinct skill names (in order of first use) that produced ``samples``."""
@@ -241,7 +242,7 @@ class Trajectory:
             return []
         idx = self.step if samples is None else self.step[np.asarray(samples)]
         out: list[str] = []
-        for i in np.unique(idx):
+        for i in unique_values(idx).tolist():
             s = self.steps[int(i)].skill
             if s not in out:
                 out.append(s)

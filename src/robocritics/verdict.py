@@ -14,6 +14,8 @@ from typing import TYPE_CHECKING, Any, Literal, Sequence
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from ._arrays import unique_values
+
 if TYPE_CHECKING:  # pragma: no cover
     from .trajectory import Trajectory
 
@@ -174,7 +176,7 @@ def make_evidence(
         if samples.dtype == bool:
             idx = np.flatnonzero(samples)
         else:
-            idx = np.unique(samples.astype(np.int64))
+            idx = unique_values(samples.astype(np.int64))
     fields: dict[str, Any] = {"links": list(dict.fromkeys(links)), "objects": list(dict.fromkeys(objects))}
     if worst is not None:
         worst = int(min(max(worst, 0), T - 1))

@@ -44,6 +44,7 @@ import numpy as np
 from pydantic import Field
 
 from .. import hookimpl
+from .._arrays import unique_values
 from ..critic import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
 from ..robot.hull import convex_hull
 
@@ -209,7 +210,7 @@ class SpaceUsageCritic:
                 Flag.WARNING,
                 samples,
                 worst=int(samples[far]) if far is not None else None,
-                links=[names[i] for i in np.unique(li[vertices])],
+                links=[names[i] for i in unique_values(li[vertices]).tolist()],
                 value=volume,
                 threshold=limit,
                 unit="m³",

@@ -52,6 +52,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._arrays import equal_row_groups, first_of_equal_rows
+
 __all__ = ["Hull", "FLAT_RATIO", "convex_hull", "quickhull"]
 
 FLAT_RATIO = 1e-5
@@ -141,8 +143,7 @@ def _orient_merged(V: np.ndarray, tri: np.ndarray, normals: np.ndarray) -> np.nd
     (an edge is walked in opposite directions by its two triangles) and then the whole group so its signed
     area along the face's normal is positive.
     """
-    _, group, counts = np.unique(normals, axis=0, return_inverse=True, return_counts=True)
-    group = group.reshape(-1)
+    group, counts = equal_row_groups(normals)
     merged = np.flatnonzero(counts[group] > 1)
     if merged.size == 0:
         return tri
@@ -178,22 +179,10 @@ def _orient_merged(V: np.ndarray, tri: np.ndarray, normals: np.ndarray) -> np.nd
     return tri
 
 
-def _first_of_equal(Q: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """Ascending indices of the first row of ``Q`` equal to each row of ``W``."""
-    # candidates by x (about as few as W's rows), then the whole row; the first index of a row wins
-    wanted = set(map(tuple, W.tolist()))
-    first: dict[tuple[float, float, float], int] = {}
-    for i in np.flatnonzero(np.isin(Q[:, 0], W[:, 0])).tolist():
-        key = tuple(Q[i].tolist())
-        if key in wanted and key not in first:
-            first[key] = i
-    return np.array(sorted(first.values()), dtype=np.int64)
-
-
 def _hull(Q: np.ndarray, e: int, V: np.ndarray, tri: np.ndarray, normals: np.ndarray) -> Hull:
     """The hull of ``Q 2^e`` from its triangles ``V[tri]`` (``V``: rows of ``Q``, the vertices; see _measure)."""
     volume, area = _measure(V, tri, normals)
-    return Hull(float(np.ldexp(volume, 3 * e)), float(np.ldexp(area, 2 * e)), _first_of_equal(Q, V))
+    return Hull(float(np.ldexp(volume, 3 * e)), float(np.ldexp(area, 2 * e)), first_of_equal_rows(Q, V))
 
 
 def convex_hull(P: np.ndarray) -> Hull:

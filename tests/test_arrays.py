@@ -1,0 +1,77 @@
+"""robocritics._arrays: the sort-based set operations give np.unique's answers (the slow obvious reference)."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from robocritics._arrays import equal_row_groups, first_of_equal_rows, unique_values
+
+# few distinct values, so that repeats (and -0.0 next to 0.0) are common
+small_floats = st.sampled_from([0.0, -0.0, 1.0, -1.0, 0.5, 1e-300, 2.0**-40, np.inf, -np.inf, np.nan])
+float_arrays = hnp.arrays(np.float64, st.integers(0, 40), elements=small_floats)
+int_arrays = hnp.arrays(np.int64, st.integers(0, 40), elements=st.integers(-5, 5))
+row_arrays = hnp.arrays(np.float64, st.tuples(st.integers(0, 30), st.integers(1, 3)),
+                        elements=small_floats.filter(lambda x: not np.isnan(x)))  # fmt: skip
+
+
+@settings(max_examples=300, derandomize=True, deadline=None)
+@given(st.one_of(float_arrays, int_arrays))
+def test_unique_values_is_np_unique(x):
+    got, want = unique_values(x), np.unique(x)
+    assert got.dtype == want.dtype
+    np.testing.assert_array_equal(got, want)  # NaNs compare equal here: one NaN in both
+
+
+def test_unique_values_flattens_and_keeps_one_nan():
+    np.testing.assert_array_equal(unique_values(np.array([[3, 1], [3, 2]])), [1, 2, 3])
+    got = unique_values(np.array([np.nan, 1.0, np.nan, 1.0]))
+    assert got.shape == (2,) and got[0] == 1.0 and np.isnan(got[1])
+
+
+@settings(max_examples=300, derandomize=True, deadline=None)
+@given(row_arrays)
+def test_equal_row_groups_are_np_uniques_labels(A):
+    group, counts = equal_row_groups(A)
+    if len(A) == 0:
+        assert group.shape == (0,) and counts.shape == (0,)
+        return
+    _, want_group, want_counts = np.unique(A, axis=0, return_inverse=True, return_counts=True)
+    np.testing.assert_array_equal(group, want_group.reshape(-1))
+    np.testing.assert_array_equal(counts, want_counts)
+
+
+def test_equal_row_groups_puts_a_nan_row_alone():
+    group, counts = equal_row_groups(np.array([[np.nan, 0.0], [np.nan, 0.0], [1.0, 0.0], [1.0, 0.0]]))
+    assert group[0] != group[1] and group[2] == group[3]
+    assert sorted(counts.tolist()) == [1, 1, 2]
+
+
+def first_of_equal_reference(A, W):
+    """The plain loop: for each row of A in order, keep it if it equals a row of W and no earlier row of A."""
+    out, seen = [], []
+    for i, row in enumerate(A):
+        if any((row == w).all() for w in W) and not any((row == s).all() for s in seen):
+            out.append(i)
+        seen.append(row)
+    return out
+
+
+@settings(max_examples=300, derandomize=True, deadline=None)
+@given(row_arrays, st.data())
+def test_first_of_equal_rows_is_the_loop(A, data):
+    k = A.shape[1]
+    picks = data.draw(st.lists(st.integers(0, max(len(A) - 1, 0)), max_size=10)) if len(A) else []
+    extra = data.draw(hnp.arrays(np.float64, (data.draw(st.integers(0, 3)), k), elements=st.floats(-3, 3)))
+    W = np.concatenate([A[picks].reshape(-1, k), extra])  # rows of A (some repeated) and rows A may lack
+    got = first_of_equal_rows(A, W)
+    assert got.dtype == np.int64
+    assert got.tolist() == first_of_equal_reference(A, W)
+
+
+def test_first_of_equal_rows_counts_minus_zero_as_zero():
+    A = np.array([[0.0, 1.0], [-0.0, 1.0], [2.0, 2.0]])
+    assert first_of_equal_rows(A, np.array([[-0.0, 1.0]])).tolist() == [0]
+    assert first_of_equal_rows(A, np.zeros((0, 2))).tolist() == []
