@@ -26,12 +26,23 @@ from collections.abc import Callable, Mapping
 
 from ._threads import SINGLE_THREADED_ENV
 
-__all__ = ["Child", "MAX_JOBS_PER_CHILD", "SINGLE_THREADED_ENV", "cpu_seconds", "limit_address_space"]
+__all__ = ["Child", "MAX_JOBS_PER_CHILD", "SINGLE_THREADED_ENV", "WORKER_ENV", "MALLOC_TUNABLES", "cpu_seconds", "limit_address_space"]
+
+#: glibc malloc settings of a warm child (``GLIBC_TUNABLES``, read when the interpreter starts; other C libraries
+#: ignore it): arrays up to 32 MiB come from the heap instead of fresh ``mmap`` pages, and up to 64 MiB of freed heap
+#: is kept instead of returned. A check allocates a few MB per array (``(pairs, samples)`` float64) and frees it;
+#: with glibc's defaults every program faults in ~1,700 fresh zeroed pages (~5-10 % of a warm check's CPU,
+#: ``benchmarks/bench_pipeline.py``), with these ~1. The price: up to 64 MiB of free heap held per child.
+MALLOC_TUNABLES = "glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=67108864"
 
 #: Jobs a warm child runs before a fresh one replaces it (between jobs; not a failure). Native libraries may leak
 #: per program (coal's Qhull leaks the hull it refuses: ~0.5 MB for a 3,000-point fan), and a leak must not grow
 #: until an innocent job hits the address-space limit; a restart (~1-2 s) over this many jobs costs a few per cent.
 MAX_JOBS_PER_CHILD = 1000
+
+#: Environment a warm child starts with: :data:`SINGLE_THREADED_ENV` and :data:`MALLOC_TUNABLES` (a
+#: ``GLIBC_TUNABLES`` the user exported is kept: :meth:`Child.__init__` sets only what is unset).
+WORKER_ENV: Mapping[str, str] = {**SINGLE_THREADED_ENV, "GLIBC_TUNABLES": MALLOC_TUNABLES}
 
 # os.environ is process-wide: a child is started with its environment under this lock.
 _ENV_LOCK = threading.Lock()
@@ -57,17 +68,18 @@ def cpu_seconds(pid: int) -> float:
 class Child:
     """A started ``spawn`` child running ``target(conn, *args)``, with ``conn`` its end of a duplex pipe.
 
-    ``env`` is set in the child's environment before it starts (numpy reads it on import);
+    ``env`` is set in the child's environment before it starts (numpy reads it on import, glibc at exec), except
+    ``GLIBC_TUNABLES`` when the user has exported one;
     ``started`` is the monotonic time it was started, s.
     """
 
-    def __init__(self, target: Callable, args: tuple, *, name: str, env: Mapping[str, str] = SINGLE_THREADED_ENV):
+    def __init__(self, target: Callable, args: tuple, *, name: str, env: Mapping[str, str] = WORKER_ENV):
         context = multiprocessing.get_context("spawn")
         parent, child = context.Pipe()
         self.process = context.Process(target=target, args=(child, *args), name=name, daemon=True)
         with _ENV_LOCK:  # the spawned interpreter inherits os.environ as it is at start()
             saved = {k: os.environ.get(k) for k in env}
-            os.environ.update(env)
+            os.environ.update({k: v for k, v in env.items() if k != "GLIBC_TUNABLES" or saved[k] is None})
             try:
                 self.process.start()
             finally:

@@ -1,7 +1,7 @@
 """The local engine: a pool of warm, resource-limited worker processes on this machine.
 
-Each worker is a :class:`~robocritics.child.Child` (``spawn``, single-threaded BLAS: :data:`WORKER_ENV`;
-with several workers, a multi-threaded BLAS in each would only fight for the same cores). It loads the robot
+Each worker is a :class:`~robocritics.child.Child` (``spawn``, with :data:`WORKER_ENV`: single-threaded BLAS, since
+with several workers a multi-threaded BLAS in each would only fight for the same cores, and glibc malloc tunables). It loads the robot
 once, then evaluates rows one at a time, keeping the scenes it has loaded. Limits, set per worker:
 
 * address space (``RLIMIT_AS``, ``memory_bytes``): a row that runs out of memory ends its worker;
@@ -21,14 +21,12 @@ from collections.abc import Iterator
 from multiprocessing.connection import wait
 from typing import Any
 
-from ..child import MAX_JOBS_PER_CHILD, SINGLE_THREADED_ENV, Child, limit_address_space
+from ..child import MAX_JOBS_PER_CHILD, SINGLE_THREADED_ENV, WORKER_ENV, Child, limit_address_space
 from ..errors import RoboCriticsError
 from .rows import Job, SceneCache, error_row, evaluate_job
 
 __all__ = ["LocalEngine", "BatchError", "WORKER_ENV", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_BYTES"]
 
-#: Environment every worker starts with: one BLAS/OpenMP thread each.
-WORKER_ENV = SINGLE_THREADED_ENV
 #: Wall-clock seconds one row may take in a worker.
 DEFAULT_TIMEOUT_S = 60.0
 #: Address-space limit of a worker, bytes (a checked bundled program peaks near 0.5 GB of address space).
@@ -49,7 +47,7 @@ class BatchError(RoboCriticsError):
 
 def _serve(conn, robot, memory_bytes: int, sample_rate_hz: float) -> None:
     """A worker's main loop: set the limit, load the robot, then answer Jobs with output rows."""
-    os.environ.update(WORKER_ENV)  # for anything this process starts
+    os.environ.update(SINGLE_THREADED_ENV)  # for anything this process starts
     limit_address_space(memory_bytes)
     try:
         from ..robot.model import Robot
