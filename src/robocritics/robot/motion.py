@@ -202,28 +202,35 @@ class Profile:
     def position(self, times: np.ndarray) -> np.ndarray:
         """Positions ``(m, dofs)`` at ``times`` (s from the start, in ``[0, duration_s]``).
 
-        Ruckig's ``at_time`` without a Python call per sample: per DOF, the phase ``k`` of each time (its
-        cumulative phase ends ``t_sum``) and ``p_k + dt (v_k + dt (a_k / 2 + dt j_k / 6))`` with ``dt`` the
+        Ruckig's ``at_time`` without a Python call per sample or per DOF: for every (time, DOF) the phase ``k``
+        of the time in that DOF's profile (its cumulative phase ends ``t_sum``) and ``p_k + dt (v_k + dt (a_k / 2 + dt j_k / 6))`` with ``dt`` the
         time into the phase, the same expression in the same order as ruckig's ``integrate`` (past the last
         phase: the final state, ``j = 0``). Rest-to-rest moves have no brake pre-phase (asserted).
         """
         if self._traj is None:
             return np.repeat(self.start[None, :], len(times), axis=0)
         times = np.asarray(times, dtype=float)
-        out = np.empty((len(times), len(self.start)))
-        for dof, prof in enumerate(self._traj.profiles[0]):
-            if prof.brake.duration != 0.0:  # never for a move that starts at rest; keep ruckig's own evaluation
-                return np.array([self._traj.at_time(float(t))[0] for t in times]).reshape(len(times), -1)
-            t_sum = np.cumsum(prof.t)
-            # the state at each phase start, and the final state (constant) for times past the last phase
-            p, v, a, j = (
-                np.append(np.asarray(x, dtype=float)[:7], y)
-                for x, y in ((prof.p, prof.pf), (prof.v, prof.vf), (prof.a, prof.af), (prof.j, 0.0))
-            )
-            k = np.searchsorted(t_sum, times, side="right")  # std::upper_bound; 7: past the end
-            dt = times - np.concatenate(([0.0], t_sum))[k]
-            out[:, dof] = p[k] + dt * (v[k] + dt * (a[k] / 2 + dt * j[k] / 6))
-        return out
+        profiles = self._traj.profiles[0]
+        if any(prof.brake.duration != 0.0 for prof in profiles):  # never for a move that starts at rest
+            return np.array([self._traj.at_time(float(t))[0] for t in times]).reshape(len(times), -1)
+        # per DOF (rows): the 7 phase durations, and the state at each phase start followed by the final state
+        # (constant, j = 0) for times past the last phase; one array each for all DOFs
+        durations = np.array([prof.t for prof in profiles], dtype=float)
+        p = np.array([list(prof.p)[:7] + [prof.pf] for prof in profiles], dtype=float)
+        v = np.array([list(prof.v)[:7] + [prof.vf] for prof in profiles], dtype=float)
+        a = np.array([list(prof.a)[:7] + [prof.af] for prof in profiles], dtype=float)
+        j = np.array([list(prof.j)[:7] + [0.0] for prof in profiles], dtype=float)
+        t_sum = np.cumsum(durations, axis=1)  # (dofs, 7) cumulative phase ends
+        if (durations < 0).any():  # not sorted: keep searchsorted's own rule per DOF
+            k = np.stack([np.searchsorted(row, times, side="right") for row in t_sum], axis=1)
+        else:
+            # std::upper_bound (searchsorted side="right") on a sorted row: how many phase ends are <= t; 7: past
+            # the end
+            k = (t_sum[None, :, :] <= times[:, None, None]).sum(axis=2)  # (m, dofs)
+        phase_start = np.concatenate([np.zeros((len(profiles), 1)), t_sum], axis=1)
+        dof = np.arange(len(profiles))
+        dt = times[:, None] - phase_start[dof, k]
+        return p[dof, k] + dt * (v[dof, k] + dt * (a[dof, k] / 2 + dt * j[dof, k] / 6))
 
     def sample(self, sample_rate_hz: float, max_samples: int = MAX_SEGMENT_SAMPLES) -> Segment:
         """The move sampled at ``1/sample_rate_hz`` from t=0, the end excluded (see :func:`time_joint_move`)."""
