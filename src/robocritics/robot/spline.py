@@ -41,6 +41,11 @@ def _check(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def hermite(x: np.ndarray, y: np.ndarray, slopes: np.ndarray, xs: np.ndarray) -> np.ndarray:
     """The cubic Hermite interpolant with knot values ``y`` and knot slopes ``slopes``, evaluated at ``xs``."""
     x, y = _check(x, y)
+    return _hermite(x, y, np.asarray(slopes, dtype=float), xs)
+
+
+def _hermite(x: np.ndarray, y: np.ndarray, slopes: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """:func:`hermite` for knots already checked by :func:`_check`."""
     xs = np.asarray(xs, dtype=float)
     h = np.diff(x)
     hr = h.reshape((-1,) + (1,) * (y.ndim - 1))
@@ -88,26 +93,31 @@ def _not_a_knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     diag[-1], lower[-1] = h[-2], d
     rhs[-1] = (hr[-1] ** 2 * m[-2] + (2 * d + hr[-1]) * hr[-2] * m[-1]) / d
     # Thomas algorithm (the system is diagonally dominant inside; scipy uses LAPACK's banded LU, which
-    # pivots, so the two agree to rounding, not bit for bit)
-    c = np.empty(n)
-    r = np.empty_like(rhs)
-    c[0] = upper[0] / diag[0]
-    r[0] = rhs[0] / diag[0]
+    # pivots, so the two agree to rounding, not bit for bit). Each step is a handful of scalar operations on one
+    # row of k columns: on Python floats (the same IEEE operations as numpy's, so the same bits) it costs a
+    # fraction of a numpy call per step.
+    diag_l, upper_l, lower_l = diag.tolist(), upper.tolist(), lower.tolist()
+    rows = rhs.reshape(n, -1).tolist()
+    c = [0.0] * n
+    r = [rows[0]] * n
+    c[0] = upper_l[0] / diag_l[0]
+    r[0] = [v / diag_l[0] for v in rows[0]]
     for i in range(1, n):
-        denom = diag[i] - lower[i] * c[i - 1]
-        c[i] = upper[i] / denom
-        r[i] = (rhs[i] - lower[i] * r[i - 1]) / denom
-    s = np.empty_like(rhs)
-    s[-1] = r[-1]
+        li = lower_l[i]
+        denom = diag_l[i] - li * c[i - 1]
+        c[i] = upper_l[i] / denom
+        r[i] = [(a - li * b) / denom for a, b in zip(rows[i], r[i - 1])]
+    s = r[:]
     for i in range(n - 2, -1, -1):
-        s[i] = r[i] - c[i] * s[i + 1]
-    return s
+        ci = c[i]
+        s[i] = [a - ci * b for a, b in zip(r[i], s[i + 1])]
+    return np.array(s, dtype=float).reshape(rhs.shape)
 
 
 def cubic_spline(x: np.ndarray, y: np.ndarray, xs: np.ndarray) -> np.ndarray:
     """The not-a-knot cubic spline through ``(x, y)`` (as scipy's ``CubicSpline(x, y, axis=0)``) at ``xs``."""
     x, y = _check(x, y)
-    return hermite(x, y, _not_a_knot_slopes(x, y), xs)
+    return _hermite(x, y, _not_a_knot_slopes(x, y), xs)
 
 
 def _pchip_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -139,4 +149,4 @@ def _pchip_end(h0: float, h1: float, m0: np.ndarray, m1: np.ndarray) -> np.ndarr
 def pchip(x: np.ndarray, y: np.ndarray, xs: np.ndarray) -> np.ndarray:
     """The monotone cubic (as scipy's ``PchipInterpolator(x, y, axis=0)``) through ``(x, y)`` at ``xs``."""
     x, y = _check(x, y)
-    return hermite(x, y, _pchip_slopes(x, y), xs)
+    return _hermite(x, y, _pchip_slopes(x, y), xs)
