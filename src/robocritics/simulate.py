@@ -182,7 +182,8 @@ def simulate(
         ) if isinstance(program, str) else 1  # fmt: skip
         raise ProgramError("the program made no skill calls, so there is no motion to check", line=first_code_line)
     q, t, opening, attached, step = planner.finish()
-    frames = robot.forward(q, opening)
+    # frames and capsule endpoints in one FK pass (the endpoints straight from the frames' time series)
+    frames, p0, p1 = robot.forward_with_capsules(q, opening)
     object_poses = planner.object_poses(frames[:, robot.tcp_index])
     trajectory = robot.trajectory(
         q=q,
@@ -194,6 +195,7 @@ def simulate(
         steps=planner.steps,
         object_poses=object_poses,
         frames=frames,
+        segments=(p0, p1),
     )
     final_scene = scene.model_copy(update={"objects": [planner.objects[o.id] for o in scene.objects]})
     for poses in object_poses.values():

@@ -89,36 +89,75 @@ CONTINUOUS_LIMIT_RAD = 2 * math.pi
 _SAME_HOUSING_GAP_M = 0.06
 
 
-_BLAS_MNK = 131072
-"""Largest ``m n k`` of one BLAS product in FK: OpenBLAS goes multi-threaded above 262,144 (measured here: an
-(m x 3) @ (3 x 3) gemm is single-threaded at m = 22,200 and threaded at 60,000), and threaded, one 20k-sample
-product costs 50-70x the CPU on this 2-core machine (``benchmarks/bench_pipeline.py``). Under it, chunked BLAS
-is ~7x faster than element-wise numpy."""
+# A rotation in structure-of-arrays form is the tuple of its three columns, each ``(3, T)``: row i of column k
+# is the time series of the entry (i, k), contiguous, so every product below is element-wise work on whole
+# time series (no BLAS: OpenBLAS goes multi-threaded above ~8k samples and then costs 3-10x the CPU on a
+# loaded 2-core machine). A column or origin constant over time is ``(3, 1)`` and broadcasts; an origin
+# that is zero is ``None``. Results may alias their inputs: none of these arrays is ever written in place.
+_Columns = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+#: The base (universe) frame: identity rotation as constant columns, origin zero.
+_IDENTITY_COLUMNS: _Columns = tuple(_read_only(np.eye(3)[:, k : k + 1]) for k in range(3))  # type: ignore[assignment]
 
 
-def _rot_times(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``A (T, 3, m) @ B (m, k)`` -> ``(T, 3, k)``, as BLAS products small enough to stay single-threaded."""
-    T, m, k = A.shape[0], A.shape[2], B.shape[1]
-    rows = np.ascontiguousarray(A).reshape(3 * T, m)
-    out = np.empty((T, 3, k))
-    flat = out.reshape(3 * T, k)
-    chunk = max(1, _BLAS_MNK // (m * k))
-    for i in range(0, 3 * T, chunk):
-        np.matmul(rows[i : i + chunk], B, out=flat[i : i + chunk])
-    return out
+def _combine(columns: _Columns, weights: np.ndarray) -> np.ndarray | None:
+    """``sum_m weights[m] * columns[m]``: a rotation ``[c0 c1 c2]`` (each ``(3, T)``) times the constant
+    3-vector ``weights``, i.e. ``R @ w`` per sample; ``None`` when ``weights`` is zero.
+
+    Exact zero weights are skipped and a lone weight of +-1 is the column itself (or its negation): the
+    placements of URDF joints and links are mostly signed permutations, so most products are free, and
+    the result equals the full sum (adding a product with 0 changes no value, multiplying by 1 neither).
+    """
+    total = None
+    for w, col in zip(weights.tolist(), columns):
+        if w == 0.0:
+            continue
+        if total is None:
+            total = col if w == 1.0 else (np.negative(col) if w == -1.0 else col * w)
+        else:
+            total = total + col * w
+    return total
 
 
-def _rot_apply(A: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``A (T, 3, 3) @ v (3,)`` -> ``(T, 3)``."""
-    return _rot_times(A, v.reshape(3, 1))[:, :, 0]
+def _add(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    """``a + b`` where ``None`` is zero."""
+    if a is None:
+        return b
+    return a if b is None else a + b
+
+
+def _times_rotation(columns: _Columns, placement: np.ndarray) -> _Columns:
+    """The columns of ``R @ placement[:3, :3]`` for a constant rotation ``placement``."""
+    out = tuple(_combine(columns, placement[:3, k]) for k in range(3))
+    if any(col is None for col in out):
+        raise RobotModelError("a joint or link placement has a zero rotation column")
+    return out  # type: ignore[return-value]
 
 
 def _axis_rotations(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """``(T, 3, 3)`` rotations by angles ``q`` (rad) about the unit ``axis`` (Rodrigues)."""
+    """Rotations by angles ``q (T,)`` rad about the ``axis`` (any length), entry-major ``(3, 3, T)``:
+    ``X = I + sin q K + (1 - cos q) K^2`` (Rodrigues), ``K`` the cross-product matrix of the unit axis."""
     k = axis / np.linalg.norm(axis)
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    s, c = np.sin(q)[:, None, None], np.cos(q)[:, None, None]
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
+    s, c = np.sin(q), np.cos(q)
+    return np.eye(3)[:, :, None] + s * K[:, :, None] + (1 - c) * (K @ K)[:, :, None]
+
+
+def _times_axis_rotations(columns: _Columns, X: np.ndarray) -> _Columns:
+    """The columns of ``R_t @ X_t`` for per-sample rotations ``X (3, 3, T)``: column k is ``sum_m R[:, m] X[m, k]``."""
+    return tuple(columns[0] * X[0, k] + columns[1] * X[1, k] + columns[2] * X[2, k] for k in range(3))  # type: ignore[return-value]
+
+
+def _frames_array(poses: list[tuple[_Columns, np.ndarray | None]], T: int) -> np.ndarray:
+    """The ``(T, L, 4, 4)`` homogeneous transforms of frame poses given as ``(columns, origin)`` time series."""
+    frames = np.empty((T, len(poses), 4, 4))
+    frames[:, :, 3, :3] = 0.0
+    frames[:, :, 3, 3] = 1.0
+    for f, (columns, origin) in enumerate(poses):
+        for k, column in enumerate(columns):
+            frames[:, f, :3, k] = column.T
+        frames[:, f, :3, 3] = 0.0 if origin is None else origin.T
+    return frames
 
 
 class Robot:
@@ -468,56 +507,87 @@ class Robot:
         """
         q = np.asarray(q, dtype=float)
         single = q.ndim == 1
-        if single:
-            q = q[None, :]
+        poses = self._frame_poses(q[None, :] if single else q, gripper_opening_m)
+        frames = _frames_array(poses, q.shape[0] if not single else 1)
+        return frames[0] if single else frames
+
+    def forward_with_capsules(
+        self, q: np.ndarray, gripper_opening_m: np.ndarray | float | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(frames, p0, p1)``: :meth:`forward` and :meth:`capsule_segments` of its frames, in one pass.
+
+        ``q`` is ``(T, n)`` rad; ``frames`` ``(T, L, 4, 4)``, ``p0``/``p1`` ``(T, C, 3)`` m in the base frame
+        (each a view of a ``(3, C, T)`` array: one contiguous time series per coordinate and capsule, the
+        layout the proximity kernel works in). The endpoints come from the frame poses while they are still
+        time series, with no second read of ``frames``.
+        """
+        q = np.asarray(q, dtype=float)
+        poses = self._frame_poses(q, gripper_opening_m)
+        p0, p1 = self._capsule_ends(poses, q.shape[0])
+        return _frames_array(poses, q.shape[0]), p0, p1
+
+    def _frame_poses(
+        self, q: np.ndarray, gripper_opening_m: np.ndarray | float | None
+    ) -> list[tuple[_Columns, np.ndarray | None]]:
+        """Every body frame's pose for samples ``q (T, n)`` rad, as ``(columns, origin)`` time series.
+
+        With ``oMi`` the joint placements, ``oMi[j] = oMi[parent(j)] @ M_j @ X_j(q_j)``, ``M_j`` the joint's
+        fixed placement and ``X_j`` its motion: a rotation about, or a translation along, its axis. A rotation
+        about +z (every UR and Panda joint) mixes two columns: ``c0' = c0 cos q + c1 sin q``,
+        ``c1' = c1 cos q - c0 sin q``. Frame ``f`` on joint ``j`` is ``oMi[j] @ F_f``. Columns are ``(3, T)``
+        (``(3, 1)`` when constant), origins ``(3, T)`` m (or ``(3, 1)``, or ``None`` for the base origin).
+        """
         if q.ndim != 2 or q.shape[1] != self.n:
             raise RobotModelError(f"q must have shape (T, {self.n}), got {q.shape}")
         T = q.shape[0]
-        # rotations (T, 3, 3) and origins (T, 3) of every joint, then of every body frame; products of a batch
-        # with a constant matrix as column multiply-adds and a rotation about z (every UR joint) as a mix of two
-        # columns: element-wise work, no BLAS. (Batched 4x4 matmuls and einsum went to OpenBLAS, which goes
-        # multi-threaded above ~8k samples and then costs 3-10x the CPU on a loaded 2-core machine.)
-        J = self.model.njoints
-        R: list[np.ndarray] = [np.broadcast_to(np.eye(3), (T, 3, 3))] + [None] * (J - 1)  # type: ignore[list-item]
-        P: list[np.ndarray] = [np.zeros((T, 3))] + [None] * (J - 1)  # type: ignore[list-item]
-        for j in range(1, J):
+        joints: list[tuple[_Columns, np.ndarray | None]] = [(_IDENTITY_COLUMNS, None)]
+        for j in range(1, self.model.njoints):
             kind, axis = self._joint_motion[j]
-            parent = self._joint_parents[j]
+            columns, origin = joints[self._joint_parents[j]]
             M = self._joint_placements[j]
-            Rj = _rot_times(R[parent], M[:3, :3])
-            P[j] = _rot_apply(R[parent], M[:3, 3]) + P[parent]
+            origin = _add(_combine(columns, M[:3, 3]), origin)
+            columns = _times_rotation(columns, M)
             qj = q[:, j - 1]
             if kind != "revolute":
-                P[j] += _rot_apply(Rj, axis) * qj[:, None]
+                step = _combine(columns, axis)
+                origin = _add(origin, None if step is None else step * qj)
             elif axis[0] == 0.0 and axis[1] == 0.0 and axis[2] > 0.0:
-                c, s = np.cos(qj)[:, None], np.sin(qj)[:, None]
-                x, y = Rj[:, :, 0].copy(), Rj[:, :, 1]
-                Rj[:, :, 0] *= c
-                Rj[:, :, 0] += y * s
-                y *= c
-                y -= x * s
+                c, s = np.cos(qj), np.sin(qj)
+                x, y, z = columns
+                x_new = x * c
+                x_new += y * s
+                y_new = y * c
+                y_new -= x * s
+                columns = (x_new, y_new, z)
             else:
-                Rj = np.einsum("tij,tjk->tik", Rj, _axis_rotations(qj, axis))
-            R[j] = Rj
-        L = len(self._frame_parent)
-        frames = np.empty((T, L, 4, 4))
-        frames[:, :, 3, :3] = 0.0
-        frames[:, :, 3, 3] = 1.0
-        for parent in sorted(set(self._frame_parent.tolist())):  # (np.unique would load numpy.ma: 10 ms cold)
-            # every frame on one joint in one product: R_parent @ [R_f1 t_f1 R_f2 t_f2 ...]
-            idx = np.flatnonzero(self._frame_parent == parent)
-            k = len(idx)
-            local = self._frame_placement[idx, :3, :].transpose(1, 0, 2).reshape(3, 4 * k)  # (3, 4k)
-            prod = _rot_times(R[parent], local).reshape(T, 3, k, 4).transpose(0, 2, 1, 3)  # (T, k, 3, 4)
-            prod[..., 3] += P[parent][:, None, :]
-            frames[:, idx, :3, :] = prod
+                columns = _times_axis_rotations(columns, _axis_rotations(qj, axis))
+            joints.append((columns, origin))
+        frames: list[tuple[_Columns, np.ndarray | None]] = []
+        for parent, F in zip(self._frame_parent.tolist(), self._frame_placement):
+            columns, origin = joints[parent]
+            frames.append((_times_rotation(columns, F), _add(_combine(columns, F[:3, 3]), origin)))
         if self.finger_links and gripper_opening_m is not None:
+            # each finger slides (max_opening - opening) / 2 m inwards along the tcp y axis
             shift = (self.max_opening_m - np.broadcast_to(np.asarray(gripper_opening_m, float), (T,))) / 2
-            y_axis = frames[:, self.tcp_index, :3, 1]
+            y_axis = frames[self.tcp_index][0][1]
             for sign, link in zip((1.0, -1.0), self.finger_links):
                 f = self._frame_index[link]
-                frames[:, f, :3, 3] -= sign * shift[:, None] * y_axis
-        return frames[0] if single else frames
+                columns, origin = frames[f]
+                slide = (sign * shift) * y_axis
+                frames[f] = (columns, np.negative(slide) if origin is None else origin - slide)
+        return frames
+
+    def _capsule_ends(self, poses: list[tuple[_Columns, np.ndarray | None]], T: int) -> tuple[np.ndarray, np.ndarray]:
+        """Capsule endpoints ``p = R x + t`` (m, base frame) of every capsule from its frame's pose ``(R, t)``
+        in ``poses`` (:meth:`_frame_poses`); ``(T, C, 3)`` views of ``(3, C, T)`` arrays."""
+        C = len(self.capsules)
+        ends = np.empty((2, 3, C, T))
+        for c, f in enumerate(self._capsule_frame.tolist()):
+            columns, origin = poses[f]
+            for e, local in enumerate((self._capsule_p0[c], self._capsule_p1[c])):
+                point = _add(_combine(columns, local), origin)
+                ends[e, :, c] = 0.0 if point is None else point
+        return ends[0].transpose(2, 1, 0), ends[1].transpose(2, 1, 0)
 
     def tcp_pose(self, q: np.ndarray) -> np.ndarray:
         """TCP pose(s) ``(4, 4)`` or ``(T, 4, 4)`` for ``q``."""
@@ -530,18 +600,20 @@ class Robot:
         return frames[..., self.tcp_index, :, :]
 
     def capsule_segments(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Capsule endpoints ``(T, C, 3)`` each, m in the base frame, from ``frames (T, L, 4, 4)``."""
-        T, C = frames.shape[0], len(self._capsule_frame)
-        p0, p1 = np.empty((T, C, 3)), np.empty((T, C, 3))
-        for f in sorted(set(self._capsule_frame.tolist())):
-            # [R t] (T, 3, 4) of the frame times the homogeneous endpoints [p; 1] of its capsules: one BLAS product
-            cs = np.flatnonzero(self._capsule_frame == f)
-            ends = np.concatenate([self._capsule_p0[cs], self._capsule_p1[cs]])  # (2k, 3)
-            ends_h = np.vstack([ends.T, np.ones(len(ends))])  # (4, 2k)
-            world = _rot_times(frames[:, f, :3, :], ends_h)  # (T, 3, 2k)
-            p0[:, cs] = world[:, :, : len(cs)].transpose(0, 2, 1)
-            p1[:, cs] = world[:, :, len(cs) :].transpose(0, 2, 1)
-        return p0, p1
+        """Capsule endpoints ``(T, C, 3)`` each, m in the base frame, from ``frames (T, L, 4, 4)``.
+
+        ``p = R x + t`` with ``[R t]`` the pose of the capsule's frame and ``x`` the endpoint in it. The
+        results are views of ``(3, C, T)`` arrays (see :meth:`forward_with_capsules`).
+        """
+        frames = np.asarray(frames, dtype=float)
+        T = frames.shape[0]
+        used = sorted(set(self._capsule_frame.tolist()))
+        # the capsule frames' [R t] as time series (F, 3, 4, T), one gather; other frames are never read
+        series = np.ascontiguousarray(frames[:, used, :3, :].transpose(1, 2, 3, 0))
+        poses: list = [None] * len(self.frame_names)
+        for f, pose in zip(used, series):
+            poses[f] = ((pose[:, 0], pose[:, 1], pose[:, 2]), pose[:, 3])
+        return self._capsule_ends(poses, T)
 
     def trajectory(self, q: np.ndarray, time: np.ndarray, scene, **kwargs):
         """The :class:`~robocritics.trajectory.Trajectory` of joint samples ``q`` at ``time`` in ``scene``.

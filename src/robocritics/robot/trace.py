@@ -50,6 +50,15 @@ def _entity_groups(scene: Scene) -> list[tuple[str, str, list[Shape]]]:
     return out
 
 
+def _carried_ids(attached: np.ndarray) -> list[str]:
+    """The object ids in ``attached`` (one per sample, '' for none), each once, in order of first appearance."""
+    if not len(attached):
+        return []
+    # the id changes only where a grasp or a release starts: the runs' first samples hold every id
+    starts = np.flatnonzero(np.concatenate(([True], attached[1:] != attached[:-1])))
+    return [oid for oid in dict.fromkeys(attached[starts].tolist()) if oid]
+
+
 def build_trajectory(
     robot,
     scene: Scene,
@@ -62,12 +71,15 @@ def build_trajectory(
     steps: Sequence[Step] = (),
     object_poses: Mapping[str, np.ndarray] | None = None,
     frames: np.ndarray | None = None,
+    segments: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Trajectory:
     """Build the trajectory of joint samples ``q (T, n)`` rad at ``time (T,)`` s in ``scene``.
 
     ``gripper_opening_m`` (m, default fully open), ``attached`` (object id per
     sample, '' for none), ``step``/``steps`` (provenance) and ``object_poses``
-    (``{id: (T, 4, 4)}`` for objects that move) are optional.
+    (``{id: (T, 4, 4)}`` for objects that move) are optional. ``frames`` (``robot.forward(q, opening)``)
+    and ``segments`` (its capsule endpoints ``(p0, p1)``, ``(T, C, 3)`` m each) may be given when the
+    caller has them already (:meth:`Robot.forward_with_capsules` makes both in one pass).
     """
     q = np.asarray(q, dtype=float)
     if q.ndim != 2:
@@ -76,16 +88,19 @@ def build_trajectory(
     opening = np.broadcast_to(
         np.asarray(robot.max_opening_m if gripper_opening_m is None else gripper_opening_m, float), (T,)
     ).copy()
-    attached_arr = np.full(T, "", dtype=object) if attached is None else np.asarray(attached, dtype=object)
+    attached_arr = np.full(T, "", dtype=str) if attached is None else np.asarray(attached, dtype=str).reshape(-1)
     step_arr = np.zeros(T, dtype=np.int64) if step is None else np.asarray(step, dtype=np.int64)
     if frames is None:
-        frames = robot.forward(q, opening)
+        frames, p0, p1 = robot.forward_with_capsules(q, opening)
+    elif segments is None:
+        p0, p1 = robot.capsule_segments(frames)
+    else:
+        p0, p1 = segments
     object_poses = dict(object_poses or {})
-    p0, p1 = robot.capsule_segments(frames)
     capsule_group = dict(zip(robot.capsule_names, robot.capsule_groups))
     fixed_capsules = {c.name for c in robot.capsules if c.frame in robot.fixed_links}
     entities = _entity_groups(scene)
-    carried = [oid for oid in dict.fromkeys(a for a in attached_arr if a)]
+    carried = _carried_ids(attached_arr)
 
     # one row per reported pair: its metadata and the (a, shape) kernel pairs whose minimum it is
     pairs: list[Pair] = []
@@ -134,15 +149,12 @@ def build_trajectory(
     if flat:
         kernel = prox.ProximityKernel(capsules, scene.shapes(), flat, moving=list(object_poses))
         by_pair = kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=arm).T  # (K', T) C-order
-        # each reported pair is the least of its consecutive kernel rows (an entity's shapes), row by row
+        # each reported pair is the least of its consecutive kernel rows (an entity's shapes): every pair's
+        # first row in one gather, then the pairs of several rows (containers) folded in row by row
         # (np.minimum.reduceat along axis 0 is 15x slower)
-        rows = np.empty((len(members), T))
-        for k in range(len(members)):
-            lo, hi = bounds[k], bounds[k + 1]
-            if hi - lo == 1:
-                rows[k] = by_pair[lo]
-            else:
-                np.min(by_pair[lo:hi], axis=0, out=rows[k])
+        rows = by_pair[bounds[:-1]]
+        for k in np.flatnonzero(np.diff(bounds) > 1).tolist():
+            np.minimum.reduce(by_pair[bounds[k] : bounds[k + 1]], axis=0, out=rows[k])
         proximity = np.ascontiguousarray(rows.T)
     return Trajectory(
         q=q,
@@ -152,7 +164,7 @@ def build_trajectory(
         proximity=proximity,
         pairs=pairs,
         gripper_opening_m=opening,
-        attached=np.asarray(attached_arr, dtype=str),
+        attached=attached_arr,
         step=step_arr,
         steps=steps,
         limits=robot.limits,
