@@ -1,21 +1,24 @@
 """CPU per program of the check pipeline: warm simulate()+critique() per bundled program, and a cold CLI check.
 
-Warm: one process, the UR3e loaded once, each of the six bundled programs simulated and critiqued in its own
-scene (default critics, 125 Hz) once to warm caches, then REPEATS times; the table shows the median CPU
+Warm: one process started with the tree's worker environment (``robocritics.child.WORKER_ENV``, as a batch
+worker and the studio's evaluator start: one BLAS thread, glibc malloc tunables; none for a tree without it), the
+UR3e loaded once, each of the six bundled programs simulated and critiqued in its own
+scene (default critics, 125 Hz) once to warm caches, then REPEATS times; the table shows the least CPU
 (``time.process_time``: user + system of the process, all threads) per program and the mean over programs.
 Programs/s per core is ``1000 / mean CPU ms``. Cold: ``robocritics check examples/programs/sorting_careful.py
 --scene sorting`` run as a child RUNS times, its user + system CPU from ``resource.getrusage(RUSAGE_CHILDREN)``,
-median; with a bytecode cache (as an installed package has) and without (every module compiled from source:
+the least; with a bytecode cache (as an installed package has) and without (every module compiled from source:
 ``PYTHONDONTWRITEBYTECODE=1``, as this machine's environment sets). FK: ``Robot.forward`` of 20,000 random
-samples (median of 7), the case where one batched BLAS pass lets OpenBLAS go multi-threaded.
+samples (least of 7), the case where one batched BLAS pass lets OpenBLAS go multi-threaded.
 
-Every measurement runs in a fresh child interpreter, three rounds (alternating the two trees with
-``--before-src``), and the table shows each number's least over the rounds. The "before" column is fixed: this
-script run on the source tree of commit 063c8da (before issue 15 item 3); ``--before-src DIR``, with
-``git archive 063c8da | tar -x -C DIR``, measures it again beside the current tree, in the same conditions.
+Every measurement runs in a fresh child interpreter, three rounds alternating the two trees, and the table shows
+each number's least over the rounds. "Before" is the source tree of commit 063c8da (before issue 15 item 3),
+extracted with ``git archive`` into a temporary directory and measured beside the current tree in the same
+conditions (the speed of this shared machine changes by 2x from day to day: compare ratios measured in one run);
+``--before-src DIR`` takes an extracted tree instead, ``--fixed-before`` prints :data:`BEFORE` (one day's numbers).
 
 Run:
-    .venv/bin/python benchmarks/bench_pipeline.py [REPEATS] [RUNS] [--before-src DIR]
+    .venv/bin/python benchmarks/bench_pipeline.py [REPEATS] [RUNS] [--before-src DIR | --fixed-before]
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ PROGRAMS = ROOT / "examples" / "programs"
 
 #: Measured at commit 063c8da with this script (``--before-src``, 7 repeats, 5 runs, least of 3 rounds) on this
 #: 2-core machine at load ~2 (other sessions' tests running), 2026-12-02 06:14 UTC; see the module docstring.
+BEFORE_COMMIT = "063c8da"
 BEFORE: dict[str, float] = {
     "breakfast_careful CPU ms": 129.963,
     "breakfast_naive CPU ms": 31.093,
@@ -48,7 +52,7 @@ BEFORE: dict[str, float] = {
 
 
 def warm(repeats: int) -> dict[str, float]:
-    """Median CPU ms of simulate()+critique() per bundled program in one warm process."""
+    """Least CPU ms of simulate()+critique() per bundled program in one warm process."""
     from robocritics import Robot, Scene, critique, simulate
 
     robot = Robot.ur3e()
@@ -61,12 +65,22 @@ def warm(repeats: int) -> dict[str, float]:
             t0 = time.process_time()
             critique(simulate(source, scene, robot))
             times.append(time.process_time() - t0)
-        out[path.stem] = 1000 * statistics.median(times)
+        out[path.stem] = 1000 * min(times)  # other load only ever adds CPU time
     return out
 
 
-def cli_cold(runs: int, src: Path, bytecode_cache: bool) -> float:
-    """Median user + system CPU s of one cold ``robocritics check`` child (of the tree on ``PYTHONPATH``).
+def worker_env(src: Path | None) -> dict[str, str]:
+    """The variables ``robocritics.child.WORKER_ENV`` of tree ``src`` adds to this environment ({} if it has none)."""
+    env = dict(os.environ)
+    if src is not None:
+        env["PYTHONPATH"] = str(Path(src) / "src")
+    code = "import json\ntry:\n from robocritics.child import WORKER_ENV\nexcept ImportError:\n WORKER_ENV = {}\nprint(json.dumps(dict(WORKER_ENV)))"
+    done = subprocess.run([sys.executable, "-c", code], env=env, cwd=ROOT, capture_output=True, text=True, check=True)
+    return {k: v for k, v in json.loads(done.stdout).items() if k not in os.environ}
+
+
+def cli_cold(runs: int, src: Path, bytecode_cache: bool, not_inherited: list[str]) -> float:
+    """Least user + system CPU s of one cold ``robocritics check`` child (of the tree on ``PYTHONPATH``).
 
     ``bytecode_cache``: the children share a bytecode cache (``PYTHONPYCACHEPREFIX`` in a temporary directory,
     filled by one untimed run), as an installed package has; else they compile every robocritics module from
@@ -75,7 +89,7 @@ def cli_cold(runs: int, src: Path, bytecode_cache: bool) -> float:
     import tempfile
 
     cmd = [sys.executable, "-m", "robocritics.cli", "check", str(PROGRAMS / "sorting_careful.py"), "--scene", "sorting"]
-    env = dict(os.environ)
+    env = {k: v for k, v in os.environ.items() if k not in not_inherited}  # a user's shell: no worker environment
     with tempfile.TemporaryDirectory() as cache:
         if bytecode_cache:
             env.pop("PYTHONDONTWRITEBYTECODE", None)
@@ -90,7 +104,7 @@ def cli_cold(runs: int, src: Path, bytecode_cache: bool) -> float:
             subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=env)
             after = resource.getrusage(resource.RUSAGE_CHILDREN)
             cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
-    return statistics.median(cpu)
+    return min(cpu)
 
 
 def fk_cpu_ms(samples: int = 20000) -> float:
@@ -106,7 +120,7 @@ def fk_cpu_ms(samples: int = 20000) -> float:
         t0 = time.process_time()
         robot.forward(q, 0.05)
         times.append(time.process_time() - t0)
-    return 1000 * statistics.median(times)
+    return 1000 * min(times)
 
 
 def measure(src: Path | None, repeats: int, runs: int) -> dict[str, float]:
@@ -114,31 +128,42 @@ def measure(src: Path | None, repeats: int, runs: int) -> dict[str, float]:
     env = dict(os.environ)
     if src is not None:
         env["PYTHONPATH"] = str(Path(src) / "src")
+    added = worker_env(src)
+    env.update(added)
     done = subprocess.run(
-        [sys.executable, __file__, "--child", str(repeats), str(runs), str(src or ROOT)],
+        [sys.executable, __file__, "--child", str(repeats), str(runs), str(src or ROOT), json.dumps(sorted(added))],
         env=env, cwd=ROOT, capture_output=True, text=True, check=True,
     )  # fmt: skip
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def child(repeats: int, runs: int, src: Path) -> None:
+def child(repeats: int, runs: int, src: Path, not_inherited: list[str]) -> None:
     out = {f"{k} CPU ms": v for k, v in warm(repeats).items()}
     out["FK 20k samples CPU ms"] = fk_cpu_ms()
-    out["check, cold CPU s (bytecode cached)"] = cli_cold(runs, src, True)
-    out["check, cold CPU s (no bytecode)"] = cli_cold(runs, src, False)
+    out["check, cold CPU s (bytecode cached)"] = cli_cold(runs, src, True, not_inherited)
+    out["check, cold CPU s (no bytecode)"] = cli_cold(runs, src, False, not_inherited)
     print(json.dumps(out))
 
 
 def main() -> None:
     args = [a for a in sys.argv[1:]]
     if args[:1] == ["--child"]:
-        child(int(args[1]), int(args[2]), Path(args[3]))
+        child(int(args[1]), int(args[2]), Path(args[3]), json.loads(args[4]))
         return
+    import tempfile
+
     before_src = None
-    if "--before-src" in args:
+    scratch = tempfile.TemporaryDirectory()
+    if "--fixed-before" in args:
+        args.remove("--fixed-before")
+    elif "--before-src" in args:
         i = args.index("--before-src")
         before_src = Path(args[i + 1])
         del args[i : i + 2]
+    else:
+        archive = subprocess.run(["git", "archive", BEFORE_COMMIT], cwd=ROOT, capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", scratch.name], input=archive, check=True)
+        before_src = Path(scratch.name)
     repeats = int(args[0]) if args else 15
     runs = int(args[1]) if len(args) > 1 else 7
     # rounds alternate the trees, and each number is the least over rounds: other load on the machine only
@@ -162,7 +187,7 @@ def main() -> None:
     w = max(map(len, order))
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     print(
-        f"bench_pipeline — least over {rounds} rounds of: warm median of {repeats}, cold median of {runs}; "
+        f"bench_pipeline — least over {rounds} rounds of: warm least of {repeats}, cold least of {runs}; "
         f"{os.cpu_count()} CPUs, load average {load}"
     )
     print(f"{'':<{w}}  {'before':>9}  {'now':>9}  {'before/now':>10}")
@@ -171,7 +196,7 @@ def main() -> None:
         ratio = (n / b if k.startswith("programs/s") else b / n) if b else None
         bs = f"{b:9.3f}" if b is not None else f"{'-':>9}"
         print(f"{k:<{w}}  {bs}  {n:9.3f}  {ratio:10.2f}" if ratio else f"{k:<{w}}  {bs}  {n:9.3f}")
-    print("before: commit 063c8da" + (f" measured now from {before_src}" if before_src else " (fixed numbers, see docstring)"))
+    print(f"before: commit {BEFORE_COMMIT}" + (" measured in this run" if before_src else " (fixed numbers of another day, see docstring)"))
     print(f"reproduce: .venv/bin/python benchmarks/bench_pipeline.py {' '.join(sys.argv[1:])}")
 
 
