@@ -794,17 +794,19 @@ def _reproduces(chain: _Chain, q: list[float], t: Sequence[float], tol: float) -
 def _flange_errors(dh: DH, q: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(position error m, rotation error rad) ``(n,)`` each of the flange at ``q (n, 6)`` rad against ``poses
     (n, 4, 4)``, as :func:`_pose_error`: ``T_06 = prod_i Rz(q_i) Tz(d_i) Tx(a_i) Rx(alpha_i)`` in numpy."""
-    n = len(q)
-    T = np.broadcast_to(np.eye(4), (n, 4, 4))
-    A = np.zeros((n, 4, 4))
-    A[:, 3, 3] = 1.0
-    for i in range(6):
-        ct, st = np.cos(q[:, i]), np.sin(q[:, i])
-        ca, sa = math.cos(dh.alpha[i]), math.sin(dh.alpha[i])
-        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 0, 3] = ct, -st * ca, st * sa, dh.a[i] * ct
-        A[:, 1, 0], A[:, 1, 1], A[:, 1, 2], A[:, 1, 3] = st, ct * ca, -ct * sa, dh.a[i] * st
-        A[:, 2, 1], A[:, 2, 2], A[:, 2, 3] = sa, ca, dh.d[i]
-        T = T @ A
+    # the six link transforms of every row at once (n, 6, 4, 4), then their product in order
+    ct, st = np.cos(q), np.sin(q)
+    alpha = np.asarray(dh.alpha, dtype=float)
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    a, d = np.asarray(dh.a, dtype=float), np.asarray(dh.d, dtype=float)
+    A = np.zeros(q.shape + (4, 4))
+    A[..., 0, 0], A[..., 0, 1], A[..., 0, 2], A[..., 0, 3] = ct, -st * ca, st * sa, a * ct
+    A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st, ct * ca, -ct * sa, a * st
+    A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = sa, ca, d
+    A[..., 3, 3] = 1.0
+    T = A[:, 0]
+    for i in range(1, 6):
+        T = T @ A[:, i]
     e = T[:, :3] - poses[:, :3]
     dp = np.sqrt((e[:, :, 3] ** 2).sum(axis=1))
     dr = np.sqrt(0.5 * (e[:, :, :3] ** 2).sum(axis=(1, 2)))

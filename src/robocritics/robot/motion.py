@@ -213,24 +213,22 @@ class Profile:
         profiles = self._traj.profiles[0]
         if any(prof.brake.duration != 0.0 for prof in profiles):  # never for a move that starts at rest
             return np.array([self._traj.at_time(float(t))[0] for t in times]).reshape(len(times), -1)
-        # per DOF (rows): the 7 phase durations, and the state at each phase start followed by the final state
-        # (constant, j = 0) for times past the last phase; one array each for all DOFs
-        durations = np.array([prof.t for prof in profiles], dtype=float)
-        p = np.array([list(prof.p)[:7] + [prof.pf] for prof in profiles], dtype=float)
-        v = np.array([list(prof.v)[:7] + [prof.vf] for prof in profiles], dtype=float)
-        a = np.array([list(prof.a)[:7] + [prof.af] for prof in profiles], dtype=float)
-        j = np.array([list(prof.j)[:7] + [0.0] for prof in profiles], dtype=float)
-        t_sum = np.cumsum(durations, axis=1)  # (dofs, 7) cumulative phase ends
-        if (durations < 0).any():  # not sorted: keep searchsorted's own rule per DOF
-            k = np.stack([np.searchsorted(row, times, side="right") for row in t_sum], axis=1)
-        else:
-            # std::upper_bound (searchsorted side="right") on a sorted row: how many phase ends are <= t; 7: past
-            # the end
-            k = (t_sum[None, :, :] <= times[:, None, None]).sum(axis=2)  # (m, dofs)
+        # per DOF: the 7 phase durations, and the state (p, v, a, j) at each phase start followed by the final
+        # state (constant, j = 0) for times past the last phase, one array for all DOFs
+        durations = np.array([prof.t for prof in profiles], dtype=float)  # (dofs, 7)
+        states = np.array(
+            [[*prof.p[:7], prof.pf, *prof.v[:7], prof.vf, *prof.a[:7], prof.af, *prof.j[:7], 0.0] for prof in profiles],
+            dtype=float,
+        ).reshape(len(profiles), 4, 8)
+        t_sum = np.cumsum(durations, axis=1)  # cumulative phase ends
+        k = np.empty((len(times), len(profiles)), dtype=np.intp)
+        for dof, ends in enumerate(t_sum):
+            k[:, dof] = np.searchsorted(ends, times, side="right")  # std::upper_bound; 7: past the end
         phase_start = np.concatenate([np.zeros((len(profiles), 1)), t_sum], axis=1)
-        dof = np.arange(len(profiles))
-        dt = times[:, None] - phase_start[dof, k]
-        return p[dof, k] + dt * (v[dof, k] + dt * (a[dof, k] / 2 + dt * j[dof, k] / 6))
+        dofs = np.arange(len(profiles))
+        dt = times[:, None] - phase_start[dofs, k]
+        p, v, a, j = np.moveaxis(states[dofs, :, k], 2, 0)  # (m, dofs) each
+        return p + dt * (v + dt * (a / 2 + dt * j / 6))
 
     def sample(self, sample_rate_hz: float, max_samples: int = MAX_SEGMENT_SAMPLES) -> Segment:
         """The move sampled at ``1/sample_rate_hz`` from t=0, the end excluded (see :func:`time_joint_move`)."""
