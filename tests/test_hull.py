@@ -88,3 +88,54 @@ def test_thin_sets_are_measured(thickness):
     # 1e-4 relative: coal measures it; 1e-6 and 1e-9 (below FLAT_RATIO; 1e-9 crashed coal): quickhull does
     P = np.c_[rng.uniform(-1, 1, size=(200, 2)), thickness * rng.uniform(-1, 1, size=200)]
     assert convex_hull(P).volume_m3 == pytest.approx(ConvexHull(P).volume, rel=1e-6)
+
+
+def _normalised_reference(P):
+    """The normalisation written plainly with np.ldexp (robot/hull.py before its reductions were reordered)."""
+    if len(P) < 4 or not np.isfinite(P).all():
+        return None
+    a = int(np.frexp(np.abs(P).max())[1])
+    S = np.ldexp(P, -a)
+    lo, hi = S.min(axis=0), S.max(axis=0)
+    C = S - (lo + (hi - lo) / 2)
+    top = float(np.abs(C).max())
+    if top == 0.0:
+        return None
+    b = int(np.frexp(top)[1])
+    return np.ldexp(C, -b), a + b
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(1, 40),
+    exponent=st.integers(-1074, 1020),  # the points' scale 2^exponent: subnormal up to near overflow
+    offset=st.sampled_from([0.0, 1.0, -3.0, 1e6]),  # far from the origin in units of the scale
+    repeats=st.booleans(),
+)
+def test_normalised_is_bit_identical_to_the_ldexp_formula(seed, n, exponent, offset, repeats):
+    from robocritics.robot.hull import _normalised
+
+    rng = np.random.default_rng(seed)
+    with np.errstate(over="ignore"):  # near overflow some points are infinite: both give None
+        P = np.ldexp(rng.normal(size=(n, 3)) + offset, exponent)
+    if repeats:
+        P = np.concatenate([P, P[: n // 2]])
+    got, want = _normalised(P), _normalised_reference(P)
+    assert (got is None) == (want is None)
+    if got is not None:
+        assert got[1] == want[1]
+        np.testing.assert_array_equal(got[0], want[0])
+        assert np.array_equal(np.signbit(got[0]), np.signbit(want[0]))  # -0.0 too
+
+
+@pytest.mark.parametrize("k", [-1200, -1075, -1074, -1023, -1022, -600, 0, 600, 1023, 1024, 1100])
+def test_times_pow2_is_ldexp(k):
+    from robocritics.robot.hull import _times_pow2
+
+    x = np.array([0.0, -0.0, 1.0, -1.5, 3.0 * 2.0**-1074, 2.0**-1022, 0.7 * 2.0**-1000, 1.9 * 2.0**1000, 1e300])
+    x = np.r_[x, -x / 3]
+    with np.errstate(over="ignore", under="ignore"):
+        got, want = _times_pow2(x, k), np.ldexp(x, k)
+    np.testing.assert_array_equal(got, want)
+    assert np.array_equal(np.signbit(got), np.signbit(want))
