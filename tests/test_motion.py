@@ -1,5 +1,7 @@
 """Timed motion: ruckig limits hold on the samples, speed scaling is a time stretch, lines are straight."""
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -121,3 +123,21 @@ def test_sampled_positions_are_ruckigs_at_time(start, goal, fraction, nudge):
         ours = prof.position(times)
         ref = np.array([prof._traj.at_time(float(t))[0] for t in times]).reshape(len(times), -1)
         np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-12)
+
+
+_EDGE = [0.0, -0.0, 1.0, -1.0, 1e-12, 2e-12, 1 + 1e-5, 1 + 2e-5, 1e300, math.inf, -math.inf, math.nan]
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.one_of(st.sampled_from(_EDGE), st.floats(-10, 10)), min_size=1, max_size=7),
+    st.lists(st.one_of(st.sampled_from(_EDGE), st.floats(-1e-11, 1e-11), st.floats(-1e-4, 1e-4)), min_size=7, max_size=7),
+)
+def test_allclose_is_numpy_s(start, offsets):
+    # the planner's "no motion" test: the same answer as np.allclose(start, goal, atol=1e-12), NaN and inf too
+    from robocritics.robot.motion import _allclose
+
+    start = np.array(start)
+    goal = start + np.array(offsets[: len(start)])
+    for a, b in ((start, goal), (start, start), (goal, start)):
+        assert _allclose(a, b) == bool(np.allclose(a, b, atol=1e-12))

@@ -86,3 +86,71 @@ def test_speed_events_and_step_speed_fractions():
         "speed set to 100 % of full speed",
     ]
     assert math.isclose(execution.duration_s, execution.trajectory.time[-1] - execution.trajectory.time[0])
+
+
+# --- the planner's cheap paths against the obvious computation ---------------------------------------------------
+
+
+def _planner(scene=SCENE):
+    from robocritics import Robot
+    from robocritics.robot.planner import Planner, PlannerSettings
+
+    robot = Robot.ur3e()
+    return Planner(robot.scene_for(scene), robot, 125.0, PlannerSettings())
+
+
+def test_current_tcp_is_the_fk_of_the_current_joints_and_a_fresh_copy():
+    planner = _planner()
+    first = planner.tcp()
+    np.testing.assert_array_equal(first, planner.robot.tcp_pose(planner.q))
+    first[:] = 0.0  # the caller's copy: the planner's pose is untouched
+    np.testing.assert_array_equal(planner.tcp(), planner.robot.tcp_pose(planner.q))
+    planner.q = planner.robot.ik(np.array([0.3, 0.1, 0.2]), seed=planner.q)  # a new configuration: a new pose
+    np.testing.assert_array_equal(planner.tcp(), planner.robot.tcp_pose(planner.q))
+    np.testing.assert_allclose(planner.tcp()[:3, 3], [0.3, 0.1, 0.2], atol=1e-9)
+
+
+def _grasp_reference(planner, tcp):
+    """grasp_candidate by the general 4x4 inverse and numpy (the slow obvious rule)."""
+    best, best_d = None, math.inf
+    inv = np.linalg.inv(tcp)
+    for oid, o in planner.objects.items():
+        if oid == planner.attached or not o.graspable:
+            continue
+        local = (inv @ np.append(np.asarray(o.position, float), 1.0))[:3]
+        s = planner.settings
+        if abs(local[0]) > s.grasp_region_m or abs(local[1]) > planner.robot.max_opening_m / 2:
+            continue
+        if not (-s.grasp_depth_m <= local[2] <= o.half_height + s.grasp_tip_gap_m):
+            continue
+        if np.linalg.norm(local) < best_d:
+            best, best_d = oid, float(np.linalg.norm(local))
+    return best
+
+
+@pytest.mark.parametrize("scene_name", ["sorting", "recycling", "breakfast"])
+def test_grasp_candidate_is_the_rigid_inverse_rule_at_every_object(scene_name):
+    from robocritics.robot.model import fingers_down
+
+    planner = _planner(Scene.builtin(scene_name))
+    rng = np.random.default_rng(3)
+    found = 0
+    for o in list(planner.objects.values()):
+        for _ in range(20):  # around each object's centre, at any yaw: inside and just outside the grasp region
+            tcp = np.eye(4)
+            tcp[:3, :3] = fingers_down(rng.uniform(-math.pi, math.pi))
+            tcp[:3, 3] = np.asarray(o.position) + rng.normal(0.0, 0.03, 3)
+            expected = _grasp_reference(planner, tcp)
+            assert planner.grasp_candidate(tcp) == expected
+            found += expected is not None
+    assert found > 0  # some poses do grasp
+
+
+def test_support_below_is_the_highest_surface_under_the_object():
+    # the reorder of its tests keeps the rule: every container whose floor is under the point and reachable
+    planner = _planner(Scene.builtin("sorting"))
+    for c in planner.scene.containers:
+        above_floor = np.array([c.position[0], c.position[1], c.floor_top + 0.05])
+        assert planner.support_below("x", above_floor, 0.05, 0.02) == (c.id, c.floor_top)
+        below_floor = np.array([c.position[0], c.position[1], c.floor_top - 0.01])
+        assert planner.support_below("x", below_floor, 0.0, 0.02)[0] != c.id

@@ -238,10 +238,24 @@ class Profile:
         return Segment(self.position(times), times, self.duration_s)
 
 
+def _allclose(start: np.ndarray, goal: np.ndarray) -> bool:
+    """``np.allclose(start, goal, atol=1e-12)``: every ``|start - goal| <= 1e-12 + 1e-5 |goal|`` (infinities
+    only equal to themselves), on Python floats: the same comparisons without numpy's per-call overhead."""
+    if start.shape != goal.shape:
+        return bool(np.allclose(start, goal, atol=1e-12))  # broadcasting: numpy's own rule
+    for s, g in zip(start.ravel().tolist(), goal.ravel().tolist()):
+        if math.isfinite(s) and math.isfinite(g):
+            if not abs(s - g) <= 1e-12 + 1e-5 * abs(g):
+                return False
+        elif s != g:
+            return False
+    return True
+
+
 def profile_joint_move(start, goal, limits: Limits, speed_fraction: float) -> Profile:
     """The time-optimal jerk-limited rest-to-rest joint move from ``start`` to ``goal`` (rad), not yet sampled."""
     start, goal = np.asarray(start, float), np.asarray(goal, float)
-    if np.allclose(start, goal, atol=1e-12):
+    if _allclose(start, goal):
         return Profile(0.0, start)
     traj = _ruckig(start, goal, limits.scaled(speed_fraction))
     return Profile(float(traj.duration), start, traj)

@@ -106,8 +106,11 @@ def trajectory_bytes_per_sample(robot: Robot, scene: Scene, carried: int = 0) ->
     shape) pair, those of ``carried`` objects the gripper carries against every shape, the proximity columns
     (one per pair of entities) and the carried objects' poses.
     """
-    shapes = len(scene.shapes())
-    entities = len(scene.objects) + len(scene.containers) + 1  # and the table
+    return _bytes_per_sample(robot, len(scene.shapes()), len(scene.objects) + len(scene.containers) + 1, carried)
+
+
+def _bytes_per_sample(robot: Robot, shapes: int, entities: int, carried: int) -> int:
+    """:func:`trajectory_bytes_per_sample` for a scene of ``shapes`` shapes and ``entities`` entities (with the table)."""
     movers = len(robot.capsule_names) + carried
     return (
         _BYTES_PER_SAMPLE_FIXED
@@ -308,6 +311,8 @@ class Planner:
         self.timing_work = 0
         self.ik_solves = 0
         self.bytes_per_sample: dict[int, int] = {}  # by the number of objects carried so far
+        self.scene_counts: tuple[int, int] | None = None  # (shapes, entities with the table), counted once
+        self._tcp_cache: tuple[np.ndarray, np.ndarray] | None = None  # (self.q, its TCP pose)
 
     # --- the motion budget --------------------------------------------------------------
 
@@ -341,7 +346,9 @@ class Planner:
             )
         carried = len({c[0] for c in self.carry})
         if carried not in self.bytes_per_sample:
-            self.bytes_per_sample[carried] = trajectory_bytes_per_sample(self.robot, self.scene, carried)
+            if self.scene_counts is None:
+                self.scene_counts = (len(self.scene.shapes()), len(self.scene.objects) + len(self.scene.containers) + 1)
+            self.bytes_per_sample[carried] = _bytes_per_sample(self.robot, *self.scene_counts, carried)
         per_sample = self.bytes_per_sample[carried]
         if total_n * per_sample > s.max_trajectory_bytes:
             raise MotionBudgetError(
@@ -389,7 +396,14 @@ class Planner:
     # --- geometry helpers ---------------------------------------------------------------
 
     def tcp(self, q=None) -> np.ndarray:
-        return self.robot.tcp_pose(self.q if q is None else q)
+        """TCP pose ``(4, 4)`` at ``q`` (default: the current joints; a fresh copy the caller may change)."""
+        if q is not None:
+            return self.robot.tcp_pose(q)
+        # a call asks for the current pose several times (its contacts, its start, its line): FK once per
+        # configuration. The planner replaces self.q, never writes into it, so the same array is the same pose.
+        if self._tcp_cache is None or self._tcp_cache[0] is not self.q:
+            self._tcp_cache = (self.q, self.robot.tcp_pose(self.q))
+        return self._tcp_cache[1].copy()
 
     def entity_top(self, entity_id: str) -> tuple[np.ndarray, float]:
         if entity_id in self.objects:
@@ -468,11 +482,14 @@ class Planner:
     def grasp_candidate(self, tcp: np.ndarray) -> str | None:
         """The graspable object whose centre lies between the fingers at TCP pose ``tcp`` (the nearest to the TCP)."""
         best, best_d = None, math.inf
-        R, t = tcp[:3, :3], tcp[:3, 3]
+        (r00, r01, r02, tx), (r10, r11, r12, ty), (r20, r21, r22, tz) = tcp[:3].tolist()
         for oid, o in self.objects.items():
             if oid == self.attached or not o.graspable:
                 continue
-            local = (np.asarray(o.position) - t) @ R  # R^T (p - t): the rigid inverse, no general 4x4 inverse
+            # R^T (p - t): the rigid inverse, no general 4x4 inverse; on Python floats (three objects' worth of
+            # numpy calls cost more than the arithmetic)
+            dx, dy, dz = o.position[0] - tx, o.position[1] - ty, o.position[2] - tz
+            local = (dx * r00 + dy * r10 + dz * r20, dx * r01 + dy * r11 + dz * r21, dx * r02 + dy * r12 + dz * r22)
             # local z: along the fingers (+ beyond the tips); y: closing axis; x: finger width
             if abs(local[0]) > self.settings.grasp_region_m or abs(local[1]) > self.robot.max_opening_m / 2:
                 continue
@@ -491,10 +508,11 @@ class Planner:
         """The entity an object at ``position`` would settle on (not object ``ignore``), and the z of that surface [m]."""
         best_id, best_z = "table", self.scene.table.top_z
         for c in self.scene.containers:
-            on_floor = (position[0], position[1], c.floor_top + ON_SURFACE_M)
-            if c.contains_point(on_floor) and position[2] >= c.floor_top - ON_SURFACE_M:
-                if c.floor_top > best_z:
-                    best_id, best_z = c.id, c.floor_top
+            floor = c.floor_top
+            # the cheap comparisons first: they rule most containers out without the point test
+            if position[2] >= floor - ON_SURFACE_M and floor > best_z:
+                if c.contains_point((position[0], position[1], floor + ON_SURFACE_M)):
+                    best_id, best_z = c.id, floor
         footprint, gap = self.settings.stack_footprint_fraction, self.settings.stack_gap_m
         for other_id, other in self.objects.items():
             if other_id == oid or other_id == ignore:
