@@ -2,8 +2,10 @@
 
 Compares the vectorised trajectory builder (FK for every frame, every self and
 environment pair) with the obvious implementation: Pinocchio FK per sample and
-``coal.distance`` called pair by pair in a Python loop; and the batched FK alone
-(``Robot.forward``) with Pinocchio's ``framesForwardKinematics`` per sample.
+``coal.distance`` called pair by pair in a Python loop; the batched FK alone
+(``Robot.forward``) with Pinocchio's ``framesForwardKinematics`` per sample; and FK with
+the capsule endpoints in one pass (``Robot.forward_with_capsules``, what ``simulate()``
+runs) with ``forward`` followed by ``capsule_segments`` of its frames.
 
 Run: .venv/bin/python benchmarks/bench_kinematics.py
 """
@@ -143,6 +145,8 @@ def main() -> None:
     fk_ref = pinocchio_frames(robot, q)
     fk_loop = time.perf_counter() - t0
     fk_err = float(np.max(np.abs(fk_ref - robot.forward(q))))
+    fused, _ = timed(lambda: robot.forward_with_capsules(q), 7)
+    separate, _ = timed(lambda: robot.capsule_segments(robot.forward(q)), 7)
 
     limits = Limits(robot.velocity_limits, robot.acceleration_limits, robot.jerk_limits)
     rng = np.random.default_rng(5)
@@ -160,6 +164,7 @@ def main() -> None:
         ("speed-up", f"{ref_time / fast:.0f}x", f"max |difference| {err:.2e} m"),
         ("FK only, batched (Robot.forward)", f"{fk_fast * 1e3:.1f} ms", f"{SAMPLES} samples x {len(robot.frame_names)} frames"),
         ("FK only, Pinocchio per sample", f"{fk_loop * 1e3:.0f} ms", f"max |difference| {fk_err:.1e}; speed-up {fk_loop / fk_fast:.1f}x"),
+        ("FK + capsule endpoints, one pass", f"{fused * 1e3:.1f} ms", f"forward_with_capsules; forward then capsule_segments {separate * 1e3:.1f} ms"),
         ("ruckig, 6-waypoint joint motion", f"{ruckig_median * 1e3:.2f} ms", "5 rest-to-rest segments, sampled at 125 Hz"),
     ]
     width = max(len(r[0]) for r in rows)

@@ -23,7 +23,10 @@ The whole contract is in docs/robots.md.
 Forward kinematics over a whole trajectory is vectorised: with ``oMi`` the joint
 placements, ``oMi[j] = oMi[parent(j)] @ M_j @ X_j(q_j)`` where ``M_j`` is the
 joint's fixed placement and ``X_j`` its motion (a rotation about, or translation
-along, its axis). All ``T`` samples are one batched matrix product per joint.
+along, its axis). Every rotation column and origin is a ``(3, T)`` time series
+(structure of arrays), so each product over all ``T`` samples is a few element-wise
+multiply-adds; the capsule endpoints come from the same pass
+(:meth:`Robot.forward_with_capsules`).
 """
 
 from __future__ import annotations
