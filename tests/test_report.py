@@ -6,6 +6,9 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from robocritics.critic import ALL_PASSED, BUILTIN_CRITICS, Evidence, Flag, Report, Verdict, critique, make_signal
 from robocritics.errors import CriticError
@@ -198,3 +201,24 @@ def test_signal_downsampling_keeps_extremes():
 def test_evidence_defaults_are_empty():
     e = Evidence()
     assert e.lines == [] and e.worst_sample is None
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(
+    values=hnp.arrays(np.float64, st.integers(1, 900), elements=st.floats(allow_nan=True, allow_infinity=True)),
+    worse=st.sampled_from(["above", "below"]),
+)
+def test_signal_lists_are_the_per_sample_python_floats(values, worse):
+    """make_signal converts with tolist(): the same Python floats as float(x) per sample, None where not finite."""
+    t = np.cumsum(np.full(len(values), 0.002))
+    sig = make_signal(t, values, label="x", unit="m", worse=worse)
+    if len(values) <= 400:
+        kept_t, kept_v = t, values
+    else:  # the picks are the samples whose times survived
+        pick = np.searchsorted(t, sig.time_s)
+        kept_t, kept_v = t[pick], values[pick]
+    assert sig.time_s == [float(x) for x in kept_t]
+    assert all(type(x) is float for x in sig.time_s)
+    want = [float(v) if np.isfinite(v) else None for v in kept_v]
+    assert sig.value == want
+    assert all(v is None or type(v) is float for v in sig.value)

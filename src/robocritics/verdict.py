@@ -231,11 +231,16 @@ def make_signal(
         pick = np.argmax(padded.reshape(buckets, size), axis=1) + np.arange(buckets) * size + 1
         pick = np.concatenate(([0], np.minimum(pick, n - 2), [n - 1]))
         time, values = time[pick], values[pick]
+    value = values.tolist()  # Python floats, bit for bit; a non-finite value is None (no measure)
+    finite = np.isfinite(values)
+    if not finite.all():
+        for i in np.flatnonzero(~finite).tolist():
+            value[i] = None
     return Signal(
         label=label,
         unit=unit,
-        time_s=[float(t) for t in time],
-        value=[float(v) if math.isfinite(v) else None for v in values.tolist()],
+        time_s=time.tolist(),
+        value=value,
         warning=warning,
         error=error,
         worse=worse,
