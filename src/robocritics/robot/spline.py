@@ -93,25 +93,25 @@ def _not_a_knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     diag[-1], lower[-1] = h[-2], d
     rhs[-1] = (hr[-1] ** 2 * m[-2] + (2 * d + hr[-1]) * hr[-2] * m[-1]) / d
     # Thomas algorithm (the system is diagonally dominant inside; scipy uses LAPACK's banded LU, which
-    # pivots, so the two agree to rounding, not bit for bit). Each step is a handful of scalar operations on one
-    # row of k columns: on Python floats (the same IEEE operations as numpy's, so the same bits) it costs a
-    # fraction of a numpy call per step.
+    # pivots, so the two agree to rounding, not bit for bit). Each step is a few scalar operations: on Python
+    # floats (the same IEEE operations as numpy's, so the same bits), one column at a time, it costs a fraction
+    # of a numpy call per step. The elimination's divisors depend on x only: once for every column.
     diag_l, upper_l, lower_l = diag.tolist(), upper.tolist(), lower.tolist()
-    rows = rhs.reshape(n, -1).tolist()
     c = [0.0] * n
-    r = [rows[0]] * n
-    c[0] = upper_l[0] / diag_l[0]
-    r[0] = [v / diag_l[0] for v in rows[0]]
+    denom = [0.0] * n
+    c[0], denom[0] = upper_l[0] / diag_l[0], diag_l[0]
     for i in range(1, n):
-        li = lower_l[i]
-        denom = diag_l[i] - li * c[i - 1]
-        c[i] = upper_l[i] / denom
-        r[i] = [(a - li * b) / denom for a, b in zip(rows[i], r[i - 1])]
-    s = r[:]
-    for i in range(n - 2, -1, -1):
-        ci = c[i]
-        s[i] = [a - ci * b for a, b in zip(r[i], s[i + 1])]
-    return np.array(s, dtype=float).reshape(rhs.shape)
+        d = diag_l[i] - lower_l[i] * c[i - 1]
+        denom[i], c[i] = d, upper_l[i] / d
+    columns = rhs.reshape(n, -1).T.tolist()
+    forward, backward = range(1, n), range(n - 2, -1, -1)
+    for col in columns:  # solved in place: rhs -> r (forward) -> s (backward)
+        prev = col[0] = col[0] / denom[0]
+        for i in forward:
+            prev = col[i] = (col[i] - lower_l[i] * prev) / denom[i]
+        for i in backward:
+            prev = col[i] = col[i] - c[i] * prev
+    return np.array(columns, dtype=float).T.reshape(rhs.shape)
 
 
 def cubic_spline(x: np.ndarray, y: np.ndarray, xs: np.ndarray) -> np.ndarray:
