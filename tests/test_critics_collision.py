@@ -135,3 +135,26 @@ def test_agrees_with_the_per_sample_reference(traj, overrides):
     v = c.check(traj, None, p)
     assert_matches_reference(v, ref_collision(traj, p))
     assert_well_formed(v, "collision")
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(traj=trajectories())
+def test_closest_is_the_row_minimum_of_the_counted_distances(traj):
+    from robocritics.critics.collision import Counted
+
+    want = counted_distances(traj).min(axis=1) if traj.proximity.shape[1] else np.full(len(traj), np.inf)
+    got = Counted(traj).closest(traj.proximity)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_closest_with_intended_contacts_and_nothing_always_counted():
+    pairs = [env_pair("left_finger", "apple.body", entity="apple"), env_pair("right_finger", "table.top", entity="table")]
+    steps = [Step(skill="move_to", line=1), Step(skill="close_gripper", line=2, contacts=("apple",))]
+    step = (np.arange(T) >= 25).astype(int)
+    trajectory = traj_with(pairs, {0: dip(-0.01, slice(20, 40)), 1: 0.3}, steps=steps, step=step)
+    from robocritics.critics.collision import Counted
+
+    got = Counted(trajectory).closest(trajectory.proximity)
+    want = np.where(np.arange(T) >= 25, 0.3, dip(-0.01, slice(20, 40)))  # the apple counts until the grasp step
+    want = np.minimum(want, 0.3)
+    np.testing.assert_array_equal(got, want)

@@ -68,10 +68,14 @@ def _run_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.cumsum(change) - 1, values[starts]
 
 
-def _row_min(P: np.ndarray, cols) -> np.ndarray:
-    """``(T,)`` minimum of ``P[:, cols]`` per row, +inf for no columns."""
-    sub = P[:, cols]
-    return sub.min(axis=1) if sub.shape[1] else np.full(len(P), np.inf)
+def _column_min(P: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """``(T,)`` minimum of ``P[:, cols]`` per row, +inf for no columns.
+
+    The columns are gathered as rows of ``P.T`` (a ``(len(cols), T)`` array) and reduced along axis 0: numpy
+    then takes elementwise minima of whole rows, where a minimum along each short row of ``P[:, cols]`` pays a
+    per-row overhead (4x slower for 40 columns).
+    """
+    return P.T[cols].min(axis=0) if len(cols) else np.full(len(P), np.inf)
 
 
 class Counted:
@@ -130,17 +134,17 @@ class Counted:
     def closest(self, P: np.ndarray) -> np.ndarray:
         """``(T,)`` closest counted distance per sample, m (+inf where nothing counts).
 
-        The counted columns are gathered and reduced by a plain row minimum: a masked ``where=`` reduction
-        over ``(T, K)`` is about 4x slower.
+        The counted columns are gathered (as rows of ``P.T``, see :func:`_column_min`) and reduced by a plain
+        minimum: a masked ``where=`` reduction over ``(T, K)`` is about 4x slower.
         """
         always = self.columns.copy()
         if self.intended is not None:
             always[self.gcols] = False
-        out = _row_min(P, np.flatnonzero(always))
+        out = _column_min(P, np.flatnonzero(always))
         if self.intended is not None:
-            gripper = np.take(P, self.gcols, axis=1)
-            gripper[self.intended] = np.inf
-            np.minimum(out, _row_min(gripper, slice(None)), out=out)
+            gripper = P.T[self.gcols]  # (Kg, T), a copy
+            np.putmask(gripper, self.intended.T, np.inf)
+            np.minimum(out, gripper.min(axis=0), out=out)
         return out
 
 
