@@ -193,3 +193,16 @@ def test_build_trajectory_with_or_without_the_callers_frames_and_segments():
         checked += len(shapes) > 1
         exact += int(near.sum())
     assert checked and exact
+
+
+@pytest.mark.parametrize("block", [1, 7, 2000])
+def test_frames_laid_out_block_by_block(robot, block, monkeypatch):
+    """The (T, L, 4, 4) frames written a block of samples at a time (full blocks, a partial last one, blocks
+    longer than the trajectory) are the frames written in one go, and Pinocchio's."""
+    q = np.random.default_rng(5).uniform(robot.lower, robot.upper, size=(53, robot.n))
+    opening = np.linspace(0.0, robot.max_opening_m, 53)
+    whole = robot.forward(q, opening)
+    monkeypatch.setattr(model_module, "_FRAME_BLOCK", block)
+    blocked = robot.forward(q, opening)
+    np.testing.assert_array_equal(blocked, whole)
+    np.testing.assert_allclose(blocked, _pinocchio_frames(robot, q, opening), rtol=0, atol=1e-12)

@@ -151,16 +151,32 @@ def _times_axis_rotations(columns: _Columns, X: np.ndarray) -> _Columns:
     return tuple(columns[0] * X[0, k] + columns[1] * X[1, k] + columns[2] * X[2, k] for k in range(3))  # type: ignore[return-value]
 
 
+#: Samples per block when :func:`_frames_array` lays frames out per sample: both (16 L, block) buffers stay in
+#: cache (1,500-3,000 measured best here). Not a power of two: the transposing copy reads all 16 L rows of the
+#: block at once, and rows a power of two bytes apart share cache sets (2,048 was 5x slower than 2,000).
+_FRAME_BLOCK = 2000
+
+
 def _frames_array(poses: list[tuple[_Columns, np.ndarray | None]], T: int) -> np.ndarray:
     """The ``(T, L, 4, 4)`` homogeneous transforms of frame poses given as ``(columns, origin)`` time series."""
-    frames = np.empty((T, len(poses), 4, 4))
-    frames[:, :, 3, :3] = 0.0
-    frames[:, :, 3, 3] = 1.0
-    for f, (columns, origin) in enumerate(poses):
-        for k, column in enumerate(columns):
-            frames[:, f, :3, k] = column.T
-        frames[:, f, :3, 3] = 0.0 if origin is None else origin.T
-    return frames
+    # per block of samples: every entry as a contiguous time series (cheap row copies), then one transposing
+    # copy into the block's rows of the output; 2-3x less CPU than writing each column straight into the
+    # (T, L, 4, 4) array, which makes a pass over T rows 16 L entries apart per column
+    L = len(poses)
+    frames = np.empty((T, L * 16))
+    block = min(T, _FRAME_BLOCK)
+    series = np.empty((L, 4, 4, block))
+    series[:, 3, :3] = 0.0
+    series[:, 3, 3] = 1.0
+    for start in range(0, T, block):
+        stop = min(T, start + block)
+        n = stop - start
+        for f, (columns, origin) in enumerate(poses):
+            for k, column in enumerate(columns):
+                series[f, :3, k, :n] = column if column.shape[1] == 1 else column[:, start:stop]
+            series[f, :3, 3, :n] = 0.0 if origin is None else (origin if origin.shape[1] == 1 else origin[:, start:stop])
+        frames[start:stop] = series.reshape(L * 16, block)[:, :n].T
+    return frames.reshape(T, L, 4, 4)
 
 
 class Robot:
