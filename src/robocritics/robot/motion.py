@@ -214,20 +214,23 @@ class Profile:
         if any(prof.brake.duration != 0.0 for prof in profiles):  # never for a move that starts at rest
             return np.array([self._traj.at_time(float(t))[0] for t in times]).reshape(len(times), -1)
         # per DOF: the 7 phase durations, and the state (p, v, a, j) at each phase start followed by the final
-        # state (constant, j = 0) for times past the last phase, one array for all DOFs
+        # state (constant, j = 0) for times past the last phase: one (4, dofs, 8) table for all DOFs
+        dofs = len(profiles)
         durations = np.array([prof.t for prof in profiles], dtype=float)  # (dofs, 7)
         states = np.array(
-            [[*prof.p[:7], prof.pf, *prof.v[:7], prof.vf, *prof.a[:7], prof.af, *prof.j[:7], 0.0] for prof in profiles],
+            [[*prof.p[:7], prof.pf] for prof in profiles]
+            + [[*prof.v[:7], prof.vf] for prof in profiles]
+            + [[*prof.a[:7], prof.af] for prof in profiles]
+            + [[*prof.j[:7], 0.0] for prof in profiles],
             dtype=float,
-        ).reshape(len(profiles), 4, 8)
+        ).reshape(4, dofs * 8)
         t_sum = np.cumsum(durations, axis=1)  # cumulative phase ends
-        k = np.empty((len(times), len(profiles)), dtype=np.intp)
+        k = np.empty((len(times), dofs), dtype=np.intp)
         for dof, ends in enumerate(t_sum):
             k[:, dof] = np.searchsorted(ends, times, side="right")  # std::upper_bound; 7: past the end
-        phase_start = np.concatenate([np.zeros((len(profiles), 1)), t_sum], axis=1)
-        dofs = np.arange(len(profiles))
-        dt = times[:, None] - phase_start[dofs, k]
-        p, v, a, j = np.moveaxis(states[dofs, :, k], 2, 0)  # (m, dofs) each
+        entry = k + 8 * np.arange(dofs)  # (m, dofs): the (dof, phase) entry of each sample, flattened
+        dt = times[:, None] - np.concatenate([np.zeros((dofs, 1)), t_sum], axis=1).ravel()[entry]
+        p, v, a, j = states[:, entry]  # (m, dofs) each
         return p + dt * (v + dt * (a / 2 + dt * j / 6))
 
     def sample(self, sample_rate_hz: float, max_samples: int = MAX_SEGMENT_SAMPLES) -> Segment:
