@@ -145,3 +145,52 @@ def test_agrees_with_the_per_sample_reference(traj, overrides, radius):
     limit = p.warn_fraction * scene.workspace.volume_m3
     if abs(ref["volume"] - limit) > bound:
         assert v.flag is ref["flag"]
+
+
+def hull_points_reference(X, tol):
+    """The docstring's rule, one frame and one block at a time: the largest second-difference norm M of the
+    block gives the stride s (the largest power of two <= 64 with M s^2 / 8 <= tol) and every s-th sample of
+    the block is kept, frame after frame; then each frame's last sample, where its last block's stride skipped
+    it, closes its last chord; last, a point equal to the one before it in that order goes."""
+    from robocritics.critics.space_usage import BLOCK
+
+    T, L, _ = X.shape
+    kept, closing = [], []
+    for frame in range(L):
+        p = X[:, frame]
+        second = np.zeros(T)
+        second[1:-1] = [math.sqrt(float(((p[t + 1] - 2 * p[t] + p[t - 1]) ** 2).sum())) for t in range(1, T - 1)]
+        for start in range(0, T, BLOCK):
+            M = second[start : start + BLOCK].max()
+            stride = 1
+            while stride < BLOCK and M * (2 * stride) ** 2 / 8 <= tol:
+                stride *= 2
+            kept += [(t, frame) for t in range(start, min(start + BLOCK, T), stride)]
+        if kept[-1] != (T - 1, frame):
+            closing.append((T - 1, frame))
+    out = []
+    for t, frame in kept + closing:
+        if not out or not np.array_equal(X[t, frame], X[out[-1]]):
+            out.append((t, frame))
+    return out
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    T=st.integers(3, 300),
+    L=st.integers(1, 4),
+    tol=st.sampled_from([1e-6, 5e-4, 1e-2]),
+    still=st.booleans(),
+)
+def test_hull_points_follow_the_stride_rule(seed, T, L, tol, still):
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 1, T)[:, None, None]
+    X = 0.3 * np.sin(rng.uniform(0.5, 20, size=(1, L, 3)) * t + rng.uniform(0, 6, size=(1, L, 3)))
+    X += rng.normal(scale=rng.choice([0.0, 1e-5, 1e-3]), size=X.shape)
+    if still:  # a frame that does not move: its repeated points are kept once
+        X[:, 0] = X[0, 0]
+    X = np.ascontiguousarray(X)
+    P, ti, li = hull_points(X, tol)
+    np.testing.assert_array_equal(P, X[ti, li])
+    assert list(zip(ti.tolist(), li.tolist())) == hull_points_reference(X, tol)
