@@ -293,8 +293,11 @@ class Planner:
         self.q_parts: list[np.ndarray] = []
         self.t_parts: list[np.ndarray] = []
         self.open_parts: list[np.ndarray] = []
-        self.att_parts: list[np.ndarray] = []
-        self.step_parts: list[np.ndarray] = []
+        # the attached object and the step are constant over a segment: one entry per segment, expanded by
+        # finish() with one np.repeat each instead of an array per segment
+        self.seg_lengths: list[int] = []
+        self.seg_attached: list[str] = []
+        self.seg_steps: list[int] = []
         self.t0 = 0.0
         self.steps: list[Step] = []
         self.events: list[Event] = []
@@ -455,10 +458,13 @@ class Planner:
         m = len(seg.time)
         self.q_parts.append(seg.q)
         self.t_parts.append(self.t0 + seg.time)
-        op = np.full(m, self.opening) if opening is None else np.broadcast_to(np.asarray(opening, float), (m,))
-        self.open_parts.append(np.array(op))
-        self.att_parts.append(np.full(m, self.attached, dtype=object))
-        self.step_parts.append(np.full(m, step))
+        if opening is None:
+            self.open_parts.append(np.full(m, float(self.opening)))
+        else:
+            self.open_parts.append(np.array(np.broadcast_to(np.asarray(opening, float), (m,))))
+        self.seg_lengths.append(m)
+        self.seg_attached.append(self.attached)
+        self.seg_steps.append(step)
         self.sample_count += m
         self.t0 += seg.duration_s
 
@@ -882,9 +888,10 @@ class Planner:
         self.q_parts.append(self.q[None, :])
         self.t_parts.append(np.array([self.t0]))
         self.open_parts.append(np.array([self.opening]))
-        self.att_parts.append(np.array([self.attached], dtype=object))
         last_step = len(self.steps) - 1 if self.steps else 0
-        self.step_parts.append(np.array([max(last_step, 0)]))
+        self.seg_lengths.append(1)
+        self.seg_attached.append(self.attached)
+        self.seg_steps.append(max(last_step, 0))
         self.sample_count += 1
         q = np.concatenate(self.q_parts)
         t = np.concatenate(self.t_parts)
@@ -892,8 +899,8 @@ class Planner:
             q,
             t,
             np.concatenate(self.open_parts),
-            np.concatenate(self.att_parts).astype(str),
-            np.concatenate(self.step_parts),
+            np.repeat(np.array(self.seg_attached, dtype=object), self.seg_lengths).astype(str),
+            np.repeat(np.array(self.seg_steps, dtype=int), self.seg_lengths),
         )
 
     def object_poses(self, tcp: np.ndarray) -> dict[str, np.ndarray]:
