@@ -75,3 +75,13 @@ def test_first_of_equal_rows_counts_minus_zero_as_zero():
     A = np.array([[0.0, 1.0], [-0.0, 1.0], [2.0, 2.0]])
     assert first_of_equal_rows(A, np.array([[-0.0, 1.0]])).tolist() == [0]
     assert first_of_equal_rows(A, np.zeros((0, 2))).tolist() == []
+
+
+@settings(max_examples=200, derandomize=True, deadline=None)
+@given(hnp.arrays(np.float64, st.tuples(st.integers(0, 50), st.integers(1, 13)), elements=small_floats))
+def test_row_max_and_row_any_are_numpys(A):
+    from robocritics._arrays import row_any, row_max
+
+    np.testing.assert_array_equal(row_max(A), A.max(axis=1))  # NaN where a row holds one, in both
+    np.testing.assert_array_equal(row_any(A > 0.5), (A > 0.5).any(axis=1))
+    np.testing.assert_array_equal(row_any(A[:, :0]), A[:, :0].any(axis=1))

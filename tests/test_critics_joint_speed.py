@@ -128,3 +128,17 @@ def test_agrees_with_the_per_sample_reference(traj, overrides):
     v = c.check(traj, None, p)
     assert_matches_reference(v, ref_joint_speed(traj, p))
     assert_well_formed(v, "joint_speed")
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**32 - 1), T=st.integers(2, 200), L=st.integers(1, 13))
+def test_link_speeds_are_the_per_sample_distance_over_time(seed, T, L):
+    from robocritics.critics.joint_speed import link_speeds
+
+    rng = np.random.default_rng(seed)
+    X = rng.normal(scale=rng.choice([1e-4, 0.3, 5.0]), size=(T, L, 3))
+    time = np.cumsum(rng.uniform(1e-3, 1e-2, size=T))
+    want = np.array(
+        [[np.linalg.norm(X[i + 1, k] - X[i, k]) / (time[i + 1] - time[i]) for k in range(L)] for i in range(T - 1)]
+    )
+    np.testing.assert_allclose(link_speeds(X, time), want, rtol=1e-14, atol=0)

@@ -40,6 +40,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from .. import hookimpl
+from .._arrays import row_any, row_max
 from ..critic import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["JointSpeedCritic", "register_critics", "link_speeds"]
@@ -90,7 +91,12 @@ def link_speeds(positions: np.ndarray, time: np.ndarray) -> np.ndarray:
     """
     p = np.ascontiguousarray(positions)  # contiguous: faster to difference than a strided view (no copy if already)
     step = p[1:] - p[:-1]  # (T-1, L, 3) m
-    speed = np.sqrt(np.einsum("tli,tli->tl", step, step))  # einsum: twice as fast as np.linalg.norm over xyz
+    x, y, z = step[..., 0], step[..., 1], step[..., 2]
+    # |step|^2 as x^2 + z^2 + y^2, the order einsum("tli,tli->tl") adds in (bit for bit), at a third of its cost
+    speed = x * x
+    speed += z * z
+    speed += y * y
+    np.sqrt(speed, out=speed)
     speed /= np.diff(time)[:, None]
     return speed
 
@@ -125,7 +131,7 @@ class JointSpeedCritic:
 
         # --- measure: all samples at once --------------------------------------
         v = link_speeds(positions, time)  # (T-1, L), speed reached at sample t = i + 1
-        vmax = v.max(axis=1)  # (T-1,) fastest link per sample
+        vmax = row_max(v)  # (T-1,) fastest link per sample
         wi = int(np.argmax(vmax))
         wl = int(np.argmax(v[wi]))
         worst_v = float(v[wi, wl])
@@ -136,7 +142,7 @@ class JointSpeedCritic:
             ji, jj = divmod(jflat, ratio.shape[1])
             worst_ratio = float(ratio[ji, jj])
             over_joint = ratio > 1.0 + params.joint_limit_tolerance  # (T-1, n)
-            over_joint_rows = over_joint.any(axis=1)
+            over_joint_rows = row_any(over_joint)
         else:
             ji = jj = 0
             worst_ratio = 0.0

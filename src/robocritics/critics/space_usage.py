@@ -44,7 +44,7 @@ import numpy as np
 from pydantic import Field
 
 from .. import hookimpl
-from .._arrays import unique_values
+from .._arrays import row_max, unique_values
 from ..critic import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
 from ..robot.hull import convex_hull
 
@@ -163,7 +163,7 @@ class SpaceUsageCritic:
 
         # --- leaving the workspace: every point ---------------------------------
         outside = np.asarray(workspace.outside_distance(X), dtype=float)  # (T, L) m, > 0 outside
-        per_sample = np.ascontiguousarray(outside.T).max(axis=0)  # elementwise maxima of whole rows: 3x faster
+        per_sample = row_max(outside)
         oi = int(np.argmax(per_sample))
         ol = int(np.argmax(outside[oi]))
         worst_out = float(outside[oi, ol])
