@@ -85,3 +85,14 @@ def test_row_max_and_row_any_are_numpys(A):
     np.testing.assert_array_equal(row_max(A), A.max(axis=1))  # NaN where a row holds one, in both
     np.testing.assert_array_equal(row_any(A > 0.5), (A > 0.5).any(axis=1))
     np.testing.assert_array_equal(row_any(A[:, :0]), A[:, :0].any(axis=1))
+
+
+@settings(max_examples=200, derandomize=True, deadline=None)
+@given(hnp.arrays(np.float64, st.tuples(st.integers(0, 50), st.integers(1, 13)), elements=small_floats), st.data())
+def test_min_over_columns_is_the_gathered_row_minimum(A, data):
+    from robocritics._arrays import min_over_columns
+
+    picked = data.draw(st.lists(st.integers(0, A.shape[1] - 1), max_size=A.shape[1], unique=True))
+    columns = np.array(picked, dtype=np.intp)
+    want = A[:, columns].min(axis=1) if len(columns) else np.full(len(A), np.inf)
+    np.testing.assert_array_equal(min_over_columns(A, columns), want)
