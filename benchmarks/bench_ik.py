@@ -4,6 +4,7 @@ Reproduce with::
 
     .venv/bin/python benchmarks/bench_ik.py            # 200 targets, seed 7
     .venv/bin/python benchmarks/bench_ik.py --n 1000 --seed 1
+    .venv/bin/python benchmarks/bench_ik.py --lines       # also ur_ik_line along straight lines
 
 What is measured
 ----------------
@@ -35,6 +36,10 @@ What is measured
     is one ``solve`` (how the prototype used it); "converged" repeats
     ``solve`` until the joints move less than 1e-6 rad between calls (at
     most 50 calls) and times all calls.
+* ``--lines``: ``ur_ik_line`` (the planner's dense IK of a straight line, each pose seeded by the previous
+  solution) on fingers-down lines of 30 to 1000 poses across the UR3e's workspace, against ``ur_ik`` pose by
+  pose: CPU time (``time.process_time``) per pose, the minimum of 7 repeats (the lines of the bundled
+  programs have 17-43 poses; from ``ik._VECTORISED_WALK_POSES`` poses on the line is solved vectorised).
 """
 
 from __future__ import annotations
@@ -52,7 +57,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pinocchio as pin
 
-from robocritics.robot.ik import UR3E_DH, dh_forward, dh_urdf, numeric_ik, ur_ik, ur_ik_all
+from robocritics.robot.ik import UR3E_DH, dh_forward, dh_urdf, numeric_ik, ur_ik, ur_ik_all, ur_ik_line
 
 REPRO = ".venv/bin/python benchmarks/bench_ik.py"
 LOWER = np.full(6, -2.0 * math.pi)
@@ -219,6 +224,41 @@ def bench_lively(poses: np.ndarray, seeds: np.ndarray) -> list[Result]:
     ]
 
 
+def bench_lines(sizes: tuple[int, ...] = (30, 120, 300, 1000), repeats: int = 7) -> str:
+    """ur_ik_line vs ur_ik pose by pose on fingers-down straight lines: CPU us per pose (min of ``repeats``)."""
+    from robocritics import Robot
+    from robocritics.robot.model import fingers_down
+
+    robot = Robot.ur3e()
+    lines = [f"{'poses':>6} {'ur_ik per pose us':>18} {'ur_ik_line per pose us':>23} {'ratio':>6}"]
+    for n in sizes:
+        points = np.array([0.25, -0.1, 0.15]) + np.linspace(0.0, 1.0, n)[:, None] * np.array([0.05, 0.2, 0.1])
+        tcp = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+        tcp[:, :3, :3], tcp[:, :3, 3] = fingers_down(0.3), points
+        flanges = tcp @ robot._flange_in_tcp
+
+        def walk() -> np.ndarray:
+            seed, rows = robot.home_q, []
+            for F in flanges:
+                seed = ur_ik(robot.dh, F, seed, robot.lower, robot.upper)
+                rows.append(seed)
+            return np.array(rows)
+
+        def line() -> np.ndarray:
+            return ur_ik_line(robot.dh, flanges, robot.home_q, robot.lower, robot.upper)[0]
+
+        assert np.max(np.abs(walk() - line())) <= 1e-12
+        best = {walk: math.inf, line: math.inf}
+        for _ in range(repeats):
+            for f in (walk, line):  # interleaved: the same machine load for both
+                t0 = time.process_time()
+                f()
+                best[f] = min(best[f], time.process_time() - t0)
+        a, b = best[walk] / n * 1e6, best[line] / n * 1e6
+        lines.append(f"{n:>6} {a:>18.1f} {b:>23.1f} {b / a:>6.2f}")
+    return "\n".join(lines)
+
+
 def table(results: list[Result], reference: Result | None) -> str:
     head = (f"{'solver':<38} {'median us':>10} {'p90 us':>10} {'max pos err m':>14} "
             f"{'max rot err rad':>16} {'ok 1e-6':>8} {'speed-up vs lively':>19}")
@@ -239,6 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n", type=int, default=200, help="number of targets (default 200)")
     ap.add_argument("--seed", type=int, default=7, help="random seed (default 7)")
     ap.add_argument("--no-lively", action="store_true", help="skip lively-tk")
+    ap.add_argument("--lines", action="store_true", help="also time ur_ik_line along straight lines")
     args = ap.parse_args(argv)
 
     q_true, poses, seeds = make_targets(args.n, args.seed)
@@ -263,6 +304,10 @@ def main(argv: list[str] | None = None) -> int:
     print()
     if reference is not None:
         print("speed-up = median time of 'lively-tk Solver.solve (1 call)' / median time of the row")
+    if args.lines:
+        print()
+        print("ur_ik_line along fingers-down straight lines vs ur_ik pose by pose (CPU us per pose, min of 7):")
+        print(bench_lines())
     print(f"reproduce: {REPRO}")
     return 0
 
