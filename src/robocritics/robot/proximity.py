@@ -1175,12 +1175,20 @@ def _shape_runs(items: Sequence[tuple[Shape, Shape, np.ndarray, np.ndarray, np.n
                 out[todo[(ub <= 0.0) & (ub - lb <= _CERTIFIED_M)]] = np.nan
         for k, lo, hi in zip(ks, offsets[:-1], offsets[1:]):
             vals[k][:] = out[lo:hi]
-    for k, j in twins:
-        vals[k][:] = vals[j]
+    twin_of = dict(twins)  # each twin comes after the pair it copies
+    asked: list[np.ndarray] = []  # per pair: where coal gave the value
     for k, v in enumerate(vals):
-        need = np.flatnonzero(np.isnan(v))  # each order asks coal itself: its EPA is not exactly symmetric
-        if len(need):
+        j = twin_of.get(k)
+        if j is not None:
+            v[:] = vals[j]
+            # coal's GJK distances are symmetric (to its tolerance), its EPA depths not exactly: where the twin's
+            # coal value is an overlap, this order asks coal itself, as it always did
+            v[asked[j] & (v <= 0.0)] = np.nan
+        need = np.isnan(v)
+        asked.append(need)
+        if need.any():
             a, b, Pa, Pb, _ = items[k]
+            need = np.flatnonzero(need)
             v[need] = _coal_values(a, b, Pa, Pb, firsts[k][need])
     return [v[runs[id(item[4])][1]] for v, item in zip(vals, items)]
 
