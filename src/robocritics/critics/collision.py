@@ -91,12 +91,20 @@ class Counted:
             return
         entities = [pairs[k].b_entity for k in self.gcols]
         carriers = [pairs[k].a if pairs[k].group_a == "attached" else None for k in self.gcols]
-        excluded = None
-        # contacts allowed by each program step: an (S, Kg) table, indexed by the step of each sample
+        # contacts allowed by each program step: an (S, Kg) table; a step names a few contacts, so mark the
+        # columns of each named entity (not a test of every entity against every step's contacts)
+        table = None
         if trajectory.steps:
-            table = np.array([[e != "" and e in s.contacts for e in entities] for s in trajectory.steps], dtype=bool)
-            if table.any():
-                excluded = table[trajectory.step]
+            columns_of: dict[str, list[int]] = {}
+            for j, e in enumerate(entities):
+                if e != "":
+                    columns_of.setdefault(e, []).append(j)
+            table = np.zeros((len(trajectory.steps), len(entities)), dtype=bool)
+            for i, s in enumerate(trajectory.steps):
+                for e in s.contacts:
+                    table[i, columns_of.get(e, [])] = True
+            if not table.any():
+                table = None
         # the object held at t: run-length code `attached` (it changes a few times per program), then per
         # run: the gripper against the held object is intended, and a carried-object pair only exists
         # while that object is the one held
@@ -108,8 +116,17 @@ class Counted:
             ],
             dtype=bool,
         )
-        if att_table.any():
-            excluded = att_table[run] if excluded is None else excluded | att_table[run]
+        if not att_table.any():
+            att_table = None
+        # per sample, the row of its (step, run): both tables combined into one small (S R, Kg) table first,
+        # so the (T, Kg) mask is one gather (two gathers and their `or` cost 2x)
+        if table is not None and att_table is not None:
+            both = (table[:, None, :] | att_table[None, :, :]).reshape(-1, len(entities))
+            excluded = both[trajectory.step * len(held) + run]
+        elif table is not None:
+            excluded = table[trajectory.step]
+        else:
+            excluded = None if att_table is None else att_table[run]
         self.intended = excluded
 
     def row_mask(self, rows) -> np.ndarray:
