@@ -1002,7 +1002,8 @@ def _nearest_chain(
     q: np.ndarray, exists: np.ndarray, seed: np.ndarray, lo: np.ndarray, hi: np.ndarray
 ) -> tuple[np.ndarray, int]:
     """The nearest branch of each pose seeded by the previous pose's choice (the first by ``seed``):
-    ``(solutions (m, 6) rad, m)``, ``m`` the first pose with no branch within the limits (``n`` if none).
+    ``(solutions (m, 6) rad, m)``, ``m`` the first pose with no branch within the limits, or one that
+    :func:`_branches_many` leaves to :func:`_nearest_solution` (``n`` if none).
 
     The choice of pose ``i`` depends on that of ``i - 1``. Rather than a Python step per pose, every pose is
     solved at once for guessed seeds (the previous pass's choices, shifted by one pose), and again until the
