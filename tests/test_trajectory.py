@@ -120,3 +120,24 @@ def test_positions_are_the_frame_origins_shared_read_only_and_not_pickled(execut
     assert again.content_hash() == traj.content_hash()
     part = traj.slice(3, 10)
     np.testing.assert_array_equal(part.positions, pos[3:10])
+
+
+def _content_hash_reference(traj):
+    """The hash written plainly: each array's little-endian bytes, then every sample's held-object id joined by NUL."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for arr in (traj.q, traj.time, traj.gripper_opening_m):
+        h.update(np.ascontiguousarray(arr, dtype="<f8").tobytes())
+    h.update("\x00".join(traj.attached.tolist()).encode())
+    h.update(",".join(traj.limits.joint_names).encode())
+    return h.hexdigest()
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.lists(st.sampled_from(["", "apple", "cup_é", "a\x00b", "apple2"]), min_size=1, max_size=12))
+def test_content_hash_is_the_plain_per_sample_hash(attached):
+    kw = _kwargs(len(attached))
+    kw["attached"] = attached
+    traj = Trajectory(**kw)
+    assert traj.content_hash() == _content_hash_reference(traj)

@@ -326,8 +326,14 @@ class Trajectory:
         """
         h = hashlib.sha256()
         for arr in (self.q, self.time, self.gripper_opening_m):
-            h.update(np.ascontiguousarray(arr, dtype="<f8").tobytes())
-        h.update("\x00".join(self.attached.tolist()).encode())
+            h.update(np.ascontiguousarray(arr, dtype="<f8"))  # the buffer itself: no bytes copy
+        # "\x00".join(attached), built from its runs (the held object changes a few times per program):
+        # the same text as joining every sample's id, without a Python string per sample
+        attached = self.attached
+        if len(attached):
+            start = np.flatnonzero(np.concatenate(([True], attached[1:] != attached[:-1])))
+            count = np.diff(np.append(start, len(attached))).tolist()
+            h.update("".join((v + "\x00") * n for v, n in zip(attached[start].tolist(), count))[:-1].encode())
         h.update(",".join(self.limits.joint_names).encode())
         return h.hexdigest()
 
