@@ -1665,7 +1665,7 @@ class ProximityKernel:
             if g.product:
                 for t0, t1, pose in self._chunks(g, T, poses, far=cut is not None and g.kind != "sphere"):
                     c = None if cut is None or g.kind == "sphere" else cut[t0:t1]
-                    self._product(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], buf, t0, hits, c, pose, lbs.get((gi, t0)))
+                    self._product(g, P0, D, t0, t1, buf, hits, c, pose, lbs.get((gi, t0)))
                 continue
             step = max(64, self.chunk // max(len(g.cols), 1))
             for t0 in range(0, T, step):
@@ -1814,28 +1814,33 @@ class ProximityKernel:
     def _product(
         self,
         g: _Group,
-        a: np.ndarray,
-        d: np.ndarray,
-        buf: np.ndarray,
+        P0: np.ndarray,
+        D: np.ndarray,
         t0: int,
+        t1: int,
+        buf: np.ndarray,
         hits: dict,
         cut: np.ndarray | None,
         pose: np.ndarray | None,
         lbs: list | None = None,
     ) -> None:
-        """Evaluate one product group for the samples ``t0 ..``; ``a``, ``d``: ``(3, Cg, n)`` segment starts, directions.
+        """Evaluate one product group for the samples ``t0 .. t1``; ``P0``, ``D``: ``(3, C, T)`` segment starts and
+        directions of every capsule.
 
         ``pose (n, 4, 4)``: the per-sample pose of a moving group's shape. ``cut (n,)``: :meth:`_bounds` has
         written block lower bounds ``lbs`` into ``buf``; only the blocks whose bound is ``<= cut`` somewhere in
         the block are evaluated exactly (gathered into one flat batch per shape), the others keep their bound.
         """
         T = buf.shape[1]
-        n = a.shape[2]
+        n = t1 - t0
         r = g.r
         if cut is not None:
             flat = buf.reshape(-1)
             cut_b = _blocks(cut[None], lbs[0].shape[1])[0].max(axis=1)
-            a2, d2 = np.ascontiguousarray(a).reshape(3, -1), np.ascontiguousarray(d).reshape(3, -1)  # for flat takes
+            # flat takes of the entries straight from (3, C * T): no (3, Cg, n) copy of the group's capsules
+            Tp = P0.shape[2]
+            a2, d2 = np.ascontiguousarray(P0).reshape(3, -1), np.ascontiguousarray(D).reshape(3, -1)
+            base = g.caps * Tp + t0
             for s, lb in enumerate(lbs):
                 rows = g.rows[s]
                 near = lb <= cut_b
@@ -1848,8 +1853,7 @@ class ProximityKernel:
                 if n % _BLOCK:  # the last block is short
                     ok = ti < n
                     ci, ti = ci[ok], ti[ok]
-                # (3, m): one flat batch of (capsule, sample) entries (a flat take: 2x faster than a[:, ci, ti])
-                flat_i = ci * n + ti
+                flat_i = base[ci] + ti  # (3, m): one flat batch of (capsule, sample) entries
                 ga, gd = np.take(a2, flat_i, axis=1), np.take(d2, flat_i, axis=1)
                 if pose is not None:
                     R, c0 = pose[ti, :3, :3], pose[ti, :3, 3]
@@ -1864,7 +1868,7 @@ class ProximityKernel:
                 self._shape_eval(g.kind, ga, gd, self._prep(g.kind, gd), c, size, r[ci, 0][None], lambda ci, ti: where[ti], hits, o)
                 flat[where] = o[0]
             return
-        a, d = self._local(g, a, d, pose)
+        a, d = self._local(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], pose)
         aux = self._prep(g.kind, d)
         for s in range(len(g.centre[0])):
             c = tuple(ci[s] for ci in g.centre)
