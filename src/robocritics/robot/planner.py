@@ -641,7 +641,8 @@ class Planner:
         # every grid point seeded by the previous one's solution, in one call; then the errors in the order a
         # point-by-point walk meets them: a joint jump before the first point that has no solution
         q_grid, failure = self.robot.ik_line(points, seed=self.q, yaw_rad=self.yaw)
-        jumps = np.flatnonzero(np.max(np.abs(np.diff(q_grid, axis=0)), axis=1) > self.settings.line_max_joint_step_rad)
+        joint_steps = np.abs(np.diff(q_grid, axis=0))  # (n - 1, joints) rad between grid points
+        jumps = np.flatnonzero(joint_steps.max(axis=1) > self.settings.line_max_joint_step_rad)
         if len(jumps):
             x, y, z = points[jumps[0] + 1]
             raise PlanningError(
@@ -656,7 +657,7 @@ class Planner:
             err.call, err.target_m, err.yaw_rad = call, tuple(float(v) for v in point), float(self.yaw)
             err.goal_m = tuple(float(v) for v in goal)  # the line's end, beyond the point that failed
             raise err
-        dq_ds = np.max(np.abs(np.diff(q_grid, axis=0)), axis=0) / (length / (n_grid - 1))
+        dq_ds = joint_steps.max(axis=0) / (length / (n_grid - 1))
         joint_cap = np.min(JOINT_SPEED_MARGIN * self.limits.velocity / np.maximum(dq_ds, _STILL_JOINT_RAD_PER_M))
         f = self.speed
         v = min(self.settings.linear_speed_mps, joint_cap) * f
