@@ -6,7 +6,9 @@ Cases: the UR3e (10 capsules) on a pick-and-place-like joint trajectory of
 T = 10,000 samples through each built-in scene (every capsule against every
 scene shape, plus the robot's self pairs), with the FK time for scale; a
 synthetic chain of 10 capsules wandering through the scenes (many more
-contacts, so more depth computations); and the pure kernels on flat arrays.
+contacts, so more depth computations); an object carried low over each scene
+against its boxes and cylinders (the closed-form bounds and the coal calls they
+leave); and the pure kernels on flat arrays.
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ def main() -> None:
     args = ap.parse_args()
     T = args.T
     bench_ur3e(T, args.repeat)
+    bench_carried(T, args.repeat)
     p0, p1 = capsule_trajectory(T)
     C = p0.shape[1]
     caps = [(f"c{i}", 0.04) for i in range(C)]
@@ -152,6 +155,49 @@ def bench_ur3e(T: int, repeat: int) -> None:
             f"proximity exact {t_exact*1e3:5.1f} ms, far_m=0.1 {t_far*1e3:5.1f} ms; "
             f"min distance {D.min():+.3f} m"
         )
+
+
+def bench_carried(T: int, repeat: int) -> None:
+    """A box and a cylinder carried low over each built-in scene (a new pose every sample, upright, turning
+    slowly), against every box and cylinder of the scene: the time, and how many samples still went to coal."""
+    from robocritics.robot import proximity as prox
+    from robocritics.scene import Shape, rpy_matrix
+
+    s = np.linspace(0.0, 1.0, T)
+    poses = np.tile(np.eye(4), (T, 1, 1))
+    poses[:, :3, 3] = np.stack([0.3 * np.cos(2 * np.pi * s), 0.3 * np.sin(2 * np.pi * s), 0.06 + 0.1 * s * (1 - s)], axis=1)
+    for t in range(T):
+        poses[t, :3, :3] = rpy_matrix((0.0, 0.0, 3.0 * s[t]))
+    asked = [0]
+    coal_values = prox._coal_values
+
+    def counting(a, b, Pa, Pb, at):
+        asked[0] += len(at)
+        return coal_values(a, b, Pa, Pb, at)
+
+    for kind, size in (("box", (0.06, 0.05, 0.1)), ("cylinder", (0.035, 0.09))):
+        for name in Scene.builtin_names():
+            shapes = [sh for sh in Scene.builtin(name).shapes() if sh.kind != "sphere"]
+            held = Shape("held", "held", kind, size, np.eye(4))
+            kern = ProximityKernel([("link", 0.01)], shapes + [held], [("held", sh.name) for sh in shapes], moving={"held"})
+            z = np.zeros((T, 1, 3))
+            t_exact = timeit(lambda: kern.distances(z, z, poses={"held": poses}), repeat)
+            t_far = timeit(lambda: kern.distances(z, z, poses={"held": poses}, far_m=0.1), repeat)
+            prox._coal_values = counting
+            try:
+                asked[0] = 0
+                kern.distances(z, z, poses={"held": poses})
+                n_exact = asked[0]
+                asked[0] = 0
+                kern.distances(z, z, poses={"held": poses}, far_m=0.1)
+                n_far = asked[0]
+            finally:
+                prox._coal_values = coal_values
+            n = T * len(shapes)
+            print(
+                f"carried {kind:8s} over {name:9s} T={T}: {len(shapes)} pairs; exact {t_exact*1e3:6.1f} ms "
+                f"(coal for {n_exact}/{n} samples), far_m=0.1 {t_far*1e3:6.1f} ms (coal for {n_far})"
+            )
 
 
 if __name__ == "__main__":

@@ -64,16 +64,17 @@ everywhere (a point inside a box or cylinder has the depth of its nearest
 face). Box or cylinder against box or cylinder has no closed form in general,
 but two closed-form bounds settle most real placements (:func:`_convex_bounds`):
 the projection gap ``n.(c_B - c_A) - h_A(n) - h_B(n)`` along any unit ``n`` is
-a lower bound of the signed distance (it is the maximum over ``n``), and the
-signed distance of any point of one shape to the other an upper bound. Along
-the face normals and centre directions, with the support points of the best
-one (and a round of alternating projections, :func:`_refine_bounds`), the two
-meet to 1e-12 m whenever a face of one faces the other: an object carried over
-the table, lowered into a bin or set on a plate. The rest (a rim against an
+a lower bound of the signed distance (which is the maximum of the gap over
+``n``), and the signed distance of any point of one shape to the other an upper
+bound. Along the face normals and centre directions, with the support points of
+the best one (and a round of alternating projections, :func:`_refine_bounds`),
+the two meet to 1e-12 m whenever the nearest feature of one shape is a face of
+the other: an object carried over the table, lowered into a bin or set on a
+plate. The rest (a rim against an
 edge, overlapping cylinders) goes to ``coal.distance``, once per run of samples
 in which neither pose changes (~3 us per call), GJK to 1e-10 m when apart, EPA
-when overlapping (boxes exact; cylinders to ~1e-5 m): on the bundled programs
-about a fifth of the samples that coal used to see (:func:`_shape_runs`).
+when overlapping (boxes exact; cylinders to ~1e-5 m): on the six bundled
+programs 3,551 of the 12,460 samples coal used to see (:func:`_shape_runs`).
 
 :class:`ProximityKernel` batches it all for a trajectory: built once from the
 capsules, the scene shapes, the pairs and the names of the shapes that move,
