@@ -1742,6 +1742,8 @@ class ProximityKernel:
         elif g.rot is not None:
             balls = [(np.tensordot(g.rot.T, c, axes=1), rho) for c, rho in balls]
         r = g.r
+        if pose is None:
+            return self._static_bounds(g, balls, n, buf, t0, upper, tight)
         out = []
         for s in range(len(g.centre[0])):
             rows = g.rows[s]
@@ -1763,6 +1765,37 @@ class ProximityKernel:
                     ub = np.repeat(ub.min(axis=0), _BLOCK)[:n]
                     np.minimum(upper[t0 : t0 + n], ub, out=upper[t0 : t0 + n])
         return out
+
+    @staticmethod
+    def _static_bounds(g, balls, n, buf, t0, upper, tight) -> list:
+        """:meth:`_bounds` for a group of static shapes: every shape at once, ``(S, Cg, blocks)`` arrays."""
+        S = len(g.centre[0])
+        centre = [np.asarray(v, dtype=_FLOAT)[:, None, None] for v in g.centre]
+        size = [np.asarray(v, dtype=_FLOAT)[:, None, None] for v in g.size]
+        e = [ProximityKernel._outside_all(g.kind, c, centre, size) for c, _ in balls]
+        lb = e[0] - balls[0][1] - g.r  # (S, Cg, nb)
+        rows = np.stack(g.rows)  # (S, Cg)
+        keep = rows >= 0
+        buf[rows[keep], t0 : t0 + n] = np.repeat(lb[keep], _BLOCK, axis=1)[:, :n]
+        if tight is not None:
+            sel = keep & tight[np.where(keep, rows, 0)]
+            if sel.any():
+                ub = np.minimum.reduce([(x + rho)[sel] for x, (_, rho) in zip(e, balls)])
+                ub -= np.broadcast_to(g.r, (S,) + g.r.shape)[sel]
+                ub = np.repeat(ub.min(axis=0), _BLOCK)[:n]
+                np.minimum(upper[t0 : t0 + n], ub, out=upper[t0 : t0 + n])
+        return list(lb)
+
+    @staticmethod
+    def _outside_all(kind: str, p, centre, size) -> np.ndarray:
+        """:meth:`_outside` for every shape of a group at once: ``centre``, ``size`` as ``(S, 1, 1)`` arrays."""
+        ex = [np.abs(v - ci) for v, ci in zip(p, centre)]
+        if kind == "box":
+            out = sum(np.maximum(e - h, 0.0) ** 2 for e, h in zip(ex, size))
+        else:
+            rad = np.maximum(np.sqrt(ex[0] ** 2 + ex[1] ** 2) - size[0], 0.0)
+            out = rad * rad + np.maximum(ex[2] - size[1], 0.0) ** 2
+        return np.sqrt(out, out=out)
 
     @staticmethod
     def _size_of(g: _Group) -> list[float]:
