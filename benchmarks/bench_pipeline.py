@@ -1,7 +1,7 @@
 """CPU per program of the check pipeline: warm simulate()+critique() per bundled program, and a cold CLI check.
 
 Warm: one process started with the tree's worker environment (``robocritics.child.WORKER_ENV``, as a batch
-worker and the studio's evaluator start: one BLAS thread, glibc malloc tunables; none for a tree without it), the
+worker and the studio's evaluator start: one BLAS thread, glibc malloc tunables; at 063c8da, ``robocritics.batch.local.WORKER_ENV``: one BLAS thread), the
 UR3e loaded once, each of the six bundled programs simulated and critiqued in its own
 scene (default critics, 125 Hz) once to warm caches, then REPEATS times; the table shows the least CPU
 (``time.process_time``: user + system of the process, all threads) per program and the mean over programs.
@@ -70,11 +70,15 @@ def warm(repeats: int) -> dict[str, float]:
 
 
 def worker_env(src: Path | None) -> dict[str, str]:
-    """The variables ``robocritics.child.WORKER_ENV`` of tree ``src`` adds to this environment ({} if it has none)."""
+    """The variables the worker environment of tree ``src`` adds to this one: ``robocritics.child.WORKER_ENV``, or
+    in older trees (063c8da) ``robocritics.batch.local.WORKER_ENV`` (one BLAS thread)."""
     env = dict(os.environ)
     if src is not None:
         env["PYTHONPATH"] = str(Path(src) / "src")
-    code = "import json\ntry:\n from robocritics.child import WORKER_ENV\nexcept ImportError:\n WORKER_ENV = {}\nprint(json.dumps(dict(WORKER_ENV)))"
+    code = (
+        "import json\ntry:\n from robocritics.child import WORKER_ENV\nexcept ImportError:\n"
+        " from robocritics.batch.local import WORKER_ENV\nprint(json.dumps(dict(WORKER_ENV)))"
+    )
     done = subprocess.run([sys.executable, "-c", code], env=env, cwd=ROOT, capture_output=True, text=True, check=True)
     return {k: v for k, v in json.loads(done.stdout).items() if k not in os.environ}
 
