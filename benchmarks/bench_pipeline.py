@@ -1,9 +1,9 @@
 """CPU per program of the check pipeline: warm simulate()+critique() per bundled program, and a cold CLI check.
 
 Warm: one process started with the tree's worker environment (``robocritics.child.WORKER_ENV``, as a batch
-worker and the studio's evaluator start: one BLAS thread, glibc malloc tunables; at 063c8da, ``robocritics.batch.local.WORKER_ENV``: one BLAS thread), the
-UR3e loaded once, each of the six bundled programs simulated and critiqued in its own
-scene (default critics, 125 Hz) once to warm caches, then REPEATS times; the table shows the least CPU
+worker and the studio's evaluator start: one BLAS thread, glibc malloc tunables; at 063c8da,
+``robocritics.batch.local.WORKER_ENV``: one BLAS thread), the UR3e loaded once, each of the six bundled programs
+simulated and critiqued in its own scene (default critics, 125 Hz) once to warm caches, then REPEATS times; the table shows the least CPU
 (``time.process_time``: user + system of the process, all threads) per program and the mean over programs.
 Programs/s per core is ``1000 / mean CPU ms``. Cold: ``robocritics check examples/programs/sorting_careful.py
 --scene sorting`` run as a child RUNS times, its user + system CPU from ``resource.getrusage(RUSAGE_CHILDREN)``,

@@ -33,6 +33,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arrays import unique_values
+
 if TYPE_CHECKING:  # pragma: no cover
     from ..report import Report
     from ..simulate import Execution
@@ -78,7 +80,7 @@ def _frame_samples(time_s: np.ndarray, keep: list[int]) -> np.ndarray:
     rate_hz = (T - 1) / max(float(time_s[-1] - time_s[0]), 1e-9)
     stride = max(1, int(math.ceil(rate_hz / MAX_FRAME_RATE_HZ - 1e-9)))
     picked = np.concatenate([np.arange(0, T, stride), np.asarray(keep, dtype=np.int64), [T - 1]])
-    return np.unique(picked[(picked >= 0) & (picked < T)])
+    return unique_values(picked[(picked >= 0) & (picked < T)])  # (np.unique would load numpy.ma)
 
 
 def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> tuple[np.ndarray, np.ndarray, float]:
