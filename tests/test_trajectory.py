@@ -141,3 +141,23 @@ def test_content_hash_is_the_plain_per_sample_hash(attached):
     kw["attached"] = attached
     traj = Trajectory(**kw)
     assert traj.content_hash() == _content_hash_reference(traj)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([1e308, -1e308, 1.7e308])),
+        min_size=1,
+        max_size=40,
+    )
+)
+def test_finiteness_check_raises_exactly_where_a_value_is_not_finite(values):
+    from robocritics.trajectory import _array
+
+    arr = np.array(values)
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        with pytest.raises(TrajectoryError, match=rf"not finite at index \({bad[0]},\)"):
+            _array("proximity", arr)
+    else:  # finite values whose sum overflows (1e308 + 1e308) are still accepted
+        assert np.array_equal(_array("proximity", arr), arr)

@@ -102,7 +102,12 @@ def _array(name: str, value, dtype=float, ndim: int | None = None) -> np.ndarray
     arr = np.asarray(value, dtype=dtype)
     if ndim is not None and arr.ndim != ndim:
         raise TrajectoryError(f"{name} must have {ndim} dimensions, got shape {arr.shape}")
-    if dtype is float and not np.all(np.isfinite(arr)):
+    # one pass without a temporary: a NaN or inf makes the sum non-finite (so can an overflow of finite values,
+    # which the exact test below then clears)
+    if dtype is float:
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = np.add.reduce(arr, axis=None)
+    if dtype is float and not np.isfinite(total) and not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise TrajectoryError(f"{name} is not finite at index {tuple(int(i) for i in bad)}")
     return arr
