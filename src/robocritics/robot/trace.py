@@ -155,7 +155,7 @@ def build_trajectory(
         rows = by_pair[bounds[:-1]]
         for k in np.flatnonzero(np.diff(bounds) > 1).tolist():
             np.minimum.reduce(by_pair[bounds[k] : bounds[k + 1]], axis=0, out=rows[k])
-        proximity = np.ascontiguousarray(rows.T)
+        proximity = rows.T  # (T, K) column-major: each pair's time series contiguous, as the critics read them
     return Trajectory(
         q=q,
         time=time,
