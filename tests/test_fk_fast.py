@@ -172,7 +172,7 @@ def test_build_trajectory_with_or_without_the_callers_frames_and_segments():
     traj = built[0]
     assert traj.attached.dtype.kind == "U" and list(traj.attached) == list(attached)
     assert [p.name for p in traj.pairs if p.a == "green_apple"]  # the carried object's pairs are there
-    assert traj.proximity.flags.c_contiguous and traj.proximity.shape == (T, len(traj.pairs))
+    assert traj.proximity.flags.f_contiguous and traj.proximity.shape == (T, len(traj.pairs))  # a column per pair
     # a container pair is the least over the container's shapes (floor and walls): against every shape
     # exactly, one kernel column each, then the minimum; exact up to EXACT_WITHIN_M, a larger bound beyond
     containers = {c.id: [s.name for s in c.shapes()] for c in scene.containers}
