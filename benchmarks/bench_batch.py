@@ -1,7 +1,8 @@
 """Batch throughput: programs/s and per-task overhead of the serial baseline, the local engine and Ray.
 
 The bundled example programs, repeated to ROWS rows (default 60), evaluated:
-serial in-process (one warm robot: simulate + critique), the local engine at 1 and 2 workers, and Ray at
+serial in-process (one warm robot: simulate + critique; one BLAS thread, set before numpy loads, as the command
+line does), the local engine at 1 and 2 workers, and Ray at
 2 workers (if ray is installed). Workers are started and warmed up before the clock starts (start-up is
 reported on its own). CPU is the workers' own (from /proc/<pid>/stat) plus this process's. Per-task
 overhead is ``workers * wall / rows - serial wall / rows``: what a row costs beyond doing it in-process.
@@ -14,6 +15,10 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
+
+from robocritics._threads import single_threaded_blas  # noqa: E402 - imports nothing heavy
+
+single_threaded_blas()  # idle OpenBLAS threads would add CPU to the serial row (the workers have one thread)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _table import print_table  # noqa: E402
