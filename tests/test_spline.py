@@ -97,23 +97,13 @@ def _numpy_thomas(diag, upper, lower, rhs):
 @settings(max_examples=200, deadline=None, derandomize=True)
 @given(knots(max_n=60))
 def test_not_a_knot_slopes_are_the_numpy_thomas_solution_bit_for_bit(data):
-    # the same tridiagonal system as _not_a_knot_slopes builds, solved by numpy row operations
-    from robocritics.robot.spline import _not_a_knot_slopes
+    # the system _not_a_knot_slopes builds, solved by numpy row operations
+    from robocritics.robot.spline import _not_a_knot_slopes, _not_a_knot_system
 
     x, y, _ = data
-    n = len(x)
-    if n < 4:
+    if len(x) < 4:
         return
     h = np.diff(x)
     hr = h.reshape((-1,) + (1,) * (y.ndim - 1))
-    m = np.diff(y, axis=0) / hr
-    diag, upper, lower, rhs = np.empty(n), np.zeros(n), np.zeros(n), np.empty_like(y)
-    diag[1:-1], upper[1:-1], lower[1:-1] = 2 * (h[:-1] + h[1:]), h[:-1], h[1:]
-    rhs[1:-1] = 3 * (hr[1:] * m[:-1] + hr[:-1] * m[1:])
-    d = x[2] - x[0]
-    diag[0], upper[0] = h[1], d
-    rhs[0] = ((hr[0] + 2 * d) * hr[1] * m[0] + hr[0] ** 2 * m[1]) / d
-    d = x[-1] - x[-3]
-    diag[-1], lower[-1] = h[-2], d
-    rhs[-1] = (hr[-1] ** 2 * m[-2] + (2 * d + hr[-1]) * hr[-2] * m[-1]) / d
+    diag, upper, lower, rhs = _not_a_knot_system(x, y, h, hr, np.diff(y, axis=0) / hr)
     assert np.array_equal(_not_a_knot_slopes(x, y), _numpy_thomas(diag, upper, lower, rhs))

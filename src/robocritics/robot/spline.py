@@ -66,18 +66,10 @@ def _hermite(x: np.ndarray, y: np.ndarray, slopes: np.ndarray, xs: np.ndarray) -
     return out
 
 
-def _not_a_knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _not_a_knot_system(x: np.ndarray, y: np.ndarray, h: np.ndarray, hr: np.ndarray, m: np.ndarray):
+    """``(diag, upper, lower, rhs)`` of the not-a-knot slopes' tridiagonal system (``n >= 4`` knots):
+    ``lower[i] s_{i-1} + diag[i] s_i + upper[i] s_{i+1} = rhs[i]``; ``h`` the knot spacing, ``m`` the secants."""
     n = len(x)
-    h = np.diff(x)
-    hr = h.reshape((-1,) + (1,) * (y.ndim - 1))
-    m = np.diff(y, axis=0) / hr
-    if n == 2:  # one piece: not-a-knot is the straight line
-        return np.stack([m[0], m[0]])
-    if n == 3:  # both ends' conditions coincide: the parabola through the three points
-        A = np.array([[1.0, 1.0, 0.0], [h[1], 2 * (h[0] + h[1]), h[0]], [0.0, 1.0, 1.0]])
-        b = np.stack([2 * m[0], 3 * (hr[0] * m[1] + hr[1] * m[0]), 2 * m[1]])
-        return np.linalg.solve(A, b.reshape(3, -1)).reshape(y.shape)
-    # tridiagonal system: lower[i] s_{i-1} + diag[i] s_i + upper[i] s_{i+1} = rhs[i]
     diag = np.empty(n)
     upper = np.zeros(n)
     lower = np.zeros(n)
@@ -92,6 +84,21 @@ def _not_a_knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     d = x[-1] - x[-3]
     diag[-1], lower[-1] = h[-2], d
     rhs[-1] = (hr[-1] ** 2 * m[-2] + (2 * d + hr[-1]) * hr[-2] * m[-1]) / d
+    return diag, upper, lower, rhs
+
+
+def _not_a_knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    n = len(x)
+    h = np.diff(x)
+    hr = h.reshape((-1,) + (1,) * (y.ndim - 1))
+    m = np.diff(y, axis=0) / hr
+    if n == 2:  # one piece: not-a-knot is the straight line
+        return np.stack([m[0], m[0]])
+    if n == 3:  # both ends' conditions coincide: the parabola through the three points
+        A = np.array([[1.0, 1.0, 0.0], [h[1], 2 * (h[0] + h[1]), h[0]], [0.0, 1.0, 1.0]])
+        b = np.stack([2 * m[0], 3 * (hr[0] * m[1] + hr[1] * m[0]), 2 * m[1]])
+        return np.linalg.solve(A, b.reshape(3, -1)).reshape(y.shape)
+    diag, upper, lower, rhs = _not_a_knot_system(x, y, h, hr, m)
     # Thomas algorithm (the system is diagonally dominant inside; scipy uses LAPACK's banded LU, which
     # pivots, so the two agree to rounding, not bit for bit). Each step is a few scalar operations: on Python
     # floats (the same IEEE operations as numpy's, so the same bits), one column at a time, it costs a fraction
