@@ -158,6 +158,7 @@ def main() -> None:
 
     before_src = None
     scratch = tempfile.TemporaryDirectory()
+    given_src = args[args.index("--before-src") + 1] if "--before-src" in args else None
     if "--fixed-before" in args:
         args.remove("--fixed-before")
     elif "--before-src" in args:
@@ -200,7 +201,10 @@ def main() -> None:
         ratio = (n / b if k.startswith("programs/s") else b / n) if b else None
         bs = f"{b:9.3f}" if b is not None else f"{'-':>9}"
         print(f"{k:<{w}}  {bs}  {n:9.3f}  {ratio:10.2f}" if ratio else f"{k:<{w}}  {bs}  {n:9.3f}")
-    print(f"before: commit {BEFORE_COMMIT}" + (" measured in this run" if before_src else " (fixed numbers of another day, see docstring)"))
+    if given_src:
+        print(f"before: the tree in {given_src}, measured in this run")
+    else:
+        print(f"before: commit {BEFORE_COMMIT}" + (" measured in this run" if before_src else " (fixed numbers of another day, see docstring)"))
     print(f"reproduce: .venv/bin/python benchmarks/bench_pipeline.py {' '.join(sys.argv[1:])}")
 
 
