@@ -119,6 +119,7 @@ __all__ = [
 ]
 
 _FLOAT = np.float64
+_EYE3 = np.eye(3)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1437,6 +1438,7 @@ class ProximityKernel:
         movers: dict[int, list[tuple[int, int, int]]] = {}
         selfs: list[tuple[int, int, int]] = []
         shape_pairs: list[tuple[int, int, int]] = []
+        rot_keys: dict[int, bytes] = {}  # shape index -> its rotation as a group key (b"": the identity)
         for k, (a, b) in enumerate(self.pairs):
             if a in shape_index and b in shape_index:
                 shape_pairs.append((k, shape_index[a], shape_index[b]))
@@ -1455,9 +1457,10 @@ class ProximityKernel:
                 if s.name in self._pose_key:
                     movers.setdefault(j, []).append((k, ia, j))
                     continue
-                rot = np.asarray(s.pose, dtype=_FLOAT)[:3, :3]
-                key = b"" if s.kind == "sphere" or np.array_equal(rot, np.eye(3)) else rot.tobytes()
-                static.setdefault((s.kind, key), []).append((k, ia, j))
+                if j not in rot_keys:  # once per shape, not per (capsule, shape) pair
+                    rot = np.asarray(s.pose, dtype=_FLOAT)[:3, :3]
+                    rot_keys[j] = b"" if s.kind == "sphere" or np.array_equal(rot, _EYE3) else rot.tobytes()
+                static.setdefault((s.kind, rot_keys[j]), []).append((k, ia, j))
             else:
                 raise ValueError(f"pair {k} {(a, b)}: {b!r} is neither a capsule nor a scene shape")
         self.owners = tuple(owners)
@@ -1493,7 +1496,7 @@ class ProximityKernel:
         views = [_as_slice(rr) for rr in out_rows]
         shapes = [self.shapes[j] for j in shp]
         rot = np.asarray(shapes[0].pose, dtype=_FLOAT)[:3, :3]
-        rot = None if kind == "sphere" or np.array_equal(rot, np.eye(3)) else rot.copy()
+        rot = None if kind == "sphere" or np.array_equal(rot, _EYE3) else rot.copy()
         centres = np.array([np.asarray(s.pose, dtype=_FLOAT)[:3, 3] for s in shapes])  # (Sg, 3)
         if rot is not None:
             centres = centres @ rot  # R^T c, row by row
