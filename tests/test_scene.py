@@ -75,3 +75,36 @@ def test_container_inside_is_free_space():
 def test_round_trip_json():
     scene = Scene.builtin("breakfast")
     assert Scene.model_validate(json.loads(scene.to_json())) == scene
+
+
+def _contains_point_by_matrix(container, point, margin_m):
+    """The obvious reference: the point in the container frame by the rotation matrix."""
+    import numpy as np
+
+    from robocritics.scene import rpy_matrix
+
+    local = rpy_matrix((0, 0, container.yaw)).T @ (np.asarray(point, float) - np.asarray(container.position))
+    hx, hy = container.size[0] / 2 - container.wall_m, container.size[1] / 2 - container.wall_m
+    return bool(
+        abs(local[0]) <= hx + margin_m
+        and abs(local[1]) <= hy + margin_m
+        and container.floor_top - margin_m <= point[2] <= container.top + margin_m
+    )
+
+
+def test_container_contains_point_agrees_with_the_rotation_matrix():
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from robocritics.scene import Container
+
+    coord = st.floats(-0.5, 0.5)
+
+    @settings(max_examples=500, deadline=None, derandomize=True)
+    @given(coord, coord, st.floats(-3.2, 3.2), coord, coord, st.floats(0.0, 0.3), st.floats(0.0, 0.02))
+    def check(x, y, yaw, px, py, pz, margin_m):
+        container = Container(id="bin", position=(x, y, 0.05), size=(0.2, 0.15, 0.1), yaw=yaw)
+        point = (px, py, pz)
+        assert container.contains_point(point, margin_m) == _contains_point_by_matrix(container, point, margin_m)
+
+    check()

@@ -469,12 +469,15 @@ class Container(_Model):
 
     def contains_point(self, point: Vec3, margin_m: float = 0.0) -> bool:
         """Whether ``point`` lies in the inner volume (between the walls, above the floor, below the rim)."""
-        local = rpy_matrix((0, 0, self.yaw)).T @ (np.asarray(point, float) - np.asarray(self.position))
+        # Rz(yaw)^T (point - position) on Python floats: the planner asks this per candidate support
+        px, py, pz = (float(v) for v in point)
+        dx, dy = px - float(self.position[0]), py - float(self.position[1])
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
         hx, hy = self.size[0] / 2 - self.wall_m, self.size[1] / 2 - self.wall_m
-        return bool(
-            abs(local[0]) <= hx + margin_m
-            and abs(local[1]) <= hy + margin_m
-            and self.floor_top - margin_m <= point[2] <= self.top + margin_m
+        return (
+            abs(c * dx + s * dy) <= hx + margin_m
+            and abs(c * dy - s * dx) <= hy + margin_m
+            and self.floor_top - margin_m <= pz <= self.top + margin_m
         )
 
     def shapes(self) -> list[Shape]:
