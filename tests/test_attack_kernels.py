@@ -268,6 +268,30 @@ def test_capsule_groups_with_a_cutoff_at_block_and_chunk_edges(T, chunk):
                 np.testing.assert_allclose(D[:, columns].min(axis=1), exact[:, columns].min(axis=1), rtol=0, atol=1e-15)
 
 
+@pytest.mark.parametrize("far", [0.0, 0.01, 0.03])
+@pytest.mark.parametrize("radius", [0.0, 0.01, 0.025])
+def test_capsule_values_within_a_few_ulps_of_the_cutoff(far, radius):
+    """Horizontal capsules over the table at heights within 4 ulps of the cutoff (some exactly on it): "at or
+    below the cutoff" is inclusive, and the block bounds never drop a sample that rounds onto it."""
+    table = Shape("table", "table", "box", (1.2, 1.2, 0.04), np.eye(4))  # top face at z = 0.02
+    can = Shape("can", "can", "cylinder", (0.05, 0.2), np.eye(4))
+    T = 64 * 40
+    rng = np.random.default_rng(11)
+    kern = P.ProximityKernel([("c", radius)], [table, can], [("c", "table"), ("c", "can")])
+    level = 0.02 + radius + far
+    z = level + rng.integers(-4, 5, T) * np.spacing(level)
+    p0 = np.stack([rng.uniform(0.3, 0.5, T), rng.uniform(-0.5, 0.5, T), z], axis=1)[:, None]
+    p1 = p0 + np.array([0.05, 0.0, 0.0])
+    exact = kern.distances(p0, p1)
+    assert (exact[:, 0] <= far).sum() > T // 4  # the inputs do straddle the cutoff
+    for tight in (None, [0]):
+        D = kern.distances(p0, p1, far_m=far, exact_min_of=tight)
+        cut = np.full((T, 1), far) if tight is None else np.maximum(far, exact[:, :1])
+        inside = exact <= cut
+        np.testing.assert_array_equal(D[inside], exact[inside])
+        assert (D[~inside] > np.broadcast_to(cut, D.shape)[~inside]).all()
+
+
 # --- forward kinematics -----------------------------------------------------------------------------------------
 
 
