@@ -96,3 +96,10 @@ def test_min_over_columns_is_the_gathered_row_minimum(A, data):
     columns = np.array(picked, dtype=np.intp)
     want = A[:, columns].min(axis=1) if len(columns) else np.full(len(A), np.inf)
     np.testing.assert_array_equal(min_over_columns(A, columns), want)
+
+
+def test_first_of_equal_rows_compares_values_across_dtypes():
+    # W is not cast to A's dtype: 0.5 is no int 0, 258 is no uint8 2; equal values of other dtypes do match
+    assert first_of_equal_rows(np.array([[0, 0], [1, 1]]), np.array([[0, 0.5]])).tolist() == []
+    assert first_of_equal_rows(np.array([[1, 2]], dtype=np.uint8), np.array([[1, 258]])).tolist() == []
+    assert first_of_equal_rows(np.array([[0, 0], [1, 1]]), np.array([[1.0, 1.0]])).tolist() == [1]

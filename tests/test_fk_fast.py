@@ -206,3 +206,11 @@ def test_frames_laid_out_block_by_block(robot, block, monkeypatch):
     blocked = robot.forward(q, opening)
     np.testing.assert_array_equal(blocked, whole)
     np.testing.assert_allclose(blocked, _pinocchio_frames(robot, q, opening), rtol=0, atol=1e-12)
+
+
+def test_zero_samples_give_empty_frames_and_capsules():
+    robot = Robot.ur3e()
+    n_frames, n_capsules = len(robot.frame_names), len(robot.capsule_names)
+    assert robot.forward(np.zeros((0, robot.n))).shape == (0, n_frames, 4, 4)
+    frames, p0, p1 = robot.forward_with_capsules(np.zeros((0, robot.n)), 0.05)
+    assert frames.shape == (0, n_frames, 4, 4) and p0.shape == p1.shape == (0, n_capsules, 3)

@@ -724,3 +724,11 @@ def _pose_of(rng):
     pose[:3, :3] = rpy_matrix(tuple(rng.uniform(-0.5, 0.5, 3)))
     pose[:3, 3] = [0.1, 0.0, 0.1] + rng.normal(scale=0.08, size=3)
     return pose
+
+
+@pytest.mark.parametrize("far_m", [None, 0.1])
+def test_zero_samples_give_an_empty_result_for_every_kind_of_pair(far_m):
+    shapes = [Shape("o", "o", "box", (0.1, 0.1, 0.1), np.eye(4)), Shape("t", "t", "box", (1.0, 1.0, 0.1), np.eye(4))]
+    kernel = P.ProximityKernel([("c", 0.01), ("d", 0.01)], shapes, [("o", "t"), ("c", "t"), ("c", "d")], moving=["o"])
+    empty = np.zeros((0, 2, 3))
+    assert kernel.distances(empty, empty, poses={"o": np.zeros((0, 4, 4))}, far_m=far_m).shape == (0, 3)

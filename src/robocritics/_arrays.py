@@ -18,7 +18,8 @@ __all__ = ["unique_values", "equal_row_groups", "first_of_equal_rows", "row_max"
 
 
 def unique_values(values: np.ndarray) -> np.ndarray:
-    """Sorted distinct values of ``values`` (flattened): ``np.unique(values)``, NaNs collapsed into one."""
+    """Sorted distinct values of ``values`` (flattened): ``np.unique(values)``, NaNs collapsed into one (numbers;
+    datetimes' NaT are not merged)."""
     a = np.sort(np.asarray(values).ravel())
     if a.size == 0:
         return a
@@ -63,6 +64,9 @@ def first_of_equal_rows(A: np.ndarray, W: np.ndarray) -> np.ndarray:
     row of ``A`` equals it (element-wise ``==``): the first of each set of equal rows that ``W`` asks for. Rows of
     ``W`` that ``A`` lacks are ignored."""
     A, W = np.asarray(A), np.asarray(W)
+    if A.dtype != W.dtype:  # compare values, not W cast to A's dtype (0.5 is no int 0; 258 is no uint8 2)
+        common = np.result_type(A, W)
+        A, W = A.astype(common), W.astype(common)
     if len(A) == 0 or len(W) == 0:
         return np.zeros(0, dtype=np.int64)
     # candidates: rows of A whose first element is one of W's (a binary search each; W is usually much

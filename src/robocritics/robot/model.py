@@ -164,7 +164,7 @@ def _frames_array(poses: list[tuple[_Columns, np.ndarray | None]], T: int) -> np
     # (T, L, 4, 4) array, which makes a pass over T rows 16 L entries apart per column
     L = len(poses)
     frames = np.empty((T, L * 16))
-    block = min(T, _FRAME_BLOCK)
+    block = max(1, min(T, _FRAME_BLOCK))  # T = 0: no blocks, an empty array
     series = np.empty((L, 4, 4, block))
     series[:, 3, :3] = 0.0
     series[:, 3, 3] = 1.0

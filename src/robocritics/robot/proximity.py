@@ -1088,7 +1088,7 @@ def _refine_bounds(A: _Convex, B: _Convex, lb: np.ndarray, ub: np.ndarray, round
 def _pose_changes(poses: np.ndarray, T: int) -> np.ndarray:
     """``(T,)`` bool: sample 0 and every sample whose pose differs from the one before (``poses (1 or T, 4, 4)``)."""
     changed = np.zeros(T, dtype=bool)
-    changed[0] = True
+    changed[:1] = True  # (no sample at all: nothing changes)
     if len(poses) > 1:
         changed[1:] = (poses[1:] != poses[:-1]).any(axis=(1, 2))
     return changed
