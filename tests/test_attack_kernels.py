@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import coal
 import numpy as np
-import pinocchio as pin
 import pytest
+
+from fk_reference import capsule_reference, pinocchio_frames
 
 from robocritics import Robot
 from robocritics import _arrays as A
@@ -295,33 +296,6 @@ def test_capsule_values_within_a_few_ulps_of_the_cutoff(far, radius):
 # --- forward kinematics -----------------------------------------------------------------------------------------
 
 
-def _pinocchio_rows(robot, q, rows, opening=None):
-    """Pinocchio's body frames at the given samples, fingers slid in along the tcp y axis (as ``forward``)."""
-    data = robot.model.createData()
-    ids = [robot.model.getFrameId(name, pin.FrameType.BODY) for name in robot.frame_names]
-    out = np.empty((len(rows), len(ids), 4, 4))
-    for r, t in enumerate(rows):
-        pin.framesForwardKinematics(robot.model, data, np.asarray(q[t], dtype=float))
-        for i, fid in enumerate(ids):
-            out[r, i] = data.oMf[fid].homogeneous
-        if opening is not None:
-            slide = (robot.max_opening_m - opening[t]) / 2 * out[r, robot.tcp_index, :3, 1]
-            for sign, link in zip((1.0, -1.0), robot.finger_links):
-                out[r, robot.frame_names.index(link), :3, 3] -= sign * slide
-    return out
-
-
-def _capsule_rows(robot, frames):
-    T, C = len(frames), len(robot.capsules)
-    p0, p1 = np.empty((T, C, 3)), np.empty((T, C, 3))
-    for t in range(T):
-        for c, capsule in enumerate(robot.capsules):
-            pose = frames[t, robot.frame_names.index(capsule.frame)]
-            p0[t, c] = pose[:3, :3] @ capsule.p0 + pose[:3, 3]
-            p1[t, c] = pose[:3, :3] @ capsule.p1 + pose[:3, 3]
-    return p0, p1
-
-
 @pytest.fixture(scope="module", params=["ur3e", "ur5e", "ur10e", "ur16e", "panda"])
 def arm(request):
     return Robot.panda() if request.param == "panda" else Robot.ur(request.param)
@@ -351,9 +325,9 @@ def test_forward_matches_pinocchio_at_the_block_edges(arm, T, variant):
     np.testing.assert_array_equal(q, q_before)
     np.testing.assert_array_equal(frames2, frames)
     rows = sorted({t for e in (0, 2000, 4000) for t in (e - 2, e - 1, e, e + 1) if 0 <= t < T} | {T - 1})
-    ref = _pinocchio_rows(arm, q, rows, opening)
+    ref = pinocchio_frames(arm, q[rows], None if opening is None else opening[rows])
     np.testing.assert_allclose(frames[rows], ref, rtol=0, atol=1e-12)
-    c0, c1 = _capsule_rows(arm, ref)
+    c0, c1 = capsule_reference(arm, ref)
     np.testing.assert_allclose(p0[rows], c0, rtol=0, atol=1e-12)
     np.testing.assert_allclose(p1[rows], c1, rtol=0, atol=1e-12)
     single = arm.forward(q[T - 1], None if opening is None else opening[T - 1])

@@ -11,6 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from fk_reference import capsule_reference, pinocchio_frames
+
 from robocritics import Robot, Scene
 from robocritics.robot import model as model_module
 from robocritics.robot import proximity as prox
@@ -21,34 +23,6 @@ from robocritics.robot.trace import EXACT_WITHIN_M, _carried_ids, build_trajecto
 def robot(request):
     # the UR3e's placements are signed permutations (the shortcut paths); the Panda's come from rpy angles
     return getattr(Robot, request.param)()
-
-
-def _pinocchio_frames(robot, q, opening):
-    """Per sample: Pinocchio's body frames, the fingers slid (max_opening - opening) / 2 inwards along tcp y."""
-    data = robot.model.createData()
-    ids = [robot.model.getFrameId(name, pin.FrameType.BODY) for name in robot.frame_names]
-    out = np.empty((len(q), len(ids), 4, 4))
-    for t in range(len(q)):
-        pin.framesForwardKinematics(robot.model, data, q[t])
-        for i, fid in enumerate(ids):
-            out[t, i] = data.oMf[fid].homogeneous
-        if opening is not None:
-            slide = (robot.max_opening_m - opening[t]) / 2 * out[t, robot.tcp_index, :3, 1]
-            for sign, link in zip((1.0, -1.0), robot.finger_links):
-                out[t, robot.frame_names.index(link), :3, 3] -= sign * slide
-    return out
-
-
-def _capsule_reference(robot, frames):
-    """Per sample and capsule: the frame's 4x4 pose times the homogeneous endpoint ``[x; 1]``."""
-    T, C = len(frames), len(robot.capsules)
-    p0, p1 = np.empty((T, C, 3)), np.empty((T, C, 3))
-    for t in range(T):
-        for c, capsule in enumerate(robot.capsules):
-            pose = frames[t, robot.frame_names.index(capsule.frame)]
-            p0[t, c] = (pose @ np.append(capsule.p0, 1.0))[:3]
-            p1[t, c] = (pose @ np.append(capsule.p1, 1.0))[:3]
-    return p0, p1
 
 
 samples = st.integers(1, 12).flatmap(
@@ -70,13 +44,13 @@ def test_frames_and_capsules_match_pinocchio_and_the_4x4_products(robot, case):
     q = q7[:, : robot.n]
     per_sample = None if opening is None else np.broadcast_to(opening, (len(q),))
     frames, p0, p1 = robot.forward_with_capsules(q, opening)
-    np.testing.assert_allclose(frames, _pinocchio_frames(robot, q, per_sample), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(frames, pinocchio_frames(robot, q, per_sample), rtol=0, atol=1e-12)
     # the fused pass gives what forward() and capsule_segments() of its frames give, bit for bit
     np.testing.assert_array_equal(frames, robot.forward(q, opening))
     s0, s1 = robot.capsule_segments(frames)
     np.testing.assert_array_equal(p0, s0)
     np.testing.assert_array_equal(p1, s1)
-    r0, r1 = _capsule_reference(robot, frames)
+    r0, r1 = capsule_reference(robot, frames)
     np.testing.assert_allclose(p0, r0, rtol=0, atol=1e-12)
     np.testing.assert_allclose(p1, r1, rtol=0, atol=1e-12)
 
@@ -117,7 +91,7 @@ def test_capsules_for_any_joint_axis():
         for f, (parent, placement) in enumerate(zip(robot._frame_parent, robot._frame_placement)):
             reference[t, f] = joints[parent] @ placement
     np.testing.assert_allclose(frames, reference, rtol=0, atol=1e-13)
-    r0, r1 = _capsule_reference(robot, reference)
+    r0, r1 = capsule_reference(robot, reference)
     np.testing.assert_allclose(p0, r0, rtol=0, atol=1e-13)
     np.testing.assert_allclose(p1, r1, rtol=0, atol=1e-13)
 
@@ -205,7 +179,7 @@ def test_frames_laid_out_block_by_block(robot, block, monkeypatch):
     monkeypatch.setattr(model_module, "_FRAME_BLOCK", block)
     blocked = robot.forward(q, opening)
     np.testing.assert_array_equal(blocked, whole)
-    np.testing.assert_allclose(blocked, _pinocchio_frames(robot, q, opening), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(blocked, pinocchio_frames(robot, q, opening), rtol=0, atol=1e-12)
 
 
 def test_zero_samples_give_empty_frames_and_capsules():
