@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from robocritics._arrays import equal_row_groups, first_of_equal_rows, unique_values
+from robocritics._arrays import equal_row_groups, first_of_equal_rows, run_starts, squared_norms, unique_values
 
 # few distinct values, so that repeats (and -0.0 next to 0.0) are common
 small_floats = st.sampled_from([0.0, -0.0, 1.0, -1.0, 0.5, 1e-300, 2.0**-40, np.inf, -np.inf, np.nan])
@@ -103,3 +103,16 @@ def test_first_of_equal_rows_compares_values_across_dtypes():
     assert first_of_equal_rows(np.array([[0, 0], [1, 1]]), np.array([[0, 0.5]])).tolist() == []
     assert first_of_equal_rows(np.array([[1, 2]], dtype=np.uint8), np.array([[1, 258]])).tolist() == []
     assert first_of_equal_rows(np.array([[0, 0], [1, 1]]), np.array([[1.0, 1.0]])).tolist() == [1]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.sampled_from(["", "apple", "cup"]), max_size=30))
+def test_run_starts_are_where_a_value_differs_from_the_one_before(values):
+    a = np.array(values, dtype=str)
+    assert run_starts(a).tolist() == [i for i in range(len(values)) if i == 0 or values[i] != values[i - 1]]
+
+
+@settings(max_examples=100, deadline=None)
+@given(hnp.arrays(np.float64, hnp.array_shapes(min_dims=1, max_dims=3).map(lambda s: (*s, 3)), elements=st.floats(-1e3, 1e3)))
+def test_squared_norms_equal_einsum_bit_for_bit(v):
+    assert np.array_equal(squared_norms(v), np.einsum("...i,...i->...", v, v))

@@ -14,7 +14,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["unique_values", "equal_row_groups", "first_of_equal_rows", "row_max", "row_any", "min_over_columns"]
+__all__ = [
+    "unique_values",
+    "run_starts",
+    "equal_row_groups",
+    "first_of_equal_rows",
+    "row_max",
+    "row_any",
+    "min_over_columns",
+    "squared_norms",
+]
 
 
 def unique_values(values: np.ndarray) -> np.ndarray:
@@ -31,6 +40,14 @@ def unique_values(values: np.ndarray) -> np.ndarray:
         keep[first_nan] = True
         keep[first_nan + 1 :] = False
     return a[keep]
+
+
+def run_starts(values: np.ndarray) -> np.ndarray:
+    """Indices of the first element of each run of equal consecutive values of the 1-D ``values`` (0 first)."""
+    change = np.empty(len(values), dtype=bool)
+    change[:1] = True
+    np.not_equal(values[1:], values[:-1], out=change[1:])
+    return np.flatnonzero(change)
 
 
 def _lexsorted_runs(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -106,3 +123,13 @@ def min_over_columns(A: np.ndarray, columns: np.ndarray) -> np.ndarray:
     (40 columns).
     """
     return A.T[columns].min(axis=0) if len(columns) else np.full(len(A), np.inf)
+
+
+def squared_norms(v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``|v|^2`` over the last axis (length 3) of ``v (..., 3)``, as ``x^2 + z^2 + y^2``: the order
+    ``np.einsum("...i,...i->...", v, v)`` adds in (bit for bit with numpy 2.4), at a third of its cost."""
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    out = np.multiply(x, x, out=out)
+    out += z * z
+    out += y * y
+    return out

@@ -36,7 +36,7 @@ from typing import Iterator, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from ._arrays import unique_values
+from ._arrays import run_starts, unique_values
 from .errors import TrajectoryError
 
 __all__ = ["Pair", "Step", "RobotLimits", "State", "Trajectory"]
@@ -108,9 +108,9 @@ def _array(name: str, value, dtype=float, ndim: int | None = None) -> np.ndarray
     if dtype is float:
         with np.errstate(over="ignore", invalid="ignore"):
             total = np.add.reduce(arr, axis=None)
-    if dtype is float and not np.isfinite(total) and not np.all(np.isfinite(arr)):
-        bad = np.argwhere(~np.isfinite(arr))[0]
-        raise TrajectoryError(f"{name} is not finite at index {tuple(int(i) for i in bad)}")
+        if not np.isfinite(total) and not np.all(np.isfinite(arr)):
+            bad = np.argwhere(~np.isfinite(arr))[0]
+            raise TrajectoryError(f"{name} is not finite at index {tuple(int(i) for i in bad)}")
     return arr
 
 
@@ -337,7 +337,7 @@ class Trajectory:
         # the same text as joining every sample's id, without a Python string per sample
         attached = self.attached
         if len(attached):
-            start = np.flatnonzero(np.concatenate(([True], attached[1:] != attached[:-1])))
+            start = run_starts(attached)
             count = np.diff(np.append(start, len(attached))).tolist()
             h.update("".join((v + "\x00") * n for v, n in zip(attached[start].tolist(), count))[:-1].encode())
         h.update(",".join(self.limits.joint_names).encode())

@@ -37,7 +37,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from .._arrays import min_over_columns
+from .._arrays import min_over_columns, run_starts
 from ..hookspecs import hookimpl  # not `from .. import`: the root imports the repairs, which import this module
 from ..critic import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 
@@ -62,11 +62,10 @@ class Params(CriticParams):
 
 def _run_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Run-length code a 1-D array: (run id per element, value of each run). No per-sample Python."""
-    change = np.empty(len(values), dtype=bool)
-    change[0] = True
-    change[1:] = values[1:] != values[:-1]
-    starts = np.flatnonzero(change)
-    return np.cumsum(change) - 1, values[starts]
+    starts = run_starts(values)
+    ids = np.zeros(len(values), dtype=np.intp)
+    ids[starts[1:]] = 1
+    return np.cumsum(ids), values[starts]
 
 
 class Counted:

@@ -44,7 +44,7 @@ import numpy as np
 from pydantic import Field
 
 from .. import hookimpl
-from .._arrays import row_max, unique_values
+from .._arrays import row_max, squared_norms, unique_values
 from ..critic import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
 from ..robot.hull import convex_hull
 
@@ -84,11 +84,7 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
         d2 -= X[1:-1]
         d2 += X[:-2]
         M = np.zeros((nb * BLOCK, L))  # squared second-difference norms by sample (0 where undefined)
-        sq = M[1 : T - 1]
-        x, y, z = d2[..., 0], d2[..., 1], d2[..., 2]
-        np.multiply(x, x, out=sq)  # x^2 + z^2 + y^2: the order einsum("tli,tli->tl") adds in, bit for bit
-        sq += z * z
-        sq += y * y
+        squared_norms(d2, out=M[1 : T - 1])
         # block maxima along contiguous rows of the (L, T) transpose: a maximum over axis 1 of the
         # (nb, BLOCK, L) view costs 4x more
         Mb = np.sqrt(np.ascontiguousarray(M.T).reshape(L, nb, BLOCK).max(axis=2)).T  # (nb, L) block maxima, m

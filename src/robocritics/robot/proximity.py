@@ -1791,7 +1791,8 @@ class ProximityKernel:
 
     @staticmethod
     def _outside_all(kind: str, p, centre, size) -> np.ndarray:
-        """:meth:`_outside` for every shape of a group at once: ``centre``, ``size`` as ``(S, 1, 1)`` arrays."""
+        """Distance (m) of the points ``p`` (x, y, z in the shapes' frame) outside each shape, 0 inside: ``centre``
+        and ``size`` (half sizes) per coordinate, scalars for one shape or ``(S, 1, 1)`` arrays for several."""
         ex = [np.abs(v - ci) for v, ci in zip(p, centre)]
         if kind == "box":
             out = sum(np.maximum(e - h, 0.0) ** 2 for e, h in zip(ex, size))
@@ -1812,13 +1813,7 @@ class ProximityKernel:
     @staticmethod
     def _outside(kind: str, p, g: _Group, s: int) -> np.ndarray:
         """Distance (m) of the points ``p`` (x, y, z in the group's frame) outside shape ``s`` of ``g``, 0 inside."""
-        ex = [np.abs(v - ci[s]) for v, ci in zip(p, g.centre)]
-        if kind == "box":
-            out = sum(np.maximum(e - h[s], 0.0) ** 2 for e, h in zip(ex, g.size))
-        else:
-            rad = np.maximum(np.sqrt(ex[0] ** 2 + ex[1] ** 2) - g.size[0][s], 0.0)
-            out = rad * rad + np.maximum(ex[2] - g.size[1][s], 0.0) ** 2
-        return np.sqrt(out, out=out)
+        return ProximityKernel._outside_all(kind, p, [c[s] for c in g.centre], [v[s] for v in g.size])
 
     @staticmethod
     def _collect(hits, kind, sq, loc, a, d, c, size, r):

@@ -27,6 +27,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .._arrays import run_starts
 from ..scene import Scene, Shape
 from ..trajectory import Pair, Step, Trajectory
 from . import proximity as prox
@@ -55,8 +56,7 @@ def _carried_ids(attached: np.ndarray) -> list[str]:
     if not len(attached):
         return []
     # the id changes only where a grasp or a release starts: the runs' first samples hold every id
-    starts = np.flatnonzero(np.concatenate(([True], attached[1:] != attached[:-1])))
-    return [oid for oid in dict.fromkeys(attached[starts].tolist()) if oid]
+    return [oid for oid in dict.fromkeys(attached[run_starts(attached)].tolist()) if oid]
 
 
 def build_trajectory(
