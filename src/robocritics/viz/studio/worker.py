@@ -372,12 +372,14 @@ class Evaluator:
             if self._closed:
                 raise EvaluatorError("the Evaluator is closed")
             assert self._child is not None
-            # died between jobs (killed from outside): start afresh. An idle, ready child sends nothing, so a
-            # readable pipe is its end closing (seen before the process can be reaped).
-            if not self._child.is_alive() or (self._ready and self._conn.poll(0)):
-                self._replace()
             evaluation = Evaluation(program)
             try:
+                # died between jobs (killed from outside): start afresh. An idle, ready child sends nothing, so a
+                # readable pipe is its end closing (seen before the process can be reaped).
+                if not self._child.is_alive() or (self._ready and self._conn.poll(0)):
+                    self._replace()
+                if self._child is None:  # close() in another thread killed it after the check above
+                    raise EvaluatorError("the Evaluator was closed during the check")
                 self._await_ready()
                 self._run(evaluation, (kind, program, job_critics, job_params, self.cpu_s))
                 self._jobs_done += 1
