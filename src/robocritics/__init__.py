@@ -9,7 +9,7 @@ and pinch-point problems with explanations and fix hints (:class:`Report`);
 deployed to a UR3e (:mod:`robocritics.deploy`).
 
 The root holds the names most programs need; everything else lives in its
-module: ``robocritics.simulate.Execution``, ``robocritics.trajectory.State``,
+module: ``robocritics.execution.Execution``, ``robocritics.trajectory.State``,
 ``robocritics.critic`` (``Evidence``, ``get_critics``, ``critic_sources``,
 ``register``, the verdict helpers), ``robocritics.llm`` (``OpenAICompatible``,
 ``Attempt``), ``robocritics.deploy`` (``URArm``).
@@ -41,7 +41,7 @@ _EXPORTS = {
 # Names that used to be exported here, and the module to import them from.
 _MOVED = {
     "State": "robocritics.trajectory",
-    "Execution": "robocritics.simulate",
+    "Execution": "robocritics.execution",
     "Evidence": "robocritics.critic",
     "get_critics": "robocritics.critic",
     "critic_sources": "robocritics.critic",
