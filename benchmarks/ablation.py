@@ -498,7 +498,7 @@ def run_repairs_one(model: Any, task: str, mode: str, *, max_attempts: int, mode
 def careful_reference(task: str) -> RepairsResult:
     """The careful example program simulated and critiqued with the task's goals (no model, no repairs)."""
     from robocritics.critic import critique
-    from robocritics.simulate import simulate
+    from robocritics.pipeline import simulate
 
     scene = Scene.builtin(task)
     started = time.process_time()

@@ -20,7 +20,7 @@ from robocritics.critic import (
 from robocritics.critics.joint_speed import Params as JointSpeedParams
 from robocritics.errors import CriticError
 from robocritics.scene import Scene, Workspace
-from robocritics.simulate import Execution
+from robocritics.execution import Execution
 from synth import line_motion, make_trajectory, realistic_trajectory
 
 

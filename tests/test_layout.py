@@ -121,8 +121,8 @@ def test_the_cycle_finder_finds_a_cycle():
 
 def test_import_graph_sees_lazy_and_relative_imports():
     graph = import_graph()
-    # simulate.py imports the planner inside the function
-    assert "robocritics.robot.planner" in graph["robocritics.simulate"]
+    # pipeline.py imports the planner inside the function
+    assert "robocritics.robot.planner" in graph["robocritics.pipeline"]
     # the CLI's main imports its subcommand modules by name (cli.main.BUILTIN), only the one a command line
     # names: every subcommand module of the package must be in that list, or its command would not exist
     from robocritics.cli.main import BUILTIN

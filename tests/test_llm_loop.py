@@ -457,7 +457,7 @@ def test_ablation_selftest_runs_offline(capsys):
 
 def test_simulate_hook_checks_every_program_and_its_errors_are_fed_back(llm_server, make_client, sorting):
     from robocritics.critic import critique
-    from robocritics.simulate import simulate
+    from robocritics.pipeline import simulate
 
     unreachable = "move_above(green_apple)\nmove_to(0.95, 0.0, 0.2)\nhome()\n"
     llm_server.reply(SHORT, fenced(unreachable))

@@ -25,7 +25,7 @@ from robocritics.llm.loop import Loop
 from robocritics.llm.memory import InteractionMemory
 from robocritics.repair import repair
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 from robocritics.verdict import Flag, Verdict
 
 pytestmark = pytest.mark.usefixtures("clean_llm_env")

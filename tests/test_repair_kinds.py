@@ -13,12 +13,13 @@ import numpy as np
 import pytest
 
 from robocritics import Scene
-from robocritics.critic import check_program, critique
+from robocritics.critic import critique
+from robocritics.pipeline import check
 from robocritics.errors import PlanningError
 from robocritics.repair import repair
 from robocritics.repair.builtin import _nearest_reachable_dz
 from robocritics.robot.model import Robot
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 from robocritics.verdict import Flag
 
 
@@ -79,7 +80,7 @@ def test_natural_posture_faces_the_target_with_the_elbow_up():
 
 
 def test_bad_posture_is_a_program_error_naming_the_choices():
-    _, report = check_program('move_to(0.3, 0.0, 0.2, posture="sideways")\n', BEHIND)
+    _, report = check('move_to(0.3, 0.0, 0.2, posture="sideways")\n', BEHIND)
     v = report.verdict("runtime")
     assert v.flag == Flag.ERROR and "'nearest'" in v.message and "'natural'" in v.message
 
@@ -98,7 +99,7 @@ home()
 
 def test_unreachable_hover_is_lowered_to_a_reachable_height():
     scene = Scene.resolve("sorting")
-    _, before = check_program(UNREACHABLE, scene)
+    _, before = check(UNREACHABLE, scene)
     assert [v.critic for v in before.verdicts] == ["runtime"] and before.verdicts[0].evidence.lines == [1]
     r = repair(UNREACHABLE, scene, goal="green_apple in white_box")
     assert r.execution is not None and r.errors == []
@@ -250,7 +251,7 @@ def test_release_raise_table_is_updated_not_duplicated():
 def test_an_unreachable_straight_lift_ends_where_the_line_is_still_reachable():
     src = UNREACHABLE.replace("height=0.42", "height=0.1").replace("move_up(0.12)", "move_up(0.4)")
     scene = Scene.resolve("sorting")
-    _, before = check_program(src, scene)
+    _, before = check(src, scene)
     assert before.verdicts[0].critic == "runtime" and before.verdicts[0].evidence.lines == [4]
     r = repair(src, scene, goal="green_apple in white_box")
     assert r.errors == [] and r.execution.object_inside("green_apple", "white_box")

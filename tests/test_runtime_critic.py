@@ -10,7 +10,8 @@ import pytest
 from llm_fixtures import clean_llm_env, llm_server  # noqa: F401
 
 from robocritics.cli import main
-from robocritics.critic import RUNTIME, Flag, check_program
+from robocritics.critic import RUNTIME, Flag
+from robocritics.pipeline import check
 from robocritics.errors import CriticError, GoalError
 from robocritics.report import Report
 from robocritics.scene import Scene
@@ -34,7 +35,7 @@ def sorting():
     ],
 )
 def test_a_program_that_does_not_run_gets_one_runtime_error(sorting, program, kind, line, words):
-    execution, report = check_program(program, sorting)
+    execution, report = check(program, sorting)
     assert execution is None
     assert isinstance(report, Report) and len(report.verdicts) == 1
     verdict = report.verdicts[0]
@@ -49,7 +50,7 @@ def test_a_program_that_does_not_run_gets_one_runtime_error(sorting, program, ki
 
 
 def test_a_program_that_runs_gets_the_critics_and_its_execution(sorting):
-    execution, report = check_program(
+    execution, report = check(
         (EXAMPLES / "sorting_careful.py").read_text(), sorting, goals=["green_apple in white_box"]
     )
     assert execution is not None and len(execution.trajectory) == report.samples
@@ -58,9 +59,9 @@ def test_a_program_that_runs_gets_the_critics_and_its_execution(sorting):
 
 def test_bad_input_of_the_caller_still_raises_before_simulating(sorting):
     with pytest.raises(CriticError, match="did you mean 'joint_speed'"):
-        check_program("import os\n", sorting, critics=["joint_sped"])
+        check("import os\n", sorting, critics=["joint_sped"])
     with pytest.raises(GoalError):
-        check_program("import os\n", sorting, goals=["green_apple in bin"])
+        check("import os\n", sorting, goals=["green_apple in bin"])
 
 
 def test_check_prints_the_runtime_report_and_exits_1(capsys, tmp_path):

@@ -28,7 +28,7 @@ from robocritics.scene import (
     parse_json,
     reserved_names,
 )
-from robocritics.simulate import check_scene_ids
+from robocritics.pipeline import check_scene_ids
 
 CUBE = {"id": "cube", "shape": "box", "size": [0.04, 0.04, 0.04], "position": [0.3, 0.0, 0.02]}
 BOX = {"id": "bin_1", "size": [0.1, 0.1, 0.1], "position": [0.3, 0.2, 0.05]}

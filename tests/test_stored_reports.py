@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from robocritics import Scene
-from robocritics.critic import check_program as check
+from robocritics.pipeline import check
 
 STORED = Path(__file__).resolve().parent / "data" / "reports"
 PROGRAMS = Path(__file__).resolve().parents[1] / "examples" / "programs"

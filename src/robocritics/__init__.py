@@ -51,8 +51,8 @@ _MOVED = {
 }
 
 # Eager, and cheap (their heavy imports are inside the functions): the submodules
-# `robocritics.simulate` and `robocritics.repair` would otherwise shadow the functions of the same names.
-from .simulate import simulate  # noqa: E402
+# `robocritics.repair` would otherwise shadow the function of the same name.
+from .pipeline import check, simulate  # noqa: E402
 from .repair import repair  # noqa: E402
 from .errors import (  # noqa: E402
     CriticError,
@@ -80,7 +80,7 @@ _ERRORS = (
     "RTDEError",
 )
 
-__all__ = [*_EXPORTS, "simulate", "repair", *_ERRORS]
+__all__ = [*_EXPORTS, "simulate", "check", "repair", *_ERRORS]
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), moved=_MOVED)

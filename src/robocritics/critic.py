@@ -93,7 +93,6 @@ __all__ = [
     "critique",
     "as_execution",
     "takes_execution",
-    "check_program",
     "runtime_report",
     "RUNTIME",
     "select_critics",
@@ -368,7 +367,7 @@ def _run_critic(critic: Any, execution: "Execution", params: BaseModel) -> Verdi
 
 
 RUNTIME = "runtime"
-"""Critic name of the verdict of a program that does not run (:func:`check_program`)."""
+"""Critic name of the verdict of a program that does not run (:func:`robocritics.pipeline.check`)."""
 
 _RUNTIME_HINTS = {
     "ProgramError": "fix the program at the line named: the sandbox rejected it or it failed while running",
@@ -396,34 +395,3 @@ def runtime_report(error: "RoboCriticsError") -> Report:
         details={"error": kind, "line": line, "text": str(error), "reason": str(getattr(error, "reason", error))},
     )
     return Report(verdicts=[verdict], trajectory_hash="", samples=0, duration_s=0.0, params={})
-
-
-def check_program(
-    program: "str | Plan",
-    scene: "Scene",
-    *,
-    goals: "Iterable[str | Goal] | str | Goal | None" = None,
-    critics: Iterable[str | Critic] | str | None = None,
-    params: Mapping[str, ParamsArg] | None = None,
-    robot: Any = None,
-    sample_rate_hz: float = 125.0,
-) -> "tuple[Execution | None, Report]":
-    """Simulate ``program`` in ``scene`` and critique it: ``(execution, report)``, a report even when it does not run.
-
-    A program the sandbox rejects (:class:`~robocritics.errors.ProgramError`) or whose motion cannot be planned
-    (:class:`~robocritics.errors.PlanningError`, including the motion budget) gives ``(None, report)`` with one
-    ERROR verdict of the ``runtime`` critic naming the line (:func:`runtime_report`; score 0), so callers treat
-    it like any failing report. Bad input of the caller — unknown critics or params (:class:`CriticError`),
-    malformed goals (:class:`~robocritics.errors.GoalError`), a bad scene — still raises, before simulating.
-    """
-    from .errors import PlanningError, ProgramError
-    from .goals import parse_goals
-    from .simulate import simulate
-
-    goals = parse_goals(goals, scene)
-    select_critics(critics, params)  # fail fast, before a slow simulation
-    try:
-        execution = simulate(program, scene, robot=robot, sample_rate_hz=sample_rate_hz)
-    except (ProgramError, PlanningError) as exc:
-        return None, runtime_report(exc)
-    return execution, critique(execution, critics=critics, params=params, goals=goals)

@@ -44,7 +44,7 @@ def register_critics(register):  # type: ignore[no-untyped-def]
 def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
     """Candidate repairs for one flagged ``verdict``: a list of :class:`robocritics.repair.Edit`.
 
-    ``execution`` is the :class:`~robocritics.simulate.Execution` the verdict judged
+    ``execution`` is the :class:`~robocritics.execution.Execution` the verdict judged
     (its ``plan`` maps skill calls to program lines), or for the ``runtime`` critic's
     verdict (a program that does not run) a :class:`robocritics.repair.NotRun` (its
     ``scene`` and ``robot``, no trajectory); ``program`` is the source text.

@@ -29,7 +29,7 @@ scene is untrusted input, so everything in it is bounded:
   (:data:`robocritics.program.language.SAFE_BUILTINS`, e.g. ``print``) or
   ``table`` (see :func:`reserved_names`). The names of the skill API (``home``,
   ``lib``, ``objects``, ``open``, ...) are checked where a scene meets it, by
-  :func:`robocritics.simulate.check_scene_ids`: the skills are built on scenes,
+  :func:`robocritics.pipeline.check_scene_ids`: the skills are built on scenes,
   so this module cannot import them;
 * at most :data:`MAX_ENTITIES` objects and containers; text fields and free
   attributes are bounded in length, nesting and count, and are JSON-like text
@@ -222,7 +222,7 @@ def reserved_names() -> dict[str, str]:
 
     Python's keywords (soft ones too), the builtins of robot programs
     (:data:`robocritics.program.language.SAFE_BUILTINS`) and ``table``. The names of
-    the skill API are checked by :func:`robocritics.simulate.check_scene_ids`.
+    the skill API are checked by :func:`robocritics.pipeline.check_scene_ids`.
     """
     from .program import language  # the program language's names (a leaf module: no import cycle)
 

@@ -183,7 +183,7 @@ def scene_for(program_path: str, scene_arg: str | None):
     with, else an empty table; refused (SceneError naming the field) if its ids are names of the skill API."""
     from ..errors import SceneError
     from ..scene import Scene
-    from ..simulate import check_scene_ids
+    from ..pipeline import check_scene_ids
 
     if scene_arg is not None and not scene_arg.strip():
         raise UsageError("--scene is empty; give a built-in scene name or a scene JSON file")

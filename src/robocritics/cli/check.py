@@ -79,8 +79,8 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _check(args: argparse.Namespace) -> int:
     import sys
 
-    from ..critic import check_program
     from ..goals import parse_goals
+    from ..pipeline import check
 
     source = read_text(args.program, "program")
     if args.html:
@@ -91,7 +91,7 @@ def _check(args: argparse.Namespace) -> int:
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
     goals = parse_goals(args.goals, scene)  # GoalError naming a wrong id, before simulating
-    execution, report = check_program(source, scene, goals=goals, critics=critics, params=params, sample_rate_hz=args.rate)
+    execution, report = check(source, scene, goals=goals, critics=critics, params=params, sample_rate_hz=args.rate)
     print(report.to_json() if args.json else report.to_text())
     if execution is None:  # the program did not run: its error, as before, beside the report
         verdict = report.verdicts[0]

@@ -30,11 +30,10 @@ def _build_deploy(sub) -> None:
 
 
 def _cmd_deploy(args: argparse.Namespace) -> int:
-    from ..critic import critique
     from ..deploy import URArm
     from ..errors import DeployError
+    from ..pipeline import check
     from ..program.sandbox import run_program
-    from ..simulate import simulate
 
     scene = scene_for(args.program, args.scene)
     plan = run_program(read_text(args.program, "program"), scene)  # a bad program is reported before connecting
@@ -43,8 +42,7 @@ def _cmd_deploy(args: argparse.Namespace) -> int:
             args.host, rtde_port=args.rtde_port, dashboard_port=args.dashboard_port, secondary_port=args.secondary_port
         ) as arm:
             start_q = arm.actual_q()
-            execution = simulate(plan, scene, start_q=start_q)
-            report = critique(execution)  # every installed critic: all of them gate the deploy
+            execution, report = check(plan, scene, start_q=start_q)  # every installed critic gates the deploy
             print(f"planned from the arm's joints [{', '.join(f'{v:.4f}' for v in start_q)}] rad")
             print(report.to_text())
             result = arm.deploy(execution, report, dry_run=args.dry_run)

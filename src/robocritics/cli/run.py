@@ -233,7 +233,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     from ..critic import select_critics
     from ..goals import parse_goals
     from ..scene import Scene
-    from ..simulate import check_scene_ids
+    from ..pipeline import check_scene_ids
     from ..llm.loop import Loop
     from ..llm.memory import InteractionMemory
     from ..llm.prompts import check_task

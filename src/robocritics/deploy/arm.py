@@ -48,7 +48,7 @@ from robocritics.deploy.stream import STATE_FIELDS, DeployResult, StreamPlan, _R
 from robocritics.deploy.urscript import INPUT_FIELDS, SECONDARY_PORT, streaming_program
 from robocritics.errors import DeployError, RTDEError
 from robocritics.robot.arms import UR3E
-from robocritics.simulate import Execution
+from robocritics.execution import Execution
 from robocritics.trajectory import Trajectory
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -256,7 +256,7 @@ class URArm:
     ) -> DeployResult:
         """Check ``motion`` against ``report`` and the arm (the gate), then stream it.
 
-        ``motion``: the :class:`~robocritics.simulate.Execution` that
+        ``motion``: the :class:`~robocritics.execution.Execution` that
         :func:`robocritics.simulate` returned, or a
         :class:`~robocritics.trajectory.Trajectory` (e.g. :meth:`approach`);
         ``report``: the :class:`~robocritics.report.Report` of exactly that trajectory.

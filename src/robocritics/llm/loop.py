@@ -9,7 +9,7 @@
     best = loop.run("sort the apples by ripeness", max_attempts=5)   # iterate automatically
 
 Every model reply becomes an :class:`Attempt`: its program is extracted,
-simulated (:func:`~robocritics.simulate.simulate`) and critiqued
+simulated (:func:`~robocritics.pipeline.simulate`) and critiqued
 (:func:`~robocritics.critic.critique`), and the attempt is stored in the
 interaction memory as ``(request, program, feedback, score)``.
 
@@ -123,7 +123,7 @@ from .prompts import (
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic import Report
     from ..repair import Change
-    from ..simulate import Execution
+    from ..execution import Execution
     from ..robot.model import Robot
     from ..scene import Scene
 
@@ -304,7 +304,7 @@ class Loop:
     * ``on_attempt`` — called with each :class:`Attempt` as soon as it is made.
     * ``model_options`` — keyword arguments for ``model.complete`` (temperature, seed ...).
     * ``sample_rate_hz`` — trajectory sample rate for simulation, Hz (default:
-      :func:`~robocritics.simulate.simulate`'s).
+      :func:`~robocritics.pipeline.simulate`'s).
     * ``context_tokens`` — the model's context window in tokens, to fit every
       prompt to (module docstring); None: unknown until the server refuses one.
     * ``goals`` — task goals (``"green_apple in white_box"`` or :class:`~robocritics.goals.Goal`) that
@@ -314,7 +314,7 @@ class Loop:
       program elsewhere (e.g. :meth:`robocritics.viz.studio.worker.Evaluator.loop_simulate`,
       in a resource-limited process); it raises :class:`ProgramError`,
       :class:`PlanningError`, :class:`TrajectoryError` or :class:`CriticError`
-      as the in-process check does. None: :func:`~robocritics.simulate.simulate`
+      as the in-process check does. None: :func:`~robocritics.pipeline.simulate`
       and :func:`~robocritics.critic.critique` here, with ``robot``,
       ``critics``, ``params`` and ``sample_rate_hz``.
     """
@@ -888,8 +888,7 @@ class Loop:
 
     def _check(self, attempt: Attempt) -> None:
         """Simulate and critique ``attempt.program``; a failure becomes runtime feedback."""
-        from ..critic import critique
-        from ..simulate import simulate
+        from ..pipeline import check
 
         assert attempt.program is not None
         if self._simulate is not None:
@@ -901,21 +900,21 @@ class Loop:
                 return
             attempt.score = attempt.report.score
             return
+        rate = {} if self.sample_rate_hz is None else {"sample_rate_hz": self.sample_rate_hz}
         try:
-            rate = {} if self.sample_rate_hz is None else {"sample_rate_hz": self.sample_rate_hz}
-            execution = simulate(attempt.program, self.scene, self.robot, **rate)
-        except (ProgramError, PlanningError, TrajectoryError) as exc:
-            attempt.error = runtime_feedback(exc, program=attempt.program)
-            self._pending_error = attempt.error
-            return
-        attempt.execution = execution
-        try:
-            attempt.report = critique(execution, self.scene, self._selection, self.params or None, goals=self.goals)
-        except CriticError as exc:  # a critic could not judge this motion: report it, never crash the loop
+            checked = check(attempt.program, self.scene, robot=self.robot, goals=self.goals, critics=self._selection,
+                            params=self.params or None, **rate)  # fmt: skip
+        except (TrajectoryError, CriticError) as exc:  # a critic could not judge this motion: report it, never crash
             log.warning("attempt %d: %s", attempt.index, exc)
+            attempt.execution = getattr(exc, "execution", None)
             attempt.error = runtime_feedback(exc, program=attempt.program)
             self._pending_error = attempt.error
             return
+        if checked.error is not None:  # the program did not run: the model gets the error, with its line
+            attempt.error = runtime_feedback(checked.error, program=attempt.program)
+            self._pending_error = attempt.error
+            return
+        attempt.execution, attempt.report = checked
         attempt.score = attempt.report.score
 
     # --- memory and prompts ----------------------------------------------------------------------

@@ -429,7 +429,7 @@ REACH_FURTHER_M = (0.05, 0.1)
 def _unreached(execution, program):
     """The PlanningError of an unreachable target (it carries ``call``, ``target_m``, ``yaw_rad``), or None."""
     from ..errors import PlanningError
-    from ..simulate import simulate
+    from ..pipeline import simulate
 
     try:
         simulate(program, execution.scene, robot=execution.robot)

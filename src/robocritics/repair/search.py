@@ -21,7 +21,7 @@ log = logging.getLogger(__name__)
 if TYPE_CHECKING:  # pragma: no cover
     from ..report import Report
     from ..scene import Scene
-    from ..simulate import Execution
+    from ..execution import Execution
 
 __all__ = ["search", "Repair", "Change", "NotRun", "MAX_ROUNDS"]
 
@@ -155,7 +155,7 @@ def _offered_edits(hook, verdict, execution, source: str) -> list:
 
 def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any, params: Any) -> Repair:
     """The body of :func:`robocritics.repair.repair` (its arguments and result are documented there)."""
-    from ..critic import check_program
+    from ..pipeline import check
     from ..robot.model import Robot
     from ..scene import Scene
 
@@ -167,7 +167,7 @@ def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any
     not_run = NotRun(robot.scene_for(scene), robot)
 
     def evaluate(source: str):
-        return check_program(source, scene, goals=goals, critics=critics, params=params, robot=robot)
+        return check(source, scene, goals=goals, critics=critics, params=params, robot=robot)
 
     hook = _manager().hook
     source = program

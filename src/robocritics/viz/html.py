@@ -20,7 +20,7 @@ from .replay import replay_data
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..report import Report
-    from ..simulate import Execution
+    from ..execution import Execution
 
 __all__ = ["assets", "replay_html", "write_replay_html", "Replay", "script_json"]
 

@@ -1,6 +1,6 @@
 """One simulated run as replay data: what the 3-D replay (``static/replay.js``) draws, as plain JSON.
 
-:func:`replay_data` turns an :class:`~robocritics.simulate.Execution` (and the
+:func:`replay_data` turns an :class:`~robocritics.execution.Execution` (and the
 :class:`~robocritics.report.Report` of its critics) into a JSON-serialisable dict
 that the replay component renders in a browser, the same for the studio, a
 notebook and an offline HTML file:
@@ -37,7 +37,7 @@ from .._arrays import unique_values
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..report import Report
-    from ..simulate import Execution
+    from ..execution import Execution
 
 __all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ", "closest_points"]
 

@@ -381,10 +381,9 @@ class Studio:
 
     def deploy(self, index: int) -> dict[str, Any]:
         """Deploy revision ``index`` through the deploy gate: planned from the arm's joints, all critics."""
-        from ...critic import critique
         from ...deploy import URArm
         from ...errors import DeployError
-        from ...simulate import simulate
+        from ...pipeline import check
 
         if not self.deploy_target:
             raise StudioError("no UR controller is configured (start the studio with --deploy-host)")
@@ -397,9 +396,10 @@ class Studio:
         with self._run_lock:
             try:
                 with URArm(target.pop("host"), **target) as arm:
-                    execution = simulate(revision.program, self.scene, start_q=arm.actual_q())
-                    report = critique(execution)
-                    result = arm.deploy(execution, report)
+                    checked = check(revision.program, self.scene, start_q=arm.actual_q())  # every installed critic
+                    if checked.execution is None:
+                        return {"ok": False, "message": f"deploy stopped: {checked.report.verdicts[0].message}"}
+                    result = arm.deploy(checked.execution, checked.report)
             except DeployError as exc:
                 return {"ok": False, "message": f"deploy stopped: {exc}"}
         return {"ok": True, "message": result.summary()}

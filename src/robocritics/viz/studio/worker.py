@@ -1,6 +1,6 @@
 """Check programs for the studio in one warm, resource-limited child process.
 
-The studio runs :func:`~robocritics.simulate.simulate` and
+The studio runs :func:`~robocritics.pipeline.simulate` and
 :func:`~robocritics.critic.critique` on programs an LLM (or a user) wrote. The
 sandbox bounds what a program can do, but planning and critiquing a motion
 still costs memory and CPU, and a bug in a native library (Pinocchio, coal) can
@@ -46,7 +46,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ...report import Report
     from ...robot.model import Robot
     from ...scene import Scene
-    from ...simulate import Execution
+    from ...execution import Execution
 
 __all__ = [
     "DEFAULT_CPU_S",
@@ -150,8 +150,8 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
     limit_address_space(memory_bytes)
     try:
         from ...critic import critique
+        from ...pipeline import check, simulate
         from ...robot.model import Robot
-        from ...simulate import simulate
 
         robot = robot if robot is not None else Robot.ur3e()
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which raises it typed
@@ -182,8 +182,11 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
                                   params=job_params or None)  # fmt: skip
                 execution, report = repaired.execution, repaired.report
             else:
-                execution = simulate(program, scene, robot, **rate)
-                report = critique(execution, scene, job_critics, job_params, goals=goals)
+                checked = check(program, scene, robot=robot, goals=goals, critics=job_critics, params=job_params,
+                                **rate)  # fmt: skip
+                if checked.error is not None:  # the program did not run: the parent rebuilds this error, typed
+                    raise checked.error
+                execution, report = checked
             conn.send(("done", execution, report, None, time.process_time() - used, repaired))
         except MemoryError:
             _out_of_memory(conn, time.process_time() - used)
@@ -211,7 +214,7 @@ class Evaluator:
     """Simulate and critique programs in one warm child process with memory, CPU and time limits.
 
     ``scene``, ``robot`` (default the UR3e, loaded in the child), ``critics``, ``params`` and
-    ``sample_rate_hz`` (Hz) are as in :func:`~robocritics.simulate.simulate` and
+    ``sample_rate_hz`` (Hz) are as in :func:`~robocritics.pipeline.simulate` and
     :func:`~robocritics.critic.critique`; ``critics``/``params`` are checked here and are the
     defaults for :meth:`evaluate`. ``goals`` are task goals (``"green_apple in white_box"``, checked here
     against the scene: a bad one raises GoalError) that ``task_outcome`` checks on every job's final scene,

@@ -1,41 +1,38 @@
-"""``simulate()``: a robot program to a physically timed, critic-ready trajectory.
+"""The pipeline: :func:`simulate` (a robot program to a critic-ready run) and :func:`check` (a program or a run to
+its report), the one composition of the stages that the CLI, the loop, repairs, the studio, batch and deploy call.
 
-The pipeline, one stage after another (each a plain function of its inputs):
+:func:`simulate`, one stage after another (each a plain function of its inputs):
 
 1. the program runs in the sandbox (:func:`robocritics.program.run_program`) to a
    :class:`~robocritics.program.plan.Plan`: skill calls with their source lines;
-2. the planner (:class:`robocritics.robot.planner.Planner`) turns each call into
+2. the planner (:class:`robocritics.planning.planner.Planner`) turns each call into
    timed joint samples (IK, obstacle routing, jerk-limited timing, grasps);
 3. the robot model (:meth:`robocritics.Robot.trajectory`) adds link frames and
    proximities, giving the :class:`~robocritics.trajectory.Trajectory` the critics
    read and the deploy gate streams.
+
+:func:`check` then runs the critics on the :class:`~robocritics.execution.Execution`
+(:func:`robocritics.critic.critique`); a program that cannot run gets the ``runtime`` verdict instead.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Iterable, Iterator, Mapping, Optional
 
-from .errors import ProgramError, RobotModelError, SceneError
+from .errors import CriticError, PlanningError, ProgramError, RobotModelError, RoboCriticsError, SceneError
 from .execution import Execution
 
 if TYPE_CHECKING:  # pragma: no cover
+    from .critic import Critic
+    from .goals import Goal
     from .program.plan import Plan
+    from .report import Report
     from .robot.model import Robot
-    from .robot.planner import Event, MotionBudgetError, PlannerSettings
+    from .robot.planner import PlannerSettings
     from .scene import Scene
-    from .trajectory import Trajectory
 
-__all__ = ["simulate", "check_scene_ids", "Execution", "Event", "PlannerSettings", "MotionBudgetError"]
-
-
-def __getattr__(name: str) -> Any:
-    # The planner's types, re-exported without importing the planner (and Pinocchio)
-    # when only `robocritics` is imported: `robocritics.simulate` is imported eagerly.
-    if name in ("Event", "PlannerSettings", "MotionBudgetError"):
-        from .robot import planner
-
-        return getattr(planner, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__all__ = ["simulate", "check", "Checked", "check_scene_ids"]
 
 
 #: Names the interpreter binds in every program besides skills, builtins and modules (it has no public list).
@@ -160,3 +157,64 @@ def simulate(
         trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.resting_on), dict(object_poses)
     )
 
+
+
+@dataclass(frozen=True)
+class Checked:
+    """What :func:`check` returns: the run (None when the program did not run), its report, and the error that
+    stopped the program (None when it ran). Unpacks as ``execution, report = check(...)``."""
+
+    execution: Optional[Execution]
+    report: Report
+    #: The ProgramError or PlanningError of a program that did not run (its report is the ``runtime`` verdict).
+    error: Optional[RoboCriticsError] = None
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter((self.execution, self.report))
+
+
+def check(
+    program: str | Plan | Execution,
+    scene: Scene | None = None,
+    *,
+    robot: Robot | None = None,
+    goals: Iterable[str | Goal] | str | Goal | None = None,
+    critics: Iterable[str | Critic] | str | None = None,
+    params: Mapping[str, Any] | None = None,
+    sample_rate_hz: float = 125.0,
+    settings: PlannerSettings | None = None,
+    start_q=None,
+) -> Checked:
+    """Simulate ``program`` in ``scene`` (:func:`simulate`) and critique the run (:func:`robocritics.critique`).
+
+    ``program`` is source text, a Plan, or an :class:`Execution` already simulated (or imported from another
+    tool), which is only critiqued (``scene`` then defaults to its own). ``goals``, ``critics`` and ``params`` are
+    as in :func:`~robocritics.critic.critique`; ``robot``, ``sample_rate_hz``, ``settings`` and ``start_q`` as in
+    :func:`simulate`.
+
+    A program the sandbox rejects (:class:`~robocritics.errors.ProgramError`) or whose motion cannot be planned
+    (:class:`~robocritics.errors.PlanningError`, the motion budget included) gives ``Checked(None, report, error)``
+    whose report is one ERROR verdict of the ``runtime`` critic naming the line
+    (:func:`~robocritics.critic.runtime_report`; score 0), so callers treat it like any failing report. Bad input
+    of the caller (unknown critics or params: :class:`CriticError`; malformed goals:
+    :class:`~robocritics.errors.GoalError`; a bad scene) raises, before simulating; so does a critic that fails
+    (its CriticError's ``execution`` is the run it could not judge).
+    """
+    from .critic import critique, runtime_report, select_critics
+    from .goals import parse_goals
+
+    if isinstance(program, Execution):
+        return Checked(program, critique(program, scene, critics, params, goals=goals, robot=robot))
+    if scene is None:
+        raise SceneError("check() needs the scene the program runs in: check(program, scene)")
+    goals = parse_goals(goals, scene)
+    select_critics(critics, params)  # fail fast, before a slow simulation
+    try:
+        execution = simulate(program, scene, robot, sample_rate_hz, settings, start_q)
+    except (ProgramError, PlanningError) as exc:
+        return Checked(None, runtime_report(exc), exc)
+    try:
+        return Checked(execution, critique(execution, critics=critics, params=params, goals=goals))
+    except CriticError as exc:  # a critic could not judge the run: the error carries the run (its motion is shown)
+        exc.execution = execution
+        raise
