@@ -33,8 +33,8 @@ def main(argv: list[str] | None = None) -> None:
     from scipy.spatial import ConvexHull
 
     from robocritics import Scene, simulate
-    from robocritics.critics.space_usage import hull_points
-    from robocritics.robot.hull import convex_hull, quickhull
+    from robocritics.critic.builtin.space_usage import hull_points
+    from robocritics.geometry.hull import convex_hull, quickhull
 
     rng = np.random.default_rng(0)
     sphere = rng.normal(size=(16000, 3))

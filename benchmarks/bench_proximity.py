@@ -1,4 +1,4 @@
-"""Timing of the exact capsule distance kernels (robocritics.robot.proximity) on trajectory-sized arrays.
+"""Timing of the exact capsule distance kernels (robocritics.geometry.proximity) on trajectory-sized arrays.
 
 Run: ``python benchmarks/bench_proximity.py`` (single thread is what counts; set
 OMP_NUM_THREADS=1 to be sure numpy's linear algebra does not spread).
@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from robocritics.robot.proximity import ProximityKernel, _seg_box_sq, _seg_cyl_sq, _seg_seg_sq, _point_seg_sq
+from robocritics.geometry.proximity import ProximityKernel, _seg_box_sq, _seg_cyl_sq, _seg_seg_sq, _point_seg_sq
 from robocritics.scene import Scene
 
 
@@ -160,7 +160,7 @@ def bench_ur3e(T: int, repeat: int) -> None:
 def bench_carried(T: int, repeat: int) -> None:
     """A box and a cylinder carried low over each built-in scene (a new pose every sample, upright, turning
     slowly), against every box and cylinder of the scene: the time, and how many samples still went to coal."""
-    from robocritics.robot import proximity as prox
+    from robocritics.geometry import proximity as prox
     from robocritics.scene import Shape, rpy_matrix
 
     s = np.linspace(0.0, 1.0, T)

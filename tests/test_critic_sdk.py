@@ -17,7 +17,7 @@ from robocritics.critic import (
     get_critics,
     select_critics,
 )
-from robocritics.critics.joint_speed import Params as JointSpeedParams
+from robocritics.critic.builtin.joint_speed import Params as JointSpeedParams
 from robocritics.errors import CriticError
 from robocritics.scene import Scene, Workspace
 from robocritics.execution import Execution

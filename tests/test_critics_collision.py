@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
 from critic_reference import ref_collision
 from robocritics.critic import Flag
-from robocritics.critics.collision import counted_distances
+from robocritics.critic.builtin.collision import counted_distances
 from robocritics.trajectory import Step
 from strategies import trajectories
 from synth import env_pair, make_trajectory, self_pair
@@ -140,7 +140,7 @@ def test_agrees_with_the_per_sample_reference(traj, overrides):
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(traj=trajectories())
 def test_closest_is_the_row_minimum_of_the_counted_distances(traj):
-    from robocritics.critics.collision import Counted
+    from robocritics.critic.builtin.collision import Counted
 
     want = counted_distances(traj).min(axis=1) if traj.proximity.shape[1] else np.full(len(traj), np.inf)
     got = Counted(traj).closest(traj.proximity)
@@ -152,7 +152,7 @@ def test_closest_with_intended_contacts_and_nothing_always_counted():
     steps = [Step(skill="move_to", line=1), Step(skill="close_gripper", line=2, contacts=("apple",))]
     step = (np.arange(T) >= 25).astype(int)
     trajectory = traj_with(pairs, {0: dip(-0.01, slice(20, 40)), 1: 0.3}, steps=steps, step=step)
-    from robocritics.critics.collision import Counted
+    from robocritics.critic.builtin.collision import Counted
 
     got = Counted(trajectory).closest(trajectory.proximity)
     want = np.where(np.arange(T) >= 25, 0.3, dip(-0.01, slice(20, 40)))  # the apple counts until the grasp step

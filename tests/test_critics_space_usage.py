@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
 from critic_reference import ref_space_usage
 from robocritics.critic import Flag
-from robocritics.critics.space_usage import hull_points, hull_volume, volume_error_bound
+from robocritics.critic.builtin.space_usage import hull_points, hull_volume, volume_error_bound
 from robocritics.scene import Scene, Workspace
 from strategies import trajectories
 from synth import make_trajectory, realistic_trajectory
@@ -152,7 +152,7 @@ def hull_points_reference(X, tol):
     block gives the stride s (the largest power of two <= 64 with M s^2 / 8 <= tol) and every s-th sample of
     the block is kept, frame after frame; then each frame's last sample, where its last block's stride skipped
     it, closes its last chord; last, a point equal to the one before it in that order goes."""
-    from robocritics.critics.space_usage import BLOCK
+    from robocritics.critic.builtin.space_usage import BLOCK
 
     T, L, _ = X.shape
     kept, closing = [], []

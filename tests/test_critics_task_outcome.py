@@ -9,7 +9,7 @@ import pytest
 
 from robocritics.critic import Flag, critique, get_critics
 from robocritics.pipeline import check
-from robocritics.critics.task_outcome import GoalOutcome, TaskOutcomeCritic
+from robocritics.critic.builtin.task_outcome import GoalOutcome, TaskOutcomeCritic
 from robocritics.errors import CriticError, GoalError
 from robocritics.goals import Goal
 from robocritics.scene import Scene
@@ -102,12 +102,12 @@ def test_the_critic_alone_reads_the_goals_of_the_run(careful):
 
 
 def test_registered_like_the_others_when_its_entry_point_is_installed():
-    # pyproject's entry point (task_outcome = "robocritics.critics.task_outcome") makes it installed; without it
+    # pyproject's entry point (task_outcome = "robocritics.critic.builtin.task_outcome") makes it installed; without it
     # critique() still brings it whenever there are goals
     installed = get_critics()
     if "task_outcome" in installed:
         assert isinstance(installed["task_outcome"], TaskOutcomeCritic)
-    from robocritics.critics import task_outcome
+    from robocritics.critic.builtin import task_outcome
 
     seen = []
     task_outcome.register_critics(seen.append)

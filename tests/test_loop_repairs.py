@@ -26,7 +26,7 @@ from robocritics.llm.memory import InteractionMemory
 from robocritics.repair import repair
 from robocritics.scene import Scene
 from robocritics.pipeline import simulate
-from robocritics.verdict import Flag, Verdict
+from robocritics.critic.verdict import Flag, Verdict
 
 pytestmark = pytest.mark.usefixtures("clean_llm_env")
 

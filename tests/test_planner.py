@@ -93,7 +93,7 @@ def test_speed_events_and_step_speed_fractions():
 
 def _planner(scene=SCENE):
     from robocritics import Robot
-    from robocritics.robot.planner import Planner, PlannerSettings
+    from robocritics.planning.planner import Planner, PlannerSettings
 
     robot = Robot.ur3e()
     return Planner(robot.scene_for(scene), robot, 125.0, PlannerSettings())

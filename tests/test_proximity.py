@@ -1,4 +1,4 @@
-"""Exact capsule distances (robocritics.robot.proximity) against coal and brute-force references.
+"""Exact capsule distances (robocritics.geometry.proximity) against coal and brute-force references.
 
 coal's GJK (separated shapes, run with a 1e-12 tolerance) and its EPA for boxes
 and capsules agree with the closed forms to ~1e-15 m. coal's EPA for cylinders
@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
 
-from robocritics.robot import proximity as P
+from robocritics.geometry import proximity as P
 from robocritics.scene import Scene, Shape, rpy_matrix
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from robocritics.robot import proximity as P
+from robocritics.geometry import proximity as P
 from robocritics.scene import Shape, rpy_matrix
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)

@@ -48,13 +48,13 @@ def test_the_root_exports_exactly_the_designed_names():
 def test_each_root_name_is_the_object_its_module_defines():
     from robocritics.critic import Critic, CriticParams, critique
     from robocritics.execution import Execution
-    from robocritics.hookspecs import hookimpl
+    from robocritics.critic.hookspecs import hookimpl
     from robocritics.llm.loop import Loop
-    from robocritics.report import Report
+    from robocritics.critic.report import Report
     from robocritics.robot.model import Robot
     from robocritics.scene import Scene
     from robocritics.trajectory import Trajectory
-    from robocritics.verdict import Flag, Verdict
+    from robocritics.critic.verdict import Flag, Verdict
 
     from robocritics.repair import builtin  # noqa: F401  (submodules import under the function's name)
     from robocritics.pipeline import check, simulate

@@ -20,7 +20,7 @@ from robocritics.repair import repair
 from robocritics.repair.builtin import _nearest_reachable_dz
 from robocritics.robot.model import Robot
 from robocritics.pipeline import simulate
-from robocritics.verdict import Flag
+from robocritics.critic.verdict import Flag
 
 
 def _scores(report):
@@ -186,7 +186,7 @@ home()
 
 def _reference_overlaps(execution, line):
     """Per carried object, max over counted collision samples of ``line`` of top(b) - bottom(a): one sample at a time."""
-    from robocritics.critics.collision import counted_distances
+    from robocritics.critic.builtin.collision import counted_distances
 
     traj = execution.trajectory
     D = counted_distances(traj)

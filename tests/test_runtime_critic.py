@@ -13,7 +13,7 @@ from robocritics.cli import main
 from robocritics.critic import RUNTIME, Flag
 from robocritics.pipeline import check
 from robocritics.errors import CriticError, GoalError
-from robocritics.report import Report
+from robocritics.critic.report import Report
 from robocritics.scene import Scene
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "programs"

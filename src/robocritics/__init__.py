@@ -33,10 +33,10 @@ _EXPORTS = {
     "critique": "robocritics.critic",
     "Critic": "robocritics.critic",
     "CriticParams": "robocritics.critic",
-    "Flag": "robocritics.verdict",
-    "Verdict": "robocritics.verdict",
-    "Report": "robocritics.report",
-    "hookimpl": "robocritics.hookspecs",
+    "Flag": "robocritics.critic.verdict",
+    "Verdict": "robocritics.critic.verdict",
+    "Report": "robocritics.critic.report",
+    "hookimpl": "robocritics.critic.hookspecs",
     "Loop": "robocritics.llm.loop",
 }
 # Names that used to be exported here, and the module to import them from.
@@ -89,10 +89,10 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), moved=_MOVED)
 if TYPE_CHECKING:  # pragma: no cover
     from .critic import Critic, CriticParams, critique
     from .execution import Execution
-    from .hookspecs import hookimpl
+    from .critic.hookspecs import hookimpl
     from .llm.loop import Loop
-    from .report import Report
+    from .critic.report import Report
     from .robot.model import Robot
     from .scene import Scene
     from .trajectory import Trajectory
-    from .verdict import Flag, Verdict
+    from .critic.verdict import Flag, Verdict

@@ -27,9 +27,9 @@ if TYPE_CHECKING:  # pragma: no cover
     from .critic import Critic
     from .goals import Goal
     from .program.plan import Plan
-    from .report import Report
+    from .critic.report import Report
     from .robot.model import Robot
-    from .robot.planner import PlannerSettings
+    from .planning.planner import PlannerSettings
     from .scene import Scene
 
 __all__ = ["simulate", "check", "Checked", "check_scene_ids"]
@@ -88,8 +88,8 @@ def simulate(
     The motion starts at ``start_q`` (joint angles, rad; e.g. where a real arm is
     now, ``URArm.actual_q()``) or, by default, at the robot's home pose
     ``robot.home_q``. ``sample_rate_hz`` is the trajectory's sample rate [Hz], in
-    [25, 500] (:data:`~robocritics.robot.motion.MIN_SAMPLE_RATE_HZ`,
-    :data:`~robocritics.robot.motion.MAX_SAMPLE_RATE_HZ`: sparser sampling hides
+    [25, 500] (:data:`~robocritics.planning.timing.MIN_SAMPLE_RATE_HZ`,
+    :data:`~robocritics.planning.timing.MAX_SAMPLE_RATE_HZ`: sparser sampling hides
     fast motion from the critics, denser is more than a controller executes).
 
     Raises :class:`SceneError` for a scene whose ids are names of the skill API (:func:`check_scene_ids`),
@@ -103,8 +103,8 @@ def simulate(
     from .program.plan import Plan
     from .program.sandbox import run_program
     from .robot.model import Robot
-    from .robot.motion import check_sample_rate
-    from .robot.planner import Planner, PlannerSettings
+    from .planning.timing import check_sample_rate
+    from .planning.planner import Planner, PlannerSettings
     from .scene import Scene
 
     if not isinstance(scene, Scene):

@@ -10,7 +10,7 @@ frames and ``K`` proximity pairs holds
 * ``proximity`` ``(T, K)`` signed distances, m, of the named pairs in ``pairs``
   (P_t; <= 0 on penetration; a simulated trajectory's array is column-major, each pair's
   time series contiguous, as the critics read it). Self pairs are exact; an environment pair's value
-  is exact when it is at most 0.10 m (:data:`robocritics.robot.trace.EXACT_WITHIN_M`)
+  is exact when it is at most 0.10 m (:data:`robocritics.planning.trace.EXACT_WITHIN_M`)
   or at most the arm's closest environment distance at that sample, and otherwise
   a lower bound beyond both (far pairs are not measured exactly). So every
   threshold up to 0.10 m, and the closest distance over any set of environment

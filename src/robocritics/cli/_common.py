@@ -82,7 +82,7 @@ def positive_int(text: str) -> int:
 def sample_rate(text: str) -> float:
     """A trajectory sample rate [Hz] in the range the critics can trust (robot.motion.check_sample_rate)."""
     from ..errors import PlanningError
-    from ..robot.motion import check_sample_rate
+    from ..planning.timing import check_sample_rate
 
     try:
         value = float(text)

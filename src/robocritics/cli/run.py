@@ -202,7 +202,7 @@ def _error(message: str, stream: TextIO) -> int:
 
 def _print_attempt(attempt, out: TextIO) -> None:
     from ..llm.limits import MAX_PRINTED_CHARS, cut_text
-    from ..report import format_score
+    from ..critic.report import format_score
 
     _say(out, f"=== attempt {attempt.index} [{attempt.kind}] ===")
     if attempt.error and attempt.program is None:
@@ -237,7 +237,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     from ..llm.loop import Loop
     from ..llm.memory import InteractionMemory
     from ..llm.prompts import check_task
-    from ..report import format_score
+    from ..critic.report import format_score
 
     out = stdout or sys.stdout
     err = stderr or sys.stderr

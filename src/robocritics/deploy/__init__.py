@@ -1,6 +1,6 @@
 """Deployment to a Universal Robots arm: RTDE and Dashboard clients, the URScript
 streaming program, the gate and the paced servo stream — typed on
-:class:`~robocritics.trajectory.Trajectory` and :class:`~robocritics.report.Report`.
+:class:`~robocritics.trajectory.Trajectory` and :class:`~robocritics.critic.report.Report`.
 
 * :mod:`~robocritics.deploy.rtde` — :class:`RTDEClient`, RTDE protocol v2/v1 with a background reader;
   the mode tables :class:`RobotMode`, :class:`SafetyMode`, :class:`RuntimeState`.

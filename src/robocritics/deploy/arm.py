@@ -71,14 +71,14 @@ def approach_trajectory(
 ) -> Trajectory:
     """A slow joint move from ``start_q`` [rad] to the first sample of ``goal``, as a Trajectory.
 
-    Planned by :func:`robocritics.robot.planner.plan_approach` at ``speed_fraction``
+    Planned by :func:`robocritics.planning.planner.plan_approach` at ``speed_fraction``
     of the robot's limits and sampled at ``goal``'s rate, with ``goal``'s first
     gripper opening, in ``scene`` (where the objects are when ``goal`` starts).
     Critique it (``robocritics.critique(approach, scene)``) and deploy it with that
     report: it passes the same gate as any motion. Raises :class:`DeployError` if
     ``goal`` starts holding an object (plan that approach in the program instead).
     """
-    from robocritics.robot.planner import plan_approach
+    from robocritics.planning.planner import plan_approach
 
     if not isinstance(goal, Trajectory):
         raise DeployError(f"approach_trajectory(): goal must be a robocritics.Trajectory, got {type(goal).__name__}")
@@ -259,7 +259,7 @@ class URArm:
         ``motion``: the :class:`~robocritics.execution.Execution` that
         :func:`robocritics.simulate` returned, or a
         :class:`~robocritics.trajectory.Trajectory` (e.g. :meth:`approach`);
-        ``report``: the :class:`~robocritics.report.Report` of exactly that trajectory.
+        ``report``: the :class:`~robocritics.critic.report.Report` of exactly that trajectory.
         ``allow_errors`` must be passed explicitly to deploy a report with Errors.
         ``dry_run`` does the gate, the connection checks, the resampling, the
         program text and the pacing schedule, and checks that the secondary

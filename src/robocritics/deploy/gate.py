@@ -1,7 +1,7 @@
 """The deploy gate: what a trajectory, its report and the arm must satisfy before anything moves.
 
 Plain functions of typed inputs — a :class:`~robocritics.trajectory.Trajectory`,
-the :class:`~robocritics.report.Report` that judged it, the resampled
+the :class:`~robocritics.critic.report.Report` that judged it, the resampled
 :class:`~robocritics.deploy.stream.StreamPlan` and one RTDE state package — each
 returning the ``(cause, explanation)`` reasons it finds (empty: the rule passes).
 :meth:`robocritics.deploy.URArm.deploy` runs them and raises :class:`DeployRefused`
@@ -10,7 +10,7 @@ with every reason before it sends anything that could move the arm.
 ===================  ===========================================================
 cause                rule
 ===================  ===========================================================
-``no_report``        a :class:`~robocritics.report.Report` is required
+``no_report``        a :class:`~robocritics.critic.report.Report` is required
 ``report_errors``    the report has an Error verdict (names each critic and its
                      message); ``allow_errors=True`` overrides this rule only
 ``hash_mismatch``    ``report.trajectory_hash != trajectory.content_hash()``:
@@ -49,7 +49,7 @@ from robocritics.deploy.rtde import RobotMode, RuntimeState, SafetyMode, mode_na
 from robocritics.deploy.stream import StreamPlan
 from robocritics.errors import DeployError
 from robocritics.robot.arms import ARMS
-from robocritics.report import Report
+from robocritics.critic.report import Report
 from robocritics.execution import Execution
 from robocritics.trajectory import Trajectory
 

@@ -244,7 +244,7 @@ def resample(trajectory: Trajectory, rate_hz: float = UR3E.control_rate_hz) -> S
         g = np.interp(ts, t, g_src)
         how = "linear"
     else:
-        from ..robot.spline import pchip
+        from ..planning.spline import pchip
 
         q = pchip(t, q_src, ts)
         g = np.clip(pchip(t, g_src, ts), g_src.min(), g_src.max())

@@ -101,7 +101,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
 from ..errors import CriticError, LLMError, PlanningError, ProgramError, RoboCriticsError, TrajectoryError
-from ..report import format_score
+from ..critic.report import format_score
 from .client import ChatModel, ContextLengthError
 from .limits import DEFAULT_MAX_TOKENS, MAX_MESSAGE_CHARS, MIN_REPLY_TOKENS, clean_text, cut_text
 from .memory import MAX_SEARCH_K, SOURCES, Interaction, InteractionMemory  # SOURCES: who wrote a program
@@ -635,7 +635,7 @@ class Loop:
         nothing (or fail: then the model is asked, as without repairs).
         """
         from ..repair import repair
-        from ..verdict import Flag
+        from ..critic.verdict import Flag
 
         did_not_run = self._did_not_run()  # the runtime critic's Error: e.g. an unreachable target
         if did_not_run:

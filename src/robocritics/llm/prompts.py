@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ..errors import CriticError, LLMError, PlanningError, ProgramError, RoboCriticsError
-from ..report import format_score
+from ..critic.report import format_score
 from .limits import CHARS_PER_TOKEN, MAX_FEEDBACK_CHARS, MAX_REPLY_CHARS, MAX_TASK_CHARS, clean_text, cut_text
 
 if TYPE_CHECKING:  # pragma: no cover

@@ -2,7 +2,7 @@
 
 ``repair(program, scene)`` simulates the program, asks every critic that flags
 an Error for candidate edits (the ``robocritics_repairs`` hook, see
-:mod:`robocritics.hookspecs`; the built-in critics' repairs are in
+:mod:`robocritics.critic.hookspecs`; the built-in critics' repairs are in
 :mod:`robocritics.repair.builtin`, registered the same way as a plugin's),
 re-simulates each candidate and keeps it only when it makes progress on an
 Error without worsening any verdict (or the task goal); see :func:`_acceptable`.

@@ -11,7 +11,7 @@ import ast
 import math
 import re
 
-from ..hookspecs import hookimpl
+from ..critic.hookspecs import hookimpl
 from .edit import Edit, Insert, InsertText, MoveBlock, ReplaceSpan, ReplaceText, ScaleNumbers, paragraphs
 
 #: Headroom under a speed threshold a slowdown aims for (fraction of the threshold).
@@ -226,7 +226,7 @@ def _vertical_overlaps(execution, line: int) -> dict[str, float]:
     """
     import numpy as np
 
-    from ..critics.collision import Counted
+    from ..critic.builtin.collision import Counted
 
     traj = execution.trajectory
     steps = [i for i, s in enumerate(traj.steps) if s.line == line]

@@ -12,14 +12,14 @@ from typing import TYPE_CHECKING, Any
 
 from ..critic import RUNTIME
 from ..errors import RoboCriticsError
-from ..verdict import Flag
+from ..critic.verdict import Flag
 from . import builtin
 from .edit import Edit, apply_edits
 
 log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..report import Report
+    from ..critic.report import Report
     from ..scene import Scene
     from ..execution import Execution
 
@@ -91,7 +91,7 @@ class NotRun:
 
 
 def _manager():
-    from ..plugins import load_plugins, pm
+    from ..critic.plugins import load_plugins, pm
 
     load_plugins()
     if not pm.is_registered(builtin):

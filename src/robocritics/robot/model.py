@@ -637,9 +637,9 @@ class Robot:
     def trajectory(self, q: np.ndarray, time: np.ndarray, scene, **kwargs):
         """The :class:`~robocritics.trajectory.Trajectory` of joint samples ``q`` at ``time`` in ``scene``.
 
-        See :func:`robocritics.robot.trace.build_trajectory` for the optional arguments.
+        See :func:`robocritics.planning.trace.build_trajectory` for the optional arguments.
         """
-        from .trace import build_trajectory
+        from ..planning.trace import build_trajectory
 
         return build_trajectory(self, scene, q, time, **kwargs)
 
@@ -732,7 +732,7 @@ class Robot:
         shoulder column). What remains are non-adjacent arm links and arm links
         against the gripper, the pairs that can close on a hand.
         """
-        from .proximity import capsule_capsule
+        from ..geometry.proximity import capsule_capsule
 
         parent_of = {}
         for f in self.model.frames:

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from .replay import replay_data
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..report import Report
+    from ..critic.report import Report
     from ..execution import Execution
 
 __all__ = ["assets", "replay_html", "write_replay_html", "Replay", "script_json"]

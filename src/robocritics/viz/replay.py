@@ -1,7 +1,7 @@
 """One simulated run as replay data: what the 3-D replay (``static/replay.js``) draws, as plain JSON.
 
 :func:`replay_data` turns an :class:`~robocritics.execution.Execution` (and the
-:class:`~robocritics.report.Report` of its critics) into a JSON-serialisable dict
+:class:`~robocritics.critic.report.Report` of its critics) into a JSON-serialisable dict
 that the replay component renders in a browser, the same for the studio, a
 notebook and an offline HTML file:
 
@@ -36,7 +36,7 @@ import numpy as np
 from .._arrays import unique_values
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..report import Report
+    from ..critic.report import Report
     from ..execution import Execution
 
 __all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ", "closest_points"]
@@ -93,7 +93,7 @@ def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> 
     """
     import coal
 
-    from ..robot.proximity import _coal_geometry
+    from ..geometry.proximity import _coal_geometry
 
     def transform(pose):
         pose = np.asarray(pose, float)

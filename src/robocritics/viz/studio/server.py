@@ -226,7 +226,7 @@ class Studio:
             return self._evaluator
 
     def installed_critics(self) -> list[str]:
-        from ...plugins import get_critics
+        from ...critic.plugins import get_critics
 
         return list(get_critics())
 

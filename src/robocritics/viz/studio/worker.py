@@ -43,7 +43,7 @@ from ...child import MAX_JOBS_PER_CHILD, Child, cpu_seconds, limit_address_space
 from ...errors import CriticError, PlanningError, ProgramError, RoboCriticsError, SceneError, TrajectoryError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ...report import Report
+    from ...critic.report import Report
     from ...robot.model import Robot
     from ...scene import Scene
     from ...execution import Execution

@@ -30,7 +30,7 @@ import numpy as np
 from .._arrays import run_starts
 from ..scene import Scene, Shape
 from ..trajectory import Pair, Step, Trajectory
-from . import proximity as prox
+from ..geometry import proximity as prox
 
 __all__ = ["build_trajectory", "EXACT_WITHIN_M"]
 

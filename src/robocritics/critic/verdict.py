@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING, Any, Literal, Sequence
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from ._arrays import unique_values
+from .._arrays import unique_values
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .trajectory import Trajectory
+    from ..trajectory import Trajectory
 
 __all__ = [
     "Flag",

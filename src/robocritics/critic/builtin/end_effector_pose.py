@@ -37,9 +37,9 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from .. import hookimpl
-from ..critic import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
-from ..errors import CriticError
+from ... import hookimpl
+from .. import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
+from ...errors import CriticError
 
 __all__ = ["EndEffectorPoseCritic", "register_critics", "spearing_speed"]
 

@@ -34,7 +34,7 @@ import numpy as np
 from ruckig import InputParameter, Result, Ruckig, RuckigError, Trajectory as RuckigTrajectory
 
 from ..errors import PlanningError
-from .arms import UR3E
+from ..robot.arms import UR3E
 
 __all__ = [
     "Limits",

@@ -37,9 +37,9 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from .._arrays import min_over_columns, run_starts
+from ..._arrays import min_over_columns, run_starts
 from ..hookspecs import hookimpl  # not `from .. import`: the root imports the repairs, which import this module
-from ..critic import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
+from .. import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["CollisionCritic", "register_critics", "Counted", "counted_distances"]
 

@@ -39,9 +39,9 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from .. import hookimpl
-from .._arrays import row_any, row_max, squared_norms
-from ..critic import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
+from ... import hookimpl
+from ..._arrays import row_any, row_max, squared_norms
+from .. import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["JointSpeedCritic", "register_critics", "link_speeds"]
 

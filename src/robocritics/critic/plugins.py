@@ -1,7 +1,7 @@
 """The plugin manager: loads every ``robocritics`` entry point and collects the critics.
 
 There is one :data:`pm` (``pluggy.PluginManager("robocritics")``) with the
-hookspecs of :mod:`robocritics.hookspecs`. :func:`load_plugins` walks the
+hookspecs of :mod:`robocritics.critic.hookspecs`. :func:`load_plugins` walks the
 ``robocritics`` entry-point group itself (rather than pluggy's
 ``load_setuptools_entrypoints``) so that a plugin that fails to import is
 reported **by name**, with a :class:`PluginWarning` and an entry in
@@ -33,7 +33,7 @@ import pluggy
 from pydantic import BaseModel
 
 from . import hookspecs
-from .errors import CriticError
+from ..errors import CriticError
 
 __all__ = [
     "pm",

@@ -14,8 +14,8 @@ Each call becomes motion:
   the TCP), ``open_gripper`` releases it and it settles on what is below it
   (a container floor, another object, or the table);
 * ``reduce_speed``/``set_speed`` scale every later move's limits as a time
-  stretch (see :mod:`robocritics.robot.motion`); the slowest speed is
-  :data:`~robocritics.robot.motion.MIN_SPEED_FRACTION` (1 %).
+  stretch (see :mod:`robocritics.planning.timing`); the slowest speed is
+  :data:`~robocritics.planning.timing.MIN_SPEED_FRACTION` (1 %).
 
 The motion budget
 -----------------
@@ -49,9 +49,9 @@ from ..errors import PlanningError
 from ..program.plan import Plan, SkillCall
 from ..scene import MAX_COORD_M, Container, Scene, SceneObject, rpy_matrix
 from ..trajectory import Step
-from .model import Robot, fingers_down
+from ..robot.model import Robot, fingers_down
 from .spline import cubic_spline
-from .motion import (
+from .timing import (
     JOINT_SPEED_MARGIN,
     MIN_SPEED_FRACTION,
     Limits,
@@ -172,7 +172,7 @@ def plan_approach(
     critiques it like any other motion. ``speed_fraction`` scales the robot's
     limits as in ``set_speed`` (velocity by f, acceleration by f², jerk by f³), in
     [MIN_SPEED_FRACTION, 1]; ``sample_rate_hz`` lies in the range of
-    :func:`~robocritics.robot.motion.check_sample_rate`. The move must fit the
+    :func:`~robocritics.planning.timing.check_sample_rate`. The move must fit the
     motion budget of ``settings`` (default :class:`PlannerSettings`), checked before
     it is sampled (:class:`MotionBudgetError`).
     """

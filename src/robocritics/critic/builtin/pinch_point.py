@@ -23,8 +23,8 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from .. import hookimpl
-from ..critic import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
+from ... import hookimpl
+from .. import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
 
 __all__ = ["PinchPointCritic", "register_critics"]
 

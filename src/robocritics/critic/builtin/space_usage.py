@@ -33,7 +33,7 @@ move) are kept once. The workspace check always uses every point.
 Degenerate point sets (fewer than 4 distinct points, all coplanar or
 collinear to rounding, about 1e-12 of their size) have volume 0; thinner
 sets than coal's Qhull copes with are measured by the numpy quickhull (see
-:mod:`robocritics.robot.hull`).
+:mod:`robocritics.geometry.hull`).
 """
 
 from __future__ import annotations
@@ -43,10 +43,10 @@ from functools import partial
 import numpy as np
 from pydantic import Field
 
-from .. import hookimpl
-from .._arrays import row_max, squared_norms, unique_values
-from ..critic import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
-from ..robot.hull import convex_hull
+from ... import hookimpl
+from ..._arrays import row_max, squared_norms, unique_values
+from .. import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
+from ...geometry.hull import convex_hull
 
 __all__ = ["SpaceUsageCritic", "register_critics", "hull_points", "hull_volume", "volume_error_bound"]
 
@@ -120,7 +120,7 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
 def hull_volume(P: np.ndarray) -> tuple[float, float, np.ndarray]:
     """``(volume m^3, area m^2, vertex indices)`` of the convex hull of ``P (N, 3)``; 0 for degenerate sets.
 
-    See :func:`robocritics.robot.hull.convex_hull`: vertex indices ascend (the first of equal points); sets flat
+    See :func:`robocritics.geometry.hull.convex_hull`: vertex indices ascend (the first of equal points); sets flat
     to rounding give ``(0, 0, [])``.
     """
     if len(P) < 4:

@@ -13,7 +13,7 @@ on the execution's final scene:
 It is an on-demand critic: ``requested(execution)`` is true when the run has goals, so the default selection
 runs it only then, and any selection runs it then.
 
-It is not part of the 0-10 score (:attr:`robocritics.report.Report.scored_verdicts`: the five motion
+It is not part of the 0-10 score (:attr:`robocritics.critic.report.Report.scored_verdicts`: the five motion
 critics), but its Error makes ``Report.has_errors`` true and ``Report.passed`` false.
 """
 
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict
 
-from ..goals import GoalOutcome, check_outcomes, program_goals
+from ...goals import GoalOutcome, check_outcomes, program_goals
 from ..hookspecs import hookimpl
 from ..verdict import Evidence, Flag, Verdict
 

@@ -10,7 +10,7 @@ program lines and skills).
 
 Critics are plugins: each is registered through the ``robocritics``
 entry-point group by a ``register_critics(register)`` hook (see
-:mod:`robocritics.hookspecs`), the built-in ones exactly like third-party ones;
+:mod:`robocritics.critic.hookspecs`), the built-in ones exactly like third-party ones;
 :func:`register` adds one from a notebook through the same plugin manager.
 :func:`get_critics` lists the installed critics; :func:`critique` runs them.
 
@@ -45,8 +45,8 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping, Protocol, Union, runti
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from ._suggest import did_you_mean
-from .errors import CriticError, RoboCriticsError
+from .._suggest import did_you_mean
+from ..errors import CriticError, RoboCriticsError
 from .plugins import (
     critic_distributions,
     critic_sources,
@@ -76,11 +76,11 @@ from .verdict import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .goals import Goal
-    from .program.plan import Plan
-    from .scene import Scene
-    from .execution import Execution
-    from .trajectory import Trajectory
+    from ..goals import Goal
+    from ..program.plan import Plan
+    from ..scene import Scene
+    from ..execution import Execution
+    from ..trajectory import Trajectory
 
 __all__ = [
     "Critic",
@@ -296,9 +296,9 @@ def as_execution(
     """
     from dataclasses import replace
 
-    from .execution import Execution
-    from .goals import parse_goals
-    from .trajectory import Trajectory
+    from ..execution import Execution
+    from ..goals import parse_goals
+    from ..trajectory import Trajectory
 
     if isinstance(run, Execution):
         execution = run if scene is None else replace(run, scene=scene)

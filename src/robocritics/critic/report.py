@@ -1,7 +1,7 @@
 """The verdicts of one critique run: score, feedback text, terminal text, JSON, notebook HTML.
 
 ``Report.score`` is the paper's 0-10 program quality index over the five built-in
-motion critics (:data:`~robocritics.plugins.BUILTIN_CRITICS`): each scores 2 (OK),
+motion critics (:data:`~robocritics.critic.plugins.BUILTIN_CRITICS`): each scores 2 (OK),
 1 (Warning) or 0 (Error) and the score is their sum; when only some of the five
 ran, the sum is scaled to 0-10 (``10 * sum / (2 n)``). Every other critic that ran
 (a plugin's, or one passed to ``critique()``) is reported beside the score, not in
@@ -20,8 +20,8 @@ from typing import Any, Iterable
 
 from pydantic import BaseModel, ConfigDict, Field, computed_field
 
-from ._suggest import did_you_mean
-from .errors import CriticError
+from .._suggest import did_you_mean
+from ..errors import CriticError
 from .plugins import BUILTIN_CRITICS
 from .verdict import Flag, Signal, Verdict, fmt_value, format_lines
 
