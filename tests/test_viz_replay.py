@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import robocritics as rc
-from robocritics.viz import MAX_FRAME_RATE_HZ, REPLAY_FORMAT, Replay, closest_points, replay_data, replay_html
+from robocritics.geometry.pairs import closest_points
+from robocritics.viz import MAX_FRAME_RATE_HZ, REPLAY_FORMAT, Replay, replay_data, replay_html
 from robocritics.viz.html import script_json
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "programs"

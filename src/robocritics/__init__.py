@@ -30,6 +30,8 @@ _EXPORTS = {
     "Scene": "robocritics.scene",
     "Trajectory": "robocritics.trajectory",
     "Execution": "robocritics.execution",
+    "simulate": "robocritics.pipeline",
+    "check": "robocritics.pipeline",
     "critique": "robocritics.critic",
     "Critic": "robocritics.critic",
     "CriticParams": "robocritics.critic",
@@ -50,9 +52,8 @@ _MOVED = {
     "OpenAICompatible": "robocritics.llm",
 }
 
-# Eager, and cheap (their heavy imports are inside the functions): the submodules
+# Eager, and cheap (its heavy imports are inside the function): the subpackage
 # `robocritics.repair` would otherwise shadow the function of the same name.
-from .pipeline import check, simulate  # noqa: E402
 from .repair import repair  # noqa: E402
 from .errors import (  # noqa: E402
     CriticError,
@@ -80,7 +81,7 @@ _ERRORS = (
     "RTDEError",
 )
 
-__all__ = [*_EXPORTS, "simulate", "check", "repair", *_ERRORS]
+__all__ = [*_EXPORTS, "repair", *_ERRORS]
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), moved=_MOVED)
@@ -89,6 +90,7 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), moved=_MOVED)
 if TYPE_CHECKING:  # pragma: no cover
     from .critic import Critic, CriticParams, critique
     from .execution import Execution
+    from .pipeline import check, simulate
     from .critic.hookspecs import hookimpl
     from .llm.loop import Loop
     from .critic.report import Report

@@ -732,7 +732,7 @@ class Robot:
         shoulder column). What remains are non-adjacent arm links and arm links
         against the gripper, the pairs that can close on a hand.
         """
-        from ..geometry.proximity import capsule_capsule
+        from ..geometry.kernels import capsule_capsule
 
         parent_of = {}
         for f in self.model.frames:

@@ -34,12 +34,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._arrays import unique_values
+from ..geometry.pairs import capsule_pose, closest_points
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic.report import Report
     from ..execution import Execution
 
-__all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ", "closest_points"]
+__all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ"]
 
 #: Version tag of the replay data, checked by ``replay.js``.
 REPLAY_FORMAT = "robocritics-replay/1"
@@ -83,43 +84,6 @@ def _frame_samples(time_s: np.ndarray, keep: list[int]) -> np.ndarray:
     return unique_values(picked[(picked >= 0) & (picked < T)])  # (np.unique would load numpy.ma)
 
 
-def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> tuple[np.ndarray, np.ndarray, float]:
-    """Closest points (m, base frame) between two shapes and their distance [m], with coal.
-
-    Kinds: ``"capsule"`` (size ``(radius, length)``, axis z of its pose), ``"box"``
-    (extents), ``"cylinder"`` (radius, height), ``"sphere"`` (radius). Poses are 4x4.
-    The distance is negative on penetration (coal's signed distance); the points
-    are then the witness points of the penetration.
-    """
-    import coal
-
-    from ..geometry.proximity import _coal_geometry
-
-    def transform(pose):
-        pose = np.asarray(pose, float)
-        return coal.Transform3s(pose[:3, :3].copy(), pose[:3, 3].copy())
-
-    request, result = coal.DistanceRequest(), coal.DistanceResult()
-    request.enable_signed_distance = True
-    distance = coal.distance(_coal_geometry(a_kind, a_size), transform(a_pose), _coal_geometry(b_kind, b_size), transform(b_pose),
-                             request, result)  # fmt: skip
-    return np.array(result.getNearestPoint1()), np.array(result.getNearestPoint2()), float(distance)
-
-
-def _capsule_pose(p0: np.ndarray, p1: np.ndarray) -> tuple[np.ndarray, float]:
-    """A pose whose z axis runs along ``p0 -> p1``, centred between them, and the segment length [m]."""
-    axis = p1 - p0
-    length = float(np.linalg.norm(axis))
-    z = axis / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
-    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    pose = np.eye(4)
-    pose[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-    pose[:3, 3] = (p0 + p1) / 2
-    return pose, length
-
-
 def _segment(execution: Execution, pair_name: str, sample: int) -> list[list[float]] | None:
     """The closest-points segment of proximity pair ``pair_name`` at ``sample`` (m, base frame), or None."""
     trajectory, robot = execution.trajectory, execution.robot
@@ -132,7 +96,7 @@ def _segment(execution: Execution, pair_name: str, sample: int) -> list[list[flo
     def shapes_of(name: str) -> list[tuple[str, Any, np.ndarray]]:
         if name in capsule_index:
             i = capsule_index[name]
-            pose, length = _capsule_pose(p0[0, i], p1[0, i])
+            pose, length = capsule_pose(p0[0, i], p1[0, i])
             return [("capsule", (robot.capsule_radii[i], length), pose)]
         moved = execution.object_poses.get(name)
         return [
