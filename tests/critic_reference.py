@@ -13,6 +13,7 @@ import math
 from scipy.spatial import ConvexHull, QhullError
 
 from robocritics.critic import Flag
+from robocritics.robot.model import default_workspace
 
 
 def ref_joint_speed(traj, params) -> dict:
@@ -55,7 +56,7 @@ def ref_space_usage(traj, scene, params) -> dict:
     """Every link point: outside the workspace sphere is an error; exact hull volume vs 50 % of W."""
     frames = traj.frames
     sel = [traj.frame_names.index(n) for n in params.frames] if params.frames else range(len(traj.frame_names))
-    ws = scene.workspace
+    ws = scene.workspace or default_workspace()  # a scene without one: the default arm's reach
     cx, cy, cz = ws.center
     points = set()
     worst_out = -math.inf

@@ -102,7 +102,7 @@ def simulate(
     """
     from .program.plan import Plan
     from .program.sandbox import run_program
-    from .robot.model import Robot
+    from .robot.model import Robot, default_robot
     from .planning.timing import check_sample_rate
     from .planning.planner import Planner, PlannerSettings
     from .scene import Scene
@@ -117,7 +117,7 @@ def simulate(
     sample_rate_hz = check_sample_rate(sample_rate_hz)
     if not isinstance(program, Plan):  # a program refers to objects by id
         check_scene_ids(scene)
-    robot = robot or Robot.ur3e()
+    robot = robot or default_robot()
     if scene.robot and scene.robot != robot.name:
         raise SceneError(
             f"the scene {scene.name!r} was made for the {scene.robot}, not the {robot.name}: its objects are placed "

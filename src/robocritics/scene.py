@@ -11,8 +11,8 @@ fixed x, y, z axes) orients it. Sizes are full extents in metres:
 A container is an open-top box of outer extents ``size`` whose floor and four
 walls are ``wall_m`` thick: its inside is free space, so placing something
 *into* it is not a collision. The table top is the plane ``z = table.top_z``
-(the robot base stands on it). The allowed workspace is a sphere (default the
-UR3e reach, radius 0.5 m around the shoulder) cut by the table top.
+(the robot base stands on it). The allowed workspace is a sphere (by default the
+robot's reach around its shoulder) cut by the table top.
 
 Invalid input raises :class:`~robocritics.errors.SceneError` naming the field
 path (``objects[2].size[0]``) and the problem, or the file and the problem. A
@@ -50,7 +50,7 @@ import unicodedata
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Optional
 
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
@@ -58,7 +58,6 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationEr
 from ._suggest import did_you_mean
 from ._files import read_bounded_text
 from .errors import SceneError
-from .robot.arms import UR3E
 
 __all__ = [
     "SceneObject",
@@ -518,12 +517,13 @@ class Table(_Model):
 class Workspace(_Model):
     """The allowed workspace W_allowed: a sphere (m) above the plane ``min_z``.
 
-    A scene without one follows its robot: ``robot.scene_for(scene)`` puts in ``robot.workspace``, the reach
-    sphere around that robot's shoulder. The field defaults are the UR3e's (the bundled scenes' robot).
+    A scene without one (``workspace`` None) follows its robot: ``robot.scene_for(scene)`` puts in
+    ``robot.workspace``, the reach sphere around that robot's shoulder. A scene knows no arm, so it has no
+    default sphere of its own (the default arm's is :func:`robocritics.robot.model.default_workspace`).
     """
 
-    center: Vec3 = Field((0.0, 0.0, UR3E.dh.d1), description="sphere centre, m (default: UR3e shoulder)")
-    radius_m: Length = Field(UR3E.reach_m, description="sphere radius, m (default: UR3e reach)")
+    center: Vec3 = Field(description="sphere centre, m (e.g. the arm's shoulder)")
+    radius_m: Length = Field(description="sphere radius, m (e.g. the arm's reach)")
 
     @property
     def volume_m3(self) -> float:
@@ -561,7 +561,7 @@ class Scene(_Model):
     objects: Annotated[list[SceneObject], BeforeValidator(_entities)] = Field(default_factory=list)
     containers: Annotated[list[Container], BeforeValidator(_entities)] = Field(default_factory=list)
     table: Table = Field(default_factory=Table)
-    workspace: Workspace = Field(default_factory=Workspace)
+    workspace: Optional[Workspace] = Field(None, description="the allowed workspace; None: the robot's reach")
     robot: Name = Field("", description="the robot this scene was made for (e.g. 'ur3e'); '' = any robot")
 
     @model_validator(mode="after")

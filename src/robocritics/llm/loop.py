@@ -411,9 +411,9 @@ class Loop:
     @property
     def robot(self) -> Robot:
         if self._robot is None:
-            from ..robot.model import Robot
+            from ..robot.model import default_robot
 
-            self._robot = Robot.ur3e()
+            self._robot = default_robot()
         return self._robot
 
     @property

@@ -135,6 +135,10 @@ def describe_scene(scene: "Scene") -> str:
         f"centred at (x, y) = ({_m(table.center_xy[0])}, {_m(table.center_xy[1])})."
     )
     ws = scene.workspace
+    if ws is None:  # the scene follows its robot; the prompt describes the default arm's reach
+        from ..robot.model import default_workspace
+
+        ws = default_workspace()
     lines.append(
         f"Allowed workspace: a sphere of radius {_m(ws.radius_m)} m around {_xyz(ws.center)} "
         f"(volume {ws.volume_m3:.3f} m^3); every part of the robot must stay inside it."

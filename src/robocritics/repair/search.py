@@ -156,14 +156,14 @@ def _offered_edits(hook, verdict, execution, source: str) -> list:
 def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any, params: Any) -> Repair:
     """The body of :func:`robocritics.repair.repair` (its arguments and result are documented there)."""
     from ..pipeline import check
-    from ..robot.model import Robot
+    from ..robot.model import default_robot
     from ..scene import Scene
 
     scene = scene if isinstance(scene, Scene) else Scene.resolve(scene)
     from ..goals import parse_goals
 
     goals = parse_goals(goal, scene) or None
-    robot = robot or Robot.ur3e()
+    robot = robot or default_robot()
     not_run = NotRun(robot.scene_for(scene), robot)
 
     def evaluate(source: str):

@@ -44,7 +44,7 @@ import pinocchio as pin
 from ..errors import PlanningError, RobotModelError
 from ..trajectory import RobotLimits
 
-__all__ = ["Robot", "Capsule", "fingers_down", "DH_TOLERANCE_M"]
+__all__ = ["Robot", "Capsule", "fingers_down", "DH_TOLERANCE_M", "default_robot", "default_workspace"]
 
 
 def fingers_down(yaw_rad: float = 0.0) -> np.ndarray:
@@ -455,14 +455,14 @@ class Robot:
     @property
     def workspace(self):
         """The default allowed workspace for this robot: a :class:`~robocritics.scene.Workspace` sphere of
-        radius ``reach_m`` around the shoulder (for the UR3e exactly the scene default)."""
+        radius ``reach_m`` around the shoulder (for the UR3e exactly :func:`default_workspace`)."""
         from ..scene import Workspace
 
         return Workspace(center=tuple(float(v) for v in self.shoulder_m), radius_m=self.reach_m)
 
     def scene_for(self, scene):
         """``scene`` with this robot's :attr:`workspace` unless the scene gives its own ``workspace``."""
-        if "workspace" in scene.model_fields_set:
+        if scene.workspace is not None:
             return scene
         return scene.model_copy(update={"workspace": self.workspace})
 
@@ -812,6 +812,23 @@ def _load_model(path: Path):
         return pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
     except (RuntimeError, ValueError, OSError) as exc:
         raise RobotModelError(f"cannot load URDF {str(path)!r}: {exc}") from None
+
+
+def default_robot() -> Robot:
+    """The arm a run uses when none is given: :data:`robocritics.robot.arms.DEFAULT_ARM` (the UR3e), a fresh copy."""
+    from .arms import DEFAULT_ARM
+
+    return _bundled(DEFAULT_ARM.name).copy()
+
+
+def default_workspace():
+    """The allowed workspace of a scene that gives none, judged without a robot: the reach sphere of
+    :data:`~robocritics.robot.arms.DEFAULT_ARM` around its shoulder (what ``default_robot().workspace`` is,
+    without loading the model)."""
+    from ..scene import Workspace
+    from .arms import DEFAULT_ARM
+
+    return Workspace(center=(0.0, 0.0, DEFAULT_ARM.dh.d1), radius_m=DEFAULT_ARM.reach_m)
 
 
 def _bundled(name: str) -> Robot:

@@ -38,9 +38,12 @@ from ..geometry.pairs import capsule_pose, closest_points
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic.report import Report
-    from ..execution import Execution
 
 __all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ"]
+
+#: The run a replay draws: an :class:`~robocritics.execution.Execution`. Not imported, not even for type hints:
+#: ``Execution.show`` imports this package, and the import would close a cycle.
+Run = Any
 
 #: Version tag of the replay data, checked by ``replay.js``.
 REPLAY_FORMAT = "robocritics-replay/1"
@@ -84,7 +87,7 @@ def _frame_samples(time_s: np.ndarray, keep: list[int]) -> np.ndarray:
     return unique_values(picked[(picked >= 0) & (picked < T)])  # (np.unique would load numpy.ma)
 
 
-def _segment(execution: Execution, pair_name: str, sample: int) -> list[list[float]] | None:
+def _segment(execution: Run, pair_name: str, sample: int) -> list[list[float]] | None:
     """The closest-points segment of proximity pair ``pair_name`` at ``sample`` (m, base frame), or None."""
     trajectory, robot = execution.trajectory, execution.robot
     pair = next((p for p in trajectory.pairs if p.name == pair_name), None)
@@ -122,7 +125,7 @@ def _finite(x: float | None) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
 
-def _verdicts(execution: Execution, report: Report, time_s: np.ndarray) -> list[dict[str, Any]]:
+def _verdicts(execution: Run, report: Report, time_s: np.ndarray) -> list[dict[str, Any]]:
     out = []
     for v in report.verdicts:
         ev = v.evidence
@@ -164,7 +167,7 @@ def _keep_samples(report: Report | None) -> list[int]:
     return keep
 
 
-def replay_data(execution: Execution, report: Report | None = None, *, title: str | None = None) -> dict[str, Any]:
+def replay_data(execution: Run, report: Report | None = None, *, title: str | None = None) -> dict[str, Any]:
     """The replay of ``execution`` (with the verdicts of ``report``, if given) as a JSON-serialisable dict.
 
     See the module docstring for what it holds; ``robocritics.viz.replay_html``
@@ -174,6 +177,7 @@ def replay_data(execution: Execution, report: Report | None = None, *, title: st
     if not all(hasattr(execution, a) for a in ("trajectory", "robot", "scene", "object_poses")):
         raise TypeError(f"replay_data() needs the Execution that simulate() returns, got {type(execution).__name__}")
     trajectory, robot, scene = execution.trajectory, execution.robot, execution.scene
+    workspace = scene.workspace or robot.workspace  # a scene without one follows its robot
     time_all = np.asarray(trajectory.time, float)
     frames = _frame_samples(time_all, _keep_samples(report))
     p0, p1 = robot.capsule_segments(trajectory.frames[frames])
@@ -219,7 +223,7 @@ def replay_data(execution: Execution, report: Report | None = None, *, title: st
         "steps": steps,
         "objects": objects,
         "boxes": boxes,
-        "workspace": {"center": list(scene.workspace.center), "radius_m": float(scene.workspace.radius_m)},
+        "workspace": {"center": list(workspace.center), "radius_m": float(workspace.radius_m)},
         "verdicts": [],
         "score_text": None,
     }

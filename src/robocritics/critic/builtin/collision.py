@@ -175,7 +175,8 @@ class CollisionCritic:
     description = "Distance between the robot (and what it carries) and the scene, excluding intended contacts."
     Params = Params
 
-    def check(self, trajectory, scene, params: Params) -> Verdict:
+    def check(self, execution, params: Params) -> Verdict:
+        trajectory, scene = execution.trajectory, execution.scene
         time = trajectory.time
         P = trajectory.proximity
         counted = Counted(trajectory, params.ignore_pairs)

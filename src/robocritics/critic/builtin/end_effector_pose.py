@@ -37,7 +37,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from ... import hookimpl
+from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
 from ...errors import CriticError
 
@@ -91,7 +91,8 @@ class EndEffectorPoseCritic:
     description = "Spearing: speed of the gripper toward where its fingers point (speed x alignment)."
     Params = Params
 
-    def check(self, trajectory, scene, params: Params) -> Verdict:
+    def check(self, execution, params: Params) -> Verdict:
+        trajectory = execution.trajectory
         time = trajectory.time
         frame = params.frame or trajectory.tcp_frame
         poses = trajectory.frames[:, trajectory.frame_index(frame)]

@@ -39,7 +39,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from ... import hookimpl
+from ..hookspecs import hookimpl
 from ..._arrays import row_any, row_max, squared_norms
 from .. import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
 
@@ -102,7 +102,8 @@ class JointSpeedCritic:
     description = "Linear speed of every link (paper Algorithm 1) and angular joint speed against the robot's limits."
     Params = Params
 
-    def check(self, trajectory, scene, params: Params) -> Verdict:
+    def check(self, execution, params: Params) -> Verdict:
+        trajectory = execution.trajectory
         T = len(trajectory)
         names = trajectory.frame_names
         if params.frames:

@@ -23,7 +23,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from ... import hookimpl
+from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
 
 __all__ = ["PinchPointCritic", "register_critics"]
@@ -45,7 +45,8 @@ class PinchPointCritic:
     description = "Closest approach between non-adjacent robot links and between arm and gripper."
     Params = Params
 
-    def check(self, trajectory, scene, params: Params) -> Verdict:
+    def check(self, execution, params: Params) -> Verdict:
+        trajectory = execution.trajectory
         time = trajectory.time
         pairs = trajectory.pairs
         columns = trajectory.pair_mask(kind="self")  # (K,) only self pairs ever count

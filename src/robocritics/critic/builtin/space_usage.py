@@ -5,8 +5,8 @@ Maths and units
 Let ``P = { p_{t,l} }`` be the origins (m, base frame) of every frame ``l`` of
 the robot at every sample ``t``. The space the motion sweeps is measured by the
 volume (m^3) of the convex hull ``conv(P)`` (coal's Qhull, already loaded for proximity); the allowed
-workspace ``W`` is ``scene.workspace`` (default: the UR3e's 0.5 m reach sphere
-around the shoulder, 0.523 m^3, as in the authors' prototype).
+workspace ``W`` is ``scene.workspace`` (default: the robot's reach sphere around its shoulder; for the
+UR3e, the default arm, 0.5 m and 0.523 m^3, as in the authors' prototype).
 
 * ERROR if any point lies outside ``W``:
   ``max_{t,l} scene.workspace.outside_distance(p_{t,l}) > outside_tolerance_m``;
@@ -43,7 +43,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field
 
-from ... import hookimpl
+from ..hookspecs import hookimpl
 from ..._arrays import row_max, squared_norms, unique_values
 from .. import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
 from ...geometry.hull import convex_hull
@@ -140,12 +140,22 @@ def volume_error_bound(P: np.ndarray, area: float, tolerance_m: float) -> float:
     return area * tolerance_m + 2 * np.pi * diagonal * tolerance_m**2 + 4 / 3 * np.pi * tolerance_m**3
 
 
+def _robot_workspace(robot):
+    """The workspace of a scene that names none: its robot's reach sphere, or the default arm's."""
+    if robot is not None:
+        return robot.workspace
+    from ...robot.model import default_workspace
+
+    return default_workspace()
+
+
 class SpaceUsageCritic:
     name = "space_usage"
     description = "Convex-hull volume of the links' swept positions against the allowed workspace; leaving it is an error."
     Params = Params
 
-    def check(self, trajectory, scene, params: Params) -> Verdict:
+    def check(self, execution, params: Params) -> Verdict:
+        trajectory, scene = execution.trajectory, execution.scene
         names = trajectory.frame_names
         if params.frames:
             sel = [trajectory.frame_index(n) for n in params.frames]
@@ -154,7 +164,7 @@ class SpaceUsageCritic:
         else:
             X = trajectory.positions  # (T, L, 3) m, contiguous, shared with the other critics
         time = trajectory.time
-        workspace = scene.workspace
+        workspace = scene.workspace or _robot_workspace(execution.robot)
         w_volume = float(workspace.volume_m3)
 
         # --- leaving the workspace: every point ---------------------------------

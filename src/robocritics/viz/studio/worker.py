@@ -151,9 +151,9 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
     try:
         from ...critic import critique
         from ...pipeline import check, simulate
-        from ...robot.model import Robot
+        from ...robot.model import default_robot
 
-        robot = robot if robot is not None else Robot.ur3e()
+        robot = robot if robot is not None else default_robot()
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which raises it typed
         conn.send(("failed", f"{type(exc).__name__}: {exc}"))
         return
