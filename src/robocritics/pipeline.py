@@ -137,7 +137,7 @@ def simulate(
     q, t, opening, attached, step = planner.finish()
     # frames and capsule endpoints in one FK pass (the endpoints straight from the frames' time series)
     frames, p0, p1 = robot.forward_with_capsules(q, opening)
-    object_poses = planner.object_poses(frames[:, robot.tcp_index])
+    object_poses = planner.world.object_poses(frames[:, robot.tcp_index])
     trajectory = robot.trajectory(
         q=q,
         time=t,
@@ -150,11 +150,11 @@ def simulate(
         frames=frames,
         segments=(p0, p1),
     )
-    final_scene = scene.model_copy(update={"objects": [planner.objects[o.id] for o in scene.objects]})
+    final_scene = scene.model_copy(update={"objects": [planner.world.objects[o.id] for o in scene.objects]})
     for poses in object_poses.values():
         poses.setflags(write=False)
     return Execution(
-        trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.resting_on), dict(object_poses)
+        trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.world.resting_on), dict(object_poses)
     )
 
 

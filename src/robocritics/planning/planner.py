@@ -47,10 +47,11 @@ import numpy as np
 
 from ..errors import PlanningError
 from ..program.plan import Plan, SkillCall
-from ..scene import MAX_COORD_M, Container, Scene, SceneObject, rpy_matrix
+from ..scene import MAX_COORD_M, Container, Scene, rpy_matrix
 from ..trajectory import Step
 from ..robot.model import Robot, fingers_down
 from .spline import cubic_spline
+from .world import World
 from .timing import (
     JOINT_SPEED_MARGIN,
     MIN_SPEED_FRACTION,
@@ -81,8 +82,6 @@ __all__ = [
 MIN_SAMPLE_GAP_S = 1e-6
 #: A straight line shorter than this [m] is no move.
 SAME_POINT_M = 1e-9
-#: A point this close to a container floor [m] (above or below) is on it.
-ON_SURFACE_M = 1e-6
 #: |dq/ds| floor [rad/m] on a Cartesian line: a joint that does not move imposes no speed cap.
 _STILL_JOINT_RAD_PER_M = 1e-12
 #: Longest straight line [m] worth solving IK along: the diagonal of the scene's coordinate bound. A longer one
@@ -282,13 +281,8 @@ class Planner:
         self.yaw = 0.0
         self.speed = 1.0
         self.opening = robot.max_opening_m
-        self.attached: str = ""
-        self.grasp_offset = np.eye(4)  # object pose in the tcp frame while attached
-        self.objects: dict[str, SceneObject] = {o.id: o for o in scene.objects}
+        self.world = World(scene, robot, settings)  # the objects: held, resting, fallen
         self.obstacles: list[str] = []
-        self.resting_on: dict[str, str] = {}
-        # the object just grasped: what rests on it falls at the first sample of the next motion (the lift)
-        self.pending_lift: str = ""
         # accumulated samples
         self.q_parts: list[np.ndarray] = []
         self.t_parts: list[np.ndarray] = []
@@ -301,11 +295,7 @@ class Planner:
         self.t0 = 0.0
         self.steps: list[Step] = []
         self.events: list[Event] = []
-        # per attachment interval: (object id, first sample, last sample exclusive, offset)
-        self.carry: list[tuple[str, int, int, np.ndarray]] = []
         self.sample_count = 0
-        # poses of objects at rest, changing when released: (object id, first sample, pose)
-        self.rest_changes: list[tuple[str, int, np.ndarray]] = []
         # the call being planned (its line goes into budget errors)
         self.call: SkillCall | None = None
         # once the motion passes max_motion_s: (the call that passed it, the motion before it [s], the speed
@@ -347,7 +337,7 @@ class Planner:
                 line,
                 "max_samples",
             )
-        carried = len({c[0] for c in self.carry})
+        carried = len({c[0] for c in self.world.carry})
         if carried not in self.bytes_per_sample:
             if self.scene_counts is None:
                 self.scene_counts = (len(self.scene.shapes()), len(self.scene.objects) + len(self.scene.containers) + 1)
@@ -409,8 +399,8 @@ class Planner:
         return self._tcp_cache[1].copy()
 
     def entity_top(self, entity_id: str) -> tuple[np.ndarray, float]:
-        if entity_id in self.objects:
-            o = self.objects[entity_id]
+        if entity_id in self.world.objects:
+            o = self.world.objects[entity_id]
             return np.asarray(o.position, float), o.top
         c = self.scene.entity(entity_id)
         return np.asarray(c.position, float), c.top
@@ -418,8 +408,8 @@ class Planner:
     def resolve_point(self, call: SkillCall) -> np.ndarray:
         if "object" in call.args:
             oid = call.args["object"]
-            if oid in self.objects:
-                return np.asarray(self.objects[oid].position, float)
+            if oid in self.world.objects:
+                return np.asarray(self.world.objects[oid].position, float)
             return np.asarray(self.scene.entity(oid).position, float)
         return np.asarray(call.args["target"], float)
 
@@ -463,7 +453,7 @@ class Planner:
         else:
             self.open_parts.append(np.array(np.broadcast_to(np.asarray(opening, float), (m,))))
         self.seg_lengths.append(m)
-        self.seg_attached.append(self.attached)
+        self.seg_attached.append(self.world.attached)
         self.seg_steps.append(step)
         self.sample_count += m
         self.t0 += seg.duration_s
@@ -485,78 +475,6 @@ class Planner:
 
     # --- intended contacts ---------------------------------------------------------------
 
-    def grasp_candidate(self, tcp: np.ndarray) -> str | None:
-        """The graspable object whose centre lies between the fingers at TCP pose ``tcp`` (the nearest to the TCP)."""
-        best, best_d = None, math.inf
-        (r00, r01, r02, tx), (r10, r11, r12, ty), (r20, r21, r22, tz) = tcp[:3].tolist()
-        for oid, o in self.objects.items():
-            if oid == self.attached or not o.graspable:
-                continue
-            # R^T (p - t): the rigid inverse, no general 4x4 inverse; on Python floats (three objects' worth of
-            # numpy calls cost more than the arithmetic)
-            dx, dy, dz = o.position[0] - tx, o.position[1] - ty, o.position[2] - tz
-            local = (dx * r00 + dy * r10 + dz * r20, dx * r01 + dy * r11 + dz * r21, dx * r02 + dy * r12 + dz * r22)
-            # local z: along the fingers (+ beyond the tips); y: closing axis; x: finger width
-            if abs(local[0]) > self.settings.grasp_region_m or abs(local[1]) > self.robot.max_opening_m / 2:
-                continue
-            if not (-self.settings.grasp_depth_m <= local[2] <= o.half_height + self.settings.grasp_tip_gap_m):
-                continue
-            # the centre nearest the TCP: in a stack every centre is on the finger axis (lateral distances tie,
-            # up to rounding), and the one the fingers close on is the one at the TCP's height
-            d = math.hypot(local[0], local[1], local[2])
-            if d < best_d:
-                best, best_d = oid, d
-        return best
-
-    def support_below(
-        self, oid: str, position: np.ndarray, half_height: float, radius: float, ignore: str = ""
-    ) -> tuple[str, float]:
-        """The entity an object at ``position`` would settle on (not object ``ignore``), and the z of that surface [m]."""
-        best_id, best_z = "table", self.scene.table.top_z
-        for c in self.scene.containers:
-            floor = c.floor_top
-            # the cheap comparisons first: they rule most containers out without the point test
-            if position[2] >= floor - ON_SURFACE_M and floor > best_z:
-                if c.contains_point((position[0], position[1], floor + ON_SURFACE_M)):
-                    best_id, best_z = c.id, floor
-        footprint, gap = self.settings.stack_footprint_fraction, self.settings.stack_gap_m
-        for other_id, other in self.objects.items():
-            if other_id == oid or other_id == ignore:
-                continue
-            horizontal = math.hypot(other.position[0] - position[0], other.position[1] - position[1])
-            if horizontal < max(radius, other.width / 2) * footprint and other.top <= position[2] - half_height + gap:
-                if other.top > best_z:
-                    best_id, best_z = other_id, other.top
-        return best_id, best_z
-
-    def contacts_at(self, tcp: np.ndarray) -> set[str]:
-        """Entities the gripper or its load may touch at TCP pose ``tcp``.
-
-        The object between the fingers, and the surface under the object in (or
-        about to be in) the hand; a container floor lies on the table, so an
-        object on it is a few millimetres above the table too.
-        """
-        out: set[str] = set()
-        supports: list[str] = []
-        cand = self.grasp_candidate(tcp)
-        if cand:
-            out.add(cand)
-            o = self.objects[cand]
-            supports.append(self.support_below(cand, np.asarray(o.position), o.half_height, o.width / 2)[0])
-        if self.attached:
-            o = self.objects[self.attached]
-            pose = tcp @ self.grasp_offset
-            supports.append(self.support_below(self.attached, pose[:3, 3], o.half_height, o.width / 2)[0])
-        out.update(supports)
-        # what a support itself stands on is millimetres under the load too (a plate on the table)
-        for s in supports:
-            if s in self.objects:
-                o = self.objects[s]
-                out.add(self.support_below(s, np.asarray(o.position), o.half_height, o.width / 2)[0])
-            elif s != "table":
-                out.add("table")
-        return out
-
     # --- moves ----------------------------------------------------------------------------
 
     def joint_move(self, goal: np.ndarray, step: int) -> None:
@@ -576,12 +494,12 @@ class Planner:
         safe_z = -math.inf
         for oid in self.obstacles:
             centre, top = self.entity_top(oid)
-            ent = self.objects.get(oid) or self.scene.entity(oid)
+            ent = self.world.objects.get(oid) or self.scene.entity(oid)
             reach = (max(ent.size[:2]) / 2 if isinstance(ent, Container) else ent.width / 2) + self.settings.obstacle_margin_m
             ab = b - a
             t = 0.0 if not ab.any() else float(np.clip(np.dot(centre[:2] - a, ab) / np.dot(ab, ab), 0, 1))
             if np.linalg.norm(a + t * ab - centre[:2]) <= reach:
-                carried = 2 * self.objects[self.attached].half_height if self.attached else 0.0
+                carried = 2 * self.world.objects[self.world.attached].half_height if self.world.attached else 0.0
                 safe_z = max(safe_z, top + self.settings.obstacle_clearance_m + carried)
         if safe_z == -math.inf or (start[2] >= safe_z and goal[2] >= safe_z):
             return [goal]
@@ -707,8 +625,8 @@ class Planner:
                 if handler is None:
                     raise PlanningError(f"the planner does not know the skill {call.skill!r}", line=call.line)
                 self.call = call
-                if self.pending_lift and call.skill not in _FIXED_TIME_SKILLS and call.skill != "expect":
-                    self.drop_unsupported(self.pending_lift, call)
+                if self.world.pending_lift and call.skill not in _FIXED_TIME_SKILLS and call.skill != "expect":
+                    self.drop_unsupported(self.world.pending_lift, call)
                 handler(call)
         except (_StopTiming, PlanningError):  # _StopTiming only comes once the budget was passed
             if self.passed is None:
@@ -719,11 +637,11 @@ class Planner:
             raise self._too_long(plan, complete=True)
 
     def _move_contacts(self, goal_point: np.ndarray | None, call: SkillCall) -> set[str]:
-        contacts = self.contacts_at(self.tcp())
+        contacts = self.world.contacts_at(self.tcp())
         if goal_point is not None:
             goal_tcp = np.eye(4)
             goal_tcp[:3, :3], goal_tcp[:3, 3] = fingers_down(self.yaw), goal_point
-            contacts |= self.contacts_at(goal_tcp)
+            contacts |= self.world.contacts_at(goal_tcp)
         return contacts
 
     def do_move_to(self, call: SkillCall) -> None:
@@ -798,36 +716,9 @@ class Planner:
         self.event("obstacle", step, call, f"{oid} is an obstacle; later moves cross above it")
 
     def drop_unsupported(self, lifted: str, call: SkillCall) -> None:
-        """Everything resting on ``lifted`` (transitively) falls to the highest support below its footprint.
-
-        Runs as the lift starts (the first sample of the motion after the grasp), so the fall is instantaneous
-        at that sample; lower objects settle first so that a stack keeps its order.
-        """
-        self.pending_lift = ""
-        others = [oid for oid in self.objects if oid not in (lifted, self.attached)]
-        support = {}
-        for oid in others:
-            o = self.objects[oid]
-            support[oid] = self.resting_on.get(oid) or self.support_below(oid, np.asarray(o.position), o.half_height, o.width / 2)[0]
-        falling: set[str] = set()
-        frontier = [lifted]
-        while frontier:
-            below = frontier.pop()
-            for oid in others:
-                if support[oid] == below and oid not in falling:
-                    falling.add(oid)
-                    frontier.append(oid)
+        """What rests on ``lifted`` falls as it is lifted (:meth:`World.drop_unsupported`), one event per object."""
         step = len(self.steps) - 1
-        for oid in sorted(falling, key=lambda i: self.objects[i].bottom):
-            o = self.objects[oid]
-            below, z = self.support_below(oid, np.asarray(o.position), o.half_height, o.width / 2, ignore=lifted)
-            settled = (o.position[0], o.position[1], z + o.half_height)
-            drop = o.position[2] - settled[2]
-            self.objects[oid] = o.moved_to(settled)
-            self.resting_on[oid] = below
-            pose = np.eye(4)
-            pose[:3, :3], pose[:3, 3] = rpy_matrix(o.rpy), settled
-            self.rest_changes.append((oid, self.sample_count, pose))
+        for oid, below, drop in self.world.drop_unsupported(lifted, self.sample_count):
             self.event("fall", step, call, f"{oid} fell onto {below} ({drop * 100:.1f} cm) as {lifted} was lifted")
 
     def do_expect(self, call: SkillCall) -> None:
@@ -835,49 +726,49 @@ class Planner:
 
     def do_close_gripper(self, call: SkillCall) -> None:
         tcp = self.tcp()
-        cand = None if self.attached else self.grasp_candidate(tcp)
-        step = self.add_step(call, self.contacts_at(tcp))
+        cand = None if self.world.attached else self.world.grasp_candidate(tcp)
+        step = self.add_step(call, self.world.contacts_at(tcp))
         if cand is None:
             self.gripper_move(0.0, step)
-            if not self.attached:
+            if not self.world.attached:
                 self.event("grasp_missed", step, call, "closed on nothing: no graspable object between the fingers")
             return
-        obj = self.objects[cand]
+        obj = self.world.objects[cand]
         width = min(obj.width, self.robot.max_opening_m)
         self.gripper_move(width, step)
         pose = np.eye(4)
         pose[:3, :3], pose[:3, 3] = rpy_matrix(obj.rpy), obj.position
-        self.grasp_offset = np.linalg.inv(tcp) @ pose
-        self.attached = cand
-        self.pending_lift = cand
-        self.carry.append((cand, self.sample_count, -1, self.grasp_offset))
+        self.world.grasp_offset = np.linalg.inv(tcp) @ pose
+        self.world.attached = cand
+        self.world.pending_lift = cand
+        self.world.carry.append((cand, self.sample_count, -1, self.world.grasp_offset))
         self.event("grasp", step, call, f"grasped {cand}")
 
     def do_open_gripper(self, call: SkillCall) -> None:
         tcp = self.tcp()
         # the fingers open around the object they let go of
-        step = self.add_step(call, self.contacts_at(tcp) | ({self.attached} if self.attached else set()))
-        released = self.attached
+        step = self.add_step(call, self.world.contacts_at(tcp) | ({self.world.attached} if self.world.attached else set()))
+        released = self.world.attached
         release_sample = self.sample_count
         if released:
             # the object leaves the fingers as they start to open
-            oid, first, _, offset = self.carry[-1]
-            self.carry[-1] = (oid, first, self.sample_count, offset)
-            self.attached = ""
-            if self.pending_lift == released:  # let go before lifting: what rests on it stays supported
-                self.pending_lift = ""
+            oid, first, _, offset = self.world.carry[-1]
+            self.world.carry[-1] = (oid, first, self.sample_count, offset)
+            self.world.attached = ""
+            if self.world.pending_lift == released:  # let go before lifting: what rests on it stays supported
+                self.world.pending_lift = ""
         self.gripper_move(self.robot.max_opening_m, step)
         if released:
-            obj = self.objects[released]
-            pose = tcp @ self.grasp_offset
-            support, z = self.support_below(released, pose[:3, 3], obj.half_height, obj.width / 2)
+            obj = self.world.objects[released]
+            pose = tcp @ self.world.grasp_offset
+            support, z = self.world.support_below(released, pose[:3, 3], obj.half_height, obj.width / 2)
             drop = pose[2, 3] - obj.half_height - z
             settled = (pose[0, 3], pose[1, 3], z + obj.half_height)
-            self.objects[released] = obj.moved_to(settled)
-            self.resting_on[released] = support
+            self.world.objects[released] = obj.moved_to(settled)
+            self.world.resting_on[released] = support
             final_pose = np.eye(4)
             final_pose[:3, :3], final_pose[:3, 3] = rpy_matrix(obj.rpy), settled
-            self.rest_changes.append((released, release_sample, final_pose))
+            self.world.rest_changes.append((released, release_sample, final_pose))
             self.event("release", step, call, f"released {released} onto {support} (dropped {max(drop, 0) * 100:.1f} cm)")
 
     # --- assembly --------------------------------------------------------------------------
@@ -891,7 +782,7 @@ class Planner:
         self.open_parts.append(np.array([self.opening]))
         last_step = len(self.steps) - 1 if self.steps else 0
         self.seg_lengths.append(1)
-        self.seg_attached.append(self.attached)
+        self.seg_attached.append(self.world.attached)
         self.seg_steps.append(max(last_step, 0))
         self.sample_count += 1
         q = np.concatenate(self.q_parts)
@@ -903,29 +794,3 @@ class Planner:
             np.repeat(np.array(self.seg_attached, dtype=object), self.seg_lengths).astype(str),
             np.repeat(np.array(self.seg_steps, dtype=int), self.seg_lengths),
         )
-
-    def object_poses(self, tcp: np.ndarray) -> dict[str, np.ndarray]:
-        """Per-sample pose ``(T, 4, 4)`` of every object that moves during the program."""
-        T = tcp.shape[0]
-        moved = {c[0] for c in self.carry} | {r[0] for r in self.rest_changes}  # carried or fallen
-        out: dict[str, np.ndarray] = {}
-        for oid in moved:
-            o = next(o for o in self.scene.objects if o.id == oid)
-            rest = np.eye(4)
-            rest[:3, :3], rest[:3, 3] = rpy_matrix(o.rpy), o.position
-            poses = np.broadcast_to(rest, (T, 4, 4)).copy()
-            events = sorted(
-                [(first, "carry", (last if last >= 0 else T), off) for (cid, first, last, off) in self.carry if cid == oid]
-                + [(first, "rest", None, pose) for (cid, first, pose) in self.rest_changes if cid == oid],
-                key=lambda e: e[0],
-            )
-            for first, kind, last, data in events:
-                if kind == "rest":
-                    poses[first:] = data
-                else:
-                    poses[first:last] = tcp[first:last] @ data
-                    if last < T:
-                        poses[last:] = tcp[last - 1] @ data
-            out[oid] = poses
-        return out
-
