@@ -18,11 +18,11 @@ from robocritics.robot.ik import (
     UR3E_DH,
     dh_forward,
     dh_urdf,
-    numeric_ik,
     ur_ik,
     ur_ik_all,
     ur_reach,
 )
+from robocritics.robot.ik_numeric import numeric_ik
 
 TWO_PI = 2.0 * math.pi
 LIMIT_SLACK_RAD = 1e-10  # ur_ik's documented clamp of a solution onto a limit it overshoots by rounding

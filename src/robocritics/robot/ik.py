@@ -55,7 +55,7 @@ kinematics (Pinocchio on the URDF of the DH chain, :func:`dh_forward`) before it
 is returned. :func:`ur_ik_all` lists the branches; :func:`ur_ik` searches the same
 steps branch-and-bound for the one nearest a seed configuration.
 
-For arms that are not UR-like, :func:`numeric_ik` runs a damped-least-squares
+For arms that are not UR-like, :func:`~robocritics.robot.ik_numeric.numeric_ik` runs a damped-least-squares
 (Levenberg-Marquardt) iteration on a Pinocchio model with random restarts.
 """
 
@@ -72,41 +72,32 @@ import pinocchio as pin
 from robocritics.errors import PlanningError, RobotModelError
 
 from .arms import DH, UR3E
+from .ik_many import (
+    _CLIP_TOL,
+    _DUPLICATE_TOL,
+    _HALF_PI,
+    _LIMIT_SLACK,
+    _LINE_CHUNK,
+    _PI,
+    _TWO_PI,
+    _VECTORISED_WALK_POSES,
+    _VERIFY_TOL,
+    _WRIST_NEAR_SINGULAR,
+    _WRIST_SINGULAR,
+    _branches_many,
+    _nearest_chain,
+)
 
 __all__ = [
     "DH",
     "UR3E_DH",
     "dh_forward",
     "dh_urdf",
-    "numeric_ik",
     "ur_ik",
     "ur_ik_all",
     "ur_reach",
 ]
 
-_PI = math.pi
-_TWO_PI = 2.0 * math.pi
-_HALF_PI = 0.5 * math.pi
-# |arg| of acos may exceed 1 by this much from rounding and still be clipped;
-# beyond it the target is genuinely out of reach. The FK check decides the rest.
-_CLIP_TOL = 1e-8
-# |sin q5| below this is the wrist singularity (q6 is then a free choice). At
-# this size any choice of q6 costs at most pi * 1e-10 rad of orientation error.
-_WRIST_SINGULAR = 1e-10
-# Below this |sin q5| the computed q6 is only known to ~1e-16 / |sin q5| rad; if
-# that leaves the wrist just out of the elbow's range (a pose at the edge of
-# the workspace), q6 is nudged to the nearest value that reaches, which moves
-# the flange orientation by at most |sin q5| times the nudge. The FK check
-# below has the last word.
-_WRIST_NEAR_SINGULAR = 1e-6
-# Forward-kinematics acceptance of a branch: position (m) and rotation (rad).
-_VERIFY_TOL = 1e-9
-# Branches closer than this (rad, every joint) are one configuration (they
-# differ only by rounding at a shoulder, elbow or wrist singularity).
-_DUPLICATE_TOL = 1e-7
-# A solution this close outside a joint limit (rad) counts as on it and is
-# clamped to it (the closed form is accurate to ~1e-11 rad near singularities).
-_LIMIT_SLACK = 1e-10
 _JOINT_NAMES = (
     "joint 1 (base)",
     "joint 2 (shoulder)",
@@ -857,317 +848,3 @@ def _why_no_solution(
     )
 
 
-
-# --------------------------------------------------------------------------- #
-# The closed form for many poses at once (straight lines: ur_ik_line)
-# --------------------------------------------------------------------------- #
-
-#: Branch index ``b = 4 s + 2 w + e`` of :func:`_branches_many`: shoulder pan ``s`` (``phi + dphi``, ``phi -
-#: dphi``), wrist ``w`` (up, down), elbow ``e`` (``q3 = +acos``, ``-acos``): the order :func:`_branches` lists them.
-_SHOULDER_OF_BRANCH = np.arange(8) // 4
-_WRIST_OF_BRANCH = (np.arange(8) // 2) % 2
-_ELBOW_OF_BRANCH = np.arange(8) % 2
-#: Passes of the chained selection (see :func:`_nearest_chain`) before the rest is taken one pose per pass.
-_CHAIN_PASSES = 6
-#: Most poses of a straight line solved in one vectorised run (see :func:`ur_ik_line`).
-_LINE_CHUNK = 256
-#: Fewest poses :func:`_unverified_walk` solves vectorised: below this a pose-by-pose walk is cheaper (measured
-#: on the UR3e: 0.7 vs 1.1 ms at 30 poses, 1.2 vs 1.3 at 60, 2.0 vs 1.7 at 120, 14 vs 8 at 1000).
-_VECTORISED_WALK_POSES = 96
-
-
-def _branches_many(k: tuple[float, ...], t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every branch of the closed form for ``n`` poses at once: the steps of :func:`_branches` in numpy.
-
-    ``t`` ``(n, 12)``: row-major flange targets (m). Returns ``(q (n, 8, 6) rad, unwrapped, in the order of
-    :data:`_SHOULDER_OF_BRANCH`; exists (n, 8) bool; scalar (n,) bool)``. ``exists`` is False where the wrist is
-    inside the base cylinder or the elbow cannot reach (those ``q`` are garbage). ``scalar`` marks poses near the
-    wrist singularity (``|sin q5| < _WRIST_NEAR_SINGULAR``), where ``q6`` depends on the seed and may be nudged:
-    their branches are not computed here (the caller takes :func:`_nearest_solution` for them). Each expression
-    is :func:`_branches`' in the same order, so the angles agree with it to the last bit or two (numpy's and
-    libm's transcendental functions may round differently).
-    """
-    d1, a2, a3, d4, d5, d6, a2a3_sq, two_a2a3 = k
-    n = len(t)
-    xx, yx, zx, px, xy, yy, zy, py, xz, yz, zz, pz = (t[:, i : i + 1] for i in range(12))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        # step 1: the shoulder pans (n, 2)
-        p5x = px - d6 * zx
-        p5y = py - d6 * zy
-        r = np.sqrt(p5x * p5x + p5y * p5y)
-        ratio = d4 / r
-        shoulder_ok = (r != 0.0) & (-1.0 - _CLIP_TOL <= ratio) & (ratio <= 1.0 + _CLIP_TOL)
-        phi = np.arctan2(p5y, p5x) + _HALF_PI
-        dphi = np.arccos(np.clip(ratio, -1.0, 1.0))
-        q1 = np.concatenate([phi + dphi, phi - dphi], axis=1)
-        c1, s1 = np.cos(q1), np.sin(q1)
-        # steps 2 and 3: the wrists (n, 2 shoulders, 2 wrists)
-        xz1 = xx * s1 - xy * c1
-        yz1 = yx * s1 - yy * c1
-        zz1 = zx * s1 - zy * c1
-        s5abs = np.sqrt(xz1 * xz1 + yz1 * yz1)
-        q5 = np.stack([np.arctan2(s5abs, zz1), np.arctan2(-s5abs, zz1)], axis=2)
-        q6 = np.stack([np.arctan2(-yz1, xz1), np.arctan2(yz1, -xz1)], axis=2)
-        scalar = (s5abs < _WRIST_NEAR_SINGULAR).any(axis=1) & shoulder_ok[:, 0]
-        # step 4: the elbow of each (shoulder, wrist)
-        C1, S1 = c1[:, :, None], s1[:, :, None]
-        P5x, P5y = p5x[:, :, None], p5y[:, :, None]
-        XX, YX, ZX, XY, YY, ZY, XZ, YZ, ZZ, PZ = (v[:, :, None] for v in (xx, yx, zx, xy, yy, zy, xz, yz, zz, pz))
-        c6, s6 = np.cos(q6), np.sin(q6)
-        z4x = -(s6 * XX + c6 * YX)
-        z4y = -(s6 * XY + c6 * YY)
-        z4z = -(s6 * XZ + c6 * YZ)
-        X = (P5x - d5 * z4x) * C1 + (P5y - d5 * z4y) * S1
-        Y = PZ - d6 * ZZ - d5 * z4z - d1
-        c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
-        elbow_ok = (-1.0 - _CLIP_TOL <= c3) & (c3 <= 1.0 + _CLIP_TOL)
-        c3 = np.clip(c3, -1.0, 1.0)
-        c5, s5 = np.cos(q5), np.sin(q5)
-        x4x = c5 * (c6 * XX - s6 * YX) - s5 * ZX
-        x4y = c5 * (c6 * XY - s6 * YY) - s5 * ZY
-        x4z = c5 * (c6 * XZ - s6 * YZ) - s5 * ZZ
-        base = np.arctan2(Y, X)
-        q234 = np.arctan2(x4z, x4x * C1 + x4y * S1)
-        t3 = np.arccos(c3)
-        # the two elbows (n, 2, 2, 2)
-        q3 = np.stack([t3, -t3], axis=3)
-        q2 = base[..., None] - np.arctan2(a3 * np.sin(q3), a2 + a3 * c3[..., None])
-        q4 = q234[..., None] - q2 - q3
-    q = np.empty((n, 2, 2, 2, 6))
-    q[..., 0] = q1[:, :, None, None]
-    q[..., 1], q[..., 2], q[..., 3] = q2, q3, q4
-    q[..., 4], q[..., 5] = q5[..., None], q6[..., None]
-    exists = np.broadcast_to((shoulder_ok[:, :, None] & elbow_ok)[..., None], (n, 2, 2, 2))
-    return q.reshape(n, 8, 6), exists.reshape(n, 8) & ~scalar[:, None], scalar
-
-
-def _nearest_equivalents(x: np.ndarray, seed: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_nearest_equivalent` elementwise: ``(x + 2 pi n within [lo, hi] nearest to seed, whether one fits)``.
-
-    The same operations in the same order (``np.round`` rounds half to even, as ``round``), so bit-identical.
-    """
-    v = x + np.round((seed - x) / _TWO_PI) * _TWO_PI
-    inside = (lo <= v) & (v <= hi)
-    if inside.all():  # the common case
-        return v, inside
-    with np.errstate(invalid="ignore"):
-        n_min = np.ceil((lo - _LIMIT_SLACK - x) / _TWO_PI)
-        n_max = np.floor((hi + _LIMIT_SLACK - x) / _TWO_PI)
-        fits = n_min <= n_max
-        shifted = x + np.where(v > hi, n_max, n_min) * _TWO_PI
-        shifted = np.where(shifted > hi, hi, np.where(shifted < lo, lo, shifted))
-    return np.where(inside, v, shifted), inside | fits
-
-
-def _select_nearest(
-    q: np.ndarray, exists: np.ndarray, seeds: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """For each pose, :func:`_nearest_solution`'s choice among its branches ``q (m, 8, 6)`` (``exists (m, 8)``)
-    for the seed ``seeds (m, 6)`` (unit weights, no verification): ``(solution (m, 6) rad, found (m,))``.
-
-    The cost of a branch is summed in the order the branch-and-bound search adds it (``q1``, ``q5``, ``q6``,
-    ``q3``, ``q2``, ``q4``), so it is the same float; the search returns the first branch of least cost in its
-    order (shoulders and then wrists by increasing partial cost, a later one only when strictly cheaper; elbow
-    ``+acos`` before ``-acos``), and so does the tie-break here. Rows not found are NaN.
-    """
-    m = len(q)
-    v, fits = _nearest_equivalents(q, seeds[:, None, :], lo, hi)
-    d = v - seeds[:, None, :]
-    c = d * d
-    cost1 = c[:, :, 0]
-    cost56 = cost1 + c[:, :, 4] + c[:, :, 5]
-    total = cost56 + c[:, :, 2] + c[:, :, 1] + c[:, :, 3]
-    ok = exists & fits.all(axis=2)
-    total = np.where(ok, total, np.inf)
-    # the search order: a shoulder is listed when its q1 fits, a wrist when its q5 and q6 fit
-    shoulder_listed = fits[:, (0, 4), 0]  # (m, 2)
-    swap_shoulders = shoulder_listed.all(axis=1) & (cost1[:, 4] < cost1[:, 0])
-    wrist_listed = fits[:, (0, 2, 4, 6)][:, :, (4, 5)].all(axis=2).reshape(m, 2, 2)
-    wrist_cost = cost56[:, (0, 2, 4, 6)].reshape(m, 2, 2)
-    swap_wrists = wrist_listed.all(axis=2) & (wrist_cost[:, :, 1] < wrist_cost[:, :, 0])  # (m, 2 shoulders)
-    rank = (
-        4 * (_SHOULDER_OF_BRANCH ^ swap_shoulders[:, None])
-        + 2 * (_WRIST_OF_BRANCH ^ swap_wrists[:, _SHOULDER_OF_BRANCH])
-        + _ELBOW_OF_BRANCH
-    )
-    least = total.min(axis=1)
-    found = np.isfinite(least)
-    pick = np.argmin(np.where(total == least[:, None], rank, 8), axis=1)
-    out = v[np.arange(m), pick]
-    out[~found] = np.nan
-    return out, found
-
-
-def _nearest_chain(
-    q: np.ndarray, exists: np.ndarray, seed: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, int]:
-    """The nearest branch of each pose seeded by the previous pose's choice (the first by ``seed``):
-    ``(solutions (m, 6) rad, m)``, ``m`` the first pose with no branch within the limits, or one that
-    :func:`_branches_many` leaves to :func:`_nearest_solution` (``n`` if none).
-
-    The choice of pose ``i`` depends on that of ``i - 1``. Rather than a Python step per pose, every pose is
-    solved at once for guessed seeds (the previous pass's choices, shifted by one pose), and again until the
-    seeds reproduce themselves: then each row is exactly what the pose-by-pose walk chooses. A pass fixes at
-    least the first pose whose seed was wrong; along a smooth line the second pass confirms the first. After
-    :data:`_CHAIN_PASSES` passes the rest is finished a pose per pass (the same result, only slower).
-    """
-    n = len(q)
-    seeds = np.empty((n, 6))
-    seeds[:] = seed
-    out = np.empty((n, 6))
-    done = 0  # seeds[:done + 1] are the walk's own
-    passes = 0
-    while done < n:
-        passes += 1
-        stop = n if passes <= _CHAIN_PASSES else done + 1
-        sol, found = _select_nearest(q[done:stop], exists[done:stop], seeds[done:stop], lo, hi)
-        out[done:stop] = sol
-        # the first pose past `done` whose guessed seed is not the choice before it (NaN never equals)
-        wrong = np.flatnonzero((seeds[done + 1 : stop] != sol[:-1]).any(axis=1))
-        good_to = done + 1 + int(wrong[0]) if len(wrong) else stop
-        missing = np.flatnonzero(~found[: good_to - done])
-        if len(missing):
-            return out[: done + int(missing[0])], done + int(missing[0])
-        seeds[good_to:stop] = sol[good_to - done - 1 : stop - done - 1]
-        if good_to < n and stop == good_to:
-            seeds[good_to] = sol[-1]
-        done = good_to
-    return out, n
-
-
-# --------------------------------------------------------------------------- #
-# Numeric IK (Pinocchio, damped least squares)
-# --------------------------------------------------------------------------- #
-
-
-def _parse_target(target: Any) -> tuple[np.ndarray, np.ndarray | None]:
-    """(position (3,) m, rotation (3, 3) or None for position-only)."""
-    if isinstance(target, pin.SE3):
-        return np.array(target.translation, dtype=float), np.array(target.rotation, dtype=float)
-    if isinstance(target, tuple) and len(target) == 2:
-        pos, rot = target
-        pos = np.asarray(pos, dtype=float).reshape(3)
-        return pos, None if rot is None else np.asarray(rot, dtype=float).reshape(3, 3)
-    arr = np.asarray(target, dtype=float)
-    if arr.shape == (4, 4):
-        return arr[:3, 3].copy(), arr[:3, :3].copy()
-    if arr.shape == (3,):
-        return arr.copy(), None
-    raise PlanningError(
-        f"numeric_ik: target must be a pin.SE3, a 4x4 transform, a 3-vector (position only) "
-        f"or (position, rotation-or-None), got shape {arr.shape}"
-    )
-
-
-def numeric_ik(
-    model: Any,
-    data: Any,
-    frame_id: int | str,
-    target: Any,
-    seed: Any,
-    lower: Any = None,
-    upper: Any = None,
-    *,
-    max_iter: int = 100,
-    tol: float = 1e-10,
-    damping: float = 1e-10,
-    restarts: int = 20,
-    max_step: float = 0.5,
-    rng: int | np.random.Generator = 0,
-) -> np.ndarray:
-    """Damped-least-squares IK on a Pinocchio model (any serial arm).
-
-    Solves ``oMf(q) = target`` for the frame ``frame_id`` (a frame id, or a link name).
-    ``target``: a ``pin.SE3`` or ``(4, 4)`` transform (full pose), a ``(3,)``
-    position, or ``(position, rotation)`` where ``rotation=None`` means
-    position-only. ``seed``: ``(nq,)`` rad. ``lower``/``upper``: ``(nq,)``
-    position limits (default: the model's); every iterate is clipped to them.
-
-    Iteration (full pose): with ``iMd = oMf⁻¹ · target`` the error is
-    ``e = log6(iMd)`` (local frame, m and rad), the Jacobian ``J = -Jlog6(iMd⁻¹) · J_f``
-    where ``J_f`` is the LOCAL frame Jacobian, and the step is
-    ``dq = -Jᵀ (J Jᵀ + λ I)⁻¹ e`` with ``λ = damping + |e|²·1e-3``, scaled so
-    that no joint moves more than ``max_step`` rad, applied with
-    ``pin.integrate``. Position-only uses ``e = p* - p`` and the translational
-    rows rotated to the base frame. Converged when the position error ≤ ``tol``
-    m and the rotation error ≤ ``tol`` rad; otherwise up to ``restarts`` more
-    attempts from random configurations within the limits (deterministic
-    ``rng``). Returns ``(nq,)``; raises :class:`PlanningError` with the best
-    residual (m, rad) if nothing converged.
-    """
-    if isinstance(frame_id, str):
-        if not model.existFrame(frame_id, pin.FrameType.BODY):
-            raise RobotModelError(
-                f"numeric_ik: no link {frame_id!r} in model {model.name!r} (pass a frame id for other frame types)"
-            )
-        fid = model.getFrameId(frame_id, pin.FrameType.BODY)
-    else:
-        fid = int(frame_id)
-    if fid < 0 or fid >= model.nframes:
-        raise RobotModelError(f"numeric_ik: no frame {frame_id!r} in model {model.name!r}")
-    p_des, R_des = _parse_target(target)
-    oMdes = pin.SE3(R_des, p_des) if R_des is not None else None
-    lo = np.asarray(model.lowerPositionLimit if lower is None else lower, dtype=float)
-    hi = np.asarray(model.upperPositionLimit if upper is None else upper, dtype=float)
-    clip = model.nq == model.nv
-    gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-    eye = np.eye(6 if oMdes is not None else 3)
-
-    def attempt(q: np.ndarray) -> tuple[np.ndarray, float, float]:
-        best_q, best = q, (math.inf, math.inf)
-        for _ in range(max_iter):
-            pin.framesForwardKinematics(model, data, q)
-            oMf = data.oMf[fid]
-            if oMdes is None:
-                err = p_des - oMf.translation
-                dp, dr = float(np.linalg.norm(err)), 0.0
-            else:
-                iMd = oMf.actInv(oMdes)
-                err = pin.log6(iMd).vector
-                dp = float(np.linalg.norm(oMf.translation - p_des))
-                dr = float(np.linalg.norm(err[3:]))
-            if dp + dr < best[0] + best[1]:
-                best_q, best = q, (dp, dr)
-            if dp <= tol and dr <= tol:
-                break
-            Jf = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
-            lam = damping + 1e-3 * float(err @ err)
-            if oMdes is None:
-                J = oMf.rotation @ Jf[:3]
-                dq = J.T @ np.linalg.solve(J @ J.T + lam * eye, err)
-            else:
-                J = -pin.Jlog6(iMd.inverse()) @ Jf
-                dq = -J.T @ np.linalg.solve(J @ J.T + lam * eye, err)
-            big = float(np.abs(dq).max())
-            if big > max_step:
-                dq *= max_step / big
-            q = pin.integrate(model, q, dq)
-            if clip:
-                q = np.clip(q, lo, hi)
-        return best_q, best[0], best[1]
-
-    q0 = np.asarray(seed, dtype=float).reshape(model.nq)
-    if clip:
-        q0 = np.clip(q0, lo, hi)
-    best = (q0, math.inf, math.inf)
-    for k in range(restarts + 1):
-        if k == 0:
-            start = q0
-        elif clip:
-            rlo = np.where(np.isfinite(lo), lo, -_PI)
-            rhi = np.where(np.isfinite(hi), hi, _PI)
-            start = gen.uniform(rlo, rhi)
-        else:
-            start = pin.randomConfiguration(model)
-        q, dp, dr = attempt(start)
-        if dp + dr < best[1] + best[2]:
-            best = (q, dp, dr)
-        if dp <= tol and dr <= tol:
-            return np.array(q, dtype=float)
-    _, dp, dr = best
-    what = "position" if oMdes is None else "pose"
-    raise PlanningError(
-        f"numeric IK did not converge to the {what} target ({p_des[0]:.3f}, {p_des[1]:.3f}, "
-        f"{p_des[2]:.3f}) m for frame {model.frames[fid].name!r} after {restarts + 1} attempts: "
-        f"best residual {dp:.3g} m, {dr:.3g} rad (tolerance {tol:g})"
-    )

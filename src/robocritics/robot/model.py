@@ -677,7 +677,9 @@ class Robot:
             if self.dh is not None and self.tcp_in_flange is not None:
                 flange = target @ self._flange_in_tcp
                 return _ik.ur_ik(self.dh, flange, seed, self.lower, self.upper)
-            return _ik.numeric_ik(self.model, self.data, self._tcp_frame_id, target, seed, self.lower, self.upper)
+            from .ik_numeric import numeric_ik
+
+            return numeric_ik(self.model, self.data, self._tcp_frame_id, target, seed, self.lower, self.upper)
         except PlanningError as exc:
             pose = "with the fingers down" if orientation is None else "in the requested orientation"
             raise PlanningError(
