@@ -98,7 +98,7 @@ except ImportError:  # run from a checkout without installing
     sys.path.insert(0, str(ROOT / "src"))
 
 from robocritics.errors import LLMError, RoboCriticsError  # noqa: E402
-from robocritics.llm.client import OpenAICompatible  # noqa: E402
+from robocritics.llm.providers.openai_compatible import OpenAICompatible  # noqa: E402
 from robocritics.llm.limits import DEFAULT_MAX_TOKENS  # noqa: E402
 from robocritics.llm.loop import Attempt, Loop, NothingToFixError  # noqa: E402
 from robocritics.llm.prompts import REVIEW_INSTRUCTION  # noqa: E402

@@ -14,7 +14,7 @@ import pytest
 from browser import SCREENSHOTS, canvas_stats, chromium, severe_console_errors, wait_for
 from llm_server import LLMServer
 from robocritics import Scene, critique, simulate
-from robocritics.llm.client import OpenAICompatible
+from robocritics.llm.providers.openai_compatible import OpenAICompatible
 from robocritics.viz.studio import Studio
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -310,10 +310,10 @@ def llm_api_key(args: argparse.Namespace) -> str | None:
 
 
 def llm_client(args: argparse.Namespace, api_key: str | None, *, embedding_model: str | None = None):
-    """The :class:`~robocritics.llm.client.OpenAICompatible` the options of :func:`add_llm_options` describe;
+    """The :class:`~robocritics.llm.providers.openai_compatible.OpenAICompatible` the options of :func:`add_llm_options` describe;
     UsageError when no endpoint or model is configured (or the endpoint is unusable)."""
     from ..errors import LLMError
-    from ..llm.client import OpenAICompatible
+    from ..llm.providers.openai_compatible import OpenAICompatible
 
     try:
         return OpenAICompatible(

@@ -102,7 +102,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from ..errors import CriticError, LLMError, PlanningError, ProgramError, RoboCriticsError, TrajectoryError
 from ..critic.report import format_score
-from .client import ChatModel, ContextLengthError
+from .protocol import ChatModel, ContextLengthError
 from .limits import DEFAULT_MAX_TOKENS, MAX_MESSAGE_CHARS, MIN_REPLY_TOKENS, clean_text, cut_text
 from .memory import MAX_SEARCH_K, SOURCES, Interaction, InteractionMemory  # SOURCES: who wrote a program
 from .prompts import (
@@ -274,8 +274,8 @@ class Loop:
 
     Arguments:
 
-    * ``model`` — a :class:`~robocritics.llm.client.ChatModel` (e.g.
-      :class:`~robocritics.llm.client.OpenAICompatible`).
+    * ``model`` — a :class:`~robocritics.llm.providers.openai_compatible.ChatModel` (e.g.
+      :class:`~robocritics.llm.providers.openai_compatible.OpenAICompatible`).
     * ``scene`` — the :class:`~robocritics.scene.Scene`; ``robot`` defaults to the UR3e.
     * ``critics`` / ``params`` — which critics run and their thresholds, as in
       :func:`~robocritics.critic.critique` (default: every installed critic).

@@ -119,7 +119,7 @@ class Studio:
 
     ``Studio(scene, program=None, *, host="127.0.0.1", port=0, token=None, model=None, deploy=None,
     critics=None, evaluator=None)``: ``scene`` a :class:`~robocritics.scene.Scene` (or its name/path);
-    ``program`` the editor's first text; ``model`` a :class:`~robocritics.llm.client.ChatModel` for chat and Fix
+    ``program`` the editor's first text; ``model`` a :class:`~robocritics.llm.providers.openai_compatible.ChatModel` for chat and Fix
     (None: both disabled, the page says why); ``deploy`` ``{"host", "rtde_port", "dashboard_port",
     "secondary_port"}`` of a UR controller (None: Deploy disabled); ``critics`` the critics run (default: all
     installed); ``timeout_s`` the wall-clock bound of one simulation, s.
