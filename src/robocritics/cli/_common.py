@@ -313,10 +313,10 @@ def llm_client(args: argparse.Namespace, api_key: str | None, *, embedding_model
     """The :class:`~robocritics.llm.providers.openai_compatible.OpenAICompatible` the options of :func:`add_llm_options` describe;
     UsageError when no endpoint or model is configured (or the endpoint is unusable)."""
     from ..errors import LLMError
-    from ..llm.providers.openai_compatible import OpenAICompatible
+    from ..llm.providers import provider
 
     try:
-        return OpenAICompatible(
+        return provider()(
             base_url=args.base_url,
             model=args.model,
             api_key=api_key,

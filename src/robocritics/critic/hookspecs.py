@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import pluggy
 
-__all__ = ["hookspec", "hookimpl", "register_critics", "robocritics_repairs"]
+__all__ = ["hookspec", "hookimpl", "register_critics", "robocritics_repairs", "register_llm_providers"]
 
 hookspec = pluggy.HookspecMarker("robocritics")
 hookimpl = pluggy.HookimplMarker("robocritics")
@@ -36,7 +36,19 @@ def register_critics(register):  # type: ignore[no-untyped-def]
 
     ``critic`` follows the :class:`robocritics.critic.Critic` protocol: a
     ``name``, a ``description``, a pydantic ``Params`` model whose fields all
-    have defaults, and a pure ``check(trajectory, scene, params) -> Verdict``.
+    have defaults, and a pure ``check(execution, params) -> Verdict`` (or the older
+    ``check(trajectory, scene, params)``).
+    """
+
+
+@hookspec
+def register_llm_providers(register):  # type: ignore[no-untyped-def]
+    """Register this plugin's language-model providers: call ``register(name, factory)`` once for each.
+
+    ``factory(**options)`` returns a :class:`robocritics.llm.protocol.ChatModel` (and, if the provider can
+    embed, an :class:`~robocritics.llm.protocol.EmbeddingModel`); :func:`robocritics.llm.providers.provider`
+    finds it by ``name``. robocritics registers its OpenAI-compatible provider this way, as simonw/llm
+    registers its own OpenAI models through its ``register_models`` hook.
     """
 
 

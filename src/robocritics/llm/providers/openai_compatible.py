@@ -910,4 +910,3 @@ class OpenAICompatible:
         if not self._api_key or not text:
             return text
         return _redact_secret(text, self._api_key.reveal())
-
