@@ -174,7 +174,7 @@ def test_a_bad_params_file_exits_2_before_any_request(llm_server, capsys, tmp_pa
 
 
 def test_defaults_match_the_library():
-    from robocritics.llm.loop import DEFAULT_MAX_ATTEMPTS
+    from robocritics.llm.options import DEFAULT_MAX_ATTEMPTS
 
     args = parse(TASK, "--scene", "sorting")
     assert args.max_attempts == DEFAULT_MAX_ATTEMPTS

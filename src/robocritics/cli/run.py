@@ -68,7 +68,7 @@ __all__ = ["add_run_parser", "run_command"]
 
 # Seconds between two progress lines while tokens arrive (--verbose).
 _PROGRESS_EVERY_S = 2.0
-# Model replies with --auto: the paper's five attempts per task (llm.loop.DEFAULT_MAX_ATTEMPTS, not imported
+# Model replies with --auto: the paper's five attempts per task (llm.options.DEFAULT_MAX_ATTEMPTS, not imported
 # here so that building the parser stays cheap).
 _MAX_ATTEMPTS = 5
 
