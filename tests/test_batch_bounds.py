@@ -217,3 +217,14 @@ def test_resume_keeps_the_rows_of_a_large_parquet_file_a_row_group_at_a_time(tmp
     again.write(error_row("new", "RowError", "m"))
     again.close()
     assert cli_batch.parquet_rows(out) == [*rows, error_row("new", "RowError", "m")]
+
+
+def test_resume_counts_outs_ids_missing_from_in_and_skips_a_repeated_id(capsys, tmp_path):
+    src, out = tmp_path / "in.jsonl", tmp_path / "out.jsonl"
+    src.write_text("".join(json.dumps({"id": i, "scene": "sorting", "program": "home("}) + "\n" for i in ("a", "b", "a")))
+    out.write_text("".join(json.dumps(error_row(i, "RowError", "kept")) + "\n" for i in ("a", "z", "y")))
+    assert main(["batch", str(src), "-o", str(out), "--resume", "--workers", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "note: 2 rows of" in err and "(2 kept from OUT)" in err, err
+    rows = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [r["id"] for r in rows] == ["a", "z", "y", "b"]

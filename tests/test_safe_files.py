@@ -239,3 +239,19 @@ def test_check_html_refuses_a_link_and_writes_a_regular_file(capsys, tmp_path, v
     assert "replay.html' is a symbolic link" in capsys.readouterr().err and _untouched(victim)
     assert main(["check", program, "--html", str(page)]) in (0, 1)
     assert page.read_text(encoding="utf-8").startswith("<!DOCTYPE html>") and not page.is_symlink()
+
+
+def test_resume_refuses_an_output_hard_linked_to_another_file(capsys, tmp_path, victim):
+    """A hard link is a link too: appending to it would append to the victim."""
+    src, out = _batch_input(tmp_path), tmp_path / "out.jsonl"
+    os.link(victim, out)
+    code = main(["batch", str(src), "-o", str(out), "--resume"])
+    err = capsys.readouterr().err
+    assert code == 2 and "has 2 hard links" in err, err
+    assert _untouched(victim)
+
+
+def test_a_name_of_255_bytes_gets_a_temporary_name_that_fits(tmp_path):
+    name = "é" * 120 + ".jsonl"  # 246 bytes of UTF-8
+    path = write_file_atomically(tmp_path / name, b"ok")
+    assert path.read_bytes() == b"ok" and _listing(tmp_path) == [name]

@@ -144,7 +144,8 @@ class AtomicFile:
         self.path = check_output_path(path, what)
         self.what = what
         try:
-            fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name[:100]}.", suffix=suffix, dir=self.path.parent)
+            # the name's first 40 characters (at most 160 bytes) keep the temporary name under NAME_MAX
+            fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name[:40]}.", suffix=suffix, dir=self.path.parent)
         except OSError as exc:
             raise OutputFileError(f"{what} {_shown(self.path)}: cannot create a file in its directory: "
                                   f"{exc.strerror or exc}", self.path) from None  # fmt: skip
@@ -227,8 +228,12 @@ def open_regular(path: str | os.PathLike[str], flags: int, what: str = "output")
                                   "remove it or name another file", path) from None  # fmt: skip
         raise OutputFileError(f"{what} {shown}: {exc.strerror or exc}", path) from None
     try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
             raise OutputFileError(f"{what} {shown} is not a regular file", path)
+        if flags & os.O_ACCMODE != os.O_RDONLY and info.st_nlink > 1:  # a hard link writes into another file too
+            raise OutputFileError(f"{what} {shown} has {info.st_nlink} hard links: writing it would change the "
+                                  "other names too; copy it to a file of its own", path)  # fmt: skip
         os.set_blocking(fd, True)
     except BaseException:
         os.close(fd)

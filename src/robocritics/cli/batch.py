@@ -272,8 +272,12 @@ class ParquetWriter:
             self.out = AtomicFile(path, "--output", suffix=".partial")
         except OutputFileError as exc:
             raise UsageError(str(exc)) from None
-        self.writer = self.pq.ParquetWriter(self.out.file, self.schema)
         self.pending: list[dict] = []
+        try:
+            self.writer = self.pq.ParquetWriter(self.out.file, self.schema)
+        except BaseException:
+            self.out.discard()
+            raise
         try:
             if resume and os.path.lexists(path):
                 for batch in _parquet_batches(path, self.GROUP_ROWS):
@@ -496,14 +500,16 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise UsageError(f"--resume: cannot read --output {shown_path(out)}: {exc.strerror or exc}") from None
     done, reported = finished.keys, finished.reported
-    unmatched = set(done)  # ids in OUT not seen in IN (a different input?): kept, and said so at the end
+    matched: set[str] = set()  # ids of OUT seen in IN; the others (a different input?) are kept, and said so at the end
     progress = Progress(count_rows(args.input), sys.stderr)
 
     def pending() -> Iterator[Any]:
         for row in read_rows(args.input):
             key = _key(row.get("id")) if isinstance(row, dict) else None
-            if key in done:
-                unmatched.discard(key)
+            if key in done or key in matched:  # a repeated id of IN is skipped again, as before
+                if key in done:
+                    done.discard(key)  # matched: moved, so OUT's ids are held once
+                    matched.add(key)
                 progress.skip()
                 continue
             yield row
@@ -552,7 +558,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
                 signal.signal(signal.SIGTERM, previous)
             rows.close()  # stops the workers now, not when the generator is collected
     progress.finish()
-    if unmatched:
-        progress._say(f"robocritics batch: note: {len(unmatched)} rows of {shown_path(args.output)} have ids that are "
+    if done:  # what is left: OUT's ids not seen in IN
+        progress._say(f"robocritics batch: note: {len(done)} rows of {shown_path(args.output)} have ids that are "
                       f"not in {shown_path(args.input)} (from another input?); they were kept\n")  # fmt: skip
     return 0
