@@ -144,8 +144,7 @@ def layout(conn: sqlite3.Connection, tables: list[str]) -> dict[str, object]:
     with equal layouts store and index the same way."""
     out: dict[str, object] = {}
     for table in tables:
-        kind = conn.execute("SELECT type, wr, strict FROM pragma_table_list WHERE schema = 'main' AND name = ?",
-                            (table,)).fetchall()  # fmt: skip
+        kind = _kind(conn, table)
         columns = conn.execute(f"PRAGMA table_xinfo({_quoted(table)})").fetchall()
         listed = conn.execute(f"PRAGMA index_list({_quoted(table)})").fetchall()  # seq, name, unique, origin, partial
         indexes = []
@@ -154,6 +153,17 @@ def layout(conn: sqlite3.Connection, tables: list[str]) -> dict[str, object]:
             indexes.append((str(name), unique, origin, partial, [tuple(k[1:]) for k in keys]))
         out[table] = (kind, [tuple(c[1:]) for c in columns], sorted(indexes, key=repr))
     return out
+
+
+def _kind(conn: sqlite3.Connection, table: str) -> list[tuple]:
+    """(type, WITHOUT ROWID, STRICT) of ``table`` from ``pragma_table_list`` (SQLite 3.37+), or what an older SQLite
+    can tell from ``sqlite_master``: the same answer for the file and the reference, which one SQLite reads."""
+    try:
+        return conn.execute("SELECT type, wr, strict FROM pragma_table_list WHERE schema = 'main' AND name = ?",
+                            (table,)).fetchall()  # fmt: skip
+    except sqlite3.OperationalError:
+        return conn.execute("SELECT type, instr(upper(sql), 'WITHOUT ROWID') > 0, 0 FROM sqlite_master WHERE name = ?",
+                            (table,)).fetchall()  # fmt: skip
 
 
 def _quoted(name: object) -> str:
