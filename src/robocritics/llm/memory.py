@@ -261,8 +261,9 @@ class InteractionMemory:
                 raise self._error(f"{name} must be a whole number >= 1, got {value!r}")
         if not (isinstance(busy_timeout_s, (int, float)) and math.isfinite(busy_timeout_s) and busy_timeout_s >= 0):
             raise self._error(f"busy_timeout_s must be a finite number of seconds >= 0, got {busy_timeout_s!r}")
-        if not (isinstance(statement_timeout_s, (int, float)) and math.isfinite(statement_timeout_s) and statement_timeout_s > 0):
-            raise self._error(f"statement_timeout_s must be a finite number of seconds > 0, got {statement_timeout_s!r:.40}")
+        timeout = statement_timeout_s
+        if isinstance(timeout, bool) or not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+            raise self._error(f"statement_timeout_s must be a finite number of seconds > 0, got {timeout!r:.40}")
         self.statement_timeout_s = float(statement_timeout_s)
         self._deadline: guard.Deadline | None = None
         self.embedder = embedder
@@ -706,8 +707,8 @@ class InteractionMemory:
         bound = [*head, _BM25_K1, _BM25_K1, _BM25_B, _BM25_B, mean_length, *tail, _SCORE_DECIMALS, k]
         rows = self._read(sql, bound, "searching")
         with self._contract():  # a score of text, a negative or missing count makes the sum NULL or not finite
-            ranked = [(guard.whole(i, "request_terms.interaction_id", 1), guard.finite(s, "a BM25 score of request_terms.tf "
-                       "and interactions.request_tokens")) for i, s in rows]  # fmt: skip
+            what = "a BM25 score of request_terms.tf and interactions.request_tokens"
+            ranked = [(guard.whole(i, "request_terms.interaction_id", 1), guard.finite(s, what)) for i, s in rows]
         return [(i, score) for i, score in ranked if score > 0]
 
     def _cosine_top(self, query: str, k: int, session: str | None) -> list[tuple[int, float]]:

@@ -182,7 +182,8 @@ def whole(value: object, column: str, least: int = 0) -> int:
 
 def finite(value: object, column: str, low: float = -math.inf, high: float = math.inf) -> float:
     """``value`` as a float if it is a finite number within [low, high]; else ValueError naming ``column``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high or not math.isfinite(value):
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if not number or not math.isfinite(value) or not low <= value <= high:  # type: ignore[operator, arg-type]
         bounds = "" if math.isinf(low) and math.isinf(high) else f" within {low:g}-{high:g}"
         raise ValueError(f"{column} holds {shown(value)}, not a finite number{bounds}")
     return float(value)
