@@ -14,6 +14,8 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from robocritics.batch import LocalEngine, reward
 from robocritics.batch.local import max_workers
@@ -228,3 +230,26 @@ def test_resume_counts_outs_ids_missing_from_in_and_skips_a_repeated_id(capsys, 
     assert "note: 2 rows of" in err and "(2 kept from OUT)" in err, err
     rows = [json.loads(line) for line in out.read_text().splitlines()]
     assert [r["id"] for r in rows] == ["a", "z", "y", "b"]
+
+
+_ids = st.one_of(st.none(), st.integers(-(10**19), 10**19), st.text(min_size=1, max_size=20))
+
+
+@given(ids=st.lists(_ids, max_size=40), messages=st.lists(st.text(max_size=30), min_size=1, max_size=5))
+@settings(max_examples=40, deadline=None)
+def test_the_ids_read_for_resume_equal_those_of_every_row_read_whole(tmp_path_factory, ids, messages):
+    """The streaming readers (JSONL line by line, Parquet a row group at a time, only three columns) against the
+    obvious reference: every row parsed whole, its id's JSON text, or its error's JSON for an id-less row."""
+    pytest.importorskip("pyarrow")
+    directory = tmp_path_factory.mktemp("resume")
+    rows = [error_row(i, "RowError", messages[n % len(messages)]) for n, i in enumerate(ids)]
+    jsonl, parquet = directory / "out.jsonl", directory / "out.parquet"
+    jsonl.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    writer = cli_batch.ParquetWriter(parquet)
+    for r in rows:
+        writer.write(r)
+    writer.close()
+    want_keys = {json.dumps(r["id"]) for r in rows if r["id"] is not None}
+    want_reported = {cli_batch.error_digest(r["error"]) for r in rows if r["id"] is None}
+    for finished in (cli_batch.finished_jsonl(jsonl), cli_batch.finished_parquet(parquet)):
+        assert (finished.keys, finished.reported) == (want_keys, want_reported)
