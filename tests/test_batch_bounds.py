@@ -100,6 +100,16 @@ def test_reward_with_too_many_workers_is_refused_before_starting_any(workers):
     assert set(multiprocessing.active_children()) == before
 
 
+def test_a_local_ray_cluster_takes_the_same_cap_before_starting():
+    pytest.importorskip("ray")
+    from robocritics.batch.ray_engine import RayEngine
+
+    with pytest.raises(ValueError, match=f"at most {max_workers()} on this machine"):
+        RayEngine(10**6)
+    with pytest.raises(ValueError, match="at most"):
+        reward([SHORT], "sorting", engine="ray", workers=10**6)
+
+
 def test_the_cli_and_the_api_share_one_cap(capsys, tmp_path):
     src = tmp_path / "in.jsonl"
     src.write_text("")
