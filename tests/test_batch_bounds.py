@@ -141,6 +141,16 @@ def test_workers_take_the_hard_limit_when_it_is_below_theirs(tmp_path):
     assert sorted(r["id"] for r in rows) == [0, 1] and all(r["error"] is None for r in rows), rows
 
 
+def test_a_hard_limit_too_small_to_start_a_worker_is_a_one_line_error_naming_it(tmp_path):
+    src = tmp_path / "in.jsonl"
+    src.write_text(json.dumps({"id": 1, "scene": "sorting", "program": SHORT}) + "\n")
+    limit = 200 * 1024**2
+    done = subprocess.run([*CLI, "batch", str(src), "-o", str(tmp_path / "out.jsonl"), "--workers", "1"],
+                          capture_output=True, text=True, timeout=600, preexec_fn=_hard_address_limit(limit))  # fmt: skip
+    assert done.returncode == 2 and "could not start" in done.stderr and f"limit of {limit:,} bytes" in done.stderr
+    assert "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
 def test_the_engine_reports_the_limit_its_workers_can_set():
     code = textwrap.dedent("""
         import resource

@@ -254,5 +254,6 @@ class LocalEngine:
         self._start_failures += 1
         if self._start_failures >= MAX_START_FAILURES:
             self.close()
-            raise BatchError(f"a batch worker could not start ({self._start_failures} times): {why}")
+            raise BatchError(f"a batch worker could not start ({self._start_failures} times, with an address-space "
+                             f"limit of {self.memory_bytes:,} bytes): {why}")  # fmt: skip
         self._replace(w)
