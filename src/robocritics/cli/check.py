@@ -98,8 +98,6 @@ def _check(args: argparse.Namespace) -> int:
             print(f"robocritics: no replay written to {args.html}: the program did not run", file=sys.stderr)
         return 1
     if args.html:
-        from ..viz import write_replay_html
-
         from .._files import OutputFileError, write_file_atomically
         from ..viz import replay_html
 
