@@ -63,7 +63,10 @@ def read_bounded_text(path: object, what: str, shown: str, max_bytes: int, error
 # * an existing symbolic link, directory, FIFO or device at the output path is refused up front with an
 #   :class:`OutputFileError` naming the path (the choice: a link there is more likely an attack or a mistake than a
 #   wish to replace it, and refusing is the answer that never surprises), so nothing is computed for nothing;
-# * a file that must be appended to (``batch --resume``) is opened with ``O_NOFOLLOW`` and must be a regular file.
+# * a file that must be appended to (``batch --resume``) is opened with ``O_NOFOLLOW`` and must be a regular file
+#   with one name (a hard link would write into another file too).
+#
+# Only the last component of a path is guarded: links among the directories above it are the user's own path.
 
 
 class OutputFileError(RoboCriticsError, OSError):
