@@ -245,6 +245,15 @@ def test_a_link_at_the_file_or_a_companion_is_refused_and_its_target_unchanged(t
     assert victim.read_bytes() == b"precious"
 
 
+def test_a_hard_link_to_another_database_is_refused_and_it_is_unchanged(tmp_path):
+    victim = _memory_file(tmp_path / "victim.sqlite")
+    before = victim.read_bytes()
+    os.link(victim, tmp_path / "memory.sqlite")
+    with pytest.raises(InteractionMemoryError, match="has 2 hard links"):
+        InteractionMemory(tmp_path / "memory.sqlite")
+    assert victim.read_bytes() == before
+
+
 def test_a_fifo_as_the_file_is_refused_without_hanging(tmp_path):
     path = tmp_path / "memory.sqlite"
     os.mkfifo(path)

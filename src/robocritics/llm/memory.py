@@ -348,7 +348,8 @@ class InteractionMemory:
             raise self._error(f"{where} cannot be opened: {str(path.parent)!r} is not a directory")
         for companion in (path, *(path.with_name(path.name + end) for end in ("-wal", "-shm", "-journal"))):
             try:
-                mode = os.lstat(companion).st_mode
+                info = os.lstat(companion)
+                mode = info.st_mode
             except FileNotFoundError:
                 continue
             except OSError as exc:
@@ -360,6 +361,9 @@ class InteractionMemory:
                 raise self._error(f"{where} cannot be opened: it is a directory, not a file")
             if not stat.S_ISREG(mode):
                 raise self._error(f"{where} cannot be opened: {str(companion)!r} is not a regular file")
+            if info.st_nlink > 1:  # a hard link: writing it would change another file too
+                raise self._error(f"{where} cannot be opened: {str(companion)!r} has {info.st_nlink} hard links; "
+                                  "copy it to a file of its own")  # fmt: skip
         if path.exists() and not os.access(path, os.R_OK | os.W_OK):
             raise self._error(
                 f"{where} cannot be opened: the file is read-only (no read and write permission): make it "
