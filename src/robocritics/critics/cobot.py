@@ -1,0 +1,145 @@
+"""What the collaborative-operation critics share: the robot's parts over time, their speeds, the carried mass.
+
+* :func:`robot_parts`: every robot capsule and the carried object (a sphere around it, while it is held), as
+  segments ``(T, P, 3)`` m in the base frame with radii ``(P,)`` m and a mask ``(T, P)`` of when each exists;
+* :func:`part_speeds`: the speed of each part, m/s: the faster of its two segment ends (a rigid body's speed
+  is largest at an end of any segment in it, since velocity is affine along the segment);
+* :func:`part_body_distances`: the distance ``(T, P, K)`` m between each part and each capsule of a body model;
+* :func:`robot_masses`: the robot's moving mass and its tool's, kg, from the model's inertias (URDF);
+* :func:`carried_mass`: the mass held at each sample, kg, from the objects' ``mass_kg`` attribute.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import SceneError
+from ..robot.proximity import capsule_capsule
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..execution import Execution
+    from ..humans import BodyModel
+
+__all__ = ["Parts", "robot_parts", "part_speeds", "part_body_distances", "robot_masses", "carried_mass", "object_mass"]
+
+
+@dataclass(frozen=True)
+class Parts:
+    """Robot parts over time: segment ``p0``-``p1`` ``(T, P, 3)`` m, ``radius_m (P,)``, ``present (T, P)``."""
+
+    names: tuple[str, ...]
+    p0: np.ndarray
+    p1: np.ndarray
+    radius_m: np.ndarray
+    present: np.ndarray
+
+
+def _bounding_radius(kind: str, size: tuple[float, ...]) -> float:
+    if kind == "box":
+        return 0.5 * math.sqrt(sum(s * s for s in size))
+    if kind == "cylinder":
+        return math.hypot(size[0], size[1] / 2)
+    return float(size[0])
+
+
+def robot_parts(execution: "Execution") -> Parts:
+    """The robot's capsules and each object it carries (while held), from ``execution`` (needs its robot)."""
+    trajectory, robot = execution.trajectory, execution.robot
+    p0, p1 = robot.capsule_segments(trajectory.frames)
+    names = [c.name for c in robot.capsules]
+    radii = [c.radius_m for c in robot.capsules]
+    T = len(trajectory)
+    starts, ends, present = [p0], [p1], [np.ones((T, len(names)), dtype=bool)]
+    poses = getattr(execution, "object_poses", {}) or {}
+    for obj_id in sorted({a for a in trajectory.attached.tolist() if a}):
+        held = trajectory.attached == obj_id
+        if obj_id not in poses:
+            continue
+        obj = execution.scene.entity(obj_id)
+        centre = np.asarray(poses[obj_id], dtype=float)[:, :3, 3]
+        starts.append(centre[:, None, :])
+        ends.append(centre[:, None, :])
+        present.append(held[:, None])
+        names.append(f"carried {obj_id}")
+        radii.append(_bounding_radius(obj.shape, tuple(obj.size)))
+    return Parts(
+        names=tuple(names),
+        p0=np.concatenate(starts, axis=1),
+        p1=np.concatenate(ends, axis=1),
+        radius_m=np.asarray(radii, dtype=float),
+        present=np.concatenate(present, axis=1),
+    )
+
+
+def part_speeds(parts: Parts, time_s: np.ndarray) -> np.ndarray:
+    """``(T, P)`` speed of each part, m/s, reached at each sample (sample 0: 0); the faster segment end."""
+    dt = np.diff(np.asarray(time_s, dtype=float))[:, None]
+    speed = np.zeros(parts.present.shape)
+    v0 = np.linalg.norm(np.diff(parts.p0, axis=0), axis=-1) / dt
+    v1 = np.linalg.norm(np.diff(parts.p1, axis=0), axis=-1) / dt
+    speed[1:] = np.maximum(v0, v1)
+    speed[1:] *= parts.present[1:] & parts.present[:-1]  # a part picked up or let go has no speed across it
+    return speed
+
+
+def part_body_distances(parts: Parts, body: "BodyModel") -> np.ndarray:
+    """``(T, P, K)`` distance, m, between each part and each capsule of ``body`` (negative: overlapping);
+    +inf where the part is absent."""
+    d = capsule_capsule(
+        parts.p0[:, :, None, :],
+        parts.p1[:, :, None, :],
+        parts.radius_m[None, :, None],
+        body.p0[None, None],
+        body.p1[None, None],
+        body.radius_m[None, None],
+    )
+    return np.where(parts.present[:, :, None], d, np.inf)
+
+
+def robot_masses(robot) -> tuple[float, float]:
+    """``(moving_kg, tool_kg)``: the mass of the arm's moving links and of its tool (gripper), kg.
+
+    From the robot model's inertias (the URDF's ``<inertial>``; the bundled UR3e's link masses are UR's
+    published ones, :data:`robocritics.robot.arms.UR3E`): the tool is what the model fixes to the last joint
+    (its frames of fixed joints that carry mass), the moving links are the rest of what the joints move.
+    """
+    model = robot.model
+    total = sum(model.inertias[j].mass for j in range(1, model.njoints))
+    tool = sum(
+        f.inertia.mass for f in model.frames if f.parentJoint == model.njoints - 1 and str(f.type) == "FIXED_JOINT"
+    )
+    return float(total - tool), float(tool)
+
+
+def object_mass(execution: "Execution", obj_id: str) -> float | None:
+    """The ``mass_kg`` attribute of object ``obj_id``, kg (None when it has none); SceneError if not a mass."""
+    scene = execution.scene
+    for i, obj in enumerate(scene.objects):
+        if obj.id != obj_id:
+            continue
+        value = obj.attributes.get("mass_kg")
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 <= float(value) <= 1000:
+            raise SceneError(f"{value!r} is not a mass in kg (0 to 1000)", path=f"objects[{i}].attributes.mass_kg")
+        return float(value)
+    return None
+
+
+def carried_mass(execution: "Execution") -> tuple[np.ndarray, list[str]]:
+    """``(T,)`` mass held at each sample, kg, and the ids of held objects whose mass is unknown (counted 0)."""
+    attached = execution.trajectory.attached
+    mass = np.zeros(len(attached))
+    unknown: list[str] = []
+    for obj_id in sorted({a for a in attached.tolist() if a}):
+        m = object_mass(execution, obj_id)
+        if m is None:
+            unknown.append(obj_id)
+            continue
+        mass[attached == obj_id] = m
+    return mass, unknown
