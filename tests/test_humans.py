@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from robocritics.critics.cobot import robot_masses
 from robocritics.errors import SceneError
@@ -124,3 +126,23 @@ def test_the_cli_exits_2_on_a_bad_posture(tmp_path):
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2, out.stderr
     assert "humans[0].posture" in out.stderr
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    x=st.floats(-2, 2), y=st.floats(-2, 2), yaw=st.floats(-math.pi, math.pi), height=st.floats(1.4, 2.1),
+    floor=st.floats(-1.2, 0.0), posture=st.sampled_from(["standing", "seated"]),
+)
+def test_body_model_is_the_upright_model_turned_and_moved_to_the_feet(x, y, yaw, height, floor, posture):
+    """Reference: each capsule of a person at the origin facing +x, rotated by yaw about z, then translated."""
+    here = body_model(Human(id="p", position=(x, y), yaw_rad=yaw, height_m=height, floor_z_m=floor, posture=posture))
+    origin = body_model(Human(id="p", position=(0.0, 0.0), yaw_rad=0.0, height_m=height, floor_z_m=0.0,
+                              posture=posture))
+    c, s = math.cos(yaw), math.sin(yaw)
+    for a, b in ((here.p0, origin.p0), (here.p1, origin.p1)):
+        for got, ref in zip(a, b):
+            turned = (c * ref[0] - s * ref[1] + x, s * ref[0] + c * ref[1] + y, ref[2] + floor)
+            assert got == pytest.approx(turned, abs=1e-9)
+    assert here.radius_m.tolist() == origin.radius_m.tolist()
+    # taller people have proportionally larger bodies
+    assert max(here.radius_m) == pytest.approx(0.065 * height)
