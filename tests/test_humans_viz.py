@@ -62,3 +62,26 @@ def test_the_operator_is_drawn_in_the_offline_file(naive, tmp_path):
         wait_for(driver, READY, what="the first frame")
         assert driver.find_element("css selector", ".rc-replay").get_attribute("data-people") == "0"
         assert canvas_pixels(driver, driver.find_element("css selector", ".rc-canvas")) != with_people
+
+
+def test_the_studio_shows_the_operator_and_the_separation_error(naive):
+    from robocritics.viz.studio import Studio
+
+    _, report = naive
+    with chromium() as driver, Studio("workbench", NAIVE.read_text()) as studio:
+        driver.get(studio.url)
+        wait_for(driver, "return document.body.dataset.ready === '1'", what="the studio page to start")
+        driver.execute_script("document.getElementById('run').click()")
+        wait_for(driver, "const r = document.querySelector('#critics .critic[data-critic=\"separation\"]'); "
+                         "return r && ['ok', 'warning', 'error'].includes(r.dataset.flag)",
+                 what="the separation critic's flag after Run")
+        shown = driver.execute_script(
+            "const o = {}; for (const r of document.querySelectorAll('#critics .critic')) o[r.dataset.critic] = "
+            "r.dataset.flag; return o;")
+        assert shown["separation"] == "error" == report.verdict("separation").flag.value.lower()
+        wait_for(driver, "return document.getElementById('replay').dataset.ready === '1'", what="the replay")
+        assert driver.execute_script("return document.getElementById('replay').dataset.people") == "1"
+        driver.execute_script("document.querySelector('#critics .critic[data-critic=\"separation\"]').click()")
+        wait_for(driver, "return document.getElementById('replay').dataset.selected === 'separation'")
+        driver.save_screenshot(str(SCREENSHOTS / "studio_workbench.png"))
+        assert not [e for e in severe_console_errors(driver) if "favicon" not in e]
