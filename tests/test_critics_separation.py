@@ -47,3 +47,23 @@ def test_a_longer_reaction_time_widens_the_distance():
     q, s = _separation(quick), _separation(slow)
     assert s.threshold > q.threshold + 1.5
     assert q.flag is Flag.OK and s.flag is Flag.ERROR
+
+
+@pytest.mark.parametrize("speed, distance", [(1.0, None), (0.5, 0.9), (1.0, 2.5)])
+def test_pruned_distances_equal_the_full_computation(speed, distance):
+    """The bounding-sphere pruning of contact_speed and separation against every pair computed exactly."""
+    import numpy as np
+
+    from robocritics.critics.cobot import part_body_distances, part_body_nearest, robot_parts
+    from robocritics.humans import scene_bodies
+
+    run = execution(speed, distance_m=distance)
+    parts = robot_parts(run)
+    body = scene_bodies(run.scene)[0]
+    full = part_body_distances(parts, body)
+    assert np.allclose(part_body_nearest(parts, body), full.min(axis=2), rtol=0, atol=1e-12)
+    for within in (0.0, 0.1, 0.5):
+        pruned = part_body_distances(parts, body, within_m=within)
+        exact = (full <= within) | np.vstack([(full <= within)[1:], np.zeros((1,) + full.shape[1:], bool)])
+        assert np.allclose(pruned[exact], full[exact], rtol=0, atol=1e-12)
+        assert np.all(pruned[~exact] > within) and np.all(pruned <= full + 1e-12)  # a lower bound elsewhere

@@ -4,7 +4,8 @@
   segments ``(T, P, 3)`` m in the base frame with radii ``(P,)`` m and a mask ``(T, P)`` of when each exists;
 * :func:`part_speeds`: the speed of each part, m/s: the faster of its two segment ends (a rigid body's speed
   is largest at an end of any segment in it, since velocity is affine along the segment);
-* :func:`part_body_distances`: the distance ``(T, P, K)`` m between each part and each capsule of a body model;
+* :func:`part_body_distances`: the distance ``(T, P, K)`` m between each part and each capsule of a body model
+  (exact within a distance of interest), :func:`part_body_nearest` the distance ``(T, P)`` to the nearest one;
 * :func:`robot_masses`: the robot's moving mass and its tool's, kg, from the model's inertias (URDF);
 * :func:`carried_mass`: the mass held at each sample, kg, from the objects' ``mass_kg`` attribute.
 """
@@ -25,7 +26,16 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..execution import Execution
     from ..humans import BodyModel
 
-__all__ = ["Parts", "robot_parts", "part_speeds", "part_body_distances", "robot_masses", "carried_mass", "object_mass"]
+__all__ = [
+    "Parts",
+    "robot_parts",
+    "part_speeds",
+    "part_body_distances",
+    "part_body_nearest",
+    "robot_masses",
+    "carried_mass",
+    "object_mass",
+]
 
 
 @dataclass(frozen=True)
@@ -87,18 +97,58 @@ def part_speeds(parts: Parts, time_s: np.ndarray) -> np.ndarray:
     return speed
 
 
-def part_body_distances(parts: Parts, body: "BodyModel") -> np.ndarray:
-    """``(T, P, K)`` distance, m, between each part and each capsule of ``body`` (negative: overlapping);
-    +inf where the part is absent."""
-    d = capsule_capsule(
-        parts.p0[:, :, None, :],
-        parts.p1[:, :, None, :],
-        parts.radius_m[None, :, None],
-        body.p0[None, None],
-        body.p1[None, None],
-        body.radius_m[None, None],
-    )
+def _exact(parts: Parts, body: "BodyModel", rows: np.ndarray, p: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Capsule distances (m) of the (sample, part, body capsule) triples ``rows, p, k`` (index arrays)."""
+    return capsule_capsule(parts.p0[rows, p], parts.p1[rows, p], parts.radius_m[p], body.p0[k], body.p1[k],
+                           body.radius_m[k])
+
+
+def _centre_distances(parts: Parts, body: "BodyModel") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(between, half_a, half_b)``: the distance ``(T, P, K)`` m between the segments' midpoints and the half
+    lengths ``(T, P, 1)`` and ``(K,)`` m of the segments: bounds on the capsule distance (see the callers)."""
+    mid_a = 0.5 * (parts.p0 + parts.p1)  # (T, P, 3)
+    mid_b = 0.5 * (body.p0 + body.p1)  # (K, 3)
+    half_a = 0.5 * np.linalg.norm(parts.p1 - parts.p0, axis=-1)[:, :, None]
+    half_b = 0.5 * np.linalg.norm(body.p1 - body.p0, axis=-1)
+    diff = mid_a[:, :, None, :] - mid_b[None, None]
+    return np.sqrt(np.einsum("tpki,tpki->tpk", diff, diff)), half_a, half_b
+
+
+def part_body_distances(parts: Parts, body: "BodyModel", within_m: float | None = None) -> np.ndarray:
+    """``(T, P, K)`` distance, m, between each part and each capsule of ``body`` (negative: overlapping); +inf
+    where the part is absent.
+
+    With ``within_m``, the distance is exact wherever it may be ``<= within_m`` at that sample or the next one,
+    and elsewhere a lower bound above ``within_m`` (the distance between bounding spheres), which is all a
+    caller comparing against ``within_m`` needs: far pairs skip the segment-distance computation.
+    """
+    if within_m is None:
+        rows, p, k = np.indices(parts.present.shape + (len(body),)).reshape(3, -1)
+        d = _exact(parts, body, rows, p, k).reshape(parts.present.shape + (len(body),))
+    else:
+        between, half_a, half_b = _centre_distances(parts, body)
+        d = between - half_a - half_b - parts.radius_m[None, :, None] - body.radius_m
+        need = d <= within_m
+        need[:-1] |= need[1:]  # the sample before a near one: its exact distance says whether the part closes in
+        rows, p, k = np.nonzero(need)
+        d[rows, p, k] = _exact(parts, body, rows, p, k)
     return np.where(parts.present[:, :, None], d, np.inf)
+
+
+def part_body_nearest(parts: Parts, body: "BodyModel") -> np.ndarray:
+    """``(T, P)`` exact distance, m, between each part and the nearest capsule of ``body``; +inf where absent.
+
+    Branch and bound: a capsule whose bounding-sphere distance exceeds the least midpoint-to-midpoint distance
+    (an upper bound: both midpoints lie on the segments) cannot be the nearest, so only the others are computed.
+    """
+    between, half_a, half_b = _centre_distances(parts, body)
+    radii = parts.radius_m[None, :, None] + body.radius_m
+    upper = (between - radii).min(axis=2, keepdims=True)
+    candidate = between - half_a - half_b - radii <= upper
+    rows, p, k = np.nonzero(candidate)
+    d = np.full(candidate.shape, np.inf)
+    d[rows, p, k] = _exact(parts, body, rows, p, k)
+    return np.where(parts.present, d.min(axis=2), np.inf)
 
 
 def robot_masses(robot) -> tuple[float, float]:

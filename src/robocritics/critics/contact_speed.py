@@ -71,7 +71,7 @@ def contact_speeds(execution, params: Params):
     payload_kg = payload_kg + tool_kg  # (T,) m_L: tool and workpiece
     out = []
     for body in scene_bodies(execution.scene):
-        d = part_body_distances(parts, body)  # (T, P, K)
+        d = part_body_distances(parts, body, within_m=params.near_m)  # (T, P, K), exact up to near_m
         closing = np.zeros(d.shape, dtype=bool)
         closing[1:] = d[1:] < d[:-1]
         contact = np.where(closing & (d <= params.near_m), speed[:, :, None], 0.0)

@@ -35,7 +35,7 @@ from .. import hookimpl
 from ..critic import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 from ..humans import scene_bodies
 from ..robot.arms import ARMS, UR3E
-from .cobot import part_body_distances, part_speeds, robot_parts
+from .cobot import part_body_nearest, part_speeds, robot_parts
 from .contact_speed import requested
 
 __all__ = ["SeparationCritic", "register_critics", "protective_separation"]
@@ -71,12 +71,13 @@ class Params(CriticParams):
     )
 
 
-def _arm_facts(robot) -> tuple[float, float]:
-    """``(T_s, Z_r)``: the arm's worst published stopping time of joints 0-2 (s) and its repeatability (m)."""
+def _arm_facts(robot) -> tuple[float, float, str]:
+    """``(T_s, Z_r, arm)``: the worst published stopping time of joints 0-2 (s), the repeatability (m), and the
+    arm whose data they are: the robot's, or the default arm's (UR3e) for an arm without recorded data."""
     spec = ARMS.get(getattr(robot, "name", ""), None)
     if spec is None or not spec.stopping_time_s:
-        spec = UR3E  # the default arm: its published data stand in for an arm without any
-    return max(spec.stopping_time_s), float(spec.pose_repeatability_m or 0.0)
+        spec = UR3E
+    return max(spec.stopping_time_s), float(spec.pose_repeatability_m or 0.0), spec.name
 
 
 def protective_separation(v_r: np.ndarray, params: Params, stopping_time_s: float, robot_uncertainty_m: float):
@@ -102,7 +103,7 @@ class SeparationCritic:
         if execution.robot is None:
             return Verdict(critic=NAME, flag=Flag.OK, message="no robot model: nothing to check (its parts' "
                            "shapes are needed)", hint="judge the motion with its robot")
-        t_s, z_r = _arm_facts(execution.robot)
+        t_s, z_r, stopping_data = _arm_facts(execution.robot)
         time = trajectory.time
         parts = robot_parts(execution)
         speed = part_speeds(parts, time).max(axis=1)  # (T,) fastest part, m/s
@@ -111,7 +112,7 @@ class SeparationCritic:
         v_toward = np.zeros(T)
         bodies = scene_bodies(execution.scene)
         for b, body in enumerate(bodies):
-            d = part_body_distances(parts, body).min(axis=2)  # (T, P) part to person
+            d = part_body_nearest(parts, body)  # (T, P) part to person
             closing = np.zeros(d.shape)
             with np.errstate(invalid="ignore"):
                 closing[1:] = np.nan_to_num(-(d[1:] - d[:-1]) / np.diff(time)[:, None], nan=0.0, posinf=0.0,
@@ -133,7 +134,7 @@ class SeparationCritic:
                              warning=params.warn_margin_m, error=0.0)
         details = {"human": body.human, "separation_m": float(sep[t]), "protective_separation_m": float(s_p[t]),
                    "robot_speed_m_s": float(speed[t]), "speed_toward_person_m_s": float(v_toward[t]),
-                   "stopping_time_s": t_s, "robot_uncertainty_m": z_r}
+                   "stopping_time_s": t_s, "robot_uncertainty_m": z_r, "stopping_data_of": stopping_data}
         at = (f"{body.human} is {fmt_length(float(sep[t]))} from the robot at {time[t]:.2f} s while it moves at "
               f"{speed[t]:.2f} m/s ({v_toward[t]:.2f} m/s toward them); the protective separation distance there "
               f"is {fmt_length(float(s_p[t]))}")

@@ -245,7 +245,7 @@ UR3E = ArmSpec(
 """The UR3e (e-series)."""
 
 def _ur_e_series(name: str, dh: DH, reach_m: float, velocity_rad_s, effort_nm, link_masses_kg, velocity_source: str,
-                 effort_source: str) -> ArmSpec:
+                 effort_source: str, rated_payload_kg: float) -> ArmSpec:
     """An e-series arm: the family shares joint names, ranges, acceleration/jerk choices and the 500 Hz cycle."""
     return ArmSpec(
         name=name,
@@ -260,8 +260,15 @@ def _ur_e_series(name: str, dh: DH, reach_m: float, velocity_rad_s, effort_nm, l
         link_masses_kg=link_masses_kg,
         control_period_s=UR3E.control_period_s,
         reach_m=reach_m,
-        sources={**_UR_E_SERIES_SOURCES, "velocity_rad_s": velocity_source, "effort_nm": effort_source},
+        sources={**{k: v for k, v in _UR_E_SERIES_SOURCES.items() if k in _FAMILY_SOURCES},
+                 "velocity_rad_s": velocity_source, "effort_nm": effort_source},
+        rated_payload_kg=rated_payload_kg,
     )
+
+
+# the sources that hold for the whole family (the stopping and payload-curve data above are the UR3e's only)
+_FAMILY_SOURCES = {"dh", "lower_rad", "acceleration_rad_s2", "jerk_rad_s3", "link_masses_kg", "control_period_s",
+                   "reach_m", "rated_payload_kg"}
 
 
 _DEG = math.pi / 180.0
@@ -278,6 +285,7 @@ UR5E = _ur_e_series(
     link_masses_kg=(3.761, 8.058, 2.846, 1.37, 1.3, 0.365),
     velocity_source="UR5e technical specification / user manual v5.8: every joint 180 deg/s",
     effort_source="UR support article 'Max. joint torques': UR5e 150/150/150/28/28/28 N m",
+    rated_payload_kg=5.0,
 )
 """The UR5e (e-series), 850 mm reach."""
 
@@ -291,6 +299,7 @@ UR10E = _ur_e_series(
     velocity_source="UR10e technical specification / user manual v5.8: base, shoulder 120 deg/s; elbow, "
     "wrists 180 deg/s",
     effort_source="UR support article 'Max. joint torques': UR10e 330/330/150/56/56/56 N m",
+    rated_payload_kg=12.5,
 )
 """The UR10e (e-series), 1300 mm reach."""
 
@@ -304,6 +313,7 @@ UR16E = _ur_e_series(
     velocity_source="UR16e technical specification / user manual v5.8: base, shoulder 120 deg/s; elbow, "
     "wrists 180 deg/s",
     effort_source="UR support article 'Max. joint torques': UR16e 330/330/150/56/56/56 N m",
+    rated_payload_kg=16.0,
 )
 """The UR16e (e-series), 900 mm reach."""
 
