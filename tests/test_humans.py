@@ -16,7 +16,7 @@ from robocritics.robot.model import Robot
 from robocritics.scene import Human, Scene
 
 # ISO/TS 15066:2016 Annex A, per region: quasi-static force F (N, Table A.2), transient contact permitted,
-# spring constant k (N/mm, Table A.3), effective mass m_H (kg, Table A.3), and v_max (m/s) for the bundled UR3e
+# spring constant k (N/mm, Annex A), effective mass m_H (kg, Table A.3), and v_max (m/s) for the bundled UR3e
 # (moving mass M = 8.7985 kg, UR's published link masses; tool 1.0 kg) with nothing carried, worked by hand:
 #   m_R = M/2 + m_L = 4.39925 + 1.0 = 5.39925 kg;  mu = (1/m_H + 1/m_R)^-1;  v_max = 2F / sqrt(mu k)
 # e.g. abdomen: mu = (1/40 + 1/5.39925)^-1 = 4.7571 kg, sqrt(4.7571 * 10000) = 218.11, v = 220 / 218.11 = 1.009.

@@ -13,7 +13,8 @@ Per body region (:data:`BODY_REGIONS`):
 * ``force_n``: maximum permissible force for quasi-static contact, Table A.2 [N];
 * ``transient_factor``: the multiplier of Table A.2 for transient contact (2; 0 where transient contact is
   not permitted: skull and forehead, face);
-* ``spring_n_m``: effective spring constant k of the region, Table A.3 [N/mm in the standard; N/m here];
+* ``spring_n_m``: effective spring constant k of the region, Annex A [N/mm in the standard; N/m here]
+  (secondary sources place it in Table A.2 or beside the masses of Table A.3);
 * ``mass_kg``: effective mass m_H of the region, Table A.3 [kg].
 
 The speed limit of a transient contact (Annex A, A.3.2, formulae A.6-A.8)::
@@ -62,7 +63,10 @@ __all__ = [
     "LIMITS_SOURCE",
 ]
 
-LIMITS_SOURCE = "ISO/TS 15066:2016 Annex A: forces Table A.2, spring constants and effective masses Table A.3"
+LIMITS_SOURCE = (
+    "ISO/TS 15066:2016 Annex A: maximum permissible forces and the transient multiplier, Table A.2; effective "
+    "masses, Table A.3; effective spring constants, Annex A (A.3)"
+)
 
 
 @dataclass(frozen=True)
@@ -76,7 +80,7 @@ class BodyRegion:
     transient_factor: float
     """Multiplier for transient contact (Table A.2): 2, or 0 where transient contact is not permitted."""
     spring_n_m: float
-    """Effective spring constant k, N/m (Table A.3 gives N/mm)."""
+    """Effective spring constant k, N/m (Annex A gives N/mm)."""
     mass_kg: float
     """Effective mass m_H, kg (Table A.3)."""
 
@@ -124,9 +128,9 @@ def reduced_mass_kg(human_mass_kg: float, robot_mass_kg: float) -> float:
 def transient_speed_limit(region: BodyRegion, moving_mass_kg: float, payload_kg: float) -> float:
     """Largest permissible relative speed of a transient contact with ``region``, m/s (Annex A, A.3.2).
 
-    ``v_max = F_max / sqrt(mu k)`` with ``F_max`` the transient force (2 x Table A.2), ``k`` and ``m_H`` from
-    Table A.3 and ``m_R = M/2 + m_L`` (``moving_mass_kg`` M: the robot's moving parts; ``payload_kg`` m_L: tool
-    and workpiece). 0 for regions where transient contact is not permitted (skull and forehead, face).
+    ``v_max = F_max / sqrt(mu k)`` with ``F_max`` the transient force (2 x Table A.2), ``k`` (Annex A),
+    ``m_H`` (Table A.3) and ``m_R = M/2 + m_L`` (``moving_mass_kg`` M: the robot's moving parts;
+    ``payload_kg`` m_L: tool and workpiece). 0 where transient contact is not permitted (skull and forehead, face).
     """
     if not region.contact_permitted:
         return 0.0

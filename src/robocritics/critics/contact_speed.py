@@ -10,8 +10,8 @@ part (the model's capsules) and every carried object (a sphere around it while h
   within ``near_m`` and people move, so the direction in which a closing part would strike is not known;
 * the limit is ``v_max = F_max / sqrt(mu k)``, ``mu = (1/m_H + 1/m_R)^-1``, ``m_R = M/2 + m_L``
   (:func:`robocritics.humans.transient_speed_limit`): F_max the transient force of the region (2 x Table
-  A.2), k and m_H from Table A.3, M the robot's moving mass and m_L its tool plus the carried object's
-  ``mass_kg`` at ``t``. Skull and forehead, and face: no contact is permitted (Table A.2: transient contact
+  A.2), k its effective spring constant (Annex A), m_H its effective mass (Table A.3), M the robot's moving
+  mass and m_L its tool plus the carried object's ``mass_kg`` at ``t``. Skull and forehead, and face: no contact is permitted (Table A.2: transient contact
   not applicable), so the limit there is 0 m/s.
 
 Flags: ERROR when any contact speed exceeds its limit (or any part closes in on the head); WARNING when one
