@@ -67,3 +67,17 @@ def test_pruned_distances_equal_the_full_computation(speed, distance):
         exact = (full <= within) | np.vstack([(full <= within)[1:], np.zeros((1,) + full.shape[1:], bool)])
         assert np.allclose(pruned[exact], full[exact], rtol=0, atol=1e-12)
         assert np.all(pruned[~exact] > within) and np.all(pruned <= full + 1e-12)  # a lower bound elsewhere
+
+
+def test_the_repair_slows_the_flagged_moves_of_the_naive_workbench_program_out_of_error():
+    from pathlib import Path
+
+    from robocritics.repair import repair
+    from robocritics.scene import Scene
+
+    program = (Path(__file__).parent.parent / "examples" / "programs" / "workbench_naive.py").read_text()
+    result = repair(program, Scene.builtin("workbench"))
+    assert not result.report.has_errors, result.report.summary()
+    kept = [c for c in result.changes if c.critic in ("separation", "contact_speed")]
+    assert kept and "set_speed(" in result.program
+    assert _separation(result.report).flag is Flag.OK

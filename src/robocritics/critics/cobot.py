@@ -7,7 +7,8 @@
 * :func:`part_body_distances`: the distance ``(T, P, K)`` m between each part and each capsule of a body model
   (exact within a distance of interest), :func:`part_body_nearest` the distance ``(T, P)`` to the nearest one;
 * :func:`robot_masses`: the robot's moving mass and its tool's, kg, from the model's inertias (URDF);
-* :func:`carried_mass`: the mass held at each sample, kg, from the objects' ``mass_kg`` attribute.
+* :func:`carried_mass`: the mass held at each sample, kg, from the objects' ``mass_kg`` attribute;
+* :func:`slow_flagged_moves`: the repair both people critics offer: the flagged moves, slower.
 """
 
 from __future__ import annotations
@@ -35,7 +36,12 @@ __all__ = [
     "robot_masses",
     "carried_mass",
     "object_mass",
+    "slow_flagged_moves",
 ]
+
+SPEED_MARGIN = 0.85
+"""A slowdown aims this fraction of the way under the limit (as the built-in speed repairs do)."""
+_MOVES = {"move_to", "move_linear", "move_above", "move_down", "move_up", "home"}
 
 
 @dataclass(frozen=True)
@@ -193,3 +199,28 @@ def carried_mass(execution: "Execution") -> tuple[np.ndarray, list[str]]:
             continue
         mass[attached == obj_id] = m
     return mass, unknown
+
+
+def slow_flagged_moves(verdict, execution, ratio: float) -> list:
+    """Repair candidates: ``set_speed(f)`` before each flagged move line (the speed in force restored after it),
+    ``f`` = the speed there times ``ratio`` (the limit over the measured speed) times :data:`SPEED_MARGIN`, and a
+    second, stronger candidate. Empty without a plan (imported motion) or a ratio to aim at."""
+    from ..repair.edit import Edit, Insert
+
+    plan = getattr(execution, "plan", None)
+    if plan is None or not 0 < ratio < 1:
+        return []
+    skills = {c.line: c.skill for c in plan.calls}
+    lines = [ln for ln in verdict.evidence.lines if skills.get(ln) in _MOVES]
+    edits = []
+    for margin in (SPEED_MARGIN, SPEED_MARGIN**3):
+        ops, said = [], []
+        for ln in lines:
+            before = plan.speed_at(ln)
+            f = max(0.01, round(before * ratio * margin, 2))
+            ops.append(Insert(ln, before=(f"set_speed({f:g})",), after=(f"set_speed({before:g})",)))
+            said.append(f"line {ln}: speed {before:g} -> {f:g}")
+        if ops:
+            edits.append(Edit(verdict.critic, lines[0], "; ".join(said) + " (restored after the move)",
+                              f"{verdict.message.split(':')[0]}", ops))
+    return edits

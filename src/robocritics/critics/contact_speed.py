@@ -31,7 +31,7 @@ from pydantic import Field
 from .. import hookimpl
 from ..critic import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
 from ..humans import BODY_REGIONS, LIMITS_SOURCE, scene_bodies, transient_speed_limit
-from .cobot import carried_mass, part_body_distances, part_speeds, robot_masses, robot_parts
+from .cobot import carried_mass, part_body_distances, part_speeds, robot_masses, robot_parts, slow_flagged_moves
 
 __all__ = ["ContactSpeedCritic", "register_critics", "contact_speeds"]
 
@@ -156,3 +156,11 @@ class ContactSpeedCritic:
 @hookimpl
 def register_critics(register):
     register(ContactSpeedCritic())
+
+
+@hookimpl
+def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
+    """The flagged moves slowed under the region's limit (no slowdown makes contact with the head acceptable)."""
+    if verdict.critic != NAME or not verdict.value or not verdict.threshold:
+        return []
+    return slow_flagged_moves(verdict, execution, verdict.threshold / verdict.value)

@@ -35,7 +35,7 @@ from .. import hookimpl
 from ..critic import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 from ..humans import scene_bodies
 from ..robot.arms import ARMS, UR3E
-from .cobot import part_body_nearest, part_speeds, robot_parts
+from .cobot import part_body_nearest, part_speeds, robot_parts, slow_flagged_moves
 from .contact_speed import requested
 
 __all__ = ["SeparationCritic", "register_critics", "protective_separation"]
@@ -134,7 +134,8 @@ class SeparationCritic:
                              warning=params.warn_margin_m, error=0.0)
         details = {"human": body.human, "separation_m": float(sep[t]), "protective_separation_m": float(s_p[t]),
                    "robot_speed_m_s": float(speed[t]), "speed_toward_person_m_s": float(v_toward[t]),
-                   "stopping_time_s": t_s, "robot_uncertainty_m": z_r, "stopping_data_of": stopping_data}
+                   "stopping_time_s": t_s, "robot_uncertainty_m": z_r, "stopping_data_of": stopping_data,
+                   "reduced_speed_m_s": params.reduced_speed_m_s}
         at = (f"{body.human} is {fmt_length(float(sep[t]))} from the robot at {time[t]:.2f} s while it moves at "
               f"{speed[t]:.2f} m/s ({v_toward[t]:.2f} m/s toward them); the protective separation distance there "
               f"is {fmt_length(float(s_p[t]))}")
@@ -156,3 +157,13 @@ class SeparationCritic:
 @hookimpl
 def register_critics(register):
     register(SeparationCritic())
+
+
+@hookimpl
+def robocritics_repairs(verdict, execution, program):  # type: ignore[no-untyped-def]
+    """The flagged moves slowed to the reduced speed, at which the robot may come closer than S_p."""
+    speed = (verdict.details or {}).get("robot_speed_m_s") if verdict.critic == NAME else None
+    if not speed:
+        return []
+    reduced = (verdict.details or {}).get("reduced_speed_m_s", Params().reduced_speed_m_s)
+    return slow_flagged_moves(verdict, execution, reduced / speed)
