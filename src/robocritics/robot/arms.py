@@ -244,6 +244,11 @@ UR3E = ArmSpec(
 )
 """The UR3e (e-series)."""
 
+# the sources that hold for the whole family (the stopping and payload-curve data above are the UR3e's only)
+_FAMILY_SOURCES = {"dh", "lower_rad", "acceleration_rad_s2", "jerk_rad_s3", "link_masses_kg", "control_period_s",
+                   "reach_m", "rated_payload_kg"}
+
+
 def _ur_e_series(name: str, dh: DH, reach_m: float, velocity_rad_s, effort_nm, link_masses_kg, velocity_source: str,
                  effort_source: str, rated_payload_kg: float) -> ArmSpec:
     """An e-series arm: the family shares joint names, ranges, acceleration/jerk choices and the 500 Hz cycle."""
@@ -264,11 +269,6 @@ def _ur_e_series(name: str, dh: DH, reach_m: float, velocity_rad_s, effort_nm, l
                  "velocity_rad_s": velocity_source, "effort_nm": effort_source},
         rated_payload_kg=rated_payload_kg,
     )
-
-
-# the sources that hold for the whole family (the stopping and payload-curve data above are the UR3e's only)
-_FAMILY_SOURCES = {"dh", "lower_rad", "acceleration_rad_s2", "jerk_rad_s3", "link_masses_kg", "control_period_s",
-                   "reach_m", "rated_payload_kg"}
 
 
 _DEG = math.pi / 180.0
