@@ -247,8 +247,9 @@ def quickhull(P: np.ndarray) -> Hull:
     return _quickhull(*norm)
 
 
-def _quickhull(Q: np.ndarray, e: int) -> Hull:
-    eps = _EPS
+def _initial_tetrahedron(Q: np.ndarray, eps: float) -> list[tuple[int, int, int]] | None:
+    """The outward facets of the first tetrahedron of the points ``Q``, or None when they are all within ``eps``
+    of a line or a plane."""
     # --- initial tetrahedron: extreme in x, farthest from it, from their line, from their plane
     i0 = int(np.argmin(Q[:, 0]))
     d = Q - Q[i0]
@@ -258,17 +259,45 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
     cr2 = np.einsum("ij,ij->i", cr, cr)
     i2 = int(np.argmax(cr2))
     if not np.sqrt(cr2[i2]) > eps * np.linalg.norm(u):  # all points within eps of a line (|Q| < 1, so |u| <= 2)
-        return _empty()
+        return None
     n = np.cross(u, d[i2])  # its direction is good to ~1e-16 / eps: the triangle is more than eps wide
     h = d @ (n / np.linalg.norm(n))
     i3 = int(np.argmax(np.abs(h)))
     if abs(h[i3]) <= eps:  # all points within eps of a plane
-        return _empty()
+        return None
     if h[i3] < 0:  # make (i0, i1, i2, i3) positively oriented: i3 on the side of (i1 - i0) x (i2 - i0)
         i1, i2 = i2, i1
     # outward faces of a positive tetrahedron, consistent by construction (each edge walked both ways); the
     # only geometric decision is the sign of h[i3], which is more than eps from 0
-    facets = [(i0, i2, i1), (i0, i1, i3), (i1, i2, i3), (i0, i3, i2)]
+    return [(i0, i2, i1), (i0, i1, i3), (i1, i2, i3), (i0, i3, i2)]
+
+
+def _visible_region(start: int, point, F, edge_facet, normals, offsets, tols) -> tuple[set[int], list[tuple[int, int]]]:
+    """The facets ``point`` sees, grown from facet ``start`` across shared edges, and the directed edges of the
+    region's boundary (the horizon)."""
+    px, py, pz = point
+    visible, stack, horizon = {start}, [start], []
+    while stack:
+        f = stack.pop()
+        u, v, w = F[f]
+        for a, b in ((u, v), (v, w), (w, u)):
+            g = edge_facet[(b, a)]
+            if g in visible:
+                continue
+            nx, ny, nz = normals[g]
+            if px * nx + py * ny + pz * nz - offsets[g] > tols[g]:
+                visible.add(g)
+                stack.append(g)
+            else:
+                horizon.append((a, b))
+    return visible, horizon
+
+
+def _quickhull(Q: np.ndarray, e: int) -> Hull:
+    eps = _EPS
+    facets = _initial_tetrahedron(Q, eps)
+    if facets is None:  # all points within eps of a line or a plane
+        return _empty()
 
     F: list[tuple[int, int, int]] = []  # every facet made so far; dead ones stay (ids are list positions)
     normals: list[list[float]] = []  # unit outward normals
@@ -337,20 +366,7 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
         # boundary, the horizon, is one loop even when rounding makes a far facet look visible). Coning p to
         # the edge of a coplanar facet may fold the new triangle over it: _face_normals measures such faces.
         # (Counting facets p is within eps of as seen instead deletes and re-cones faces of a grid: +2.5 %)
-        visible, stack, horizon = {start}, [start], []
-        while stack:
-            f = stack.pop()
-            u, v, w = F[f]
-            for a, b in ((u, v), (v, w), (w, u)):
-                g = edge_facet[(b, a)]
-                if g in visible:
-                    continue
-                nx, ny, nz = normals[g]
-                if px * nx + py * ny + pz * nz - offsets[g] > tols[g]:
-                    visible.add(g)
-                    stack.append(g)
-                else:
-                    horizon.append((a, b))
+        visible, horizon = _visible_region(start, (px, py, pz), F, edge_facet, normals, offsets, tols)
         if not _one_loop(horizon):
             horizon = _mend(visible, horizon, F, edge_facet)
         if not horizon:  # no consistent cone from p: leave p out (it is within rounding of the hull)

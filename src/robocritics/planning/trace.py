@@ -59,6 +59,45 @@ def _carried_ids(attached: np.ndarray) -> list[str]:
     return [oid for oid in dict.fromkeys(attached[run_starts(attached)].tolist()) if oid]
 
 
+def _reported_pairs(robot, scene: Scene, carried: Sequence[str]) -> tuple[list[Pair], list[list[tuple[str, str]]]]:
+    """One row per reported pair: its metadata, and the (a, shape) kernel pairs whose minimum it is: the robot's
+    self pairs, every capsule against every entity (not the fixed base against the table), every carried object
+    against every other entity."""
+    capsule_group = dict(zip(robot.capsule_names, robot.capsule_groups))
+    fixed_capsules = {c.name for c in robot.capsules if c.frame in robot.fixed_links}
+    entities = _entity_groups(scene)
+    pairs: list[Pair] = []
+    members: list[list[tuple[str, str]]] = []
+    for a, b in robot.self_pairs:
+        pairs.append(Pair(name=f"{a}|{b}", kind="self", a=a, b=b, group_a=capsule_group[a], group_b=capsule_group[b]))
+        members.append([(a, b)])
+    for cname in robot.capsule_names:
+        for eid, group, shapes in entities:
+            if group == "table" and cname in fixed_capsules:
+                continue  # the base stands on the table
+            pairs.append(
+                Pair(
+                    name=f"{cname}|{eid}",
+                    kind="environment",
+                    a=cname,
+                    b=eid,
+                    group_a=capsule_group[cname],
+                    group_b=group,
+                    b_entity=eid,
+                )
+            )
+            members.append([(cname, shape.name) for shape in shapes])
+    for oid in carried:
+        for eid, group, shapes in entities:
+            if eid == oid:
+                continue
+            pairs.append(
+                Pair(name=f"{oid}|{eid}", kind="environment", a=oid, b=eid, group_a="attached", group_b=group, b_entity=eid)
+            )
+            members.append([(oid, shape.name) for shape in shapes])
+    return pairs, members
+
+
 def build_trajectory(
     robot,
     scene: Scene,
@@ -97,41 +136,7 @@ def build_trajectory(
     else:
         p0, p1 = segments
     object_poses = dict(object_poses or {})
-    capsule_group = dict(zip(robot.capsule_names, robot.capsule_groups))
-    fixed_capsules = {c.name for c in robot.capsules if c.frame in robot.fixed_links}
-    entities = _entity_groups(scene)
-    carried = _carried_ids(attached_arr)
-
-    # one row per reported pair: its metadata and the (a, shape) kernel pairs whose minimum it is
-    pairs: list[Pair] = []
-    members: list[list[tuple[str, str]]] = []
-    for a, b in robot.self_pairs:
-        pairs.append(Pair(name=f"{a}|{b}", kind="self", a=a, b=b, group_a=capsule_group[a], group_b=capsule_group[b]))
-        members.append([(a, b)])
-    for cname in robot.capsule_names:
-        for eid, group, shapes in entities:
-            if group == "table" and cname in fixed_capsules:
-                continue  # the base stands on the table
-            pairs.append(
-                Pair(
-                    name=f"{cname}|{eid}",
-                    kind="environment",
-                    a=cname,
-                    b=eid,
-                    group_a=capsule_group[cname],
-                    group_b=group,
-                    b_entity=eid,
-                )
-            )
-            members.append([(cname, shape.name) for shape in shapes])
-    for oid in carried:
-        for eid, group, shapes in entities:
-            if eid == oid:
-                continue
-            pairs.append(
-                Pair(name=f"{oid}|{eid}", kind="environment", a=oid, b=eid, group_a="attached", group_b=group, b_entity=eid)
-            )
-            members.append([(oid, shape.name) for shape in shapes])
+    pairs, members = _reported_pairs(robot, scene, _carried_ids(attached_arr))
 
     # one kernel for robot and carried-object pairs: exact within EXACT_WITHIN_M and within the arm's closest
     # distance at each sample (its columns' minimum stays exact); farther values are bounds, never evaluated

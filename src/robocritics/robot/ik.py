@@ -526,6 +526,48 @@ def _nearest_equivalent(x: float, seed: float, lo: float, hi: float) -> float | 
     return hi if v > hi else (lo if v < lo else v)
 
 
+def _costed_shoulders(pans, s0: float, l0: float, h0: float, w0: float) -> list[tuple[float, float, float]]:
+    """``(cost, q1, v1)`` of each shoulder pan ``q1`` whose seed-nearest equivalent ``v1`` is within the limits,
+    cheapest first (the first step of :func:`_nearest_solution`)."""
+    shoulders = []
+    for q1 in pans:
+        v1 = q1 + round((s0 - q1) / _TWO_PI) * _TWO_PI
+        if not l0 <= v1 <= h0:
+            v1 = _nearest_equivalent(q1, s0, l0, h0)
+        if v1 is not None:
+            shoulders.append((w0 * (v1 - s0) * (v1 - s0), q1, v1))
+    if len(shoulders) == 2 and shoulders[1][0] < shoulders[0][0]:
+        shoulders.reverse()
+    return shoulders
+
+
+def _costed_wrists(pairs, cost1: float, q6_final: bool, sd, lo, hi, w) -> list[tuple]:
+    """``(cost, q5, q6, v5, v6)`` of each wrist solution ``(q5, q6)`` within the limits, cheapest first; ``v6`` is
+    None until the elbow step fixes ``q6`` (near the wrist singularity, ``q6_final`` False)."""
+    (s4, s5), (l4, l5), (h4, h5), (w4, w5) = sd, lo, hi, w
+    near = _nearest_equivalent
+    wrists = []
+    for q5, q6 in pairs:
+        v5 = q5 + round((s4 - q5) / _TWO_PI) * _TWO_PI
+        if not l4 <= v5 <= h4:
+            v5 = near(q5, s4, l4, h4)
+        if v5 is None:
+            continue
+        cost = cost1 + w4 * (v5 - s4) * (v5 - s4)
+        v6 = None
+        if q6_final:
+            v6 = q6 + round((s5 - q6) / _TWO_PI) * _TWO_PI
+            if not l5 <= v6 <= h5:
+                v6 = near(q6, s5, l5, h5)
+            if v6 is None:
+                continue
+            cost += w5 * (v6 - s5) * (v6 - s5)
+        wrists.append((cost, q5, q6, v5, v6))
+    if len(wrists) == 2 and wrists[1][0] < wrists[0][0]:
+        wrists.reverse()
+    return wrists
+
+
 def _nearest_solution(
     k: tuple[float, ...],
     t: Sequence[float],
@@ -555,15 +597,7 @@ def _nearest_solution(
     # _nearest_equivalent, its common case (the seed-nearest equivalent within the limits) written out at each
     # use: the same expression, without a call per joint per branch (a third of a line walk's time otherwise)
     near = _nearest_equivalent
-    shoulders = []
-    for q1 in pans:
-        v1 = q1 + round((s0 - q1) / _TWO_PI) * _TWO_PI
-        if not l0 <= v1 <= h0:
-            v1 = near(q1, s0, l0, h0)
-        if v1 is not None:
-            shoulders.append((w0 * (v1 - s0) * (v1 - s0), q1, v1))
-    if len(shoulders) == 2 and shoulders[1][0] < shoulders[0][0]:
-        shoulders.reverse()
+    shoulders = _costed_shoulders(pans, s0, l0, h0, w0)
 
     best = math.inf
     best_q: list[float] | None = None
@@ -573,25 +607,7 @@ def _nearest_solution(
         c1, s1 = math.cos(q1), math.sin(q1)
         s5abs, pairs = _wrists(t, c1, s1, s5)
         q6_final = s5abs >= _WRIST_NEAR_SINGULAR  # else the elbow step may nudge q6
-        wrists = []
-        for q5, q6 in pairs:
-            v5 = q5 + round((s4 - q5) / _TWO_PI) * _TWO_PI
-            if not l4 <= v5 <= h4:
-                v5 = near(q5, s4, l4, h4)
-            if v5 is None:
-                continue
-            cost = cost1 + w4 * (v5 - s4) * (v5 - s4)
-            v6 = None
-            if q6_final:
-                v6 = q6 + round((s5 - q6) / _TWO_PI) * _TWO_PI
-                if not l5 <= v6 <= h5:
-                    v6 = near(q6, s5, l5, h5)
-                if v6 is None:
-                    continue
-                cost += w5 * (v6 - s5) * (v6 - s5)
-            wrists.append((cost, q5, q6, v5, v6))
-        if len(wrists) == 2 and wrists[1][0] < wrists[0][0]:
-            wrists.reverse()
+        wrists = _costed_wrists(pairs, cost1, q6_final, (s4, s5), (l4, l5), (h4, h5), (w4, w5))
         for cost56, q5, q6, v5, v6 in wrists:
             if cost56 >= best:
                 break

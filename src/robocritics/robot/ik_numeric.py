@@ -38,6 +38,29 @@ def _parse_target(target: Any) -> tuple[np.ndarray, np.ndarray | None]:
     )
 
 
+def _frame_id(model: Any, frame_id: int | str) -> int:
+    """The id of frame ``frame_id`` (an id, or a link name) in ``model``; RobotModelError naming it if none."""
+    if isinstance(frame_id, str):
+        if not model.existFrame(frame_id, pin.FrameType.BODY):
+            raise RobotModelError(
+                f"numeric_ik: no link {frame_id!r} in model {model.name!r} (pass a frame id for other frame types)"
+            )
+        fid = model.getFrameId(frame_id, pin.FrameType.BODY)
+    else:
+        fid = int(frame_id)
+    if fid < 0 or fid >= model.nframes:
+        raise RobotModelError(f"numeric_ik: no frame {frame_id!r} in model {model.name!r}")
+    return fid
+
+
+def _random_start(model: Any, gen: np.random.Generator, lo: np.ndarray, hi: np.ndarray, clip: bool) -> np.ndarray:
+    """A random configuration within the limits ``lo``/``hi`` (rad; an unbounded joint within +-pi) to restart
+    from, or Pinocchio's for a model whose configuration is not its joint angles (``clip`` False)."""
+    if not clip:
+        return pin.randomConfiguration(model)
+    return gen.uniform(np.where(np.isfinite(lo), lo, -math.pi), np.where(np.isfinite(hi), hi, math.pi))
+
+
 def numeric_ik(
     model: Any,
     data: Any,
@@ -74,16 +97,7 @@ def numeric_ik(
     ``rng``). Returns ``(nq,)``; raises :class:`PlanningError` with the best
     residual (m, rad) if nothing converged.
     """
-    if isinstance(frame_id, str):
-        if not model.existFrame(frame_id, pin.FrameType.BODY):
-            raise RobotModelError(
-                f"numeric_ik: no link {frame_id!r} in model {model.name!r} (pass a frame id for other frame types)"
-            )
-        fid = model.getFrameId(frame_id, pin.FrameType.BODY)
-    else:
-        fid = int(frame_id)
-    if fid < 0 or fid >= model.nframes:
-        raise RobotModelError(f"numeric_ik: no frame {frame_id!r} in model {model.name!r}")
+    fid = _frame_id(model, frame_id)
     p_des, R_des = _parse_target(target)
     oMdes = pin.SE3(R_des, p_des) if R_des is not None else None
     lo = np.asarray(model.lowerPositionLimit if lower is None else lower, dtype=float)
@@ -130,14 +144,7 @@ def numeric_ik(
         q0 = np.clip(q0, lo, hi)
     best = (q0, math.inf, math.inf)
     for k in range(restarts + 1):
-        if k == 0:
-            start = q0
-        elif clip:
-            rlo = np.where(np.isfinite(lo), lo, -math.pi)
-            rhi = np.where(np.isfinite(hi), hi, math.pi)
-            start = gen.uniform(rlo, rhi)
-        else:
-            start = pin.randomConfiguration(model)
+        start = q0 if k == 0 else _random_start(model, gen, lo, hi, clip)
         q, dp, dr = attempt(start)
         if dp + dr < best[1] + best[2]:
             best = (q, dp, dr)

@@ -97,6 +97,41 @@ def link_speeds(positions: np.ndarray, time: np.ndarray) -> np.ndarray:
     return speed
 
 
+def _selected_frames(trajectory, frames) -> tuple[tuple[str, ...], np.ndarray]:
+    """The names and positions ``(T, L, 3)`` (m) of the frames ``frames`` names, or of every frame."""
+    if not frames:
+        return trajectory.frame_names, trajectory.positions  # shared with the other critics
+    sel = [trajectory.frame_index(n) for n in frames]
+    return tuple(trajectory.frame_names[i] for i in sel), trajectory.positions[:, sel]
+
+
+def _joint_speeds(q: np.ndarray, time: np.ndarray, limits: np.ndarray, tolerance: float):
+    """Joint speeds ``w (T-1, n)`` rad/s, the (interval, joint) of the highest fraction of its limit, that
+    fraction, where a joint is over its limit by more than ``tolerance`` ``(T-1, n)``, and which intervals
+    have one ``(T-1,)``."""
+    w = np.abs(np.diff(q, axis=0)) / np.diff(time)[:, None]  # (T-1, n) rad/s
+    if not w.shape[1]:
+        return w, (0, 0), 0.0, np.zeros(w.shape, dtype=bool), np.zeros(w.shape[0], dtype=bool)
+    ratio = w / limits  # (T-1, n)
+    ji, jj = divmod(int(np.argmax(ratio)), ratio.shape[1])
+    over_joint = ratio > 1.0 + tolerance  # (T-1, n)
+    return w, (ji, jj), float(ratio[ji, jj]), over_joint, row_any(over_joint)
+
+
+def _sample_values(per_interval: np.ndarray, first=0.0) -> np.ndarray:
+    """Per-sample values ``(T,)`` from per-interval ones ``(T-1,)``: interval i ends at sample i + 1; sample 0 is
+    ``first``."""
+    out = np.empty(len(per_interval) + 1, dtype=per_interval.dtype)
+    out[0] = first
+    out[1:] = per_interval
+    return out
+
+
+def _links_over(v: np.ndarray, names: tuple[str, ...], threshold: float) -> list[str]:
+    """The links whose speed ``v (T-1, L)`` passes ``threshold`` (m/s) at some sample."""
+    return [names[i] for i in np.flatnonzero((v > threshold).any(axis=0))]
+
+
 class JointSpeedCritic:
     name = "joint_speed"
     description = "Linear speed of every link (paper Algorithm 1) and angular joint speed against the robot's limits."
@@ -105,13 +140,7 @@ class JointSpeedCritic:
     def check(self, execution, params: Params) -> Verdict:
         trajectory = execution.trajectory
         T = len(trajectory)
-        names = trajectory.frame_names
-        if params.frames:
-            sel = [trajectory.frame_index(n) for n in params.frames]
-            names = tuple(names[i] for i in sel)
-            positions = trajectory.positions[:, sel]
-        else:
-            positions = trajectory.positions  # (T, L, 3) m, shared with the other critics
+        names, positions = _selected_frames(trajectory, params.frames)
         time = trajectory.time
         limits = np.asarray(trajectory.limits.velocity_rad_s, dtype=float)
         if T < 2 or positions.shape[1] == 0:
@@ -132,34 +161,16 @@ class JointSpeedCritic:
         wi = int(np.argmax(vmax))
         wl = int(np.argmax(v[wi]))
         worst_v = float(v[wi, wl])
-        w = np.abs(np.diff(trajectory.q, axis=0)) / np.diff(time)[:, None]  # (T-1, n) rad/s
-        if w.shape[1]:
-            ratio = w / limits  # (T-1, n)
-            jflat = int(np.argmax(ratio))
-            ji, jj = divmod(jflat, ratio.shape[1])
-            worst_ratio = float(ratio[ji, jj])
-            over_joint = ratio > 1.0 + params.joint_limit_tolerance  # (T-1, n)
-            over_joint_rows = row_any(over_joint)
-        else:
-            ji = jj = 0
-            worst_ratio = 0.0
-            over_joint_rows = np.zeros(T - 1, dtype=bool)
+        w, (ji, jj), worst_ratio, over_joint, over_joint_rows = _joint_speeds(
+            trajectory.q, time, limits, params.joint_limit_tolerance
+        )
 
         over_max = vmax > params.max_speed_m_s
         over_warn = vmax > params.warn_speed_m_s
         err_lin, err_joint, warn = bool(over_max.any()), bool(over_joint_rows.any()), bool(over_warn.any())
 
-        signal_values = np.empty(T)
-        signal_values[0] = 0.0
-        signal_values[1:] = vmax
-        signal = make_signal(
-            time,
-            signal_values,
-            label="fastest link speed",
-            unit="m/s",
-            warning=params.warn_speed_m_s,
-            error=params.max_speed_m_s,
-        )
+        signal = make_signal(time, _sample_values(vmax), label="fastest link speed", unit="m/s",
+                             warning=params.warn_speed_m_s, error=params.max_speed_m_s)  # fmt: skip
         details = {
             "max_link_speed_m_s": worst_v,
             "fastest_link": names[wl],
@@ -169,18 +180,9 @@ class JointSpeedCritic:
 
         verdict = partial(threshold_verdict, self.name, trajectory, unit="m/s", signal=signal, details=details)
 
-        def sample_mask(rows: np.ndarray) -> np.ndarray:
-            mask = np.zeros(T, dtype=bool)
-            mask[1:] = rows
-            return mask
-
-        def links_over(threshold: float) -> list[str]:
-            over = (v > threshold).any(axis=0)
-            return [names[i] for i in np.flatnonzero(over)]
-
         if err_lin or err_joint:
             rows = over_max | over_joint_rows
-            links = links_over(params.max_speed_m_s) if err_lin else []
+            links = _links_over(v, names, params.max_speed_m_s) if err_lin else []
             joints_over = []
             if err_joint:
                 jover = over_joint.any(axis=0)
@@ -193,10 +195,9 @@ class JointSpeedCritic:
                     f"({worst_v:.2f} m/s at the {names[wl]} at {time[wi + 1]:.2f} s)."
                 )
             if err_joint:
-                limit = limits[jj]
                 sentences.append(
                     f"The {trajectory.limits.joint_names[jj]} turns at {w[ji, jj]:.2f} rad/s, above its limit of "
-                    f"{limit:.2f} rad/s (at {time[ji + 1]:.2f} s)."
+                    f"{limits[jj]:.2f} rad/s (at {time[ji + 1]:.2f} s)."
                 )
             if err_lin:
                 value, threshold, unit = worst_v, params.max_speed_m_s, "m/s"
@@ -204,7 +205,7 @@ class JointSpeedCritic:
                 value, threshold, unit = float(w[ji, jj]), float(limits[jj]), "rad/s"
             return verdict(
                 Flag.ERROR,
-                sample_mask(rows),
+                _sample_values(rows, False),
                 worst=(wi if err_lin else ji) + 1,
                 links=links,
                 value=value,
@@ -216,9 +217,9 @@ class JointSpeedCritic:
         if warn:
             return verdict(
                 Flag.WARNING,
-                sample_mask(over_warn),
+                _sample_values(over_warn, False),
                 worst=wi + 1,
-                links=links_over(params.warn_speed_m_s),
+                links=_links_over(v, names, params.warn_speed_m_s),
                 value=worst_v,
                 threshold=params.warn_speed_m_s,
                 message=f"Joint speed is higher than the recommended value of {fmt_value(params.warn_speed_m_s)} m/s "

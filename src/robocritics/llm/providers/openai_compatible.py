@@ -729,15 +729,7 @@ class OpenAICompatible:
             events += 1
             message = _error_message(chunk)
             if message is not None and "choices" not in chunk:
-                context = _context_error(message, event)
-                if context is not None:
-                    raise ContextLengthError(
-                        f"{what} at {url}: the server stopped the stream: {self._safe_excerpt(message)}",
-                        context_tokens=context[0],
-                        requested_tokens=context[1],
-                    )
-                raise LLMError(f"{what} at {url}: the server stopped the stream with an error: "
-                               f"{self._safe_excerpt(message)}")  # fmt: skip
+                raise self._stream_error(message, event, what, url)
             if isinstance(chunk.get("model"), str):
                 model = chunk["model"]
             if isinstance(chunk.get("usage"), dict):
@@ -801,15 +793,24 @@ class OpenAICompatible:
                 f"{what} at {url}: the streamed reply ended after {tokens} tokens without a finish reason or "
                 "[DONE]: the server stopped in the middle"
             )
-        if not usage.get("completion_tokens"):
-            usage = {**usage, "completion_tokens": tokens}
         return {
             "model": model,
             "choices": [{"index": 0, "message": {"role": "assistant", "content": "".join(parts)},
                          "finish_reason": finish}],
-            "usage": usage,
+            "usage": usage if usage.get("completion_tokens") else {**usage, "completion_tokens": tokens},
             _STREAMED: True,
         }  # fmt: skip
+
+    def _stream_error(self, message: str, event: bytes, what: str, url: Any) -> LLMError:
+        """The error of a stream the server stopped with an ``error`` event saying ``message``."""
+        context = _context_error(message, event)
+        if context is not None:
+            return ContextLengthError(
+                f"{what} at {url}: the server stopped the stream: {self._safe_excerpt(message)}",
+                context_tokens=context[0],
+                requested_tokens=context[1],
+            )
+        return LLMError(f"{what} at {url}: the server stopped the stream with an error: {self._safe_excerpt(message)}")
 
     def _deadline_error(self, what: str, url: str, attempts: int, last_problem: str) -> LLMError:
         tried = f" after {attempts} attempt{'s' if attempts != 1 else ''}" if attempts else ""
