@@ -1,4 +1,4 @@
-"""CPU time of the hull (robot/hull.py): coal's Qhull path, the numpy quickhull, scipy's Qhull, on point sets the
+"""CPU time of the hull (geometry/hull.py): coal's Qhull path, the numpy quickhull, scipy's Qhull, on point sets the
 space_usage critic meets (a sphere's worth of vertices, a fan coal refuses, a simulated base sweep's exact hull).
 
 Each time is the best of ``--repeat`` runs of ``time.process_time``.

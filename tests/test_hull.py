@@ -91,7 +91,7 @@ def test_thin_sets_are_measured(thickness):
 
 
 def _normalised_reference(P):
-    """The normalisation written plainly with np.ldexp (robot/hull.py before its reductions were reordered)."""
+    """The normalisation written plainly with np.ldexp (geometry/hull.py, once robot/hull.py, before its reductions were reordered)."""
     if len(P) < 4 or not np.isfinite(P).all():
         return None
     a = int(np.frexp(np.abs(P).max())[1])
