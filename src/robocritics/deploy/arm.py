@@ -43,8 +43,9 @@ from robocritics.deploy.gate import (
     check_trajectory,
     trajectory_of,
 )
-from robocritics.deploy.rtde import RTDE_PORT, InputRecipe, RTDEClient, TextMessage
-from robocritics.deploy.stream import STATE_FIELDS, DeployResult, StreamPlan, _Run, _Stream, resample
+from robocritics._text import safe_text
+from robocritics.deploy.rtde import RTDE_PORT, InputRecipe, Recipe, RTDEClient, RTDEValueError, TextMessage
+from robocritics.deploy.stream import STATE_FIELDS, DeployResult, StreamPlan, _Run, _Stream, resample, rtde_type
 from robocritics.deploy.urscript import INPUT_FIELDS, SECONDARY_PORT, streaming_program
 from robocritics.errors import DeployError, RTDEError
 from robocritics.robot.arms import UR3E
@@ -152,8 +153,10 @@ class URArm:
         rtde.connect()
         try:
             recipe = rtde.setup_outputs(list(STATE_FIELDS), self.frequency_hz)
+            _check_types(recipe, rtde.address)
             self._out_freq = recipe.frequency_hz
             self._inputs = rtde.setup_inputs(list(INPUT_FIELDS))
+            _check_types(self._inputs, rtde.address)
             rtde.start()
             rtde.wait_next(self.timeout_s)
         except BaseException:
@@ -288,7 +291,10 @@ class URArm:
         reasons = check_report(traj, report, allow_errors=allow_errors) + check_trajectory(traj, plan)
         if reasons:
             raise DeployRefused(reasons)
-        state = rtde.wait_next(self.timeout_s)
+        try:
+            state = rtde.wait_next(self.timeout_s)
+        except RTDEValueError as exc:
+            raise DeployRefused([("non_finite", str(exc))]) from None
         with self._dash_lock:
             try:
                 remote, dashboard_error = self._healthy_dashboard().is_in_remote_control(), ""
@@ -345,6 +351,14 @@ class URArm:
                 "secondary_interface",
                 f"cannot connect to the secondary interface at {self.host}:{self.secondary_port}: {exc}",
             )]) from None
+
+
+def _check_types(recipe: Recipe, address: str) -> None:
+    """Refuse a controller that answers other types than the RTDE specification's for the fields deploy uses."""
+    wrong = [f"{n} is {safe_text(t, 20)}, not {rtde_type(n)}" for n, t in zip(recipe.names, recipe.types)
+             if t != rtde_type(n)]
+    if wrong:
+        raise RTDEError(f"RTDE controller at {address} answered unexpected field types: {'; '.join(wrong)}")
 
 
 def _dry_run_result(traj: Trajectory, plan: StreamPlan, state: dict[str, Any], trajectory_hash: str,

@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
+from robocritics._text import RepeatLimiter, safe_text
 from robocritics.errors import RTDEError
 from robocritics.robot.arms import UR3E
 
@@ -65,6 +66,9 @@ __all__ = [
     "InputRecipe",
     "TextMessage",
     "RTDEClient",
+    "RTDEValueError",
+    "RTDEFloodError",
+    "first_non_finite",
     "pack_package",
     "encode_text_message",
     "decode_text_message",
@@ -82,6 +86,66 @@ V1_FREQUENCY_HZ = 125.0
 """Output frequency of protocol version 1, which cannot choose one [Hz]."""
 
 _HEADER = struct.Struct(">HB")
+
+MAX_UNEXPECTED_PACKAGES = 1000
+"""Packages nobody asked for (unknown types, unrequested replies, data for an unknown recipe, malformed text
+messages) a connection tolerates; one more is a flood: the connection fails (:class:`RTDEFloodError`)."""
+
+MESSAGE_CHARS = 500
+"""Characters of a controller text message kept (stored and logged); the rest is cut with a note."""
+
+LOGGED_MESSAGES_PER_KIND = 20
+"""Text messages of one level and source logged per connection; the rest are counted, summarised on close."""
+
+
+class RTDEValueError(RTDEError):
+    """The controller sent a number that is not finite (NaN, +inf, -inf): nothing it says is trusted after it.
+
+    ``field`` is the output field, ``index`` the element of a vector field (None for a scalar), ``value``
+    the value, ``package`` the number of the data package (1 = the first of the connection).
+    """
+
+    def __init__(self, message: str, *, field: str, index: int | None, value: float, package: int):
+        self.field = field
+        self.index = index
+        self.value = value
+        self.package = package
+        super().__init__(message, cause="non_finite")
+
+
+class RTDEFloodError(RTDEError):
+    """The controller sent more than :data:`MAX_UNEXPECTED_PACKAGES` packages nobody asked for."""
+
+    def __init__(self, message: str):
+        super().__init__(message, cause="controller_flood")
+
+
+def first_non_finite(values: Mapping[str, Any]) -> tuple[str, int | None, float] | None:
+    """The first value of ``values`` (RTDE output fields) that is a float but not finite: ``(field, index,
+    value)`` with ``index`` the element of a vector (None for a scalar); None if every number is finite.
+
+    The one guard on numbers read from the robot: the client applies it to every data package, the gate to
+    the state it judges. Integers and booleans are always finite; anything else that is not a number (a
+    string, None) counts as not finite too, element index included.
+    """
+    for name, v in values.items():
+        if isinstance(v, (str, bytes)) or not hasattr(v, "__len__"):
+            if not _finite(v):
+                return name, None, v
+            continue
+        for i, x in enumerate(v):  # a vector field (a tuple from the wire; a list or an array from a caller)
+            if not _finite(x):
+                return name, i, x
+    return None
+
+
+def _finite(x: Any) -> bool:
+    if isinstance(x, int):  # bool is an int
+        return True
+    try:
+        return math.isfinite(x)
+    except (TypeError, ValueError):  # not a number at all
+        return False
 
 class RobotMode(IntEnum):
     """Values of the ``robot_mode`` output; the dashboard's ``robotmode`` answers with the names."""
@@ -420,6 +484,12 @@ class RTDEClient:
         self._dropped = 0
         self._last_rx = 0.0
         self._error: str | None = None
+        self._error_type: type[RTDEError] = RTDEError
+        self._data_fault: RTDEValueError | None = None
+        self._awaiting: int | None = None  # the reply type a request waits for; other packages are unexpected
+        self._unexpected = 0
+        self._log_once = RepeatLimiter(per_kind=1)
+        self._message_log = RepeatLimiter(per_kind=LOGGED_MESSAGES_PER_KIND, kinds=16)
         self._closing = False
         self._started = False
         self._activity = "idle"
@@ -469,6 +539,11 @@ class RTDEClient:
         self._sock = sock
         self._closing = False
         self._error = None
+        self._error_type = RTDEError
+        self._data_fault = None
+        self._unexpected = 0
+        self._log_once = RepeatLimiter(per_kind=1)
+        self._message_log = RepeatLimiter(per_kind=LOGGED_MESSAGES_PER_KIND, kinds=16)
         self._reader = threading.Thread(target=self._read_loop, name=f"rtde-reader-{self.address}", daemon=True)
         self._reader.start()
         try:
@@ -502,6 +577,10 @@ class RTDEClient:
         self._reader = None
         with self._cond:
             self._cond.notify_all()
+        held_back = sum(self._log_once.suppressed().values()) + sum(self._message_log.suppressed().values())
+        if held_back:
+            log.warning("RTDE %s: %d more log lines of kinds already logged were held back (%d unexpected packages)",
+                        self.address, held_back, self._unexpected)
 
     # ------------------------------------------------------------------ handshake
 
@@ -665,12 +744,14 @@ class RTDEClient:
     def latest(self, allow_stale: bool = False) -> dict[str, Any]:
         """The newest value of every output field received so far (empty before the first package).
 
-        Never blocks. Raises :class:`RTDEError` once the connection has dropped,
-        unless ``allow_stale`` (then it returns the last values received, e.g. for
+        Never blocks. Raises :class:`RTDEError` once the connection has dropped, and
+        :class:`RTDEValueError` once a data package carried a non-finite number, unless
+        ``allow_stale`` (then it returns the last values received before either, e.g. for
         a post-mortem of where the robot was).
         """
         if not allow_stale:
             self._raise_if_failed("reading the latest data")
+            self._raise_if_untrusted()
         with self._cond:
             return dict(self._latest)
 
@@ -679,10 +760,11 @@ class RTDEClient:
 
         ``timeout_s`` defaults to the client's ``timeout_s`` [s]. Raises
         :class:`RTDEError` if nothing arrives in time (silent controller) or the
-        connection drops.
+        connection drops, :class:`RTDEValueError` once a package carried a non-finite number.
         """
         timeout = self.timeout_s if timeout_s is None else float(timeout_s)
         self._raise_if_failed("waiting for data")
+        self._raise_if_untrusted()
         if not self._started:
             raise RTDEError(f"RTDE {self.address}: call start() before waiting for data")
         deadline = time.monotonic() + timeout
@@ -699,6 +781,7 @@ class RTDEClient:
                     )
                 self._cond.wait(remaining)
             if self._error is None:
+                self._raise_if_untrusted()
                 return dict(self._latest)
         self._raise_if_failed("waiting for data")
         raise AssertionError("unreachable")
@@ -722,7 +805,10 @@ class RTDEClient:
         return state
 
     def drain(self) -> list[dict[str, Any]]:
-        """Remove and return every buffered data package (oldest first), one dict per package."""
+        """Remove and return every buffered data package (oldest first), one dict per package.
+
+        Raises :class:`RTDEValueError` once a data package carried a non-finite number."""
+        self._raise_if_untrusted()
         with self._cond:
             out = list(self._buffer)
             self._buffer.clear()
@@ -763,9 +849,23 @@ class RTDEClient:
         age = self.age_s()
         return "never" if math.isinf(age) else f"{age:.3f} s ago"
 
+    @property
+    def data_fault(self) -> RTDEValueError | None:
+        """The error of the first data package with a non-finite number (None while every number was finite).
+
+        From then on :meth:`latest`, :meth:`wait_next` and :meth:`drain` raise it; :meth:`send` still works,
+        so the client can still tell the controller to stop."""
+        return self._data_fault
+
+    def _raise_if_untrusted(self) -> None:
+        fault = self._data_fault
+        if fault is not None:
+            raise RTDEValueError(str(fault), field=fault.field, index=fault.index, value=fault.value,
+                                 package=fault.package)
+
     def _raise_if_failed(self, doing: str) -> None:
         if self._error is not None:
-            raise RTDEError(self._error)
+            raise self._error_type(self._error)
         if self._sock is None:
             raise RTDEError(f"RTDE client for {self.address} is not connected (while {doing}); call connect() first")
 
@@ -794,37 +894,47 @@ class RTDEClient:
         with self._request_lock:
             with self._cond:
                 self._replies.clear()
-            previous = self._activity
-            self._activity = doing
-            self._send_raw(pack_package(command, payload), doing)
-            deadline = time.monotonic() + self.timeout_s
-            with self._cond:
-                while True:
-                    while self._replies:
-                        cmd, body = self._replies.popleft()
-                        if cmd == command:
-                            self._activity = previous
-                            return body
-                        log.warning("RTDE %s: unexpected reply %s while %s", self.address, _COMMAND_NAMES.get(cmd, cmd), doing)
-                    if self._error is not None:
-                        raise RTDEError(self._error)
-                    remaining = deadline - time.monotonic()
-                    if remaining <= 0:
-                        msg = (
-                            f"no reply to {_COMMAND_NAMES.get(command, command)} from RTDE {self.address} within "
-                            f"{self.timeout_s:g} s while {doing} (controller silent or overloaded)"
-                        )
-                        # a late reply would be taken for the answer to the next request: give up on this connection
-                        self._error = msg
-                        self._started = False
-                        self._cond.notify_all()
-                        raise RTDEError(msg)
-                    self._cond.wait(remaining)
+                self._awaiting = command
+            try:
+                return self._exchange(command, payload, doing)
+            finally:
+                with self._cond:
+                    self._awaiting = None
 
-    def _fail(self, message: str) -> None:
+    def _exchange(self, command: int, payload: bytes, doing: str) -> bytes:
+        """Send one request and wait for its reply (``_request`` holds the request lock)."""
+        previous = self._activity
+        self._activity = doing
+        self._send_raw(pack_package(command, payload), doing)
+        deadline = time.monotonic() + self.timeout_s
+        with self._cond:
+            while True:
+                while self._replies:
+                    cmd, body = self._replies.popleft()
+                    if cmd == command:
+                        self._activity = previous
+                        return body
+                    self._unexpected_package(f"unexpected reply {_COMMAND_NAMES.get(cmd, cmd)} while {doing}", cmd)
+                if self._error is not None:
+                    raise self._error_type(self._error)
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    msg = (
+                        f"no reply to {_COMMAND_NAMES.get(command, command)} from RTDE {self.address} within "
+                        f"{self.timeout_s:g} s while {doing} (controller silent or overloaded)"
+                    )
+                    # a late reply would be taken for the answer to the next request: give up on this connection
+                    self._error = msg
+                    self._started = False
+                    self._cond.notify_all()
+                    raise RTDEError(msg)
+                self._cond.wait(remaining)
+
+    def _fail(self, message: str, error_type: type[RTDEError] = RTDEError) -> None:
         with self._cond:
             if self._error is None:
                 self._error = message
+                self._error_type = error_type
             self._started = False
             self._cond.notify_all()
 
@@ -859,7 +969,7 @@ class RTDEClient:
                 if pos:
                     del buf[:pos]
         except RTDEError as exc:
-            self._fail(str(exc))
+            self._fail(str(exc), type(exc) if type(exc) is not RTDEValueError else RTDEError)
         except OSError as exc:
             if not self._closing:
                 self._fail(
@@ -871,46 +981,77 @@ class RTDEClient:
 
     def _dispatch(self, cmd: int, payload: bytes) -> None:
         if cmd == Command.DATA_PACKAGE:
-            if self.protocol_version >= 2:
-                if not payload:
-                    raise RTDEError(f"RTDE {self.address} sent an empty data package")
-                recipe = self._outputs.get(payload[0])
-                if recipe is None:
-                    log.warning("RTDE %s: data package for unknown recipe %d", self.address, payload[0])
-                    return
-                values = recipe.unpack(payload, 1)
-            else:
-                recipe = self._v1_output
-                if recipe is None:
-                    return
-                values = recipe.unpack(payload, 0)
-            now = time.monotonic()
-            with self._cond:
-                self._latest.update(values)
-                if len(self._buffer) == self._buffer.maxlen:
-                    self._dropped += 1
-                self._buffer.append(values)
-                self._count += 1
-                self._last_rx = now
-                self._cond.notify_all()
+            self._data_package(payload)
         elif cmd == Command.TEXT_MESSAGE:
             try:
                 msg = decode_text_message(payload, self.protocol_version or 2)
             except RTDEError as exc:
-                log.warning("RTDE %s: %s", self.address, exc)
+                self._unexpected_package(str(exc), "malformed text message")
                 return
-            log.log(
-                logging.ERROR if msg.level <= MessageLevel.ERROR else logging.WARNING if msg.level == 2 else logging.INFO,
-                "RTDE %s %s [%s]: %s",
-                self.address,
-                msg.level_name,
-                msg.source,
-                msg.message,
-            )
+            msg = TextMessage(safe_text(msg.message, MESSAGE_CHARS), safe_text(msg.source, 60), msg.level)
+            if self._message_log.admit((msg.level, msg.source)):
+                log.log(
+                    logging.ERROR if msg.level <= MessageLevel.ERROR else logging.WARNING if msg.level == 2 else logging.INFO,
+                    "RTDE %s %s [%s]: %s",
+                    self.address,
+                    msg.level_name,
+                    msg.source,
+                    msg.message,
+                )
             with self._cond:
                 self._messages.append(msg)
                 self._cond.notify_all()
         else:
             with self._cond:
-                self._replies.append((cmd, payload))
-                self._cond.notify_all()
+                if cmd == self._awaiting and not self._replies:
+                    self._replies.append((cmd, payload))
+                    self._cond.notify_all()
+                    return
+            self._unexpected_package(f"package of type {_COMMAND_NAMES.get(cmd, cmd)} nobody asked for "
+                                     f"({len(payload) + 3} bytes)", cmd)
+
+    def _data_package(self, payload: bytes) -> None:
+        if self.protocol_version >= 2:
+            if not payload:
+                raise RTDEError(f"RTDE {self.address} sent an empty data package")
+            recipe = self._outputs.get(payload[0])
+            if recipe is None:
+                self._unexpected_package(f"data package for unknown recipe {payload[0]}", "unknown recipe")
+                return
+            values = recipe.unpack(payload, 1)
+        else:
+            recipe = self._v1_output
+            if recipe is None:
+                return
+            values = recipe.unpack(payload, 0)
+        bad = first_non_finite(values)
+        now = time.monotonic()
+        with self._cond:
+            self._count += 1
+            self._last_rx = now
+            if bad is not None and self._data_fault is None:
+                name, index, value = bad
+                where = name if index is None else f"{name}[{index}]"
+                self._data_fault = RTDEValueError(
+                    f"RTDE {self.address} sent a non-finite number: {where} = {safe_text(value, 40)} in data package "
+                    f"{self._count} while {self._activity}; no value from this connection is trusted after it",
+                    field=name, index=index, value=value, package=self._count,
+                )
+                log.error("%s", self._data_fault)
+            if self._data_fault is None:  # after a non-finite value nothing more is kept: every reader raises
+                self._latest.update(values)
+                if len(self._buffer) == self._buffer.maxlen:
+                    self._dropped += 1
+                self._buffer.append(values)
+            self._cond.notify_all()
+
+    def _unexpected_package(self, what: str, kind: object) -> None:
+        """Count a package nobody asked for, log the first of its kind; past the bound the connection fails."""
+        self._unexpected += 1
+        if self._log_once.admit(kind):
+            log.warning("RTDE %s: %s (logged once per kind; more are counted)", self.address, what)
+        if self._unexpected > MAX_UNEXPECTED_PACKAGES:
+            raise RTDEFloodError(
+                f"RTDE {self.address} flooded the connection: {self._unexpected} packages nobody asked for "
+                f"(more than {MAX_UNEXPECTED_PACKAGES}; the last: {what}) while {self._activity}"
+            )

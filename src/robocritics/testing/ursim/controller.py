@@ -57,7 +57,9 @@ statement by statement, once per 2 ms control cycle:
 
 Fault injection: :meth:`URSim.inject_drop`, :meth:`URSim.trigger_protective_stop`,
 :meth:`URSim.set_slow`, :meth:`URSim.set_silent`, :meth:`URSim.set_remote_control`,
-the constructor's ``fieldbus_registers`` — now, or at a known point of a
+:meth:`URSim.corrupt_output` (NaN, ±inf or any value in an output field),
+:meth:`URSim.inject_packages` (raw packages: floods, unknown types, truncated
+ones), the constructor's ``fieldbus_registers`` — now, or at a known point of a
 deployment with :meth:`URSim.at_program_time`.
 
 Run it from a shell with ``python -m robocritics.testing.ursim`` (or the
@@ -72,12 +74,14 @@ import math
 import re
 import socket
 import struct
+import sys
 import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
+from robocritics._text import safe_text
 from robocritics.deploy import urscript
 from robocritics.deploy.rtde import (
     DATA_TYPES,
@@ -119,6 +123,11 @@ PROTECTIVE_STOP_DECEL = 10.0
 _JOINT_MODE = {RobotMode.POWER_OFF: 239, RobotMode.IDLE: 255, RobotMode.RUNNING: 253}
 _SAFETY_STATUS_BIT = {1: 0, 2: 1, 3: 2, 4: 3, 5: 4, 6: 5, 7: 6, 8: 8, 9: 9}
 """safety_mode → its bit in ``safety_status_bits``."""
+
+MAX_LINE_BYTES = 4096
+"""Longest dashboard command line the controller reads [bytes]; a longer one ends the connection."""
+MAX_SCRIPT_CHARS = 1_000_000
+"""Longest program text the secondary interface holds before its ``end`` [characters]."""
 
 LOCAL_CONTROL_REPLY = "Command is not allowed due to safety reasons: the robot is in local control"
 UNLOCK_TOO_EARLY_REPLY = (
@@ -711,6 +720,11 @@ class URSim:
             raise DeployError(f"URSim clock must be one of {', '.join(CLOCKS)}, got {clock!r}")
         if idle_after_s is not None and (clock != "stepped" or not idle_after_s > 0):
             raise DeployError(f"URSim idle_after_s needs clock='stepped' and a positive number of s, got {idle_after_s!r}")
+        for attr, number in (("rtde_port", rtde_port), ("dashboard_port", dashboard_port), ("secondary_port", secondary_port)):
+            if not (isinstance(number, int) and 0 <= number <= 65535):
+                raise DeployError(f"URSim {attr} must be a TCP port from 0 (any free one) to 65535, got {safe_text(number, 20)}")
+        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in initial_q):
+            raise DeployError(f"URSim initial_q must be 6 finite joint positions [rad], got {safe_text(list(initial_q), 200)}")
         for fields_ in (extra_outputs or {}, extra_inputs or {}):
             for n, t in fields_.items():
                 if t not in DATA_TYPES:
@@ -758,6 +772,7 @@ class URSim:
         self._drop_after_packages: int | None = None
         self._drop_at_tick: int | None = None
         self._packages_total = 0
+        self._corrupt: dict[str, tuple[int | None, Any]] = {}
         self._last_input_wall = time.monotonic()
         self.loop_overruns = 0
         """Control cycles that started more than 2 ms late (the host was busy; ``clock="realtime"``)."""
@@ -786,10 +801,11 @@ class URSim:
                 ls.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
                 try:
                     ls.bind((self.host, getattr(self, attr)))
-                except OSError as exc:
+                except (OSError, OverflowError, UnicodeError, TypeError, ValueError) as exc:  # a bad port, host label, NUL
                     ls.close()
                     raise DeployError(
-                        f"URSim cannot listen on {self.host}:{getattr(self, attr)} ({attr}): {exc.strerror or exc}"
+                        f"URSim cannot listen on {safe_text(self.host, 80)}:{safe_text(getattr(self, attr), 20)} "
+                        f"({attr}): {getattr(exc, 'strerror', None) or exc}"
                     ) from None
                 ls.listen(8)
                 ls.settimeout(0.1)
@@ -1032,6 +1048,42 @@ class URSim:
         self._silent_rtde = bool(rtde)
         self._silent_dashboard = bool(dashboard)
 
+    def corrupt_output(self, name: str, value: Any = math.nan, index: int | None = None) -> None:
+        """From now on send ``value`` (default NaN; ``math.inf``, ``-math.inf``, …) as output field ``name``, or
+        as its element ``index`` for a vector field, in every data package; ``value=None`` ends it. A field sent
+        as INT32/UINT32 cannot carry NaN: declare it as DOUBLE with ``extra_outputs`` to send one."""
+        if name not in self._outputs:
+            raise DeployError(f"URSim has no output field {safe_text(name, 80)!r}")
+        if value is not None and DATA_TYPES[self._outputs[name][0]][0] != "d" and not isinstance(value, int):
+            raise DeployError(f"URSim output {name!r} is {self._outputs[name][0]} on the wire: it cannot carry {value!r}")
+        with self._lock:
+            if value is None:
+                self._corrupt.pop(name, None)
+            else:
+                self._corrupt[name] = (index, value)
+
+    def inject_packages(self, command: int, payload: bytes = b"", count: int = 1, raw: bytes | None = None) -> None:
+        """Send ``count`` packages of type ``command`` with ``payload`` to every RTDE client now (a flood, an
+        unknown type, a reply nobody asked for); ``raw`` sends those bytes as they are instead (a truncated or
+        malformed package)."""
+        data = raw if raw is not None else pack_package(command, payload)
+        with self._lock:
+            conns = list(self._conns)
+        for c in conns:
+            for _ in range(int(count)):
+                self._queue(c, data)
+                if len(c.outbuf) > 1 << 20:
+                    self._flush_blocking(c)
+            self._flush_blocking(c)
+
+    def _flush_blocking(self, conn: _RTDEConn) -> None:
+        """Send everything queued for ``conn`` now, waiting for the client to read (bounded by its timeout)."""
+        deadline = time.monotonic() + self.slow_client_timeout_s
+        while conn.outbuf and not conn.closed and time.monotonic() < deadline:
+            self._flush(conn)
+            if conn.outbuf:
+                time.sleep(0.001)
+
     def set_remote_control(self, enabled: bool) -> None:
         """Switch between remote control (True) and local control (False)."""
         self.remote_control = bool(enabled)
@@ -1247,7 +1299,7 @@ class URSim:
             except Exception as exc:
                 self._send_text(conn, TextMessage(f"malformed text message: {exc}", "RTDE", MessageLevel.ERROR))
                 return
-            self._event("client_message", f"{conn.peer} [{msg.source}] {msg.level_name}: {msg.message}")
+            self._event("client_message", safe_text(f"{conn.peer} [{msg.source}] {msg.level_name}: {msg.message}", 600))
         else:
             self._send_text(conn, TextMessage(f"unknown RTDE package type {cmd}", "RTDE", MessageLevel.ERROR))
 
@@ -1347,13 +1399,29 @@ class URSim:
                 rec.acc -= 1.0
                 if rec.acc > 1.0:
                     rec.acc = 0.0
-                body = rec.recipe.pack_values([g(s) for g in rec.getters])
+                values = [g(s) for g in rec.getters]
+                if self._corrupt:
+                    values = self._corrupted(rec.recipe.names, values)
+                body = rec.recipe.pack_values(values)
                 if conn.protocol >= 2:
                     body = bytes((rid,)) + body
                 with conn.lock:
                     conn.outbuf += pack_package(Command.DATA_PACKAGE, body)
                 conn.packages_sent += 1
                 self._packages_total += 1
+
+    def _corrupted(self, names: Sequence[str], values: list[Any]) -> list[Any]:
+        out = list(values)
+        for i, name in enumerate(names):
+            if name in self._corrupt:
+                index, value = self._corrupt[name]
+                if index is None:
+                    out[i] = value
+                else:
+                    vec = list(out[i])
+                    vec[index] = value
+                    out[i] = vec
+        return out
 
     def _queue(self, conn: _RTDEConn, data: bytes) -> None:
         with conn.lock:
@@ -1416,12 +1484,18 @@ class URSim:
         with self._aux_connection(sock):
             sock.sendall(b"Connected: Universal Robots Dashboard Server\n")
             f = sock.makefile("rb")
-            for raw in f:
+            while True:
+                raw = f.readline(MAX_LINE_BYTES + 1)
+                if not raw:
+                    break
+                if len(raw) > MAX_LINE_BYTES:  # a real controller answers nothing useful to that either
+                    sock.sendall(b"could not understand: line too long\n")
+                    break
                 line = raw.decode("utf-8", "replace").strip()
                 if not line:
                     continue
                 reply, close = self._dashboard_command(line)
-                self._event("dashboard", f"{peer}: {line!r} -> {reply!r}")
+                self._event("dashboard", safe_text(f"{peer}: {line!r} -> {reply!r}", 600))
                 if self._silent_dashboard:
                     continue
                 if self._reply_delay_s:
@@ -1510,7 +1584,7 @@ class URSim:
                     s.safety_mode = SafetyMode.NORMAL
                     self._event("protective_stop_released", "protective stop released from the dashboard")
                 return "Protective stop releasing", False
-        return f"could not understand: '{line}'", False
+        return f"could not understand: '{safe_text(line, 200)}'", False
 
     # ------------------------------------------------------------------ secondary interface
 
@@ -1523,6 +1597,11 @@ class URSim:
                     break
                 text += chunk.decode("utf-8", "replace")
                 text = self._take_programs(text, peer, final=False)
+                if len(text) > MAX_SCRIPT_CHARS:
+                    msg = f"program from {peer} rejected: more than {MAX_SCRIPT_CHARS:,} characters without an end"
+                    self._event("program_rejected", msg)
+                    self._broadcast(TextMessage(msg, "Controller", MessageLevel.ERROR))
+                    return
             self._take_programs(text, peer, final=True)
 
     def _take_programs(self, text: str, peer: str, final: bool) -> str:
@@ -1554,7 +1633,7 @@ class URSim:
                 except DeployError as exc:
                     reason = f"{exc} — this loopback controller only runs robocritics streaming programs"
             if reason is not None or params is None:
-                msg = f"program from {peer} rejected: {reason}"
+                msg = f"program from {peer} rejected: {safe_text(reason, 400)}"
                 self._event("program_rejected", msg)
                 self._broadcast(TextMessage(msg, "Controller", MessageLevel.ERROR))
                 return
@@ -1594,14 +1673,41 @@ def _shutdown(sock: socket.socket) -> None:
 # ---------------------------------------------------------------------------- CLI
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """Bad options end in one line on stderr (not the usage block) and exit status 2."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {safe_text(' '.join(message.split()), 500)} (see {self.prog} --help)\n")
+
+
+def _port_arg(text: str) -> int:
+    try:
+        value = int(text) if len(text) <= 5 else None
+    except ValueError:
+        value = None
+    if value is None or not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"{safe_text(text, 40)!r} is not a TCP port (a whole number from 0 to 65535)")
+    return value
+
+
+def _finite_arg(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{safe_text(text, 40)!r} is not a finite number")
+    return value
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """``robocritics ursim``: run the loopback controller until Ctrl-C."""
-    ap = argparse.ArgumentParser(prog="robocritics ursim", description="Loopback UR3e controller (RTDE, Dashboard, secondary interface) on 127.0.0.1.")
+    """``robocritics ursim``: run the loopback controller until Ctrl-C. Bad options: one line on stderr, exit 2."""
+    ap = _OneLineParser(prog="robocritics ursim", description="Loopback UR3e controller (RTDE, Dashboard, secondary interface) on 127.0.0.1.")
     ap.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    ap.add_argument("--rtde-port", type=int, default=30004, help="RTDE port (0 = any free port; default 30004)")
-    ap.add_argument("--dashboard-port", type=int, default=29999, help="Dashboard port (default 29999)")
-    ap.add_argument("--secondary-port", type=int, default=30002, help="secondary interface port (default 30002)")
-    ap.add_argument("--initial-q", type=float, nargs=6, metavar="RAD",
+    ap.add_argument("--rtde-port", type=_port_arg, default=30004, help="RTDE port (0 = any free port; default 30004)")
+    ap.add_argument("--dashboard-port", type=_port_arg, default=29999, help="Dashboard port (default 29999)")
+    ap.add_argument("--secondary-port", type=_port_arg, default=30002, help="secondary interface port (default 30002)")
+    ap.add_argument("--initial-q", type=_finite_arg, nargs=6, metavar="RAD",
                     help="initial joint positions [rad] (default the robot model's home pose, where `simulate` starts)")
     ap.add_argument("--robot-mode", default=DEFAULT_ROBOT_MODE, choices=["POWER_OFF", "IDLE", "RUNNING"],
                     help=f"initial robot mode (default {DEFAULT_ROBOT_MODE})")
@@ -1613,22 +1719,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("-v", "--verbose", action="store_true", help="log every event")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
-    sim = URSim(
-        host=args.host,
-        rtde_port=args.rtde_port,
-        dashboard_port=args.dashboard_port,
-        secondary_port=args.secondary_port,
-        initial_q=args.initial_q,
-        robot_mode=args.robot_mode,
-        remote_control=not args.local_control,
-        fieldbus_registers=args.fieldbus,
-        protocol_versions=tuple(range(1, args.protocol + 1)),
-        model=args.model,
-    )
     try:
+        sim = URSim(
+            host=args.host,
+            rtde_port=args.rtde_port,
+            dashboard_port=args.dashboard_port,
+            secondary_port=args.secondary_port,
+            initial_q=args.initial_q,
+            robot_mode=args.robot_mode,
+            remote_control=not args.local_control,
+            fieldbus_registers=args.fieldbus,
+            protocol_versions=tuple(range(1, args.protocol + 1)),
+            model=args.model,
+        )
         sim.start()
     except DeployError as exc:
-        print(f"error: {exc}")
+        print(f"robocritics ursim: error: {safe_text(' '.join(str(exc).split()), 500)}", file=sys.stderr)
         return 2
     print(
         f"URSim on {sim.host}: RTDE {sim.rtde_port}, dashboard {sim.dashboard_port}, "
