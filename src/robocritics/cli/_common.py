@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from .._files import read_bounded_text
+from .._text import safe_text
 from ..errors import RoboCriticsError
 
 Builder = Callable[["argparse._SubParsersAction"], None]
@@ -36,9 +37,15 @@ def subcommand(name: str) -> Callable[[Builder], Builder]:
     return decorate
 
 
-def one_line(text: object) -> str:
-    """``text`` with every run of whitespace (newlines included) folded to one space."""
-    return " ".join(str(text).split())
+ONE_LINE_CHARS = 4000
+"""Longest message :func:`one_line` prints [characters]: an error quoting a 900,000-character frame name is cut."""
+
+
+def one_line(text: object, limit: int = ONE_LINE_CHARS) -> str:
+    """``text`` with every run of whitespace (newlines included) folded to one space, control characters and
+    escape sequences shown as escapes, and cut after ``limit`` characters with a note
+    (:func:`robocritics._text.safe_text`): messages quote names from files and replies."""
+    return safe_text(" ".join(str(text).split()), limit)
 
 
 MAX_INPUT_BYTES = 1_000_000
