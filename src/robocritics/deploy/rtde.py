@@ -237,6 +237,8 @@ class RTDEClient:
             return
         if self._started and self._error is None:
             try:
+                with self._cond:  # its reply is expected, not a package nobody asked for
+                    self._awaiting = Command.CONTROL_PACKAGE_PAUSE
                 self._send_raw(pack_package(Command.CONTROL_PACKAGE_PAUSE), "pausing before close")
             except RTDEError:
                 pass
@@ -501,6 +503,12 @@ class RTDEClient:
     def packages_received(self) -> int:
         """Number of data packages received since :meth:`connect`."""
         return self._count
+
+    @property
+    def packages_unexpected(self) -> int:
+        """Packages nobody asked for (counted, never queued); past :data:`MAX_UNEXPECTED_PACKAGES` the
+        connection fails with :class:`RTDEFloodError`."""
+        return self._unexpected
 
     @property
     def packages_dropped(self) -> int:
