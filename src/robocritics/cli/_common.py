@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Callable
 
 from .._files import read_bounded_text
-from .._text import safe_text
 from ..errors import RoboCriticsError
 
 Builder = Callable[["argparse._SubParsersAction"], None]
@@ -45,6 +44,8 @@ def one_line(text: object, limit: int = ONE_LINE_CHARS) -> str:
     """``text`` with every run of whitespace (newlines included) folded to one space, control characters and
     escape sequences shown as escapes, and cut after ``limit`` characters with a note
     (:func:`robocritics._text.safe_text`): messages quote names from files and replies."""
+    from .._text import safe_text  # only when there is something to say: `check` does not pay for it
+
     return safe_text(" ".join(str(text).split()), limit)
 
 
