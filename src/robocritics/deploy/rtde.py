@@ -350,7 +350,7 @@ class RTDEClient:
         if len(types) != len(names):
             raise RTDEError(
                 f"RTDE controller at {self.address} answered {len(types)} types for {len(names)} {kind} fields: "
-                f"{types} for {names}"
+                f"{safe_text(types, 300)} for {names}"
             )
         not_found = [n for n, t in zip(names, types) if t == "NOT_FOUND"]
         in_use = [n for n, t in zip(names, types) if t == "IN_USE"]
@@ -376,7 +376,7 @@ class RTDEClient:
             raise RTDEError(f"RTDE {self.address}: call setup_outputs() before start()")
         reply = self._request(Command.CONTROL_PACKAGE_START, b"", "starting synchronisation")
         if reply[:1] != b"\x01":
-            raise RTDEError(f"RTDE controller at {self.address} refused to start synchronisation (reply {reply!r})")
+            raise RTDEError(f"RTDE controller at {self.address} refused to start synchronisation (reply {reply[:40]!r})")
         self._started = True
         self._activity = "streaming (synchronisation started)"
 
@@ -384,7 +384,7 @@ class RTDEClient:
         """Pause data synchronisation; recipes stay configured, :meth:`start` resumes."""
         reply = self._request(Command.CONTROL_PACKAGE_PAUSE, b"", "pausing synchronisation")
         if reply[:1] != b"\x01":
-            raise RTDEError(f"RTDE controller at {self.address} refused to pause (reply {reply!r})")
+            raise RTDEError(f"RTDE controller at {self.address} refused to pause (reply {reply[:40]!r})")
         self._started = False
         self._activity = "connected, paused"
 
