@@ -547,6 +547,8 @@ class URSim:
             conns = list(self._conns)
         for c in conns:
             for _ in range(int(count)):
+                if c.closed:  # the client gave up on the flood
+                    break
                 self._queue(c, data)
                 if len(c.outbuf) > 1 << 20:
                     self._flush_blocking(c)
