@@ -49,7 +49,7 @@ from robocritics.deploy.stream import STATE_FIELDS, DeployResult, StreamPlan, _R
 from robocritics.deploy.urscript import INPUT_FIELDS, SECONDARY_PORT, streaming_program
 from robocritics.errors import DeployError, RTDEError
 from robocritics.robot.arms import UR3E
-from robocritics.simulate import Execution
+from robocritics.execution import Execution
 from robocritics.trajectory import Trajectory
 
 if TYPE_CHECKING:  # pragma: no cover

@@ -54,7 +54,7 @@ from robocritics.deploy.stream import StreamPlan
 from robocritics.errors import DeployError
 from robocritics.robot.arms import ARMS
 from robocritics.report import Report
-from robocritics.simulate import Execution
+from robocritics.execution import Execution
 from robocritics.trajectory import Trajectory
 
 __all__ = [
