@@ -192,6 +192,15 @@ def test_a_controller_that_sends_nan_from_the_first_package_cannot_be_connected_
         assert not sim.events("program_started")
 
 
+@pytest.mark.parametrize("field, wrong, right", [("actual_q", "VECTOR3D", "VECTOR6D"), ("timestamp", "INT32", "DOUBLE"),
+                                                ("safety_mode", "VECTOR6D", "INT32")])
+def test_a_controller_that_answers_other_field_types_is_refused_at_connect(home, field, wrong, right):
+    with controller(home, extra_outputs={field: wrong}) as sim:
+        with pytest.raises(RTDEError, match=f"{field} is {wrong}, not {right}"):
+            arm_for(sim).connect()
+        assert not sim.events("program_started")
+
+
 def test_a_controller_that_declares_a_mode_field_as_double_is_refused_at_connect(home):
     """A mode sent as DOUBLE could be NaN; URArm insists on the RTDE specification's types."""
     with controller(home, extra_outputs={"robot_mode": "DOUBLE"}) as sim:

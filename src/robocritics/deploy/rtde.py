@@ -493,7 +493,10 @@ class RTDEClient:
         return out
 
     def messages(self) -> list[TextMessage]:
-        """Remove and return the text messages the controller sent (oldest first)."""
+        """Remove and return the text messages the controller sent (oldest first; at most the newest 256).
+
+        Message and source are outside text, already made safe to print: escape sequences and control
+        characters shown as escapes, the message cut after :data:`MESSAGE_CHARS` characters with a note."""
         with self._cond:
             out = list(self._messages)
             self._messages.clear()
