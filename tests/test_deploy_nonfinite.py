@@ -297,3 +297,17 @@ def test_after_a_nan_fault_a_new_connection_with_finite_values_deploys_again(mot
             # a 0.5 s watchdog: this test is about the values, not about a loaded host stalling the client
             result = arm.deploy(again, rc.critique(again, critics=BUILTIN_CRITICS), watchdog_min_hz=2.0)
         assert math.isfinite(result.final_error_rad) and result.final_error_rad < 1e-3
+
+
+@pytest.mark.parametrize("option", ["silence_timeout_s", "start_timeout_s", "settle_tolerance_rad", "settle_timeout_s",
+                                    "stop_timeout_s", "monitor_period_s", "max_tracking_error_rad",
+                                    "min_data_rate_fraction", "spin_s"])
+@pytest.mark.parametrize("value", BAD, ids=BAD_IDS)
+def test_a_threshold_that_is_not_a_number_is_refused_before_anything_is_asked(motion, home, option, value):
+    """`age > nan` is False: a NaN silence_timeout_s would have switched the silence rule off."""
+    execution, report = motion
+    with controller(home) as sim:
+        with arm_for(sim) as arm:
+            with pytest.raises(DeployError, match=option):
+                arm.deploy(execution, report, **{option: value})
+        assert not sim.events("program_started")

@@ -282,6 +282,17 @@ class URArm:
             raise DeployError(f"start_tolerance_rad must be in (0, 0.5] rad, got {start_tolerance_rad}")
         if not max_tracking_error_rad > 0:
             raise DeployError(f"max_tracking_error_rad must be > 0 rad, got {max_tracking_error_rad}")
+        limits = {"max_tracking_error_rad": max_tracking_error_rad, "silence_timeout_s": silence_timeout_s,
+                  "start_timeout_s": start_timeout_s, "settle_tolerance_rad": settle_tolerance_rad,
+                  "settle_timeout_s": settle_timeout_s, "stop_timeout_s": stop_timeout_s,
+                  "monitor_period_s": monitor_period_s}
+        for name, value in limits.items():  # a NaN or inf threshold would switch its rule off
+            if not (isinstance(value, (int, float)) and 0 < value < math.inf):
+                raise DeployError(f"{name} must be a finite number > 0, got {safe_text(value, 40)}")
+        if not (isinstance(min_data_rate_fraction, (int, float)) and 0 < min_data_rate_fraction <= 1):
+            raise DeployError(f"min_data_rate_fraction must be in (0, 1], got {safe_text(min_data_rate_fraction, 40)}")
+        if not (isinstance(spin_s, (int, float)) and 0 <= spin_s < 0.01):
+            raise DeployError(f"spin_s must be in [0, 0.01) s, got {safe_text(spin_s, 40)}")
         traj = trajectory_of(motion)
         rtde = self.rtde
         try:
