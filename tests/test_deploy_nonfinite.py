@@ -301,7 +301,7 @@ def test_after_a_nan_fault_a_new_connection_with_finite_values_deploys_again(mot
 
 @pytest.mark.parametrize("option", ["silence_timeout_s", "start_timeout_s", "settle_tolerance_rad", "settle_timeout_s",
                                     "stop_timeout_s", "monitor_period_s", "max_tracking_error_rad",
-                                    "min_data_rate_fraction", "spin_s"])
+                                    "min_data_rate_fraction", "spin_s", "rate_hz", "start_tolerance_rad"])
 @pytest.mark.parametrize("value", BAD, ids=BAD_IDS)
 def test_a_threshold_that_is_not_a_number_is_refused_before_anything_is_asked(motion, home, option, value):
     """`age > nan` is False: a NaN silence_timeout_s would have switched the silence rule off."""

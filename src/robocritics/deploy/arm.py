@@ -275,26 +275,14 @@ class URArm:
         sent) or :class:`~robocritics.deploy.stream.DeployFault` (a fault stopped
         the arm). Returns a :class:`~robocritics.deploy.stream.DeployResult`.
         """
-        steps = CONTROL_RATE_HZ / float(rate_hz)
-        if not (rate_hz > 0 and abs(steps - round(steps)) < 1e-9 and round(steps) >= 1):
-            raise DeployError(f"rate_hz must divide {CONTROL_RATE_HZ:g} Hz (500, 250, 125, 100, …), got {rate_hz}")
-        if not (0 < start_tolerance_rad <= 0.5):
-            raise DeployError(f"start_tolerance_rad must be in (0, 0.5] rad, got {start_tolerance_rad}")
-        if not max_tracking_error_rad > 0:
-            raise DeployError(f"max_tracking_error_rad must be > 0 rad, got {max_tracking_error_rad}")
-        limits = {"max_tracking_error_rad": max_tracking_error_rad, "silence_timeout_s": silence_timeout_s,
-                  "start_timeout_s": start_timeout_s, "settle_tolerance_rad": settle_tolerance_rad,
-                  "settle_timeout_s": settle_timeout_s, "stop_timeout_s": stop_timeout_s,
-                  "monitor_period_s": monitor_period_s}
-        for name, value in limits.items():  # a NaN or inf threshold would switch its rule off
-            if not (isinstance(value, (int, float)) and 0 < value < math.inf):
-                raise DeployError(f"{name} must be a finite number > 0, got {safe_text(value, 40)}")
-        if not (isinstance(min_data_rate_fraction, (int, float)) and 0 < min_data_rate_fraction <= 1):
-            raise DeployError(f"min_data_rate_fraction must be in (0, 1], got {safe_text(min_data_rate_fraction, 40)}")
-        if not (isinstance(spin_s, (int, float)) and 0 <= spin_s < 0.01):
-            raise DeployError(f"spin_s must be in [0, 0.01) s, got {safe_text(spin_s, 40)}")
+        steps = _check_options(rate_hz=rate_hz, start_tolerance_rad=start_tolerance_rad,
+                               max_tracking_error_rad=max_tracking_error_rad, silence_timeout_s=silence_timeout_s,
+                               start_timeout_s=start_timeout_s, settle_tolerance_rad=settle_tolerance_rad,
+                               settle_timeout_s=settle_timeout_s, stop_timeout_s=stop_timeout_s,
+                               monitor_period_s=monitor_period_s, min_data_rate_fraction=min_data_rate_fraction,
+                               spin_s=spin_s)
         traj = trajectory_of(motion)
-        rtde = self.rtde
+        self.rtde  # noqa: B018  (not connected: say so before anything else)
         try:
             plan = resample(traj, rate_hz)
         except (DeployError, ValueError) as exc:
@@ -302,24 +290,7 @@ class URArm:
         reasons = check_report(traj, report, allow_errors=allow_errors) + check_trajectory(traj, plan)
         if reasons:
             raise DeployRefused(reasons)
-        try:
-            state = rtde.wait_next(self.timeout_s)
-        except RTDEValueError as exc:
-            raise DeployRefused([("non_finite", str(exc))]) from None
-        with self._dash_lock:
-            try:
-                remote, dashboard_error = self._healthy_dashboard().is_in_remote_control(), ""
-            except RTDEError as exc:
-                remote, dashboard_error = None, str(exc)
-            try:  # joint angles mean a pose only on the arm they were planned for
-                model, model_error = self._healthy_dashboard().robot_model(), ""
-            except RTDEError as exc:
-                model, model_error = None, str(exc)
-        reasons = check_robot(state, plan.q[0], remote_control=remote, start_tolerance_rad=start_tolerance_rad,
-                              dashboard_error=dashboard_error)
-        reasons += check_model(traj, model, dashboard_error=model_error)
-        if reasons:
-            raise DeployRefused(reasons)
+        state = self._check_robot(traj, plan, start_tolerance_rad)
         program = streaming_program(
             lookahead_time_s=lookahead_time_s,
             gain=gain,
@@ -353,6 +324,29 @@ class URArm:
             spin_s=spin_s,
         )
 
+    def _check_robot(self, traj: Trajectory, plan: StreamPlan, start_tolerance_rad: float) -> dict[str, Any]:
+        """The robot rules of the gate on a fresh data package and the dashboard's answers; that package."""
+        rtde = self.rtde
+        try:
+            state = rtde.wait_next(self.timeout_s)
+        except RTDEValueError as exc:
+            raise DeployRefused([("non_finite", str(exc))]) from None
+        with self._dash_lock:
+            try:
+                remote, dashboard_error = self._healthy_dashboard().is_in_remote_control(), ""
+            except RTDEError as exc:
+                remote, dashboard_error = None, str(exc)
+            try:  # joint angles mean a pose only on the arm they were planned for
+                model, model_error = self._healthy_dashboard().robot_model(), ""
+            except RTDEError as exc:
+                model, model_error = None, str(exc)
+        reasons = check_robot(state, plan.q[0], remote_control=remote, start_tolerance_rad=start_tolerance_rad,
+                              dashboard_error=dashboard_error)
+        reasons += check_model(traj, model, dashboard_error=model_error)
+        if reasons:
+            raise DeployRefused(reasons)
+        return state
+
     def _probe_secondary(self) -> None:
         try:
             with socket.create_connection((self.host, self.secondary_port), timeout=self.timeout_s):
@@ -362,6 +356,25 @@ class URArm:
                 "secondary_interface",
                 f"cannot connect to the secondary interface at {self.host}:{self.secondary_port}: {exc}",
             )]) from None
+
+
+def _check_options(*, rate_hz: float, start_tolerance_rad: float, min_data_rate_fraction: float, spin_s: float,
+                   **limits: float) -> float:
+    """Refuse deploy options out of range (a NaN or inf threshold would switch its rule off); the number of
+    control cycles per setpoint."""
+    steps = CONTROL_RATE_HZ / rate_hz if isinstance(rate_hz, (int, float)) and 0 < rate_hz < math.inf else 0.0
+    if not (abs(steps - round(steps)) < 1e-9 and round(steps) >= 1):
+        raise DeployError(f"rate_hz must divide {CONTROL_RATE_HZ:g} Hz (500, 250, 125, 100, …), got {safe_text(rate_hz, 40)}")
+    if not (isinstance(start_tolerance_rad, (int, float)) and 0 < start_tolerance_rad <= 0.5):
+        raise DeployError(f"start_tolerance_rad must be in (0, 0.5] rad, got {safe_text(start_tolerance_rad, 40)}")
+    for name, value in limits.items():  # a NaN or inf threshold would switch its rule off
+        if not (isinstance(value, (int, float)) and 0 < value < math.inf):
+            raise DeployError(f"{name} must be a finite number > 0, got {safe_text(value, 40)}")
+    if not (isinstance(min_data_rate_fraction, (int, float)) and 0 < min_data_rate_fraction <= 1):
+        raise DeployError(f"min_data_rate_fraction must be in (0, 1], got {safe_text(min_data_rate_fraction, 40)}")
+    if not (isinstance(spin_s, (int, float)) and 0 <= spin_s < 0.01):
+        raise DeployError(f"spin_s must be in [0, 0.01) s, got {safe_text(spin_s, 40)}")
+    return steps
 
 
 def _check_types(recipe: Recipe, address: str) -> None:
