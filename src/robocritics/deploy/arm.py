@@ -290,7 +290,7 @@ class URArm:
         reasons = check_report(traj, report, allow_errors=allow_errors) + check_trajectory(traj, plan)
         if reasons:
             raise DeployRefused(reasons)
-        state = self._check_robot(traj, plan, start_tolerance_rad)
+        state = self._robot_gate(traj, plan, start_tolerance_rad)
         program = streaming_program(
             lookahead_time_s=lookahead_time_s,
             gain=gain,
@@ -324,7 +324,7 @@ class URArm:
             spin_s=spin_s,
         )
 
-    def _check_robot(self, traj: Trajectory, plan: StreamPlan, start_tolerance_rad: float) -> dict[str, Any]:
+    def _robot_gate(self, traj: Trajectory, plan: StreamPlan, start_tolerance_rad: float) -> dict[str, Any]:
         """The robot rules of the gate on a fresh data package and the dashboard's answers; that package."""
         rtde = self.rtde
         try:
