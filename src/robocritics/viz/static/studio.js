@@ -186,7 +186,7 @@
       const v = r && r.verdicts.find((x) => x.critic === b.closest(".critic").dataset.critic);
       const blocked = fixBlocked(v);
       b.disabled = !!blocked;
-      if (blocked) b.title = blocked;
+      b.title = blocked || (state.chat ? "apply the critics' own repairs (no LLM is configured)" : "repairs first, then the model");
     }
     renderStatus();
   }
@@ -212,8 +212,9 @@
     $("status").title = text;
     $("status-bar").style.width = (fraction * 100).toFixed(1) + "%";
     document.body.dataset.job = j ? j.kind : "";
-    $("chat-status").textContent = state.chat ? "Chat is disabled: " + state.chat + ". Fix applies the critics' own repairs."
-      : j && j.kind !== "deploy" && j.kind !== "run" ? (j.status || "working") + "…" : "";
+    const turn = j && j.kind !== "deploy" && j.kind !== "run";
+    $("chat-status").textContent = turn ? j.kind + ": " + (j.status || "working") + "…"
+      : state.chat ? "Chat is disabled: " + state.chat + ". Fix applies the critics' own repairs." : "";
   }
 
   /* Show one revision: editor, critics, flagged lines, score, terminal, replay (cleared when it has none). */
