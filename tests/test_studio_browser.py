@@ -63,13 +63,14 @@ def history(driver) -> list[str]:
 
 def run(driver, program: str) -> int:
     """Put ``program`` in the editor, press Run, wait for its revision; return its number."""
-    set_editor(driver, program)
-    count = len(history(driver))
     wait_for(driver, "return !document.getElementById('run').disabled", what="Run enabled")
+    set_editor(driver, program)
+    driver.execute_script("delete document.body.dataset.lastRun")
     click(driver, "run")
-    wait_for(driver, f"return document.querySelectorAll('#history li').length > {count} && "
-                     "!document.body.dataset.running", what="the Run's revision")
-    return int(driver.execute_script("return document.querySelector('#history li.current').dataset.index"))
+    index = int(wait_for(driver, "return !document.body.dataset.running && document.body.dataset.lastRun",
+                         what="the Run's revision"))
+    assert driver.execute_script("return document.querySelector('#history li.current').dataset.index") == str(index)
+    return index
 
 
 def flags(driver) -> dict[str, str]:

@@ -362,6 +362,9 @@ class Studio:
         revision = self._add(attempt.kind, attempt.program, attempt.execution, attempt.report, attempt.error,
                              diff=self._title(attempt.diff)[0] if attempt.diff else "", selected=self._selected)
         self._attempt_revision[attempt.index] = revision.index
+        if attempt.source == "repair":
+            done = "; ".join(f"line {c.line}: {c.what}" for c in attempt.changes)
+            self._say("note", f"#{revision.index}: {len(attempt.changes)} critic repair(s) — {done}")
         if job is not None:
             job.events.append({"type": "revision", "revision": revision.full()})
 
@@ -437,10 +440,19 @@ class Studio:
             if action == "chat":
                 loop.request(text) if loop.task is None else loop.refine(text)
             else:
-                loop.fix(critics or self._selected or None)
+                loop.fix(self._fixable(loop, critics or self._selected))
         finally:
             if hasattr(self.model, "on_progress"):
                 self.model.on_progress = previous
+
+    @staticmethod
+    def _fixable(loop, names: list[str] | None) -> list[str] | None:
+        """``names`` that gave a verdict on the current program (a critic that did not run, e.g. task_outcome
+        without goals, has nothing to fix); None for all."""
+        report = loop.current.report if loop.current is not None else None
+        if not names or report is None:
+            return None
+        return [n for n in names if n in report.critics] or None
 
     def _repair_turn(self, job: Job, shown: Revision, automation: str) -> None:
         """Fix without a model: the critics' own repairs in the worker, approved like any revision."""
