@@ -288,6 +288,14 @@ def test_deploy_sends_the_trajectory_shown_streams_progress_to_every_page_and_st
     refused = wait_for(driver, "return document.body.dataset.refused", what="the second deploy refused")
     assert "deploy of revision" in refused and "running" in refused
     assert "deploy refused" in driver.find_element("id", "terminal").get_attribute("textContent")
+    # a Run meanwhile does not wait behind the deploy: it is off, and the server refuses it at once, saying why
+    assert driver.find_element("id", "run").get_attribute("disabled") is not None
+    assert "deploy is running" in driver.find_element("id", "run").get_attribute("title")
+    answer = driver.execute_async_script(
+        "const done = arguments[0]; fetch('/api/run', {method: 'POST', headers: {'Content-Type': 'application/json',"
+        "'X-Studio': '1'}, body: JSON.stringify({program: 'home()\\n'})}).then(r => r.json().then(j => "
+        "done([r.status, j.error])));")
+    assert answer[0] == 409 and "deploy of revision" in answer[1], answer
     # a reload of the first tab mid-deploy shows the moving arm's progress again
     driver.switch_to.window(first)
     driver.refresh()

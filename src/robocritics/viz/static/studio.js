@@ -249,6 +249,7 @@
       const r = await api("/api/run", {program: $("editor").value, critics: state.critics.filter((c) => state.enabled.has(c))});
       state.known = Math.max(state.known, r.index);
       show(r);
+      await poll();  // the history lists the new revision before the page says the Run is done
       document.body.dataset.lastRun = String(r.index);
       $("editor-status").textContent = "";
     } catch (e) {
