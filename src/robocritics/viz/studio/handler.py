@@ -16,7 +16,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Iterator
 from urllib.parse import parse_qs, urlsplit
 
-from .common import MAX_BODY_BYTES, MAX_CHAT_CHARS, MAX_PROGRAM_CHARS, StudioBusy, StudioError, is_loopback
+from .common import MAX_BODY_BYTES, MAX_CHAT_CHARS, MAX_PROGRAM_CHARS, StudioError, is_loopback
 
 __all__ = ["serve"]
 
@@ -213,10 +213,10 @@ class _Handler(BaseHTTPRequestHandler):
             self._post(path, body)
         except BadRequest as exc:
             self._refuse(400, str(exc))
-        except StudioBusy as exc:
+        except StudioError as exc:  # StudioBusy too: another job runs
             self._refuse(409, str(exc))
-        except StudioError as exc:
-            self._refuse(409, str(exc))
+        except (ConnectionError, TimeoutError):
+            return  # the page went away mid-answer (a reload during a Fix): its job goes on, /api/state shows it
         except Exception as exc:  # noqa: BLE001 - a bug: an answer, one log line, no traceback to the client
             log.error("studio: %s failed: %s: %s", path, type(exc).__name__, exc)
             self._refuse(500, f"{type(exc).__name__}: {exc}")
