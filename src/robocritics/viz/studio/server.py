@@ -86,7 +86,9 @@ class Studio:
         self._turn_job: Job | None = None
         self._attempt_revision: dict[int, int] = {}  # Loop attempt index -> revision number
         self._selected: list[str] | None = None
-        self._installed: list[str] | None = None  # the critics ticked on the page of the running turn
+        from ...plugins import get_critics
+
+        self._installed: list[str] = list(get_critics())  # the critics ticked on the page of the running turn
         self._server = None
         self._thread: threading.Thread | None = None
         self._requested_port = int(port)
@@ -175,11 +177,8 @@ class Studio:
             return self._evaluator
 
     def installed_critics(self) -> list[str]:
-        """The installed critics' names (read once: every page polls the state)."""
-        if self._installed is None:
-            from ...plugins import get_critics
-
-            self._installed = list(get_critics())
+        """The installed critics' names (read once, before serving: every page polls the state, and the plugin
+        registry is not meant to be read from many request threads at once)."""
         return list(self._installed)
 
     def state(self) -> dict[str, Any]:
