@@ -81,6 +81,8 @@ def test_fix_is_the_critics_repairs_then_the_model_with_history_numbers_in_order
 
 def test_an_identical_reply_is_said_not_a_silent_revision(driver, studio, llm):
     """#9: a reply identical to the current program makes no new revision; the chat says so."""
+    if not driver.current_url.startswith(studio):
+        open_page(driver, studio)
     current = driver.execute_script("return document.getElementById('editor').value")
     count = len(history(driver))
     turns = int(driver.execute_script("return Number(document.body.dataset.turns || 0)"))
@@ -98,6 +100,8 @@ def test_an_identical_reply_is_said_not_a_silent_revision(driver, studio, llm):
 
 def test_chat_reply_streams_in_as_it_arrives(driver, studio, llm):
     reply = "I will pick the apple first and then place it gently in the white box. " * 3
+    if not driver.current_url.startswith(studio):
+        open_page(driver, studio)
     llm.token_interval_s = 0.05
     try:
         llm.reply(reply)
@@ -107,8 +111,8 @@ def test_chat_reply_streams_in_as_it_arrives(driver, studio, llm):
             driver, "const m = document.querySelector('#chat-log .live[data-streaming=\"1\"]');"
                     "return m && m.textContent.length > 0 && m.textContent", what="a partial reply")
         assert len(partial) < len(reply.strip())
-        status = driver.find_element("id", "chat-status").text
-        assert "receiving" in status
+        wait_for(driver, "return document.getElementById('chat-status').textContent.includes('receiving')",
+                 what="'receiving' while the reply streams")
         wait_for(driver, "return [...document.querySelectorAll('#chat-log .assistant')].some(m => "
                          "m.textContent.trim() === arguments[0])", reply.strip(), what="the whole reply")
     finally:

@@ -324,6 +324,7 @@
       await stream(path, {...body, index, selected, automation: $("automation").value}, (ev) => {
         if (ev.type === "text") {
           live.textContent = ev.text;
+          if (ev.phase === "receiving") $("chat-status").textContent = "receiving the model's reply…";
           if (!live.parentNode) { $("chat-log").appendChild(live); }
           $("chat-log").scrollTop = $("chat-log").scrollHeight;
         } else if (ev.type === "revision") { state.known = Math.max(state.known, ev.revision.index); show(ev.revision); }

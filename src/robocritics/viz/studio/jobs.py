@@ -68,7 +68,8 @@ class Job:
         self.cancel = threading.Event()
         self.cancel_reason = ""
         self.done = False
-        self.events: list[dict[str, Any]] = []  # a turn's stream to the page that started it
+        self.events: list[dict[str, Any]] = []  # a turn's revisions and its end, for the page that started it
+        self.reply: tuple[str, str] | None = None  # the model's reply so far and its phase (waiting, receiving)
         self.stop_requested_at: float | None = None  # monotonic s of a Stop (a deploy reports its latency)
 
     def snapshot(self, now: float) -> dict[str, Any]:

@@ -434,7 +434,7 @@ class Studio:
             if job.cancel.is_set():
                 raise Cancelled(job.cancel_reason)
             job.status = "receiving the model's reply" if p.phase == "receiving" else "waiting for the model"
-            job.events.append({"type": "text", "text": p.text, "phase": p.phase})
+            job.reply = (p.text, p.phase)  # the latest only: a long reply streamed is not kept once per token
 
         job.status = "waiting for the model" if action == "chat" else "checking what to fix"
         if hasattr(self.model, "on_progress"):
@@ -485,10 +485,13 @@ class Studio:
 
     @staticmethod
     def _events(job: Job, thread: threading.Thread) -> Iterator[dict[str, Any]]:
-        sent = 0
+        sent, reply = 0, None
         while True:
             thread.join(0.05)
             finished = not thread.is_alive()
+            if job.reply is not reply:
+                reply = job.reply
+                yield {"type": "text", "text": reply[0], "phase": reply[1]}
             while sent < len(job.events):
                 yield job.events[sent]
                 sent += 1
