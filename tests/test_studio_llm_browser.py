@@ -61,6 +61,9 @@ def test_fix_is_the_critics_repairs_then_the_model_with_history_numbers_in_order
     wait_for(driver, "return !document.getElementById('fix-all').disabled", what="Fix all enabled")
     llm.reply(fenced(CAREFUL))
     click(driver, "fix-all")
+    wait_for(driver, "return !document.getElementById('approval').hidden", what="the repairs' approval")
+    status = driver.find_element("id", "chat-status").text
+    assert "model" not in status and "approval" in status, status  # not "waiting for the model" during repairs
     repair = approve_next(driver)
     assert repair.startswith(f"--- #{index}+++ #{index + 1} (critic repairs)")
     model = approve_next(driver, repair)
