@@ -308,3 +308,19 @@ def test_a_run_while_an_approval_waits_cancels_the_turn_and_other_jobs_are_refus
     thread.join(5)
     assert outcome == ["cancelled by a Run while it waited for your approval"]
     assert board.job is run
+
+
+def test_state_sends_the_chat_only_when_something_was_said_since(studio):
+    """Every page polls the state: the chat log (up to CHAT_LOG_ENTRIES entries) is sent only when it changed."""
+    from robocritics.viz.studio.common import CHAT_LOG_ENTRIES
+
+    state = json.loads(request(studio, "GET", "/api/state", headers=API)[1])
+    version = state["chat_version"]
+    assert state["chat_log"] is not None
+    assert json.loads(request(studio, "GET", f"/api/state?chat={version}", headers=API)[1])["chat_log"] is None
+    for n in range(CHAT_LOG_ENTRIES + 5):
+        studio._say("note", f"note {n}")
+    state = json.loads(request(studio, "GET", f"/api/state?chat={version}", headers=API)[1])
+    assert state["chat_version"] == version + CHAT_LOG_ENTRIES + 5
+    assert len(state["chat_log"]) == CHAT_LOG_ENTRIES and state["chat_log"][-1]["text"] == f"note {CHAT_LOG_ENTRIES + 4}"
+    assert json.loads(request(studio, "GET", "/api/state?chat=x" + "9" * 50, headers=API)[1])["chat_log"] is not None

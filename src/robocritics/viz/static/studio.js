@@ -19,7 +19,7 @@
     return h;
   };
   const state = {critics: [], enabled: new Set(), revision: null, replay: null, busy: false, chat: null,
-    deploy: null, server: null, known: 0, deployShown: null, chatKey: "", live: null, approvalId: null};
+    deploy: null, server: null, known: 0, deployShown: null, chatVersion: -1, live: null, approvalId: null};
 
   async function api(path, body) {
     const init = body === undefined ? {headers: headers()} : {method: "POST", headers: headers(), body: JSON.stringify(body)};
@@ -262,9 +262,7 @@
 
   // --- chat, Fix and approvals ------------------------------------------------------------------------
   function renderChat(log) {
-    const key = log.length + ":" + (log.length ? log[log.length - 1].text.length : 0);
-    if (key === state.chatKey) return;
-    state.chatKey = key;
+    if (!log) return;  // nothing said since the version this page has
     const box = $("chat-log");
     box.innerHTML = "";
     for (const m of log) {
@@ -337,7 +335,7 @@
       live.remove();
       delete live.dataset.streaming;
       state.busy = false;
-      state.chatKey = "";
+      state.chatVersion = -1;  // draw the chat again (the live reply is gone; the server's log has it)
       await poll();
       const last = [...document.querySelectorAll("#chat-log .msg")].pop();
       if (last) last.dataset.done = "1";
@@ -375,11 +373,12 @@
   // --- the shared state, polled ------------------------------------------------------------------------
   async function poll() {
     let s;
-    try { s = await api("/api/state"); } catch (e) { $("status-text").textContent = "studio unreachable: " + e.message; return; }
+    try { s = await api("/api/state?chat=" + state.chatVersion); } catch (e) { $("status-text").textContent = "studio unreachable: " + e.message; return; }
     state.server = s;
     const j = s.job;
     renderApproval(j && j.approval);
     renderChat(s.chat_log);
+    state.chatVersion = s.chat_version;
     showDeployResult(s.last_deploy);
     if (s.revisions.length > state.known && !state.busy) {
       state.known = s.revisions.length;

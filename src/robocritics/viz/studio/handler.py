@@ -173,7 +173,8 @@ class _Handler(BaseHTTPRequestHandler):
         if path == "/":
             self._page(query)
         elif path == "/api/state":
-            self._json(self.studio.state())
+            seen = (query.get("chat") or [""])[0]
+            self._json(self.studio.state(int(seen) if seen.isdigit() and len(seen) < 12 else None))
         elif path.startswith("/api/revision/"):
             name = path.rsplit("/", 1)[1]
             try:

@@ -76,6 +76,7 @@ class Studio:
         self.run_program = bool(run_program)
         self.revisions: list[Revision] = []
         self.chat_log: list[dict[str, str]] = []
+        self.chat_version = 0  # entries ever said (the log keeps the last CHAT_LOG_ENTRIES)
         self.jobs = JobBoard(approval_timeout_s)
         self.last_deploy: dict[str, Any] | None = None
         self._lock = threading.Lock()
@@ -181,10 +182,12 @@ class Studio:
         registry is not meant to be read from many request threads at once)."""
         return list(self._installed)
 
-    def state(self) -> dict[str, Any]:
+    def state(self, chat_seen: int | None = None) -> dict[str, Any]:
+        """Everything every page shows. ``chat_seen``: the ``chat_version`` the page has; its ``chat_log`` is
+        None when nothing was said since (every page polls this)."""
         with self._lock:
             revisions = [r.summary() for r in self.revisions]
-            chat_log = list(self.chat_log)
+            chat_log = None if chat_seen == self.chat_version else list(self.chat_log)
         return {
             "scene": self.scene.name,
             "program": self.program,
@@ -198,6 +201,7 @@ class Studio:
             "full_revisions": FULL_REVISIONS,
             "job": self.jobs.snapshot(),
             "chat_log": chat_log,
+            "chat_version": self.chat_version,
             "last_deploy": self.last_deploy,
         }
 
@@ -212,6 +216,7 @@ class Studio:
         text = text if len(text) <= CHAT_ENTRY_CHARS else text[:CHAT_ENTRY_CHARS] + " …(cut)"
         with self._lock:
             self.chat_log.append({"role": role, "text": text})
+            self.chat_version += 1
             del self.chat_log[:-CHAT_LOG_ENTRIES]
 
     def _add(self, kind: str, program: str, execution, full_report, error: str | None, *, diff: str = "",
