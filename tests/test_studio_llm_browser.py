@@ -102,7 +102,7 @@ def test_an_identical_reply_is_said_not_a_silent_revision(driver, studio, llm):
 
 
 def test_chat_reply_streams_in_as_it_arrives(driver, studio, llm):
-    reply = "I will pick the apple first and then place it gently in the white box. " * 3
+    reply = "I will pick the apple first and then place it gently in the white box. " * 8
     if not driver.current_url.startswith(studio):
         open_page(driver, studio)
     llm.token_interval_s = 0.05
@@ -116,6 +116,14 @@ def test_chat_reply_streams_in_as_it_arrives(driver, studio, llm):
         assert len(partial) < len(reply.strip())
         wait_for(driver, "return document.getElementById('chat-status').textContent.includes('receiving')",
                  what="'receiving' while the reply streams")
+        first = driver.current_window_handle
+        driver.switch_to.new_window("tab")  # another page sees the reply come in, from the shared state
+        open_page(driver, studio)
+        elsewhere = wait_for(driver, "const m = document.querySelector('#chat-log .remote');"
+                                     "return m && m.textContent.length > 0 && m.textContent", what="the reply in a 2nd tab")
+        assert reply.strip().startswith(elsewhere.strip()[:60])
+        driver.close()
+        driver.switch_to.window(first)
         wait_for(driver, "return [...document.querySelectorAll('#chat-log .assistant')].some(m => "
                          "m.textContent.trim() === arguments[0])", reply.strip(), what="the whole reply")
     finally:

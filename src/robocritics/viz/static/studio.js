@@ -275,6 +275,15 @@
     box.scrollTop = box.scrollHeight;
   }
 
+  /* A turn another page started (or this page before a reload): its reply so far, from the shared state. */
+  function renderRemoteReply(text) {
+    let div = $("chat-log").querySelector(".remote");
+    if (!text) { if (div) div.remove(); return; }
+    if (!div) { div = document.createElement("div"); div.className = "msg assistant live remote"; }
+    div.textContent = text;
+    if (div.parentNode !== $("chat-log") || div.nextSibling) { $("chat-log").appendChild(div); $("chat-log").scrollTop = $("chat-log").scrollHeight; }
+  }
+
   function renderDiff(diff) {
     const pre = $("approval-diff");
     pre.innerHTML = "";
@@ -379,6 +388,7 @@
     renderApproval(j && j.approval);
     renderChat(s.chat_log);
     state.chatVersion = s.chat_version;
+    renderRemoteReply(j && !state.live ? j.reply : "");
     showDeployResult(s.last_deploy);
     if (s.revisions.length > state.known && !state.busy) {
       state.known = s.revisions.length;

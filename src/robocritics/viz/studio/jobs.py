@@ -77,7 +77,9 @@ class Job:
                 "elapsed_s": round(now - self.started, 1), "progress": dict(self.progress),
                 "approval": None if self.approval is None or self.approval.answer is not None
                 else self.approval.snapshot(now),
-                "cancelling": self.cancel.is_set()}
+                "cancelling": self.cancel.is_set(),
+                # the model's reply so far, for pages that did not start the turn (its end, if long)
+                "reply": self.reply[0][-2000:] if self.reply else ""}
 
 
 class JobBoard:
