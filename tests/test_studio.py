@@ -324,3 +324,23 @@ def test_state_sends_the_chat_only_when_something_was_said_since(studio):
     assert state["chat_version"] == version + CHAT_LOG_ENTRIES + 5
     assert len(state["chat_log"]) == CHAT_LOG_ENTRIES and state["chat_log"][-1]["text"] == f"note {CHAT_LOG_ENTRIES + 4}"
     assert json.loads(request(studio, "GET", "/api/state?chat=x" + "9" * 50, headers=API)[1])["chat_log"] is not None
+
+
+def test_fix_all_of_a_program_that_does_not_run_asks_the_model_with_its_runtime_error():
+    """#5/#6 with an LLM: the runtime row is fixable; the model is told what did not run, and its revision runs."""
+    from llm_server import LLMServer
+    from robocritics.llm.client import OpenAICompatible
+
+    fixed = "move_above(green_apple)\nhome()\n"
+    with LLMServer() as llm:
+        llm.reply("Here it is.\n```python\n" + fixed + "```\n")
+        with Studio("sorting", "", model=OpenAICompatible(base_url=llm.url, model="t")) as s:
+            status, body = request(s, "POST", "/api/run", {"program": "home()\nmove_to(2.0, 0, 0.3)\n"}, API)
+            assert status == 200 and json.loads(body)["verdicts"][0]["critic"] == "runtime"
+            status, body = request(s, "POST", "/api/fix", {"automation": "auto",
+                                                           "selected": s.installed_critics()}, API)
+            events = [json.loads(line) for line in body.decode().splitlines()]
+            assert status == 200 and events[-1] == {"type": "done"}, events[-1]
+            assert "move_to(x=2" in llm.requests[-1].text and "0.601 m" in llm.requests[-1].text
+            revision = [e for e in events if e["type"] == "revision"][-1]["revision"]
+            assert revision["program"] == fixed and revision["error"] is None and revision["replay"] is not None

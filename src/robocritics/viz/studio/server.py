@@ -458,6 +458,8 @@ class Studio:
         """``names`` that gave a verdict on the current program (a critic that did not run, e.g. task_outcome
         without goals, has nothing to fix); None for all."""
         report = loop.current.report if loop.current is not None else None
+        if report is not None and report.critics == ["runtime"]:
+            return ["runtime"]  # a program that did not run: its runtime Error is what there is to fix
         if not names or report is None:
             return None
         return [n for n in names if n in report.critics] or None
