@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from browser import (SCREENSHOTS, canvas_stats, chromium, click, set_editor, severe_console_errors, studio_process,
+from browser import (canvas_stats, chromium, click, save_screenshot, set_editor, severe_console_errors, studio_process,
                      ursim_process, wait_for)
 from robocritics import Scene, critique, simulate
 
@@ -191,8 +191,7 @@ def test_reload_mid_approval_shows_it_again_and_reject_leaves_a_trace(driver, st
     assert driver.find_element("id", "approval-diff").text == asked["diff"]
     assert "counts as rejected in" in driver.find_element("id", "approval-left").text
     assert server_state(studio)["job"]["approval"]["id"] == int(asked["id"])
-    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-    driver.save_screenshot(str(SCREENSHOTS / "studio-approval.png"))
+    save_screenshot(driver, "studio-approval.png")
     click(driver, "reject")
     wait_for(driver, "return [...document.querySelectorAll('#chat-log .note')].some(n => "
                      "n.textContent.includes('rejected by you'))", what="the rejection in the chat")
@@ -305,8 +304,7 @@ def test_deploy_sends_the_trajectory_shown_streams_progress_to_every_page_and_st
     sent = [int(driver.find_element("id", "status-text").text.split(": ")[1].split(" /")[0])]
     wait_for(driver, f"return Number(document.getElementById('status-text').textContent.split(': ')[1]"
                      f".split(' /')[0]) > {sent[0]}", what="progress advancing")
-    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-    driver.save_screenshot(str(SCREENSHOTS / "studio-deploy.png"))
+    save_screenshot(driver, "studio-deploy.png")
     driver.switch_to.window(driver.window_handles[-1])
     click(driver, "stop")
     for handle in (driver.window_handles[-1], first):
@@ -361,9 +359,8 @@ def test_controls_and_history_are_reachable_from_1024x700_to_1920x1080(driver, s
         "return {history: h.top >= panel.top && h.bottom <= panel.bottom + 1 && h.height > 20 && last.bottom <= h.bottom + 1"
         " && last.top >= h.top - 1, critics: first.top >= panel.top && first.bottom <= innerHeight,"
         "numbers: [panel.top, panel.bottom, h.top, h.bottom, h.height, last.top, last.bottom, innerHeight]}")
-    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
     name = "studio.png" if (width, height) == (1920, 1080) else f"studio-{width}x{height}.png"
-    driver.save_screenshot(str(SCREENSHOTS / name))
+    save_screenshot(driver, name)
     numbers = visible.pop("numbers")
     assert visible == {"history": True, "critics": True}, numbers
     buttons = driver.execute_script(

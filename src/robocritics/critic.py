@@ -41,9 +41,10 @@ Writing a critic::
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Iterable, Mapping, Protocol, Union, runtime_checkable
+from typing import TYPE_CHECKING, Annotated, Any, Iterable, Mapping, Protocol, Union, runtime_checkable
 
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StringConstraints, ValidationError
+
 
 from ._suggest import did_you_mean
 from .errors import CriticError, RoboCriticsError
@@ -105,6 +106,10 @@ __all__ = [
     "unregister",
     "validate_critic",
     "resolve_params",
+    "ParamName",
+    "ParamNames",
+    "MAX_PARAM_NAMES",
+    "MAX_PARAM_NAME_CHARS",
     "BUILTIN_CRITICS",
     "ALL_PASSED",
     "MAX_SIGNAL_POINTS",
@@ -149,9 +154,33 @@ class Critic(Protocol):
 
 
 class CriticParams(BaseModel):
-    """Base for critics' ``Params``: frozen, and unknown fields are rejected (typos are caught)."""
+    """Base for critics' ``Params``: frozen, unknown fields are rejected (typos are caught), and a number must be
+    finite (a NaN threshold compares False with everything and would pass every check)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+
+#: Most names one list parameter holds (frames, proximity pairs): a robot has tens of frames and a scene a few hundred
+#: pairs; 10,000 frame names made a 30-s program's per-sample arrays take 5 GB.
+MAX_PARAM_NAMES = 1_000
+#: Longest name in a parameter, characters (frame and pair names are identifiers).
+MAX_PARAM_NAME_CHARS = 200
+
+
+def _distinct(names: tuple[str, ...]) -> tuple[str, ...]:
+    """``names`` if none repeats: a repeated name would be checked (and cost) once per repeat."""
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            raise ValueError(f"names {name[:60]!r} more than once")
+        seen.add(name)
+    return names
+
+
+#: A name in a critic's parameters (a frame, a proximity pair): 1 to :data:`MAX_PARAM_NAME_CHARS` characters.
+ParamName = Annotated[str, StringConstraints(min_length=1, max_length=MAX_PARAM_NAME_CHARS)]
+#: A list of distinct :data:`ParamName` values, at most :data:`MAX_PARAM_NAMES` of them.
+ParamNames = Annotated[tuple[ParamName, ...], Field(max_length=MAX_PARAM_NAMES), AfterValidator(_distinct)]
 
 
 ParamsArg = Union[Mapping[str, Any], BaseModel, None]
@@ -191,8 +220,17 @@ def resolve_params(critic: Critic, given: ParamsArg) -> BaseModel:
             msg = err["msg"]
             if msg.startswith("Value error, "):
                 msg = msg[len("Value error, ") :]
-            message = f"{field}: {msg}" + (f" (got {err['input']!r})" if "input" in err and not isinstance(err["input"], dict) else "")
+            shown = f" (got {_clipped(err['input'])})" if "input" in err and not isinstance(err["input"], dict) else ""
+            message = f"{field}: {msg}{shown}"
         raise CriticError(f"invalid params for critic {critic.name!r}: {message}") from None
+
+
+def _clipped(value: Any, max_chars: int = 80) -> str:
+    """``repr(value)`` cut to ``max_chars`` characters (an invalid value may be a list of 10,000 names)."""
+    if isinstance(value, (list, tuple)) and len(value) > 8:
+        return f"a list of {len(value):,} items"
+    text = repr(value)
+    return text if len(text) <= max_chars else f"{text[:max_chars]}... ({len(text):,} characters)"
 
 
 def _select(critics: Any, available: dict[str, Any]) -> list[Any]:
@@ -236,7 +274,7 @@ def select_critics(
     selected_names = {c.name for c in selected}
     for name in params:
         if not isinstance(name, str) or (name not in available and name not in selected_names):
-            raise CriticError(_unknown("params given for unknown critic", str(name), available))
+            raise CriticError(_unknown("params given for unknown critic", str(name)[:MAX_PARAM_NAME_CHARS], available))
     return [(critic, resolve_params(critic, params.get(critic.name))) for critic in selected]
 
 
