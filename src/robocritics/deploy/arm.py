@@ -30,7 +30,7 @@ import math
 import random
 import socket
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -45,7 +45,16 @@ from robocritics.deploy.gate import (
 )
 from robocritics._text import safe_text
 from robocritics.deploy.rtde import RTDE_PORT, InputRecipe, Recipe, RTDEClient, RTDEValueError, TextMessage
-from robocritics.deploy.stream import STATE_FIELDS, DeployResult, StreamPlan, _Run, _Stream, resample, rtde_type
+from robocritics.deploy.stream import (
+    STATE_FIELDS,
+    DeployProgress,
+    DeployResult,
+    StreamPlan,
+    _Run,
+    _Stream,
+    resample,
+    rtde_type,
+)
 from robocritics.deploy.urscript import INPUT_FIELDS, SECONDARY_PORT, streaming_program
 from robocritics.errors import DeployError, RTDEError
 from robocritics.robot.arms import UR3E
@@ -256,6 +265,8 @@ class URArm:
         stop_timeout_s: float = 2.0,
         monitor_period_s: float = 0.1,
         spin_s: float = 2e-4,
+        stop: threading.Event | None = None,
+        progress: Callable[[DeployProgress], None] | None = None,
     ) -> DeployResult:
         """Check ``motion`` against ``report`` and the arm (the gate), then stream it.
 
@@ -269,6 +280,8 @@ class URArm:
         interface accepts connections, but sends no program and no setpoint.
         ``rate_hz`` must divide the 500 Hz control rate (500, 250, 125, …): each
         setpoint advances the sequence counter by ``500 / rate_hz`` control cycles.
+        ``stop``: an Event that stops the arm when set (fault ``stop_requested``, the same stop path as any
+        fault); ``progress``: called with a :class:`~robocritics.deploy.stream.DeployProgress` while streaming.
         The other parameters are the thresholds in :mod:`robocritics.deploy.stream`.
 
         Raises :class:`~robocritics.deploy.gate.DeployRefused` (the gate; nothing
@@ -308,6 +321,8 @@ class URArm:
             step=int(round(steps)),
             max_tracking_error_rad=float(max_tracking_error_rad),
             window=max(1, int(math.ceil(window_s * rate_hz))),
+            stop=stop,
+            progress=progress,
         )
         return _Stream(self).run(
             run,

@@ -41,7 +41,11 @@ the RTDE client's guard, :func:`~robocritics.deploy.rtde.first_non_finite`, name
 the field; nothing read after it is trusted, so the stop is confirmed over the
 dashboard), ``controller_flood`` (the controller sent more packages nobody asked
 for than :data:`~robocritics.deploy.rtde.MAX_UNEXPECTED_PACKAGES`),
-``interrupted`` (KeyboardInterrupt etc.; re-raised after the stop).
+``interrupted`` (KeyboardInterrupt etc.; re-raised after the stop), ``stop_requested``
+(the caller's ``stop`` event was set, e.g. a Stop button: the same stop path as any fault).
+
+**Progress**: ``progress(DeployProgress)``, when given, is called from the streaming thread at most every
+:data:`PROGRESS_PERIOD_S` while streaming (and once at its end); it must return quickly.
 
 **Stopping**: the done command over RTDE (the program ``stopj``'s), confirmed by
 ``runtime_state``; if RTDE is gone or the program does not stop within
@@ -121,6 +125,25 @@ STREAM_RATE_WINDOW_S = 0.25
 
 MAX_SETPOINTS = 500 * 3600 * 8
 """Most setpoints one stream may have: 8 hours at 500 Hz (about 0.7 GB of setpoints)."""
+
+#: Seconds between two progress reports of a running stream.
+PROGRESS_PERIOD_S = 0.1
+
+
+@dataclass(frozen=True)
+class DeployProgress:
+    """Where a running stream is: ``phase`` (starting, streaming, settling, finishing), ``setpoints_sent`` of
+    ``setpoints_total`` (the resampled plan), ``time_s`` of ``duration_s`` along the trajectory [s], the latest
+    ``tracking_error_rad`` and the largest so far ``max_tracking_error_rad`` [rad]."""
+
+    phase: str
+    setpoints_sent: int
+    setpoints_total: int
+    time_s: float
+    duration_s: float
+    tracking_error_rad: float
+    max_tracking_error_rad: float
+
 
 RESYNC_AFTER_PERIODS = 5
 """A client this many periods late shifts its schedule instead of bursting the missed setpoints."""
@@ -396,6 +419,12 @@ class _Run:
     """perf_counter of the last check [s] (0: none yet)."""
     awake_since: float = 0.0
     """perf_counter since which this process has been checking without a stall [s]."""
+    stop: threading.Event | None = None
+    """Set by the caller to stop the arm (fault ``stop_requested``)."""
+    progress: Any = None
+    """``progress(DeployProgress)`` or None."""
+    last_err: float = 0.0
+    last_progress: float = 0.0
 
     def sample(self) -> int:
         if not self.sent_any:
@@ -405,6 +434,18 @@ class _Run:
     def time_s(self) -> float:
         return float(self.plan.time[max(self.k, 0)]) if self.sent_any else 0.0
 
+
+
+def report_progress(run: _Run) -> None:
+    """Call ``run.progress`` with where the stream is (its exceptions are the caller's bug: not a fault)."""
+    try:
+        run.progress(DeployProgress(
+            phase=run.phase, setpoints_sent=run.k + 1, setpoints_total=len(run.plan), time_s=run.time_s(),
+            duration_s=float(run.plan.time[-1]), tracking_error_rad=run.last_err,
+            max_tracking_error_rad=run.max_err,
+        ))
+    except Exception:  # noqa: BLE001 - a progress display must never stop (or fail to stop) the arm
+        pass
 
 
 # ---------------------------------------------------------------------------- the stream
@@ -441,6 +482,8 @@ class _Stream:
                min_rate: float) -> None:
         """Raise _Fault if anything is wrong; process every data package received since the last check."""
         rtde = self.arm.rtde
+        if run.stop is not None and run.stop.is_set():
+            raise _Fault("stop_requested", "stopped on request (Stop)")
         if monitor is not None and monitor.fault is not None:
             raise monitor.fault
         if not rtde.connected:
@@ -480,6 +523,7 @@ class _Stream:
                 err = float(np.min(np.max(np.abs(win - actual), axis=1)))
             if run.phase != "starting":
                 run.max_err = max(run.max_err, err)
+                run.last_err = err
             if not err <= run.max_tracking_error_rad:  # NaN fails the rule too
                 raise _Fault(
                     "tracking_error",
@@ -492,6 +536,9 @@ class _Stream:
             # controller; it gets silence_timeout_s from now
             run.awake_since = now
         run.last_check = now
+        if run.progress is not None and now - run.last_progress >= PROGRESS_PERIOD_S:
+            run.last_progress = now
+            report_progress(run)
         age = min(rtde.age_s(), now - run.awake_since)
         if age > silence_timeout_s:
             raise _Fault("controller_silent", f"no RTDE data package for {age:.3f} s (> silence_timeout_s {silence_timeout_s:g})")
@@ -656,6 +703,8 @@ class _Stream:
                 deadlines.append(deadline)
                 check(now)
             self._collect_messages(run)
+            if run.progress is not None:
+                report_progress(run)
 
             # ---- hold the final setpoint until the arm settles
             run.phase = "settling"
