@@ -61,10 +61,11 @@ import statistics
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
+from robocritics.deploy.connection import URConnection
 from robocritics.deploy.dashboard import DashboardClient
 from robocritics._text import safe_text
 from robocritics.deploy.rtde import (
@@ -81,8 +82,6 @@ from robocritics.errors import DeployError, RTDEError
 from robocritics.robot.arms import UR3E
 from robocritics.trajectory import Trajectory
 
-if TYPE_CHECKING:  # pragma: no cover
-    from robocritics.deploy.arm import URArm
 
 __all__ = ["DeployFault", "DeployResult", "StreamPlan", "resample", "STATE_FIELDS", "STILL_RAD_S"]
 
@@ -360,8 +359,8 @@ def _safety_fault(safety_mode: Any, when: str = "") -> _Fault:
 class _DashboardMonitor:
     """Polls ``is in remote control`` while a deployment runs (its own thread)."""
 
-    def __init__(self, arm: "URArm", period_s: float) -> None:
-        self.arm = arm
+    def __init__(self, conn: URConnection, period_s: float) -> None:
+        self.conn = conn
         self.period_s = period_s
         self.fault: _Fault | None = None
         self._stop = threading.Event()
@@ -374,18 +373,18 @@ class _DashboardMonitor:
         """Ask the thread to end; wait at most ``wait_s`` (default: one dashboard timeout) [s]."""
         self._stop.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout=self.arm.timeout_s + 0.5 if wait_s is None else wait_s)
+            self._thread.join(timeout=self.conn.timeout_s + 0.5 if wait_s is None else wait_s)
 
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
             try:
-                with self.arm._dash_lock:
-                    dash = self.arm._dashboard
+                with self.conn.dash_lock:
+                    dash = self.conn.dashboard_client
                     if dash is None:
                         raise RTDEError("the dashboard connection is closed")
                     remote = dash.is_in_remote_control()
             except RTDEError as exc:
-                self.arm._dashboard_broken = True
+                self.conn.dashboard_broken = True
                 self.fault = _Fault("dashboard", f"the dashboard server stopped answering, so remote control cannot be confirmed: {exc}")
                 return
             if not remote:
@@ -452,17 +451,18 @@ def report_progress(run: _Run) -> None:
 
 
 class _Stream:
-    """One streaming run on a connected :class:`~robocritics.deploy.URArm` (its connections, its sequence counter)."""
+    """One streaming run over a connected :class:`~robocritics.deploy.connection.URConnection` (a
+    :class:`~robocritics.deploy.URArm`'s channels and its sequence counter)."""
 
-    def __init__(self, arm: "URArm") -> None:
-        self.arm = arm
+    def __init__(self, conn: URConnection) -> None:
+        self.conn = conn
 
 
     def _send(self, run: _Run, q: np.ndarray, opening: float, *, done: bool = False, bump: bool = True) -> None:
         if bump:
-            self.arm._seq = ((self.arm._seq + run.step + 2**31) % 2**32) - 2**31
+            self.conn.seq = ((self.conn.seq + run.step + 2**31) % 2**32) - 2**31
         try:
-            self.arm.rtde.send(setpoint(self.arm._seq, q, opening, done=done, session=run.session), self.arm._inputs)
+            self.conn.rtde.send(setpoint(self.conn.seq, q, opening, done=done, session=run.session), self.conn.inputs)
         except RTDEError as exc:
             raise _rtde_fault(exc) from None
         run.sent_any = True
@@ -470,18 +470,18 @@ class _Stream:
         run.last_opening = opening
 
     def _collect_messages(self, run: _Run) -> None:
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         if rtde is None:
             return
         for m in rtde.messages():
-            self.arm._messages.append(m)
+            self.conn.messages.append(m)
             if m.level <= MessageLevel.WARNING and len(run.messages) < MAX_KEPT_MESSAGES:
                 run.messages.append(safe_text(f"{m.level_name} [{m.source}] {m.message}", 600))
 
     def _check(self, run: _Run, monitor: _DashboardMonitor | None, now: float, silence_timeout_s: float,
                min_rate: float) -> None:
         """Raise _Fault if anything is wrong; process every data package received since the last check."""
-        rtde = self.arm.rtde
+        rtde = self.conn.rtde
         if run.stop is not None and run.stop.is_set():
             raise _Fault("stop_requested", "stopped on request (Stop)")
         if monitor is not None and monitor.fault is not None:
@@ -546,7 +546,7 @@ class _Stream:
     def _drain(self) -> list[dict[str, Any]]:
         """The data packages received since the last call; an RTDE error (non-finite value, flood, drop) is a fault."""
         try:
-            return self.arm.rtde.drain()
+            return self.conn.rtde.drain()
         except RTDEError as exc:
             raise _rtde_fault(exc) from None
 
@@ -562,12 +562,12 @@ class _Stream:
         span = timestamp_s - run.rate_ts0
         if span < STREAM_RATE_WINDOW_S:
             return
-        expected = self.arm._out_freq * span
+        expected = self.conn.out_freq * span
         if not run.rate_n >= min_rate * expected:
             raise _Fault(
                 "controller_slow",
                 f"the controller sent {run.rate_n} data packages in {span:.3f} s of its own time "
-                f"({run.rate_n / span:.0f} Hz, expected {self.arm._out_freq:g} Hz; minimum {min_rate:.0%}): "
+                f"({run.rate_n / span:.0f} Hz, expected {self.conn.out_freq:g} Hz; minimum {min_rate:.0%}): "
                 "it drops packages or is throttled",
             )
         run.rate_ts0, run.rate_n = timestamp_s, 0
@@ -588,7 +588,7 @@ class _Stream:
         monitor_period_s: float,
         spin_s: float,
     ) -> DeployResult:
-        rtde = self.arm.rtde
+        rtde = self.conn.rtde
         plan = run.plan
         period = 1.0 / plan.rate_hz
         rate = plan.rate_hz
@@ -598,7 +598,7 @@ class _Stream:
             pass  # the first check below reports it, with the stop path
         self._collect_messages(run)
         run.messages.clear()
-        monitor = _DashboardMonitor(self.arm, monitor_period_s)
+        monitor = _DashboardMonitor(self.conn, monitor_period_s)
         monitor.start()
         sent_times: list[float] = []
         deadlines: list[float] = []
@@ -619,12 +619,12 @@ class _Stream:
             except RTDEError as exc:
                 raise _rtde_fault(exc) from None
             self._send(run, q0, g0)
-            first_hold = self.arm._seq
+            first_hold = self.conn.seq
             sender_error: list[BaseException] = []
 
             def send_it() -> None:
                 try:
-                    send_program(self.arm.host, program, self.arm.secondary_port, timeout_s=self.arm.timeout_s)
+                    send_program(self.conn.host, program, self.conn.secondary_port, timeout_s=self.conn.timeout_s)
                 except BaseException as exc:  # reported by the streaming thread
                     sender_error.append(exc)
 
@@ -642,7 +642,7 @@ class _Stream:
                 now = time.perf_counter()
                 check(now)
                 self._collect_messages(run)
-                if sender is None and _holds_ours(run.last_state.get(SEQ_ECHO_FIELD), first_hold, self.arm._seq):
+                if sender is None and _holds_ours(run.last_state.get(SEQ_ECHO_FIELD), first_hold, self.conn.seq):
                     # the controller has our first setpoint in its registers: the program will read it, not zeros
                     sender = threading.Thread(target=send_it, name="urarm-send-program", daemon=True)
                     sender.start()
@@ -677,7 +677,7 @@ class _Stream:
                         f"{st.get('runtime_state') if st else None})",
                     )
             if sender is not None:
-                sender.join(timeout=self.arm.timeout_s)
+                sender.join(timeout=self.conn.timeout_s)
 
             # ---- stream with absolute deadlines
             run.phase = "streaming"
@@ -803,7 +803,7 @@ class _Stream:
         stopped, how = self._stop_arm(run, stop_timeout_s, silence_timeout_s)
         self._collect_messages(run)
         actual = None
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         if rtde is not None:
             try:
                 latest = rtde.latest(allow_stale=True)
@@ -833,7 +833,7 @@ class _Stream:
 
     def _stop_arm(self, run: _Run, stop_timeout_s: float, silence_timeout_s: float) -> tuple[bool, str]:
         """Stop the program and the arm: the done command over RTDE, else the dashboard ``stop``. Bounded."""
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         deadline = time.monotonic() + stop_timeout_s
         steps: list[str] = []
         rtde_ok = rtde is not None and rtde.connected
@@ -876,13 +876,13 @@ class _Stream:
         return False, "; ".join(steps)
 
     def _dashboard_stop(self, timeout_s: float) -> str:
-        timeout_s = min(timeout_s, self.arm.timeout_s)
-        acquired = self.arm._dash_lock.acquire(timeout=min(0.05, timeout_s))  # busy (monitor stuck)? use a fresh connection
+        timeout_s = min(timeout_s, self.conn.timeout_s)
+        acquired = self.conn.dash_lock.acquire(timeout=min(0.05, timeout_s))  # busy (monitor stuck)? use a fresh connection
         try:
-            dash = self.arm._dashboard if acquired and not self.arm._dashboard_broken else None
+            dash = self.conn.dashboard_client if acquired and not self.conn.dashboard_broken else None
             fresh = None
             if dash is None:
-                fresh = DashboardClient(self.arm.host, self.arm.dashboard_port, timeout_s=max(0.1, timeout_s))
+                fresh = DashboardClient(self.conn.host, self.conn.dashboard_port, timeout_s=max(0.1, timeout_s))
                 try:
                     fresh.connect()
                 except RTDEError as exc:
@@ -892,19 +892,19 @@ class _Stream:
                 ran = dash.stop()
                 return "dashboard stop sent" + ("" if ran else " (no program was running)")
             except RTDEError as exc:
-                if dash is self.arm._dashboard:
-                    self.arm._dashboard_broken = True
+                if dash is self.conn.dashboard_client:
+                    self.conn.dashboard_broken = True
                 return f"dashboard stop failed ({exc})"
             finally:
                 if fresh is not None:
                     fresh.close()
         finally:
             if acquired:
-                self.arm._dash_lock.release()
+                self.conn.dash_lock.release()
 
     def _confirm_stopped(self, deadline: float, silence_timeout_s: float) -> bool | None:
         """True once runtime_state is not PLAYING (RTDE, else dashboard ``running``); None if unknown."""
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         while time.monotonic() < deadline:
             if rtde is not None and rtde.connected and rtde.data_fault is None and rtde.age_s() <= silence_timeout_s:
                 try:
@@ -917,11 +917,11 @@ class _Stream:
                 continue
             break
         # RTDE is gone or silent: ask the dashboard
-        acquired = self.arm._dash_lock.acquire(timeout=max(0.0, min(0.05, deadline - time.monotonic())))
+        acquired = self.conn.dash_lock.acquire(timeout=max(0.0, min(0.05, deadline - time.monotonic())))
         if not acquired:
             return None
         try:
-            dash = self.arm._dashboard if not self.arm._dashboard_broken else None
+            dash = self.conn.dashboard_client if not self.conn.dashboard_broken else None
             if dash is None:
                 return None
             while time.monotonic() < deadline:
@@ -929,15 +929,15 @@ class _Stream:
                     if not dash.running():
                         return True
                 except RTDEError:
-                    self.arm._dashboard_broken = True
+                    self.conn.dashboard_broken = True
                     return None
                 time.sleep(0.02)
             return False
         finally:
-            self.arm._dash_lock.release()
+            self.conn.dash_lock.release()
 
     def _wait_still(self, deadline: float) -> bool:
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         if rtde is None or not rtde.connected:
             return False
         while time.monotonic() < deadline:
