@@ -149,19 +149,11 @@ def test_import_graph_sees_lazy_and_relative_imports():
     assert set(BUILTIN) == {m for m in modules if not m.startswith("_")}
 
 
-#: Known breaches in deploy/, left for the deploy stream's rewrite as phases (issue 23, step 4: the stream's run
-#: loop and the URScript program are one function each). Nothing may be added here; an entry goes when its code
-#: is fixed.
-PENDING_CYCLES: list[list[str]] = []
-PENDING_LONG_MODULES: set[str] = set()
-PENDING_LONG_FUNCTIONS = {
-    "robocritics/deploy/stream.py:_Stream.run",
-    "robocritics/deploy/urscript.py:streaming_program",
-}
+
 
 
 def test_no_import_cycles_in_src():
-    found = [c for c in cycles(import_graph()) if c not in PENDING_CYCLES]
+    found = cycles(import_graph())
     assert found == [], "import cycles (TYPE_CHECKING imports included):\n" + "\n".join(" -> ".join(c) for c in found)
 
 
@@ -177,7 +169,7 @@ MAX_FUNCTION_LINES = 100
 
 def test_no_module_is_over_1000_lines():
     long = {str(p.relative_to(SRC)): n for p in PACKAGE.rglob("*.py") if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES}
-    assert {m: n for m, n in long.items() if m not in PENDING_LONG_MODULES} == {}
+    assert long == {}
 
 
 def long_functions(path: Path) -> dict[str, int]:
@@ -213,7 +205,7 @@ def test_the_function_length_finder_counts_a_long_function():
 
 def test_no_function_is_over_100_lines():
     found = {f"{p.relative_to(SRC)}:{name}": n for p in sorted(PACKAGE.rglob("*.py")) for name, n in long_functions(p).items()}
-    assert {f: n for f, n in found.items() if f not in PENDING_LONG_FUNCTIONS} == {}
+    assert found == {}
 
 
 def package_of(module: str, path: Path) -> str:

@@ -18,6 +18,7 @@ this package never imports it.
 """
 
 from robocritics.deploy.arm import URArm, approach_trajectory
+from robocritics.deploy.backend import Backend
 from robocritics.deploy.dashboard import DASHBOARD_PORT, DashboardClient
 from robocritics.deploy.gate import DeployRefused
 from robocritics.deploy.rtde import (
@@ -47,6 +48,7 @@ from robocritics.deploy.urscript import (
 )
 
 __all__ = [
+    "Backend",
     "RTDE_PORT",
     "DASHBOARD_PORT",
     "SECONDARY_PORT",
