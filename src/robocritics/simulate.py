@@ -50,7 +50,7 @@ class Execution:
     """
 
     trajectory: Trajectory
-    plan: Plan
+    plan: Plan | None  # None for motion imported from another tool (URScript, a recording)
     events: list[Event]
     final_scene: Scene
     scene: Scene
@@ -58,6 +58,8 @@ class Execution:
     resting_on: dict[str, str] = field(default_factory=dict)
     #: Per-sample pose ``(T, 4, 4)`` (m, base frame) of every object the program moved; the others stay put.
     object_poses: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    #: Where the motion came from, for the report (e.g. "URScript pick.script"); None for a simulated program.
+    source: str | None = None
 
     @property
     def duration_s(self) -> float:
