@@ -259,6 +259,7 @@ def critique(
     from .trajectory import Trajectory
 
     outcomes: list = []
+    source = getattr(trajectory, "source", None)
     if isinstance(trajectory, Execution):
         from .goals import check_outcomes
 
@@ -298,6 +299,7 @@ def critique(
         samples=len(trajectory),
         duration_s=trajectory.duration_s,
         params=used,
+        source=source,
     )
 
 

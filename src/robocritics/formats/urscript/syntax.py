@@ -43,6 +43,10 @@ MAX_LITERAL_ITEMS = 10_000
 class URScriptError(ProgramError):
     """A URScript file that cannot be read or run: syntax, a bad value, a limit hit. ``line`` is 1-based."""
 
+    def __init__(self, message: str, line: int = 0):
+        super().__init__(message, line=line)
+        Exception.__init__(self, f"line {line}: {message}" if line else message)  # URScript has no columns to name
+
 
 class UnsupportedURScript(URScriptError):
     """A construct outside the subset robocritics interprets; ``construct`` names it, ``line`` says where."""
