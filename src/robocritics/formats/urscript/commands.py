@@ -32,7 +32,7 @@ CONTROL_PERIOD_S = 0.002  # the e-series controller's cycle (robot/arms.py: UR3E
 #: Full stroke of a Robotiq 2F-85 at its default speed, s (the planner's gripper time).
 GRIPPER_STROKE_S = 0.5
 #: servoj keeps pulling towards its last target after the stream ends until within this (rad), at most 2 s.
-SERVO_SETTLED_RAD = 1e-5
+SERVO_SETTLED_RAD = 1e-4
 
 _GRIPPER_CALLS = {
     "rq_open": 0.0, "rq_open_and_wait": 0.0, "rq_close": 255.0, "rq_close_and_wait": 255.0,
@@ -73,6 +73,7 @@ class Arm:
         self.steps: list[Step] = []
         self._step_index: dict[tuple[str, int], int] = {}
         self.servo: list[tuple[np.ndarray, float, float, int]] = []  # (target, t, tau, step) of a running stream
+        self.servo_side: list[tuple[int, Segment]] = []  # (cycle, segment) started beside the stream
         self.line = 0
         self._handlers: dict[str, Callable[..., Any]] = {
             "movej": self.movej, "movel": self.movel, "movep": self.movep, "servoj": self.servoj,
@@ -110,7 +111,7 @@ class Arm:
 
     @property
     def opening(self) -> float:
-        return float(self.timeline.end[-1])
+        return float(self.timeline.end[-1]) + sum(float(seg.values[-1, -1] - seg.values[0, -1]) for _, seg in self.servo_side)
 
     def step(self, skill: str) -> int:
         key = (skill, self.line)
@@ -121,11 +122,18 @@ class Arm:
             self.steps.append(Step(skill=skill, line=self.line, args=text))
         return index
 
-    def add(self, times: np.ndarray, q: np.ndarray, opening: np.ndarray, skill: str, blend_m: float = 0.0, moves: bool = True) -> None:
-        self.flush_servo()
+    def add(
+        self, times: np.ndarray, q: np.ndarray, opening: np.ndarray, skill: str, blend_m: float = 0.0,
+        moves: bool = True, parallel: bool = False,
+    ) -> None:  # fmt: skip
         values = np.column_stack([q, opening])
         steps = np.full(len(times), self.step(skill), dtype=np.int64)
-        self.timeline.add(Segment(times, values, steps, blend_m, moves), self.line)
+        segment = Segment(times, values, steps, blend_m, moves, parallel=parallel)
+        if parallel and self.servo:  # beside a servo stream: starts where the stream has got to
+            self.servo_side.append((sum(max(1, int(round(t / CONTROL_PERIOD_S))) for _, t, _, _ in self.servo), segment))
+            return
+        self.flush_servo()
+        self.timeline.add(segment, self.line)
 
     def local_times(self, duration: float) -> np.ndarray:
         n = max(1, int(math.ceil(duration * self.options.rate_hz - 1e-9)))
@@ -241,8 +249,12 @@ class Arm:
             out_step.append(step)
         out_q[-1] = target.copy()  # within SERVO_SETTLED_RAD of it: the arm is there
         times = np.arange(len(out_q)) * CONTROL_PERIOD_S
-        values = np.column_stack([np.array(out_q), np.full(len(out_q), self.opening)])
+        values = np.column_stack([np.array(out_q), np.zeros(len(out_q))])
+        side, self.servo_side = self.servo_side, []
+        start = self.timeline.end_time
         self.timeline.add(Segment(times, values, np.array(out_step, dtype=np.int64)), self.line)
+        for cycle, segment in side:
+            self.timeline.add(segment, self.line, delay_s=start + cycle * CONTROL_PERIOD_S - self.timeline.end_time)
 
     def stop(self, a: float = 1.0, *_: Any) -> None:
         self.flush_servo()  # every other move here ends at rest, so there is nothing to decelerate
@@ -261,6 +273,9 @@ class Arm:
 
     # ------------------------------------------------------------------ gripper
     def grip(self, opening: float, skill: str) -> None:
+        """The fingers to ``opening`` (m) at the gripper's speed; the program waits for a ``*_and_wait`` call,
+        for ``rq_open``/``rq_close`` (PolyScope's gripper node waits) and for a digital output, and runs on
+        beside a plain ``rq_move``/``rq_move_mm`` (which return at once)."""
         opening = min(max(opening, 0.0), self.max_opening)
         change = abs(opening - self.opening)
         if change < 1e-9:
@@ -268,7 +283,8 @@ class Arm:
         duration = max(CONTROL_PERIOD_S, GRIPPER_STROKE_S * change / self.max_opening)
         times = self.local_times(duration)
         q = np.repeat(self.q[None, :], len(times), axis=0)
-        self.add(times, q, self.opening + (opening - self.opening) * times / duration, skill, moves=False)
+        waits = not skill.startswith(("rq_move", "rq_move_mm")) or "wait" in skill
+        self.add(times, q, self.opening + (opening - self.opening) * times / duration, skill, moves=False, parallel=not waits)
 
     def _gripper_call(self, name: str, position: float) -> Callable[..., None]:
         return lambda *_, **__: self.grip(self.max_opening * (1.0 - position / 255.0), name)

@@ -35,6 +35,8 @@ class Segment:
     steps: np.ndarray
     blend_m: float = 0.0
     moves: bool = True
+    #: Runs beside what follows instead of before it (a gripper command that does not wait); names no samples.
+    parallel: bool = False
     tcp: np.ndarray | None = field(default=None, repr=False)  # (m, 3) TCP positions, for blends
 
     @property
@@ -47,25 +49,32 @@ class Timeline:
 
     def __init__(self, start: np.ndarray, tcp_position):
         self.start = np.asarray(start, dtype=float)
+        self.state = self.start.copy()  # where every segment so far leaves the arm and gripper
         self.segments: list[Segment] = []
         self.starts: list[float] = []
         self.end_time = 0.0
+        self.last_end = 0.0  # the latest end of any segment, parallel ones included
         self.tcp_position = tcp_position  # q (m, n) -> (m, 3) m
 
     @property
     def end(self) -> np.ndarray:
-        return self.segments[-1].values[-1] if self.segments else self.start
+        return self.state
 
-    def add(self, segment: Segment, line: int) -> None:
+    def add(self, segment: Segment, line: int, delay_s: float = 0.0) -> None:
+        """Append ``segment`` (a ``parallel`` one starting ``delay_s`` after the end of the others)."""
         if len(self.segments) >= MAX_SEGMENTS:
             raise URScriptError(f"the script commands more than {MAX_SEGMENTS:,} motions", line=line)
-        start = self.end_time
-        if self.segments and segment.moves and self.segments[-1].moves and self.segments[-1].blend_m > 0:
-            start -= self._overlap(self.segments[-1], segment)
+        start = self.end_time + (delay_s if segment.parallel else 0.0)
+        previous = next((s for s in reversed(self.segments) if not s.parallel), None)
+        if previous is not None and segment.moves and previous.moves and previous.blend_m > 0 and not segment.parallel:
+            start -= self._overlap(previous, segment)
         self.segments.append(segment)
         self.starts.append(start)
-        self.end_time = start + segment.duration
-        if self.end_time > MAX_MOTION_S:
+        self.state = self.state + (segment.values[-1] - segment.values[0])
+        if not segment.parallel:
+            self.end_time = start + segment.duration
+        self.last_end = max(self.last_end, start + segment.duration)
+        if self.last_end > MAX_MOTION_S:
             raise URScriptError(
                 f"the motion lasts more than {MAX_MOTION_S:.0f} s (the limit for one check); "
                 "shorten it or judge fewer passes (--passes)",
@@ -90,7 +99,7 @@ class Timeline:
 
     def samples(self, rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(time (T,) s, values (T, n + 1), step (T,))``: a uniform grid at ``rate_hz`` plus every segment's end."""
-        total = self.end_time
+        total = self.last_end
         uniform = np.arange(int(math.floor(total * rate_hz + 1e-9)) + 1) / rate_hz
         ends = np.array([s + seg.duration for s, seg in zip(self.starts, self.segments)] + [total])
         keep = np.min(np.abs(uniform[:, None] - ends[None, :]), axis=1) > 0.25 / rate_hz if len(ends) else True
@@ -98,7 +107,10 @@ class Timeline:
         values = np.repeat(self.start[None, :], len(grid), axis=0)
         steps = np.zeros(len(grid), dtype=np.int64)
         increments = np.zeros_like(values)
-        los = [int(np.searchsorted(grid, start - 1e-12, side="left")) for start in self.starts] + [len(grid)]
+        los = [int(np.searchsorted(grid, start - 1e-12, side="left")) for start in self.starts]
+        # the samples a segment names run to where the next segment that names samples starts
+        claims = [k for k, seg in enumerate(self.segments) if not seg.parallel]
+        until = dict(zip(claims, [los[k] for k in claims[1:]] + [len(grid)]))
         for k, (start, seg) in enumerate(zip(self.starts, self.segments)):
             lo = los[k]
             hi = int(np.searchsorted(grid, start + seg.duration + 1e-12, side="right"))
@@ -108,8 +120,10 @@ class Timeline:
                 values[lo:hi, j] += np.interp(local, seg.times, seg.values[:, j]) - base[j]
             if hi < len(grid):
                 increments[hi] += seg.values[-1] - base
+            if seg.parallel:
+                continue
             # a sample belongs to the latest segment started by its time
-            mine = grid[lo : max(lo, los[k + 1])] - start
+            mine = grid[lo : max(lo, until[k])] - start
             idx = np.clip(np.searchsorted(seg.times, mine, side="right") - 1, 0, len(seg.steps) - 1)
             steps[lo : lo + len(mine)] = seg.steps[idx]
         values += np.cumsum(increments, axis=0)
