@@ -146,6 +146,10 @@ PURE: dict[str, Callable[..., Any]] = {
     "integer_to_binary_list": lambda x: [bool(int(_num(x)) >> i & 1) for i in range(32)],
     "is_nan": lambda x: isinstance(x, float) and math.isnan(x),
     "random": lambda: _random.Random(0).random(),  # deterministic: a check must not depend on chance
+    # what the socket reads return when nothing answers: no values, an empty string
+    "socket_read_ascii_float": lambda *a, **k: [0], "socket_read_binary_integer": lambda *a, **k: [0],
+    "socket_read_byte_list": lambda *a, **k: [0], "socket_read_string": lambda *a, **k: "",
+    "socket_read_line": lambda *a, **k: "",
     "is_within_safety_limits": lambda *a: True, "is_steady": lambda: True, "get_steptime": lambda: 0.002,
 }  # fmt: skip
 
@@ -187,7 +191,6 @@ REFUSED = {
     "speedj": "velocity control",
     "speedl": "velocity control",
     "servoc": "circular servoing",
-    "movec": "circular moves are not modelled yet",
     "track_conveyor_linear": "conveyor tracking",
     "track_conveyor_circular": "conveyor tracking",
     "position_deviation_warning": "",

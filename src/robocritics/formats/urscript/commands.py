@@ -76,7 +76,7 @@ class Arm:
         self.servo_side: list[tuple[int, Segment]] = []  # (cycle, segment) started beside the stream
         self.line = 0
         self._handlers: dict[str, Callable[..., Any]] = {
-            "movej": self.movej, "movel": self.movel, "movep": self.movep, "servoj": self.servoj,
+            "movej": self.movej, "movel": self.movel, "movep": self.movep, "movec": self.movec, "servoj": self.servoj,
             "stopj": self.stop, "stopl": self.stop, "sleep": self.sleep, "sync": self.sync,
             "set_tcp": self.set_tcp, "set_payload": self.set_payload,
             "get_actual_joint_positions": self.joints, "get_target_joint_positions": self.joints,
@@ -184,13 +184,39 @@ class Arm:
         self.add(times, start + s[:, None] * delta, np.full(len(times), self.opening), "movej", r)
 
     def movel(self, pose, a: float = 1.2, v: float = 0.25, t: float = 0.0, r: float = 0.0, _skill: str = "movel") -> None:
-        from ...robot.ik import ur_ik_line
-
         a, v, t, r = _positive(a, "a"), _positive(v, "v"), _non_negative(t, "t"), _non_negative(r, "r")
         self.flush_servo()
-        seed = self.q.copy()
-        start, goal = self.pose_of(seed), self.pose_target(pose, f"{_skill}'s pose")
+        start, goal = self.pose_of(self.q), self.pose_target(pose, f"{_skill}'s pose")
         length = float(np.linalg.norm(goal[:3, 3] - start[:3, 3]))
+        self.tool_path(start, goal, length, lambda s: start[:3, 3] + s[:, None] * (goal[:3, 3] - start[:3, 3]), a, v, t, r, _skill)
+
+    def movec(self, pose_via, pose_to, a: float = 1.2, v: float = 0.25, r: float = 0.0, mode: int = 0) -> None:
+        """The arc from here through ``pose_via`` to ``pose_to``, trapezoidal along the arc; the orientation is
+        interpolated from start to end (mode 0, the default; the other modes are timed the same)."""
+        a, v, r = _positive(a, "a"), _positive(v, "v"), _non_negative(r, "r")
+        self.flush_servo()
+        start = self.pose_of(self.q)
+        via, goal = self.pose_target(pose_via, "movec's pose_via"), self.pose_target(pose_to, "movec's pose_to")
+        p1, p2, p3 = start[:3, 3], via[:3, 3], goal[:3, 3]
+        normal = np.cross(p2 - p1, p3 - p1)
+        if np.linalg.norm(normal) < 1e-9:
+            raise BuiltinError("movec: the start, via and end points lie on one line, so they define no circle")
+        system = np.array([2 * (p2 - p1), 2 * (p3 - p1), normal])
+        centre = np.linalg.solve(system, [p2 @ p2 - p1 @ p1, p3 @ p3 - p1 @ p1, normal @ p1])
+        radius = float(np.linalg.norm(p1 - centre))
+        u = (p1 - centre) / radius
+        w = np.cross(normal / np.linalg.norm(normal), u)
+        end = (p3 - centre) / radius
+        sweep = float(np.arctan2(end @ w, end @ u)) % (2 * math.pi) or 2 * math.pi
+        arc = lambda s: centre + radius * (np.cos(s * sweep)[:, None] * u + np.sin(s * sweep)[:, None] * w)  # noqa: E731
+        self.tool_path(start, goal, radius * sweep, arc, a, v, 0.0, r, "movec")
+
+    def tool_path(self, start, goal, length: float, position, a: float, v: float, t: float, r: float, skill: str) -> None:
+        """The tool from ``start`` to ``goal`` (4x4) along ``position(s)`` (s in [0, 1] -> m), trapezoidal in
+        ``length`` (m) or in the turn (rad, same numbers) when that takes longer; orientation slerped; IK per sample."""
+        from ...robot.ik import ur_ik_line
+
+        seed = self.q.copy()
         angle = float(np.linalg.norm(P.matrix_to_rotvec(start[:3, :3].T @ goal[:3, :3])))
         lead = max((length, angle), key=lambda d: profile_for(d, v, a, t)[0])
         T, peak, acc = profile_for(lead, v, a, t)
@@ -199,13 +225,13 @@ class Arm:
         path = np.empty((len(s), 4, 4))
         path[:] = np.eye(4)
         path[:, :3, :3] = P.slerp_rotations(start[:3, :3], goal[:3, :3], s)
-        path[:, :3, 3] = start[:3, 3] + s[:, None] * (goal[:3, 3] - start[:3, 3])
+        path[:, :3, 3] = position(s)
         flanges = path[1:] @ np.linalg.inv(self.tcp)
         q, error = ur_ik_line(self.robot.dh, flanges, seed, self.robot.lower, self.robot.upper)
         if error is not None:
             where = float(times[1 + len(q)])
-            raise PlanningError(f"{_skill}: the straight tool path leaves the arm's reach {where:.2f} s into the move: {error.reason}", line=self.line)
-        self.add(times, np.vstack([seed[None, :], q]), np.full(len(times), self.opening), _skill, r)
+            raise PlanningError(f"{skill}: the tool path leaves the arm's reach {where:.2f} s into the move: {error.reason}", line=self.line)
+        self.add(times, np.vstack([seed[None, :], q]), np.full(len(times), self.opening), skill, r)
 
     def movep(self, pose, a: float = 1.2, v: float = 0.25, r: float = 0.0) -> None:
         self.movel(pose, a, v, 0.0, r, _skill="movep")

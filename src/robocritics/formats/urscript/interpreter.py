@@ -369,11 +369,12 @@ class Interpreter:
             if fn.thread:
                 raise URScriptError(f"{name} is a thread: start it with run {name}()", line=node.line)
             return self.call_user(fn, args, kwargs, node.line)
+        if name in INPUT_READS:
+            self.input_reads += 1  # a loop waiting on this waits for the outside world
         if name in PURE:
             return self.with_line(PURE[name], args, kwargs, node)
         if name in NO_OPS or name.startswith("rq_"):
             if name in INPUT_READS:
-                self.input_reads += 1
                 return 0 if "integer" in name or "float" in name or "analog" in name else False
             return None  # messages, outputs, sockets, installation settings, Robotiq driver internals
         if name in REFUSED:
