@@ -247,7 +247,8 @@ class Arm:
     def flush_servo(self) -> None:
         """The running servoj stream as one segment: the loopback controller's tracking model, cycle by cycle.
 
-        Per 2 ms cycle: joint velocity = the stream's speed (target change / t) + (target − q) / τ with
+        Per 2 ms cycle: joint velocity = the stream's speed (target change / t) + (setpoint − q) / τ, the
+        setpoint moving linearly from the previous target to this one over ``t``, with
         τ = lookahead_time × 300 / gain, clipped to the joint speed limits; after the last target the arm keeps
         pulling towards it until within :data:`SERVO_SETTLED_RAD`.
         """
@@ -261,8 +262,9 @@ class Arm:
         for target, t, tau, step in stream:
             cycles = max(1, int(round(t / CONTROL_PERIOD_S)))
             ff = (target - previous) / (cycles * CONTROL_PERIOD_S)
-            for _ in range(cycles):
-                q = q + np.clip(ff + (target - q) / tau, -limit, limit) * CONTROL_PERIOD_S
+            for c in range(cycles):
+                setpoint = previous + (target - previous) * (c / cycles)  # the controller interpolates over t
+                q = q + np.clip(ff + (setpoint - q) / tau, -limit, limit) * CONTROL_PERIOD_S
                 out_q.append(q)
                 out_step.append(step)
             previous = target
