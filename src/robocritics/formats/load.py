@@ -128,9 +128,27 @@ def _hermite(t: np.ndarray, times: np.ndarray, q: np.ndarray, v: np.ndarray) -> 
     return h00 * q[i] + h10 * h * v[i] + h01 * q[i + 1] + h11 * h * v[i + 1]
 
 
+#: A recording's lead-in and tail where no joint is farther than this from where it starts (ends) are the arm
+#: waiting for the program, not its motion, rad (well above encoder noise, ~1e-5 rad, below any real move).
+STILL_RAD = 1e-4
+
+
+def _moving_span(q: np.ndarray, gripper: np.ndarray | None) -> tuple[int, int]:
+    """First and last sample of the motion: the still lead-in and tail dropped (one still sample kept at each end)."""
+    moved = np.abs(q - q[0]).max(axis=1) > STILL_RAD
+    settled = np.abs(q - q[-1]).max(axis=1) > STILL_RAD
+    if gripper is not None:
+        moved |= np.abs(gripper - gripper[0]) > 1e-4
+        settled |= np.abs(gripper - gripper[-1]) > 1e-4
+    if not moved.any():
+        return 0, len(q) - 1
+    return max(0, int(np.argmax(moved)) - 1), min(len(q) - 1, len(q) - int(np.argmax(settled[::-1])))
+
+
 def recording_execution(recording: Recording, robot: "Robot", scene: "Scene", source: str, rate_hz: float) -> "Execution":
-    """The Execution of ``recording``: joints matched, resampled to ``rate_hz`` (linear between dense samples,
-    cubic Hermite between waypoints that carry velocities), ``plan=None``."""
+    """The Execution of ``recording``: joints matched, a dense recording's still lead-in and tail dropped
+    (:data:`STILL_RAD`), resampled to ``rate_hz`` (linear between dense samples, cubic Hermite between waypoints
+    that carry velocities), ``plan=None``."""
     from ..simulate import Execution
 
     cols = _columns(recording, robot, source)
@@ -141,6 +159,11 @@ def recording_execution(recording: Recording, robot: "Robot", scene: "Scene", so
         i = int(np.argmax(np.diff(time) < 0)) + 1
         raise TrajectoryError(f"{source}: time goes backwards at sample {i} ({time[i]:.6g} s after {time[i - 1]:.6g} s)")
     time, q = time[keep], q[keep]
+    gripper = None if recording.gripper is None else np.asarray(recording.gripper, float)[keep]
+    if not recording.waypoints:
+        first, last = _moving_span(q, gripper)
+        time, q = time[first : last + 1], q[first : last + 1]
+        gripper = None if gripper is None else gripper[first : last + 1]
     time = time - time[0]
     duration = float(time[-1])
     count = int(math.floor(duration * rate_hz + 1e-9)) + 1
@@ -155,7 +178,7 @@ def recording_execution(recording: Recording, robot: "Robot", scene: "Scene", so
     else:
         samples = np.column_stack([np.interp(grid, time, q[:, j]) for j in range(robot.n)])
     opening = None
-    if recording.gripper is not None:
-        opening = np.clip(np.interp(grid, time, np.asarray(recording.gripper, float)[keep]), 0.0, robot.max_opening_m)
+    if gripper is not None:
+        opening = np.clip(np.interp(grid, time, gripper), 0.0, robot.max_opening_m)
     trajectory = robot.trajectory(q=samples, time=grid, scene=scene, gripper_opening_m=opening)
     return Execution(trajectory, None, [], scene, scene, robot, source=source)
