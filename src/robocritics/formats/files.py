@@ -46,6 +46,7 @@ class Recording:
     velocities: np.ndarray | None = None
     gripper: np.ndarray | None = None
     waypoints: bool = False  # planned waypoints (interpolated) rather than dense samples
+    live: bool = False  # recorded from an arm (ur_rtde, JointState): its still lead-in and tail are not motion
 
 
 def read_csv(text: str, what: str = "CSV") -> Recording:
@@ -90,7 +91,7 @@ def read_csv(text: str, what: str = "CSV") -> Recording:
     gripper = data[:, -1] if GRIPPER_NAME in index else None
     if names == rtde:
         names = []  # positional: the UR's six joints in order
-    return Recording(names, data[:, 0], data[:, 1 : 1 + len(columns)], gripper=gripper)
+    return Recording(names, data[:, 0], data[:, 1 : 1 + len(columns)], gripper=gripper, live=not names)
 
 
 def _is_float(cell: str) -> bool:

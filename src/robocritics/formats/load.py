@@ -16,7 +16,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..scene import Scene
     from ..simulate import Execution
 
-__all__ = ["load_motion", "motion_kind", "recording_execution", "MOTION_SUFFIXES", "URSCRIPT_SUFFIXES", "MAX_SAMPLES"]
+__all__ = ["load_motion", "motion_kind", "recording_execution", "moving_span", "STILL_RAD", "MOTION_SUFFIXES", "URSCRIPT_SUFFIXES", "MAX_SAMPLES"]
 
 URSCRIPT_SUFFIXES = (".script", ".urscript", ".urp.script")
 MOTION_SUFFIXES = {
@@ -129,24 +129,25 @@ def _hermite(t: np.ndarray, times: np.ndarray, q: np.ndarray, v: np.ndarray) -> 
 
 
 #: A recording's lead-in and tail where no joint is farther than this from where it starts (ends) are the arm
-#: waiting for the program, not its motion, rad (well above encoder noise, ~1e-5 rad, below any real move).
-STILL_RAD = 1e-4
+#: waiting for the program or settling after it, rad: a servo-streamed motion's lag decays for ~0.1-0.2 s after
+#: the last setpoint (lookahead 0.1 s), within 1e-3 rad of the end only the last ~40 ms of a planned stop lie.
+STILL_RAD = 1e-3
 
 
-def _moving_span(q: np.ndarray, gripper: np.ndarray | None) -> tuple[int, int]:
+def moving_span(q: np.ndarray, gripper: np.ndarray | None) -> tuple[int, int]:
     """First and last sample of the motion: the still lead-in and tail dropped (one still sample kept at each end)."""
     moved = np.abs(q - q[0]).max(axis=1) > STILL_RAD
     settled = np.abs(q - q[-1]).max(axis=1) > STILL_RAD
     if gripper is not None:
-        moved |= np.abs(gripper - gripper[0]) > 1e-4
-        settled |= np.abs(gripper - gripper[-1]) > 1e-4
+        moved |= np.abs(gripper - gripper[0]) > 1e-3
+        settled |= np.abs(gripper - gripper[-1]) > 1e-3
     if not moved.any():
         return 0, len(q) - 1
     return max(0, int(np.argmax(moved)) - 1), min(len(q) - 1, len(q) - int(np.argmax(settled[::-1])))
 
 
 def recording_execution(recording: Recording, robot: "Robot", scene: "Scene", source: str, rate_hz: float) -> "Execution":
-    """The Execution of ``recording``: joints matched, a dense recording's still lead-in and tail dropped
+    """The Execution of ``recording``: joints matched, a live recording's still lead-in and tail dropped
     (:data:`STILL_RAD`), resampled to ``rate_hz`` (linear between dense samples, cubic Hermite between waypoints
     that carry velocities), ``plan=None``."""
     from ..simulate import Execution
@@ -160,8 +161,8 @@ def recording_execution(recording: Recording, robot: "Robot", scene: "Scene", so
         raise TrajectoryError(f"{source}: time goes backwards at sample {i} ({time[i]:.6g} s after {time[i - 1]:.6g} s)")
     time, q = time[keep], q[keep]
     gripper = None if recording.gripper is None else np.asarray(recording.gripper, float)[keep]
-    if not recording.waypoints:
-        first, last = _moving_span(q, gripper)
+    if recording.live:
+        first, last = moving_span(q, gripper)
         time, q = time[first : last + 1], q[first : last + 1]
         gripper = None if gripper is None else gripper[first : last + 1]
     time = time - time[0]

@@ -92,4 +92,4 @@ def _joint_states(reader, connections, what: str) -> Recording:
         raise TrajectoryError(f"{what}: the topic has no messages")
     positions = np.array(rows)
     gripper = positions[:, names.index(GRIPPER_NAME)].copy() if GRIPPER_NAME in names else None
-    return Recording(names, np.array(times), positions, gripper=gripper)
+    return Recording(names, np.array(times), positions, gripper=gripper, live=True)
