@@ -60,7 +60,7 @@ def _build_check(sub) -> None:
         help="trajectory sample rate, Hz, from 25 (sparser sampling hides fast motion from the critics) to 500 "
         "(the controller's rate); default 125",
     )
-    from .motion import add_motion_options
+    from ._motion import add_motion_options
 
     add_motion_options(p)
     p.set_defaults(func=_cmd_check)
@@ -94,7 +94,7 @@ def _check(args: argparse.Namespace) -> int:
     from ..formats import motion_kind
 
     if motion_kind(args.program) is not None:
-        from .motion import check_motion
+        from ._motion import check_motion
 
         return check_motion(args)
     source = read_text(args.program, "program")
