@@ -45,11 +45,15 @@ def test_each_file_is_judged_or_refused_with_construct_and_line(path):
         assert step.skill.split("(")[0] in lines[step.line - 1], (step, lines[step.line - 1])
 
 
-def test_cli_exit_codes_for_judged_and_refused_files(capsys):
+def test_cli_exit_codes_for_judged_and_refused_files(capsys, tmp_path):
     folder = CORPUS[0].parent
-    assert main(["check", str(folder / "handwritten_square.script")]) == 0
+    html = tmp_path / "replay.html"
+    assert main(["check", str(folder / "handwritten_square.script"), "--html", str(html)]) == 0
     out = capsys.readouterr().out
     assert "motion from URScript handwritten_square.script" in out and "score 10/10" in out
+    assert "handwritten_square.script" in html.read_text()
+    assert main(["check", str(folder / "handwritten_square.script"), "--goal", "green_apple in white_box", "--scene", "sorting"]) == 2
+    assert "goals cannot be checked" in capsys.readouterr().err
     assert main(["check", str(folder / "speedl_jog.script")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["robocritics: error: UnsupportedURScript: line 3: unsupported URScript: speedl() (velocity control)"]

@@ -66,6 +66,11 @@ def check_motion(args: argparse.Namespace) -> int:
     scene = scene_for(args.program, args.scene)
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
+    if args.goals:
+        raise UsageError(
+            f"--goal: {args.program} is motion from another tool; it does not say what the gripper held, so goals "
+            "cannot be checked (check the robot program instead)"
+        )
     goals = parse_goals(args.goals, scene)
     select_critics(critics, params)
     robot = getattr(args, "robot", None)
