@@ -207,8 +207,30 @@ def test_huge_lists_and_strings_are_bounded():
 
 
 def test_too_much_motion_is_refused_before_its_samples_are_made():
-    with pytest.raises(URScriptError, match="motion lasts more than"):
+    with pytest.raises(URScriptError, match="takes the motion beyond the 300 s"):
         run("i = 0\nwhile i < 1000:\n  sleep(1.0)\n  i = i + 1\nend\n")
+
+
+@pytest.mark.parametrize(
+    "source, message",
+    [
+        ("movej([1e308, 0, 0, 0, 0, 0])\n", "finite joint angles"),
+        ("movej([9.0, 0, 0, 0, 0, 0])\n", r"joint 0 \(shoulder_pan_joint\) = 9.0000 rad is outside its limits"),
+        ("x = 1e308 * 10\n", "overflows"),
+        ("x = 1e999\n", "out of range"),
+        ('x = to_num("nan")\n', "not a finite number"),
+        ("movej(%s, t=1e9)\n" % HOME, "beyond the 300 s one check"),
+        ("sleep(1e300)\n", "beyond the 300 s one check"),
+        ("movel(p[1e10, 0, 0, 0, 0, 0])\n", "beyond the 300 s one check"),
+        ("movej(%s, a=1e-12)\n" % HOME.replace("0.0]", "1.0]"), "beyond the 300 s one check"),
+        ("i = 0\nwhile i < 100000:\n  servoj(%s, t=0.1)\n  i = i + 1\nend\n" % HOME, "servo stream lasts more"),
+        ("set_tcp(p[1e300, 0, 0, 0, 0, 0])\n", "within 2 m"),
+        ("movej(%s, a=0)\n" % HOME, "a must be positive"),
+    ],
+)
+def test_hostile_numbers_are_typed_errors_before_any_sample_is_made(source, message):
+    with pytest.raises(URScriptError, match=message):
+        run(source)
 
 
 def test_syntax_errors_name_the_line():
@@ -268,3 +290,22 @@ def test_a_script_is_judged_by_the_critics():
     assert report.source.startswith("URScript") and "motion from URScript" in report.to_text()
     speed = next(v for v in report.verdicts if v.critic == "joint_speed")
     assert speed.flag.value != "OK" and speed.evidence.lines == [1]
+
+
+TOKENS = [
+    "movej(", "movel(", "servoj(", "sleep(", "p[", "[", "]", "(", ")", ",", ":", "\n", "def f():", "end", "if ", "elif ",
+    "else:", "while ", "for i in range(3):", "switch x:", "case 1:", "default:", "return ", "break", "x", "y", " = ",
+    "1", "0.2", "-", "+", "*", "/", "%", " and ", " or ", " not ", "True", "False", '"s"', "global ", "local ",
+    "thread t():", "run t()", "get_actual_joint_positions()", "get_actual_tcp_pose()", "pose_trans(", "halt",
+    "$ 1 \"m\"", "#c", "a=", "t=", "r=", "x[0]", ".", "rq_close()", "textmsg(", "make_list(", "str_cat(",
+]  # fmt: skip
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.sampled_from(TOKENS), max_size=60))
+def test_any_token_soup_is_judged_or_a_typed_error(tokens):
+    source = "".join(tokens)
+    try:
+        run(source, max_steps=5_000)
+    except (URScriptError, PlanningError):
+        pass

@@ -23,7 +23,7 @@ from ...trajectory import Step
 from . import poses as P
 from .builtins import BuiltinError
 from .syntax import URScriptError
-from .timeline import Segment, Timeline
+from .timeline import MAX_MOTION_S, Segment, Timeline
 from .timing import profile_for, trapezoid_fraction
 
 __all__ = ["Arm", "ArmOptions", "CONTROL_PERIOD_S", "GRIPPER_STROKE_S"]
@@ -74,6 +74,7 @@ class Arm:
         self._step_index: dict[tuple[str, int], int] = {}
         self.servo: list[tuple[np.ndarray, float, float, int]] = []  # (target, t, tau, step) of a running stream
         self.servo_side: list[tuple[int, Segment]] = []  # (cycle, segment) started beside the stream
+        self._servo_s = 0.0  # duration of the running stream, s
         self.line = 0
         self._handlers: dict[str, Callable[..., Any]] = {
             "movej": self.movej, "movel": self.movel, "movep": self.movep, "movec": self.movec, "servoj": self.servoj,
@@ -136,6 +137,10 @@ class Arm:
         self.timeline.add(segment, self.line)
 
     def local_times(self, duration: float) -> np.ndarray:
+        if not duration <= MAX_MOTION_S - self.timeline.end_time:  # before any sample is made (NaN fails too)
+            raise BuiltinError(
+                f"this command ({duration:.4g} s) takes the motion beyond the {MAX_MOTION_S:.0f} s one check may hold"
+            )
         n = max(1, int(math.ceil(duration * self.options.rate_hz - 1e-9)))
         return np.linspace(0.0, duration, n + 1)
 
@@ -163,7 +168,14 @@ class Arm:
         if isinstance(target, list) and len(target) == self.robot.n and all(
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in target
         ):
-            return np.array(target, dtype=float)
+            if not all(math.isfinite(v) and abs(v) < 100.0 for v in target):
+                raise BuiltinError(f"{what} must be finite joint angles in rad, got {_short(target)}")
+            try:  # within the joint limits, as the controller requires
+                return self.robot.joint_vector(target, what, BuiltinError)
+            except BuiltinError:
+                raise
+            except Exception as exc:  # pragma: no cover - joint_vector raises the error given
+                raise BuiltinError(str(exc)) from None
         raise BuiltinError(f"{what} must be {self.robot.n} joint angles [rad] or a pose, got {target!r}"[:200])
 
     def pose_target(self, target: Any, what: str) -> np.ndarray:
@@ -242,6 +254,10 @@ class Arm:
             raise BuiltinError(f"servoj: lookahead_time must lie in [0.03, 0.2] s and gain in [100, 2000], got {lookahead}, {gain}")
         target = self.joint_target(q, "servoj's q")
         tau = max(CONTROL_PERIOD_S, lookahead * 300.0 / gain)
+        streamed = self._servo_s if self.servo else 0.0
+        if not t + streamed <= MAX_MOTION_S - self.timeline.end_time:
+            raise BuiltinError(f"the servo stream lasts more than the {MAX_MOTION_S:.0f} s of motion one check may hold")
+        self._servo_s = streamed + t
         self.servo.append((target, t, tau, self.step("servoj")))
 
     def flush_servo(self) -> None:
@@ -254,7 +270,7 @@ class Arm:
         """
         if not self.servo:
             return
-        stream, self.servo = self.servo, []
+        stream, self.servo, self._servo_s = self.servo, [], 0.0
         q = self.timeline.end[:-1].copy()
         previous = q.copy()
         limit = np.asarray(self.robot.velocity_limits, float)
@@ -341,6 +357,8 @@ class Arm:
     def set_tcp(self, pose) -> None:
         if not isinstance(pose, P.Pose):
             raise BuiltinError(f"set_tcp takes a pose, got {pose!r}"[:120])
+        if not all(math.isfinite(v) for v in pose) or math.dist(pose[:3], (0, 0, 0)) > 2.0:
+            raise BuiltinError(f"set_tcp: the TCP must lie within 2 m of the flange, got {pose!r}"[:160])
         self.tcp = P.pose_matrix(pose)
 
     def set_payload(self, m, cog=None, inertia=None) -> None:
@@ -373,6 +391,10 @@ class Arm:
         except PlanningError:
             return False
         return True
+
+
+def _short(values: list) -> str:
+    return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
 
 
 def _number(x: Any, what: str) -> float:

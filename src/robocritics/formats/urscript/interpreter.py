@@ -15,6 +15,7 @@ commands motion is refused with the line of its motion command.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -78,7 +79,11 @@ def _arith(op: str, a: Any, b: Any, line: int) -> Any:
         out = a // b if isinstance(a, int) and isinstance(b, int) and a % b == 0 else a / b
     else:
         out = a % b
-    return _int32(out) if isinstance(out, int) else out
+    if isinstance(out, int):
+        return _int32(out)
+    if not math.isfinite(out):
+        raise URScriptError(f"{a} {op} {b} overflows", line=line)
+    return out
 
 
 class Interpreter:
@@ -315,6 +320,8 @@ class Interpreter:
         self.tick(node.line)
         kind = node.kind
         if kind in ("num", "str", "bool"):
+            if kind == "num" and not math.isfinite(node.value):
+                raise URScriptError(f"the number {node.value} is out of range", line=node.line)
             return node.value
         if kind == "name":
             return self.lookup(node.name, frame, node.line)
@@ -385,11 +392,13 @@ class Interpreter:
         try:
             value = fn(*args, **kwargs)
         except BuiltinError as exc:
-            raise URScriptError(f"{node.name}(): {exc}", line=node.line) from None
+            raise URScriptError(f"{node.name}(): {str(exc)[:300]}", line=node.line) from None
         except TypeError as exc:
             raise URScriptError(f"{node.name}(): wrong arguments ({exc})", line=node.line) from None
         if isinstance(value, list) and len(value) > MAX_LIST:
             raise URScriptError(f"{node.name}() made a list of more than {MAX_LIST:,} items", line=node.line)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise URScriptError(f"{node.name}() gave {value}, not a finite number", line=node.line)
         return value
 
     def call_user(self, fn: _Function, args: list, kwargs: dict, line: int) -> Any:
