@@ -189,3 +189,22 @@ def test_export_cli_writes_each_format_that_check_reads_back(tmp_path, capsys):
         assert main(["check", str(out), "--scene", "sorting"]) == 0
         assert "score 10/10" in capsys.readouterr().out
     assert main(["export", str(source), "--to", "pdf"]) == 2
+
+
+def test_grasps_are_inferred_from_the_finger_gap_for_imported_motion(tmp_path):
+    """A pick-and-place program exported to CSV (joints and finger gap, nothing about objects) and read back: the
+    objects the fingers closed on are the ones the program carried, each left where the program left it, and the
+    grasps are not judged as collisions."""
+    careful = (ROOT / "examples" / "programs" / "sorting_careful.py").read_text()
+    program = simulate(careful, SCENE)
+    path = tmp_path / "sorting.csv"
+    path.write_text(to_csv(program.trajectory))
+    imported = load_motion(path, scene=SCENE)
+    carried = lambda e: [a for a in dict.fromkeys(e.trajectory.attached.tolist()) if a]  # noqa: E731
+    assert carried(imported) == carried(program) and len(carried(program)) == 3
+    for oid in carried(program):
+        np.testing.assert_allclose(imported.object_poses[oid][-1, :3, 3], program.object_poses[oid][-1, :3, 3], atol=0.01)
+        assert imported.final_scene.container_holding(oid) == program.final_scene.container_holding(oid)
+    assert critique(imported).score == critique(program).score == 10
+    empty_hand = load_motion(path, scene=Scene())  # nothing to grasp: the fingers close on air
+    assert not carried(empty_hand)

@@ -150,7 +150,7 @@ def recording_execution(recording: Recording, robot: "Robot", scene: "Scene", so
     """The Execution of ``recording``: joints matched, a live recording's still lead-in and tail dropped
     (:data:`STILL_RAD`), resampled to ``rate_hz`` (linear between dense samples, cubic Hermite between waypoints
     that carry velocities), ``plan=None``."""
-    from ..simulate import Execution
+    from .grasps import imported_execution
 
     cols = _columns(recording, robot, source)
     time = np.asarray(recording.time, float)
@@ -181,5 +181,4 @@ def recording_execution(recording: Recording, robot: "Robot", scene: "Scene", so
     opening = None
     if gripper is not None:
         opening = np.clip(np.interp(grid, time, gripper), 0.0, robot.max_opening_m)
-    trajectory = robot.trajectory(q=samples, time=grid, scene=scene, gripper_opening_m=opening)
-    return Execution(trajectory, None, [], scene, scene, robot, source=source)
+    return imported_execution(robot, scene, samples, grid, opening, source)

@@ -38,7 +38,7 @@ def run_urscript(
     :class:`URScriptError` for a script that is not valid or hits a limit, and
     :class:`~robocritics.errors.PlanningError` (with the line) for a target the arm cannot reach.
     """
-    from ...simulate import Execution
+    from ..grasps import imported_execution
 
     if not isinstance(passes, int) or passes < 1:
         raise URScriptError(f"passes must be a whole number >= 1, got {passes!r}")
@@ -51,9 +51,6 @@ def run_urscript(
     if not arm.timeline.segments:
         raise URScriptError("the script commands no motion, so there is nothing to check", line=1)
     time, values, step = arm.timeline.samples(options.rate_hz)
-    trajectory = robot.trajectory(
-        q=values[:, :-1], time=time, scene=scene, gripper_opening_m=values[:, -1], step=step, steps=arm.steps
-    )
     notes = "; ".join(interpreter.notes)
     described = f"URScript {name}" + (f" ({notes})" if notes else "")
-    return Execution(trajectory, None, [], scene, scene, robot, source=described)
+    return imported_execution(robot, scene, values[:, :-1], time, values[:, -1], described, step=step, steps=arm.steps)
