@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ._common import UsageError, bounded_float, load_params, one_line, positive_int, scene_for
+from ._common import UsageError, bounded_float, check_output, load_params, one_line, positive_int, scene_for
 
 __all__ = ["add_motion_options", "check_motion", "numbers"]
 
@@ -63,6 +63,8 @@ def check_motion(args: argparse.Namespace) -> int:
 
     if not Path(args.program).exists():
         raise UsageError(f"{args.program}: no such file")
+    if args.html:
+        check_output(args.html, "--html")
     scene = scene_for(args.program, args.scene)
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
@@ -90,10 +92,12 @@ def check_motion(args: argparse.Namespace) -> int:
     report = critique(execution, critics=critics, params=params, goals=goals)
     print(report.to_json() if args.json else report.to_text())
     if args.html:
-        from ..viz import write_replay_html
+        from .._files import OutputFileError, write_file_atomically
+        from ..viz import replay_html
 
+        page = replay_html(execution, report, title=f"{args.program}: {report.score_text}")
         try:
-            write_replay_html(args.html, execution, report, title=f"{args.program}: {report.score_text}")
-        except OSError as exc:
-            raise UsageError(f"--html {args.html}: cannot write the replay: {exc.strerror or exc}") from None
+            write_file_atomically(args.html, page, "--html")
+        except OutputFileError as exc:
+            raise UsageError(str(exc)) from None
     return 1 if report.has_errors else 0

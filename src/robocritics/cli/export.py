@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ._common import UsageError, one_line, read_text, sample_rate, scene_for, subcommand
+from ._common import UsageError, check_output, one_line, read_text, sample_rate, scene_for, subcommand
 
 
 @subcommand("export")
@@ -32,6 +32,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from ..formats import load_motion, motion_kind
     from ..formats.export import to_csv, to_joint_trajectory, to_urscript
 
+    if args.output:
+        check_output(args.output, "-o")
     scene = scene_for(args.program, args.scene)
     if motion_kind(args.program) is not None:
         execution = load_motion(args.program, scene=scene, rate_hz=args.rate)
@@ -54,10 +56,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
     if report.has_errors:
         print("robocritics: warning: the report has Errors; fix them before running this motion", file=sys.stderr)
     if args.output:
+        from .._files import OutputFileError, write_file_atomically
+
         try:
-            Path(args.output).write_text(text)
-        except OSError as exc:
-            raise UsageError(f"-o {args.output}: cannot write: {exc.strerror or exc}") from None
+            write_file_atomically(args.output, text, "-o")
+        except OutputFileError as exc:
+            raise UsageError(str(exc)) from None
     else:
         sys.stdout.write(text)
     return 0

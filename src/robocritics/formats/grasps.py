@@ -164,7 +164,7 @@ def imported_execution(robot, scene: Scene, q, time, opening, source: str, step=
     """The :class:`~robocritics.simulate.Execution` of imported motion: its trajectory with the grasps inferred
     (:func:`infer_grasps`, :func:`contact_steps`), ``plan=None``, the final scene with every held object where
     it was let go, and ``source``."""
-    from ..simulate import Execution
+    from ..execution import Execution
     from ..trajectory import Trajectory
 
     q = np.asarray(q, float)

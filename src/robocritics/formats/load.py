@@ -14,7 +14,7 @@ from .files import Recording, read_csv, read_joint_trajectory_json, read_moveit_
 if TYPE_CHECKING:  # pragma: no cover
     from ..robot.model import Robot
     from ..scene import Scene
-    from ..simulate import Execution
+    from ..execution import Execution
 
 __all__ = ["load_motion", "motion_kind", "recording_execution", "moving_span", "STILL_RAD", "MOTION_SUFFIXES", "URSCRIPT_SUFFIXES", "MAX_SAMPLES"]
 

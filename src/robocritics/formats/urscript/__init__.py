@@ -15,7 +15,7 @@ from .syntax import UnsupportedURScript, URScriptError, parse
 if TYPE_CHECKING:  # pragma: no cover
     from ...robot.model import Robot
     from ...scene import Scene
-    from ...simulate import Execution
+    from ...execution import Execution
 
 __all__ = ["run_urscript", "ArmOptions", "URScriptError", "UnsupportedURScript", "parse"]
 
