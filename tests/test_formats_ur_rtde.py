@@ -1,23 +1,25 @@
 """A real ur_rtde recording: `robocritics deploy` of a program to the loopback controller while ur_rtde's
 ``RTDEReceiveInterface.startFileRecording`` records it, then the CSV checked back like the program.
 
-ur_rtde always talks to port 30004, so the controller runs in real time on it (skipped when the port is taken);
-the recorder runs in its own process (ur_rtde's constructor holds the GIL while it waits for replies).
+ur_rtde always talks to port 30004, so the controller (``robocritics ursim`` in its own process, as a real
+controller runs on its own machine) runs in real time on it (skipped when the port is taken); the recorder runs
+in its own process too (ur_rtde's constructor holds the GIL while it waits for replies).
 """
 
 import re
+import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
 from robocritics import Scene, critique, simulate
 from robocritics.cli import main
-from robocritics.errors import DeployError
 from robocritics.formats import load_motion
 from robocritics.formats.load import moving_span
-from robocritics.testing.ursim import URSim
+from ur_support import controller_process
 
 #: about 12 s of motion: long enough that the controller's settling at the end (its servo lag decaying, ~0.1 s
 #: with the streaming program's lookahead) stays within the 1 % the recorded duration is held to
@@ -40,39 +42,54 @@ r.disconnect()
 """
 
 
+def record_a_deploy(program: Path, tmp_path: Path, capsys) -> tuple[Path, str] | None:
+    """Deploy ``program`` to a fresh controller on port 30004 (its own process) while ur_rtde records it:
+    ``(csv, deploy output)``, or None when the deploy was stopped by a fault (a starved real-time stream)."""
+    csv, stop = tmp_path / "recording.csv", tmp_path / "stop"
+    for leftover in (csv, stop):
+        leftover.unlink(missing_ok=True)
+    with controller_process("--rtde-port", "30004") as ctl:
+        recorder = subprocess.Popen(
+            [sys.executable, "-c", RECORDER, str(csv), str(stop)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        try:
+            assert recorder.stdout.readline().strip() == "recording", recorder.stderr.read()[-2000:]
+            time.sleep(0.3)  # a still lead-in, as a real recording has
+            ports = ["--dashboard-port", str(ctl.dashboard_port), "--secondary-port", str(ctl.secondary_port)]
+            status = main(["deploy", str(program), "--host", "127.0.0.1", *ports])
+            out, err = capsys.readouterr()
+            time.sleep(0.3)
+            stop.touch()
+            assert recorder.wait(timeout=30) == 0, recorder.stderr.read()[-2000:]
+        finally:
+            if recorder.poll() is None:
+                recorder.kill()
+            recorder.stdout.close()
+            recorder.stderr.close()
+    if status != 0:
+        assert "deploy stopped" in err, err  # a fault of the real-time stream on a starved machine, nothing else
+        return None
+    return csv, out
+
+
 def test_a_ur_rtde_recording_of_a_deployed_program_scores_like_the_program(tmp_path, capsys):
     pytest.importorskip("rtde_receive", reason="ur-rtde is not installed")
+    if not _port_free(30004):
+        pytest.skip("port 30004 is taken; ur-rtde always uses it")
     scene = Scene.builtin("sorting")
     program = tmp_path / "sorting_moves.py"
     program.write_text(PROGRAM)
     expected = simulate(PROGRAM, scene)  # a fresh controller is at the model's home pose: the same plan
     expected_report = critique(expected)
-    try:
-        sim = URSim(dashboard_port=0, secondary_port=0).start()
-    except DeployError as exc:
-        pytest.skip(f"port 30004 is taken; ur-rtde always uses it: {exc}")
-    csv, stop = tmp_path / "recording.csv", tmp_path / "stop"
-    recorder = subprocess.Popen(
-        [sys.executable, "-c", RECORDER, str(csv), str(stop)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
-    try:
-        assert recorder.stdout.readline().strip() == "recording", recorder.stderr.read()[-2000:]
-        time.sleep(0.3)  # a still lead-in, as a real recording has
-        ports = ["--dashboard-port", str(sim.dashboard_port), "--secondary-port", str(sim.secondary_port)]
-        status = main(["deploy", str(program), "--host", "127.0.0.1", *ports])
-        out, err = capsys.readouterr()
-        assert status == 0, err
-        assert "score 10/10" in out
-        streamed = re.search(r"deployed \d+ setpoints at 500 Hz in ([\d.]+) s \(trajectory ([\d.]+) s\)", out)
-        time.sleep(0.3)
-        stop.touch()
-        assert recorder.wait(timeout=30) == 0, recorder.stderr.read()[-2000:]
-    finally:
-        if recorder.poll() is None:
-            recorder.kill()
-        recorder.stdout.close()
-        recorder.stderr.close()
-        sim.stop()
+    for _ in range(3):  # a real-time stream on a loaded 2-core machine can be starved into a watchdog stop
+        recorded_run = record_a_deploy(program, tmp_path, capsys)
+        if recorded_run is not None:
+            break
+    else:
+        pytest.fail("three deploys in a row were stopped by faults")
+    csv, out = recorded_run
+    assert "score 10/10" in out
+    streamed = re.search(r"deployed \d+ setpoints at 500 Hz in ([\d.]+) s \(trajectory ([\d.]+) s\)", out)
     header = csv.read_text().splitlines()[0]
     assert header.startswith("timestamp,actual_q_0")
     late_s = float(streamed.group(1)) - float(streamed.group(2))
@@ -82,10 +99,10 @@ def test_a_ur_rtde_recording_of_a_deployed_program_scores_like_the_program(tmp_p
     print(f"recorded {recorded.duration_s:.3f} s, score {report.score:g}; program {expected.duration_s:.3f} s, "
           f"score {expected_report.score:g}; stream late {late_s:.3f} s")  # fmt: skip
     assert abs(report.score - expected_report.score) <= 1
-    # The controller runs the motion as the setpoints arrive: on a loaded machine the stream can fall behind (the
-    # deploy reports its wall time), which stretches the recorded motion by at most that much; beyond it, 1 %.
     # A recording is judged from the arm's first motion to its last (moving_span: the still lead-in and tail, the
-    # arm waiting and settling, are not the program's); the program's motion by the same rule.
+    # arm waiting and settling, are not the program's); the program's motion by the same rule. The controller
+    # runs the motion as the setpoints arrive: on a loaded machine the stream can fall behind (the deploy reports
+    # its wall time), which stretches the recorded motion by about that much; beyond it, 1 %.
     assert float(streamed.group(2)) == pytest.approx(expected.duration_s, abs=0.01)
     first, last = moving_span(expected.trajectory.q, expected.trajectory.gripper_opening_m)
     motion_s = float(expected.trajectory.time[last] - expected.trajectory.time[first])
@@ -93,3 +110,13 @@ def test_a_ur_rtde_recording_of_a_deployed_program_scores_like_the_program(tmp_p
     assert abs(recorded.duration_s - motion_s) <= 0.01 * motion_s + max(0.0, late_s)
     assert main(["check", str(csv), "--scene", "sorting"]) in (0, 1)
     assert "motion from ur_rtde recording recording.csv" in capsys.readouterr().out
+
+
+def _port_free(port: int) -> bool:
+    with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the controller binds: TIME_WAIT is no obstacle
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
