@@ -54,6 +54,11 @@ def test_cli_exit_codes_for_judged_and_refused_files(capsys, tmp_path):
     assert "handwritten_square.script" in html.read_text()
     assert main(["check", str(folder / "handwritten_square.script"), "--goal", "green_apple in white_box", "--scene", "sorting"]) == 2
     assert "goals cannot be checked" in capsys.readouterr().err
+    unreachable = tmp_path / "far.script"
+    unreachable.write_text("movej([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])\nmovel(p[0.9, 0, 0.2, 0, 3.14, 0])\n")
+    assert main(["check", str(unreachable)]) == 1  # the runtime critic's Error, naming the line
+    captured = capsys.readouterr()
+    assert "ERROR    runtime" in captured.out and "PlanningError: line 2: movel" in captured.err
     assert main(["check", str(folder / "speedl_jog.script")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["robocritics: error: UnsupportedURScript: line 3: unsupported URScript: speedl() (velocity control)"]
