@@ -195,6 +195,15 @@ def test_an_endless_loop_without_motion_hits_the_step_budget_naming_the_loop():
 def test_recursion_is_bounded():
     with pytest.raises(URScriptError, match="calls nest more than"):
         run(f"def f(n):\n  return f(n + 1)\nend\nf(0)\nmovej({HOME})\n")
+    # recursion through deeply nested blocks: bounded before Python's own recursion limit
+    deep = "".join(" " * i + "if True:\n" for i in range(60)) + "f()\n" + "end\n" * 60
+    with pytest.raises(URScriptError, match="nest more than"):
+        run("def f():\n" + deep + f"end\nf()\nmovej({HOME})\n")
+    # a thread reaching motion through a long chain of functions is found without recursion
+    n = 3000
+    chain = "".join(f"def f{i}():\n  f{i + 1}()\nend\n" for i in range(n)) + f"def f{n}():\n  movej({HOME})\nend\n"
+    with pytest.raises(UnsupportedURScript, match=f"movej at line {3 * n + 2}"):
+        run(chain + "thread t():\n  f0()\nend\nrun t()\n")
 
 
 def test_huge_lists_and_strings_are_bounded():

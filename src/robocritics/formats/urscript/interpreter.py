@@ -23,10 +23,13 @@ from . import poses as P
 from .builtins import INPUT_READS, MAX_LIST, NO_OPS, PURE, REFUSED, BuiltinError, type_name
 from .syntax import Node, UnsupportedURScript, URScriptError
 
-__all__ = ["Interpreter", "MAX_STEPS", "MAX_CALL_DEPTH", "MOTION_COMMANDS", "Halt"]
+__all__ = ["Interpreter", "MAX_STEPS", "MAX_CALL_DEPTH", "MAX_ACTIVE_BLOCKS", "MOTION_COMMANDS", "Halt"]
 
 MAX_STEPS = 500_000
 MAX_CALL_DEPTH = 48
+#: Blocks being run at once, over all active calls (a block inside a block, or a call's body): bounds the
+#: interpreter's own recursion, a few Python frames per block, well inside Python's limit of 1,000.
+MAX_ACTIVE_BLOCKS = 100
 MOTION_COMMANDS = frozenset({"movej", "movel", "movep", "movec", "servoj", "speedj", "speedl", "servoc", "stopj", "stopl"})
 
 
@@ -96,6 +99,7 @@ class Interpreter:
         self.max_steps = max_steps
         self.steps = 0
         self.depth = 0
+        self.active_blocks = 0
         self.globals: dict[str, Any] = {}
         self.functions: dict[str, _Function] = {}
         self.notes: list[str] = []
@@ -129,9 +133,16 @@ class Interpreter:
 
     # ------------------------------------------------------------------ statements
     def block(self, body: list[Node], frame: dict | None) -> None:
-        for node in body:
-            self.tick(node.line)
-            getattr(self, f"_exec_{node.kind}")(node, frame)
+        self.active_blocks += 1
+        try:
+            if self.active_blocks > MAX_ACTIVE_BLOCKS:
+                line = body[0].line if body else 0
+                raise URScriptError(f"blocks and calls nest more than {MAX_ACTIVE_BLOCKS} deep while running", line=line)
+            for node in body:
+                self.tick(node.line)
+                getattr(self, f"_exec_{node.kind}")(node, frame)
+        finally:
+            self.active_blocks -= 1
 
     def _exec_def(self, node: Node, frame: dict | None) -> None:
         self.functions[node.name] = _Function(node, node.kind == "thread")
@@ -271,7 +282,10 @@ class Interpreter:
         return len(self.notes)
 
     def motion_in(self, fn: Node, seen: set[str]) -> tuple[str, int] | None:
-        """The first motion command (name, line) in ``fn``'s body or a user function it calls, else None."""
+        """The first motion command (name, line) in ``fn``'s body or a user function it calls, else None.
+
+        One walk with an explicit stack (no Python recursion, so a long chain of functions cannot overflow it);
+        each function is read once."""
         seen.add(fn.name)
         stack: list[Any] = list(fn.body)
         while stack:
@@ -282,9 +296,8 @@ class Interpreter:
                         return item.name, item.line
                     callee = self.functions.get(item.name)
                     if callee is not None and item.name not in seen:
-                        found = self.motion_in(callee.node, seen)
-                        if found:
-                            return found
+                        seen.add(item.name)
+                        stack.extend(callee.node.body)
                 stack.extend([item.a, item.b, *item.items, *item.kwargs.values(), *item.body])
                 for cond, body in item.branches:
                     stack.append(cond)

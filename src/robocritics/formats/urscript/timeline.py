@@ -101,9 +101,11 @@ class Timeline:
         """``(time (T,) s, values (T, n + 1), step (T,))``: a uniform grid at ``rate_hz`` plus every segment's end."""
         total = self.last_end
         uniform = np.arange(int(math.floor(total * rate_hz + 1e-9)) + 1) / rate_hz
-        ends = np.array([s + seg.duration for s, seg in zip(self.starts, self.segments)] + [total])
-        keep = np.min(np.abs(uniform[:, None] - ends[None, :]), axis=1) > 0.25 / rate_hz if len(ends) else True
-        grid = np.unique(np.concatenate([uniform[keep], ends, [0.0]]))
+        ends = np.unique([s + seg.duration for s, seg in zip(self.starts, self.segments)] + [total])
+        # uniform samples within a quarter period of a segment's end give way to it (nearest end by bisection)
+        i = np.clip(np.searchsorted(ends, uniform), 1, len(ends) - 1) if len(ends) > 1 else np.zeros(len(uniform), int)
+        nearest = np.minimum(np.abs(uniform - ends[i]), np.abs(uniform - ends[i - 1 if len(ends) > 1 else 0]))
+        grid = np.unique(np.concatenate([uniform[nearest > 0.25 / rate_hz], ends, [0.0]]))
         values = np.repeat(self.start[None, :], len(grid), axis=0)
         steps = np.zeros(len(grid), dtype=np.int64)
         increments = np.zeros_like(values)
