@@ -1,4 +1,4 @@
-"""robot.hull: coal's hull and the numpy quickhull against scipy's Qhull (the slow reference, tests only)."""
+"""geometry.hull: coal's hull and the numpy quickhull against scipy's Qhull (the slow reference, tests only)."""
 
 from __future__ import annotations
 

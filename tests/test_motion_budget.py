@@ -174,7 +174,7 @@ def test_the_fastest_rate_and_the_longest_motion_meet_the_memory_limit_first():
 @pytest.mark.parametrize("exact_everywhere", [False, True])
 def test_the_memory_estimate_is_above_the_measured_peak(monkeypatch, exact_everywhere):
     # the planner refuses on the estimate, so the estimate must not be below what simulate really takes. The
-    # worst case is every pair measured exactly (far pairs otherwise get cheap lower bounds, robot.trace): there
+    # worst case is every pair measured exactly (far pairs otherwise get cheap lower bounds, planning.trace): there
     # the estimate must also be tight; with the far-pair bounds the peak is only lower
     if exact_everywhere:
         import math

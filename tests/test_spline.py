@@ -1,4 +1,4 @@
-"""robot.spline: the numpy cubic spline and PCHIP against scipy's (the slow reference stays in the tests)."""
+"""planning.spline: the numpy cubic spline and PCHIP against scipy's (the slow reference stays in the tests)."""
 
 from __future__ import annotations
 

@@ -54,12 +54,13 @@ def add_motion_options(p: argparse.ArgumentParser) -> None:
 
 
 def check_motion(args: argparse.Namespace) -> int:
-    from ..critic import critique, runtime_report, select_critics
+    from ..critic import runtime_report, select_critics
     from ..errors import PlanningError, ProgramError
     from ..formats import load_motion
     from ..formats.urscript import UnsupportedURScript
     from ..goals import parse_goals
-    from ..robot.model import Robot
+    from ..pipeline import check
+    from ..robot.model import Robot, default_robot
 
     if not Path(args.program).exists():
         raise UsageError(f"{args.program}: no such file")
@@ -76,7 +77,7 @@ def check_motion(args: argparse.Namespace) -> int:
     goals = parse_goals(args.goals, scene)
     select_critics(critics, params)
     robot = getattr(args, "robot", None)
-    robot = robot if isinstance(robot, Robot) else (Robot.ur(robot) if robot else Robot.ur3e())
+    robot = robot if isinstance(robot, Robot) else (Robot.ur(robot) if robot else default_robot())
     try:
         execution = load_motion(
             args.program, robot, scene, topic=args.topic, rate_hz=args.rate, passes=args.passes, tcp=args.tcp,
@@ -89,7 +90,7 @@ def check_motion(args: argparse.Namespace) -> int:
         print(report.to_json() if args.json else report.to_text())
         print(f"robocritics: error: {type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
         return 1
-    report = critique(execution, critics=critics, params=params, goals=goals)
+    report = check(execution, critics=critics, params=params, goals=goals).report
     print(report.to_json() if args.json else report.to_text())
     if args.html:
         from .._files import OutputFileError, write_file_atomically

@@ -28,7 +28,7 @@ def _build_export(sub) -> None:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from ..critic import check_program, critique
+    from ..pipeline import check
     from ..formats import load_motion, motion_kind
     from ..formats.export import to_csv, to_joint_trajectory, to_urscript
 
@@ -36,10 +36,9 @@ def _cmd_export(args: argparse.Namespace) -> int:
         check_output(args.output, "-o")
     scene = scene_for(args.program, args.scene)
     if motion_kind(args.program) is not None:
-        execution = load_motion(args.program, scene=scene, rate_hz=args.rate)
-        report = critique(execution)
+        execution, report = check(load_motion(args.program, scene=scene, rate_hz=args.rate))
     else:
-        execution, report = check_program(read_text(args.program, "program"), scene, sample_rate_hz=args.rate)
+        execution, report = check(read_text(args.program, "program"), scene, sample_rate_hz=args.rate)
     if execution is None:
         verdict = report.verdicts[0]
         print(f"robocritics: error: {verdict.details['error']}: {one_line(verdict.details['text'])}", file=sys.stderr)

@@ -12,7 +12,7 @@ from ..errors import TrajectoryError
 from .files import Recording, read_csv, read_joint_trajectory_json, read_moveit_yaml
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..robot.model import Robot
+    from ..robot.model import Robot, default_robot
     from ..scene import Scene
     from ..execution import Execution
 
@@ -61,12 +61,12 @@ def load_motion(
     Raises :class:`TrajectoryError` for a file that cannot be read (naming the row or field),
     :class:`~robocritics.formats.urscript.URScriptError`/``UnsupportedURScript`` for a script.
     """
-    from ..robot.model import Robot
-    from ..robot.motion import check_sample_rate
+    from ..planning.timing import check_sample_rate
+    from ..robot.model import default_robot
     from ..scene import Scene
 
     rate_hz = check_sample_rate(rate_hz)
-    robot = robot or Robot.ur3e()
+    robot = robot or default_robot()
     scene = robot.scene_for(scene if scene is not None else Scene())
     p = Path(path)
     kind = motion_kind(p)
