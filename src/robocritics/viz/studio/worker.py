@@ -127,7 +127,7 @@ def _error_dict(exc: BaseException) -> dict[str, Any]:
 def _rebuild(error: Mapping[str, Any]) -> RoboCriticsError:
     """The typed error an :attr:`Evaluation.error` describes (the Loop's runtime feedback reads its fields)."""
     kind, message, line = error["type"], error["message"], int(error.get("line") or 0)
-    if kind == "ProgramError":
+    if kind in ("ProgramError", "URScriptError", "UnsupportedURScript"):  # a URScript error is a ProgramError
         return ProgramError(message, line, int(error.get("col") or 0))
     if kind == "MotionBudgetError" or kind == "PlanningError":
         return PlanningError(message, line)
@@ -142,10 +142,12 @@ def _rebuild(error: Mapping[str, Any]) -> RoboCriticsError:
 
 
 def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_bytes) -> None:
-    """The child's main loop: set the limits, warm up, then answer ``(kind, program, critics, params, cpu_s)`` jobs.
+    """The child's main loop: set the limits, warm up, then answer ``(kind, program, critics, params, cpu_s, name)``
+    jobs.
 
-    ``kind`` is ``"check"`` (simulate and critique) or ``"repair"`` (:func:`robocritics.repair.repair`, whose
-    every re-simulation then runs under this process's limits too).
+    ``kind`` is ``"check"`` (simulate and critique), ``"repair"`` (:func:`robocritics.repair.repair`, whose
+    every re-simulation then runs under this process's limits too), ``"urscript"`` or ``"recording"`` (motion
+    from another tool, :func:`_imported`).
     """
     limit_address_space(memory_bytes)
     try:
@@ -169,7 +171,7 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
             job = conn.recv()
         except EOFError:
             return
-        kind, program, job_critics, job_params, cpu_s = job
+        kind, program, job_critics, job_params, cpu_s, name = job
         used = time.process_time()
         soft = math.ceil(used + cpu_s + CPU_BACKSTOP_S)
         resource.setrlimit(resource.RLIMIT_CPU, (soft if hard == resource.RLIM_INFINITY else min(soft, hard), hard))
@@ -181,6 +183,9 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
                 repaired = repair(program, scene, goal=goals or None, critics=job_critics, robot=robot,
                                   params=job_params or None)  # fmt: skip
                 execution, report = repaired.execution, repaired.report
+            elif kind in ("urscript", "recording"):  # motion from another tool: no goals (it names no grasps)
+                execution = _imported(kind, program, name, scene, robot)
+                report = critique(execution, scene, job_critics, job_params)
             else:
                 execution = simulate(program, scene, robot, **rate)
                 report = critique(execution, scene, job_critics, job_params, goals=goals)
@@ -194,6 +199,18 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
                 conn.send(("done", None, None, _error_dict(exc), time.process_time() - used, None))
             except MemoryError:
                 _out_of_memory(conn, time.process_time() - used)
+
+
+def _imported(kind: str, program: str, name: str, scene, robot):
+    """The Execution of a URScript ``program`` (its text; ``name`` the file's) or of the recording at path
+    ``program``, read and bounded by :mod:`robocritics.formats` in this limited process."""
+    if kind == "urscript":
+        from ...formats.urscript import run_urscript
+
+        return run_urscript(program, robot, scene, name=name or "script")
+    from ...formats import load_motion
+
+    return load_motion(program, robot, scene)
 
 
 def _out_of_memory(conn, cpu_s: float) -> None:
@@ -359,7 +376,16 @@ class Evaluator:
         """
         return self._job("check", program, critics, params)
 
-    def _job(self, kind: str, program: str, critics, params) -> Evaluation:
+    def evaluate_motion(self, kind: str, program: str, name: str = "") -> Evaluation:
+        """Like :meth:`evaluate` for motion from another tool (:mod:`robocritics.formats`): ``kind``
+        ``"urscript"`` with ``program`` the script's text and ``name`` its file's, or ``"recording"`` with
+        ``program`` the path of a recording (ur_rtde or generic CSV, JointTrajectory JSON, MoveIt YAML, rosbag2),
+        read in the child under its limits."""
+        if kind not in ("urscript", "recording"):
+            raise ValueError(f"kind must be 'urscript' or 'recording', got {kind!r}")
+        return self._job(kind, program, None, None, name)
+
+    def _job(self, kind: str, program: str, critics, params, name: str = "") -> Evaluation:
         from ...critic import select_critics
 
         if not isinstance(program, str):
@@ -381,7 +407,7 @@ class Evaluator:
                 if self._child is None:  # close() in another thread killed it after the check above
                     raise EvaluatorError("the Evaluator was closed during the check")
                 self._await_ready()
-                self._run(evaluation, (kind, program, job_critics, job_params, self.cpu_s))
+                self._run(evaluation, (kind, program, job_critics, job_params, self.cpu_s, name))
                 self._jobs_done += 1
                 if self._jobs_done >= self.max_jobs and not self._closed:  # bound any native leak
                     self._stop()
