@@ -117,7 +117,8 @@ class Studio:
         self._thread = threading.Thread(target=self._server.serve_forever, name="robocritics-studio", daemon=True)
         self._thread.start()
         # Warm the worker (imports, robot model) now, so the first Run does not pay for it; Run --program.
-        first = self._initial_run if self.run_program and self.program.strip() else (lambda: self.evaluator)
+        first = (self._initial_run if self.run_program and (self.program.strip() or self.motion)
+                 else (lambda: self.evaluator))
         threading.Thread(target=first, name="robocritics-studio-warm", daemon=True).start()
         return self
 
