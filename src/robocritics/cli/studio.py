@@ -32,6 +32,7 @@ from ._common import (
     scene_for,
     subcommand,
 )
+from ._motion import add_motion_options
 
 __all__ = ["studio_command"]
 
@@ -50,6 +51,7 @@ def _build_studio(sub) -> None:
                    "a recording (ur_rtde or generic CSV, JointTrajectory JSON, MoveIt YAML, rosbag2) is judged and "
                    "replayed (docs/formats.md)")
     add_goal_option(p)
+    add_motion_options(p)
     p.add_argument("--host", type=host, default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8765, help="port to bind (default 8765; 0: any free port)")
     p.add_argument("--token", metavar="SECRET", help="require this token on every request (needed off loopback)")
@@ -85,7 +87,8 @@ def studio_command(args: argparse.Namespace) -> int:
         deploy = {"host": args.deploy_host, "rtde_port": args.deploy_rtde_port,
                   "dashboard_port": args.deploy_dashboard_port, "secondary_port": args.deploy_secondary_port}
     studio = Studio(scene, program, host=args.host, port=args.port, token=args.token, model=model, deploy=deploy,
-                    goals=args.goals, no_model_reason=reason, run_program=bool(args.program), motion=motion)
+                    goals=args.goals, no_model_reason=reason, run_program=bool(args.program), motion=motion,
+                    motion_options=_motion_options(args, motion))
     try:
         studio.start()
     except OSError as exc:
@@ -106,6 +109,17 @@ def studio_command(args: argparse.Namespace) -> int:
     finally:
         studio.stop()
     return 0
+
+
+def _motion_options(args: argparse.Namespace, motion: str | None) -> dict:
+    """The URScript and rosbag options given (``--tcp`` …), for a motion file; none is allowed for a program."""
+    given = {"topic": args.topic, "passes": args.passes if args.passes != 1 else None, "tcp": args.tcp,
+             "payload_kg": args.payload or None, "start_q": args.start_q, "gripper_io": args.gripper_io}
+    given = {k: v for k, v in given.items() if v is not None}
+    if given and motion is None:
+        raise UsageError("--topic, --passes, --tcp, --payload, --start-q and --gripper-io are for a URScript file or "
+                         "a recording (--program FILE with its suffix: docs/formats.md)")
+    return given
 
 
 def _scene(name: str | None):

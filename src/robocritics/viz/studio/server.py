@@ -57,7 +57,9 @@ class Studio:
     recording (ur_rtde or generic CSV, JointTrajectory JSON, MoveIt YAML, rosbag2: the editor shows a read-only
     summary whose findings name times). Both are read and run in the worker's limited child. Fix and chat are off
     for them (the repairs and the model write the skill API, not URScript, and a recording has no program), and
-    so is Deploy (:data:`IMPORTED_DEPLOY`).
+    so is Deploy (:data:`IMPORTED_DEPLOY`). ``motion_options``: the options of
+    :meth:`~.worker.Evaluator.evaluate_motion` (a script's installation: ``tcp``, ``payload_kg``, ``start_q``,
+    ``gripper_io``, ``passes``; a rosbag's ``topic``).
     """
 
     def __init__(self, scene, program: str | None = None, *, host: str = "127.0.0.1", port: int = 0,
@@ -65,7 +67,7 @@ class Studio:
                  goals=None, timeout_s: float = 60.0, run_program: bool = False,
                  approval_timeout_s: float = APPROVAL_TIMEOUT_S,
                  no_model_reason: str = "no LLM endpoint is configured (start the studio with --base-url and --model)",
-                 motion=None):
+                 motion=None, motion_options: dict[str, Any] | None = None):
         from ...goals import parse_goals
         from ...scene import Scene
 
@@ -82,6 +84,7 @@ class Studio:
         self.critics = list(critics) if critics else None
         self.goals = parse_goals(goals, self.scene)  # a bad goal (GoalError) fails here, before serving
         self.motion = imported_motion(motion, bool(self.goals)) if motion is not None else None
+        self.motion_options = dict(motion_options or {})
         if self.motion is not None and self.motion["kind"] == "urscript" and not self.program:
             self.program = self.motion.pop("text")
         if self.motion is not None:
@@ -280,9 +283,9 @@ class Studio:
         if self.motion is None:
             evaluation = self.evaluator.evaluate(program)
         elif self.motion["kind"] == "urscript":
-            evaluation = self.evaluator.evaluate_motion("urscript", program, self.motion["name"])
+            evaluation = self.evaluator.evaluate_motion("urscript", program, self.motion["name"], **self.motion_options)
         else:
-            evaluation = self.evaluator.evaluate_motion("recording", self.motion["path"])
+            evaluation = self.evaluator.evaluate_motion("recording", self.motion["path"], **self.motion_options)
         if evaluation.error is None:
             return dict(execution=evaluation.execution, full_report=evaluation.report, error=None,
                         duration_s=evaluation.duration_s)
