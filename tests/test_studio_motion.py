@@ -55,3 +55,22 @@ def test_the_cli_refuses_motion_options_for_a_program(capsys):
     program = Path(__file__).resolve().parent.parent / "examples" / "programs" / "sorting_naive.py"
     assert main(["studio", "--no-browser", "--program", str(program), "--tcp", "0,0,0.1,0,0,0"]) == 2
     assert "--tcp" in capsys.readouterr().err
+
+
+def test_a_script_that_does_not_run_is_the_runtime_error_check_gives_naming_its_line():
+    """The worker's answer rebuilt in the studio says what `robocritics check` says: the error and its line."""
+    from robocritics import Robot
+    from robocritics.critic import runtime_report
+    from robocritics.formats.urscript import URScriptError, run_urscript
+
+    broken = SCRIPT.read_text().splitlines()
+    broken.insert(3, "  x = = 1")
+    broken = "\n".join(broken) + "\n"
+    with pytest.raises(URScriptError) as raised:
+        run_urscript(broken, Robot.ur3e(), Scene())
+    expected = runtime_report(raised.value).verdicts[0]
+    with Studio(Scene(), motion=SCRIPT) as studio:
+        revision = studio.run(broken)
+    (row,) = revision.full()["verdicts"]
+    assert (row["critic"], row["flag"], row["lines"]) == ("runtime", "error", [4])
+    assert row["message"] == expected.message and "column" not in row["message"]

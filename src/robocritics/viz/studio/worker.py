@@ -127,7 +127,11 @@ def _error_dict(exc: BaseException) -> dict[str, Any]:
 def _rebuild(error: Mapping[str, Any]) -> RoboCriticsError:
     """The typed error an :attr:`Evaluation.error` describes (the Loop's runtime feedback reads its fields)."""
     kind, message, line = error["type"], error["message"], int(error.get("line") or 0)
-    if kind in ("ProgramError", "URScriptError", "UnsupportedURScript"):  # a URScript error is a ProgramError
+    if kind in ("URScriptError", "UnsupportedURScript"):  # URScript has lines, no columns
+        from ...formats.urscript import URScriptError
+
+        return URScriptError(message, line)
+    if kind == "ProgramError":
         return ProgramError(message, line, int(error.get("col") or 0))
     if kind == "MotionBudgetError" or kind == "PlanningError":
         return PlanningError(message, line)
