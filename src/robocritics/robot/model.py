@@ -332,7 +332,7 @@ class Robot:
         home_q = kwargs.pop("home", home_q)
         tree, facts = arm_tree(
             path, tool=tool, tip=tip, base_pose=base_pose, joint_limits=joint_limits,
-            package_paths=tuple(Path(p) for p in package_paths), name=name,
+            package_paths=tuple(Path(p) for p in package_paths), name=name, tcp_frame=tcp_frame,
         )
         self_pairs = kwargs.pop("self_pairs", None)
         robot = cls(path, tcp_frame=tcp_frame, name=name or tree.get("name"), reach_m=1.0,

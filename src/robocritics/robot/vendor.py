@@ -68,13 +68,15 @@ def arm_tree(
     joint_limits: dict | None,
     package_paths: tuple[Path, ...] = (),
     name: str | None = None,
+    tcp_frame: str = "tcp",
 ) -> tuple[ET.Element, dict]:
     """The contract URDF tree of the vendor file at ``path`` and facts about it (``tip``, ``tool``,
     ``slack_m`` per capsule name). Raises :class:`RobotModelError` naming element, link or joint and line."""
     doc = _urdf.read_urdf(path)
     _urdf.check_numbers(doc)
     tree = _urdf.kinematic_tree(doc)
-    contract = doc.root.find("gripper") is not None and tool is None
+    # a file in robocritics' own contract (a <gripper> element, or its own TCP link) keeps its tool
+    contract = tool is None and (doc.root.find("gripper") is not None or tcp_frame in tree.links)
     joints, tip = _urdf.chain(tree, tip)
     keep = [tree.root] + [j.find("child").get("link") for j in joints]
     kept_joints = list(joints)
@@ -117,7 +119,8 @@ def arm_tree(
     for joint in kept_joints:
         out.append(_clean_joint(joint, limits.get(joint.get("name"))))
     if contract:
-        out.append(doc.root.find("gripper"))
+        if doc.root.find("gripper") is not None:
+            out.append(doc.root.find("gripper"))
         return out, {"tip": tip, "tool": "(the file's own)", "slack_m": slack}
     tool_obj = _tool(tool, path, package_paths)
     if isinstance(tool_obj, Tool):
