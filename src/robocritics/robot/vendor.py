@@ -354,12 +354,12 @@ def _home(robot, samples, frames, p0, p1, capsule_capsule, structural) -> np.nda
     clear_table = (lowest[:, movable] > 0.005).all(axis=1) if movable.any() else np.ones(len(samples), bool)
     clear_self = np.ones(len(samples), bool)
     names = robot.capsule_names
-    for a, b in _close_pairs(robot):
+    for a, b in robot._default_self_pairs(None):
         if (a, b) in structural:
             continue
         i, j = names.index(a), names.index(b)
         d = capsule_capsule(p0[:, i], p1[:, i], robot.capsule_radii[i], p0[:, j], p1[:, j], robot.capsule_radii[j])
-        clear_self &= d > 0.01
+        clear_self &= d > 0.0
     span = np.maximum(robot.upper - robot.lower, 1e-9)
     margin = np.min(np.minimum(samples - robot.lower, robot.upper - samples) / span, axis=1)
     target = robot.shoulder_m + np.array([0.5 * robot.reach_m, 0.0, -robot.shoulder_m[2] + 0.5 * robot.reach_m])
