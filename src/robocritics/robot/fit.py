@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import RobotModelError
 
-__all__ = ["Mesh", "FittedCapsule", "load_mesh", "box_mesh", "fit_capsules", "MAX_TRIANGLES", "MAX_CAPSULES_PER_LINK", "SLACK_GRID_M"]
+__all__ = ["Mesh", "FittedCapsule", "load_mesh", "box_mesh", "fit_capsules", "fit_capsules_uncached", "MAX_TRIANGLES", "MAX_CAPSULES_PER_LINK", "SLACK_GRID_M"]
 
 #: Most triangles of one mesh file (vendor collision meshes have 100-20,000; visual OBJs up to ~200,000).
 MAX_TRIANGLES = 1_000_000
@@ -40,9 +40,9 @@ MAX_CAPSULES_PER_LINK = 3
 #: A split must shrink the capsules' volume by this fraction for each capsule it adds (fewer pairs to check).
 SPLIT_GAIN = 0.1
 #: Positions tried for each cut across a link's long axis (equally spaced).
-CUT_GRID = 8
+CUT_GRID = 6
 #: Spacing of the grid on which a capsule's slack is measured [m]; added to the measured slack.
-SLACK_GRID_M = 0.004
+SLACK_GRID_M = 0.006
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,9 @@ def load_mesh(path: Path, scale=(1.0, 1.0, 1.0)) -> Mesh:
     triangles = np.array([[t[0], t[1], t[2]] for t in (model.tri_indices(i) for i in range(F))], dtype=np.int64)
     if not np.isfinite(vertices).all() or triangles.min() < 0 or triangles.max() >= len(vertices):
         raise RobotModelError(f"mesh {str(path)!r} has non-finite vertices or triangles that name no vertex")
-    return Mesh(vertices, triangles)
+    # an STL repeats each vertex for every triangle around it: one copy each (the surface is the same)
+    vertices, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    return Mesh(vertices, inverse.reshape(-1)[triangles])
 
 
 def box_mesh(size) -> Mesh:
@@ -105,6 +107,10 @@ def box_mesh(size) -> Mesh:
     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float) * half
     faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1), (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
     return Mesh(corners, np.array(faces, dtype=np.int64))
+
+
+_DIRECTIONS_2D = np.stack([np.cos(np.linspace(0, 2 * math.pi, 64, endpoint=False)),
+                           np.sin(np.linspace(0, 2 * math.pi, 64, endpoint=False))])
 
 
 def _volume(radius: float, length: float) -> float:
@@ -121,9 +127,12 @@ def _enclosing(points: np.ndarray, axis: np.ndarray, iterations: int = 40) -> tu
     v = np.cross(axis, u)
     flat = np.stack([points @ u, points @ v], axis=1)
     centre = (flat.min(axis=0) + flat.max(axis=0)) / 2
-    # Badoiu-Clarkson: step towards the farthest point; converges to the smallest enclosing circle's centre
+    # Badoiu-Clarkson: step towards the farthest point; converges to the smallest enclosing circle's centre.
+    # The farthest point is always on the hull, so the steps look only at the extreme points in 64 directions
+    # (the radius below is still measured over every point, so the capsule encloses them all)
+    extreme = flat[np.unique(np.argmax(flat @ _DIRECTIONS_2D, axis=0))]
     for i in range(1, iterations):
-        far = flat[int(np.argmax(np.einsum("ij,ij->i", flat - centre, flat - centre)))]
+        far = extreme[int(np.argmax(np.einsum("ij,ij->i", extreme - centre, extreme - centre)))]
         centre = centre + (far - centre) / (i + 1)
     across = flat - centre
     rho2 = np.einsum("ij,ij->i", across, across)
@@ -150,7 +159,23 @@ def _best_single(points: np.ndarray, iterations: int = 40) -> tuple[np.ndarray, 
     return best[1], best[2], best[3]
 
 
+_FITTED: dict[bytes, list] = {}
+
+
 def fit_capsules(mesh: Mesh, max_capsules: int = MAX_CAPSULES_PER_LINK) -> list[FittedCapsule]:
+    """:func:`fit_capsules_uncached`, once per mesh (by content) and ``max_capsules`` in a process."""
+    import hashlib
+
+    key = hashlib.sha256(mesh.vertices.tobytes() + mesh.triangles.tobytes() + bytes([max_capsules])).digest()
+    fitted = _FITTED.get(key)
+    if fitted is None:
+        if len(_FITTED) > 512:
+            _FITTED.clear()
+        fitted = _FITTED[key] = fit_capsules_uncached(mesh, max_capsules)
+    return list(fitted)
+
+
+def fit_capsules_uncached(mesh: Mesh, max_capsules: int = MAX_CAPSULES_PER_LINK) -> list[FittedCapsule]:
     """One to ``max_capsules`` capsules that together enclose every triangle of ``mesh`` (link frame, m).
 
     The mesh is cut across its long axis into slabs (cuts searched on a grid of :data:`CUT_GRID` positions,
@@ -249,10 +274,12 @@ def _slacks(mesh: Mesh, capsules) -> list[float]:
     point = coal.Sphere(1e-12)
     request, identity = coal.DistanceRequest(), coal.Transform3s()
     vertices = mesh.vertices[np.unique(mesh.triangles)]
+    # any subset of the vertices bounds the distance from above: 2,000 of them keep the matrix below small
+    vertices = vertices[:: max(1, len(vertices) // 2000)]
     v2 = np.einsum("ij,ij->i", vertices, vertices)
     out = []
     for p0, p1, r in capsules:
-        spacing = max(SLACK_GRID_M, 2 * math.pi * r / 64)  # a bounded number of points per ring
+        spacing = max(SLACK_GRID_M, 2 * math.pi * r / 48)  # a bounded number of points per ring
         surface = capsule_surface(np.asarray(p0), np.asarray(p1), r, spacing)
         # the distance to the nearest vertex bounds the distance to the mesh from above: visit the surface
         # points in falling order of it and stop where it cannot beat the largest mesh distance found

@@ -306,6 +306,11 @@ def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links) -> Non
         if not reach_m > 0:
             raise RobotModelError(f"{robot.urdf_path}: the flange {tip!r} does not move away from the shoulder")
     robot.reach_m = float(reach_m)
+    # a capsule whose lowest point keeps its height (a housing centred on a horizontal shoulder axis) stands
+    # where the file put it: its table distance is as constant as a fixed link's
+    lowest = np.minimum(p0[..., 2], p1[..., 2]) - robot.capsule_radii
+    steady = np.ptp(lowest, axis=0) < 1e-3
+    robot.table_fixed_capsules = tuple(name for name, still in zip(robot.capsule_names, steady) if still)
     structural = _structural_pairs(robot, p0, p1, capsule_capsule)
     if home_q is None:
         home_q = _home(robot, samples, frames, p0, p1, capsule_capsule, structural)
@@ -349,28 +354,26 @@ def _home(robot, samples, frames, p0, p1, capsule_capsule, structural) -> np.nda
     no moving capsule touching the table), keeps away from the joint limits, and puts the TCP in front
     of the shoulder at half the reach with the fingers down; refined by IK to that point when it can be."""
     tcp = frames[:, robot.tcp_index]
-    movable = np.array([c.frame not in robot.fixed_links for c in robot.capsules])
+    movable = np.array([c.frame not in robot.fixed_links and c.name not in robot.table_fixed_capsules for c in robot.capsules])
     lowest = np.minimum(p0[..., 2], p1[..., 2]) - robot.capsule_radii
-    clear_table = (lowest[:, movable] > 0.005).all(axis=1) if movable.any() else np.ones(len(samples), bool)
-    clear_self = np.ones(len(samples), bool)
+    clearance = lowest[:, movable].min(axis=1) if movable.any() else np.full(len(samples), np.inf)
     names = robot.capsule_names
     for a, b in robot._default_self_pairs(None):
         if (a, b) in structural:
             continue
         i, j = names.index(a), names.index(b)
         d = capsule_capsule(p0[:, i], p1[:, i], robot.capsule_radii[i], p0[:, j], p1[:, j], robot.capsule_radii[j])
-        clear_self &= d > 0.0
+        clearance = np.minimum(clearance, d)
     span = np.maximum(robot.upper - robot.lower, 1e-9)
     margin = np.min(np.minimum(samples - robot.lower, robot.upper - samples) / span, axis=1)
     target = robot.shoulder_m + np.array([0.5 * robot.reach_m, 0.0, -robot.shoulder_m[2] + 0.5 * robot.reach_m])
     down = -tcp[:, :3, 2] @ np.array([0.0, 0.0, 1.0])
     score = -np.linalg.norm(tcp[:, :3, 3] - target, axis=1) / robot.reach_m + 0.5 * down + margin
-    score[~(clear_table & clear_self)] = -np.inf
-    best = int(np.argmax(score))
-    if not np.isfinite(score[best]):
-        raise RobotModelError(f"{robot.urdf_path}: no sampled configuration is free of collision with itself and the "
-                              "table; give home_q=")
-    seed = samples[best]
+    if (clearance > 0).any():
+        score[clearance <= 0] = -np.inf
+    else:  # nothing sampled is clear: the least colliding one (the critics will say where it touches)
+        score = clearance
+    seed = samples[int(np.argmax(score))]
     try:
         return robot.ik(target, seed=seed)
     except Exception:  # the sampled pose itself is a valid home; the refinement is a nicety
