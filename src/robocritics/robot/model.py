@@ -551,6 +551,24 @@ class Robot:
     def _forward_static(self, q: np.ndarray) -> np.ndarray:
         return self.forward(q[None, :])[0]
 
+    @cached_property
+    def kinematic_hash(self) -> str:
+        """A hash of what the joint angles mean: the flange pose (``tool0``, else the tip the tool mounts on,
+        else the TCP) in the base frame at four fixed configurations (clipped to the limits), rounded to 1 um
+        and 1 urad. Two models with the same chain and base convention share it whatever their names and link
+        frames; a ROS-convention UR (base turned 180 deg) or other lengths do not. The deploy gate keys on it."""
+        import hashlib
+
+        flange = "tool0" if "tool0" in self._frame_index else getattr(self, "tip_frame", None) or self.tcp_frame
+        index = self._frame_index[flange]
+        pattern = np.array([0.0, 0.3, -1.2, 1.1, -0.7, 0.9, 0.4, -0.5, 0.8])
+        probes = [np.zeros(self.n)] + [np.roll(pattern, k)[: self.n] * (1 + 0.5 * k) for k in range(3)]
+        h = hashlib.sha256(f"{self.n}:".encode())
+        for q in probes:
+            pose = self._forward_static(np.clip(q, self.lower, self.upper))[index]
+            h.update(np.round(pose[:3, :4], 6).astype("<f8").tobytes() + b";")
+        return h.hexdigest()[:16]
+
     # --- limits ---------------------------------------------------------------------
 
     @cached_property

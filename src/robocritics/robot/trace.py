@@ -169,5 +169,6 @@ def build_trajectory(
         steps=steps,
         limits=robot.limits,
         robot_name=robot.name,
+        kinematic_hash=robot.kinematic_hash,
         tcp_frame=robot.tcp_frame,
     )
