@@ -305,3 +305,85 @@ def test_base_pose_mounts_the_arm_in_the_world(tmp_path):
     mount[:3, :3] = pin.rpy.rpyToMatrix(0, 0, math.pi / 2)
     mount[:3, 3] = (0.1, 0.2, 0.5)
     np.testing.assert_allclose(b, mount @ a, atol=1e-12)
+
+
+# --- through the CLI ------------------------------------------------------------------------------------
+
+_PICK = """lib.set_speed(0.3)
+lib.open_gripper()
+lib.move_above(apple, 0.1)
+lib.move_linear(apple.x, apple.y, apple.z)
+lib.close_gripper()
+lib.move_linear(apple.x, apple.y, apple.z + 0.15)
+lib.move_to(box.x, box.y, box.top + 0.12)
+lib.open_gripper()
+lib.home()
+"""
+
+
+def _pick_scene(path: Path, reach_m: float) -> Path:
+    """An apple and a box laid out as for the UR3e, scaled to the arm's reach (0.6 m for the UR3e's layout)."""
+    import json
+
+    s = reach_m / 0.6
+    scene = {"name": "pick", "objects": [{"id": "apple", "shape": "sphere", "size": [0.035], "position": [0.35 * s, 0.1 * s, 0.035]}],
+             "containers": [{"id": "box", "size": [0.2, 0.2, 0.08], "position": [0.3 * s, -0.25 * s, 0.04]}]}
+    path.write_text(json.dumps(scene))
+    return path
+
+
+_CLI_ARMS = [p for p in _arms() if p.id in ("airo ur5e", "pybullet xarm6", "erd panda")]
+
+
+@pytest.mark.parametrize("path, kwargs", _CLI_ARMS)
+def test_a_pick_and_place_through_the_cli_on_a_vendor_arm(tmp_path, capsys, path, kwargs):
+    import json
+
+    from robocritics import cli
+
+    if path is None or not path.is_file():
+        pytest.skip("the package with this URDF is not installed (pip install '.[test]')")
+    tool = kwargs.get("tool", "robotiq_2f85")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        robot = Robot.from_urdf(path, tool=tool, tip=kwargs.get("tip"))
+        program = tmp_path / "pick.py"
+        program.write_text(_PICK)
+        scene = _pick_scene(tmp_path / "scene.json", robot.reach_m)
+        argv = ["check", str(program), "--scene", str(scene), "--robot", str(path), "--tool", tool, "--json",
+                "--goal", "apple in box"] + (["--tip", kwargs["tip"]] if "tip" in kwargs else [])
+        status = cli.main(argv)
+    report = json.loads(capsys.readouterr().out)
+    verdicts = {v["critic"]: v for v in report["verdicts"]}
+    assert status == 0, [(v["critic"], v["message"]) for v in report["verdicts"] if v["flag"] == "ERROR"]
+    assert verdicts["task_outcome"]["flag"] == "OK"  # the apple ended in the box
+    # space usage is judged against this arm's own reach: half its reach sphere, as the UR3e's is against 0.5 m
+    assert verdicts["space_usage"]["threshold"] == pytest.approx(2 / 3 * math.pi * robot.reach_m**3, rel=1e-9)
+
+
+def test_a_scene_that_names_a_bundled_arm_is_run_on_it(tmp_path, capsys):
+    import json
+
+    from robocritics import cli
+
+    program = tmp_path / "pick.py"
+    program.write_text(_PICK)
+    scene = _pick_scene(tmp_path / "scene.json", 0.95)
+    scene.write_text(json.dumps({**json.loads(scene.read_text()), "robot": "ur5e"}))
+    assert cli.main(["check", str(program), "--scene", str(scene), "--json"]) in (0, 1)  # not 2: the CLI follows the scene
+    report = json.loads(capsys.readouterr().out)
+    assert report["verdicts"][0]["critic"] != "runtime"
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--tool", "robotiq_2f85"], "--tool and --tip need --robot PATH.urdf"),
+    (["--robot", "ur5e", "--tool", "robotiq_2f85"], "carries its own gripper"),
+    (["--robot", "kuka"], "not a bundled arm"),
+])
+def test_robot_options_refuse_what_they_cannot_do(tmp_path, capsys, argv, message):
+    from robocritics import cli
+
+    program = tmp_path / "pick.py"
+    program.write_text(_PICK)
+    assert cli.main(["check", str(program), *argv]) == 2
+    assert message in capsys.readouterr().err
