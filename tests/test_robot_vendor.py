@@ -62,7 +62,7 @@ def _raw_tip_pose(path: Path, joint_names, q, tip: str) -> np.ndarray:
         else:  # continuous: (cos, sin)
             x[idx : idx + 2] = (math.cos(value), math.sin(value))
     pin.framesForwardKinematics(model, data, x)
-    return data.oMf[model.getFrameId(tip)].homogeneous
+    return data.oMf[model.getFrameId(tip, pin.FrameType.BODY)].homogeneous
 
 
 @pytest.mark.parametrize("path, kwargs", _arms())
