@@ -41,6 +41,15 @@ PAGE_TIMEOUT_S = 60.0
 SCREENSHOTS = Path(__file__).resolve().parent.parent / "docs" / "screenshots"
 
 
+def save_screenshot(driver, name: str) -> Path:
+    """The page as PNG in ``docs/screenshots/name``, through the project's safe writer (a temporary file renamed
+    over it: never written through a link placed at the name)."""
+    from robocritics._files import write_file_atomically
+
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    return write_file_atomically(SCREENSHOTS / name, driver.get_screenshot_as_png(), "screenshot")
+
+
 def chromium_paths() -> tuple[str, str] | None:
     browser = shutil.which("chromium") or shutil.which("chromium-browser")
     driver = shutil.which("chromedriver")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from browser import SCREENSHOTS, canvas_stats, chromium, severe_console_errors, wait_for
+from browser import canvas_stats, chromium, save_screenshot, severe_console_errors, wait_for
 from llm_server import LLMServer
 from robocritics import Scene, critique, simulate
 from robocritics.llm.client import OpenAICompatible
@@ -95,11 +95,10 @@ def test_run_on_sorting_naive_shows_the_critics_timeline_and_robot(driver):
         t = float(wait_for(driver, "const t = document.getElementById('replay').dataset.time; "
                                    "return t !== '-1' && t", what="the time cursor to move"))
         assert t == pytest.approx(worst.evidence.worst_time_s, abs=0.1)
-        SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         driver.set_window_size(1400, 900)
         driver.execute_script(f"document.querySelector('#critics .critic[data-critic=\"{worst.critic}\"]').click()")
         time.sleep(0.5)  # let the highlight render before the screenshot (not an assertion)
-        driver.save_screenshot(str(SCREENSHOTS / "studio.png"))
+        save_screenshot(driver, "studio.png")
         assert not [e for e in severe_console_errors(driver) if "favicon" not in e]
 
 

@@ -160,6 +160,17 @@ def read_text(path: str, what: str, max_bytes: int = MAX_INPUT_BYTES) -> str:
     return read_bounded_text(path, what, shown_path(path), max_bytes, UsageError)
 
 
+def check_output(path: str, option: str) -> None:
+    """A UsageError (one line, naming ``option`` and the path) unless a new file may be written at ``path``:
+    no link, directory, FIFO or device there, and its directory exists (:func:`~robocritics._files.check_output_path`)."""
+    from .._files import OutputFileError, check_output_path
+
+    try:
+        check_output_path(path, option)
+    except OutputFileError as exc:
+        raise UsageError(str(exc)) from None
+
+
 def load_params(path: str | None) -> dict:
     if not path:
         return {}

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ._common import (
     UsageError,
     add_critic_options,
     add_robot_options,
     add_goal_option,
+    check_output,
     load_params,
     one_line,
     read_text,
@@ -86,10 +86,8 @@ def _check(args: argparse.Namespace) -> int:
     from ..goals import parse_goals
 
     source = read_text(args.program, "program")
-    if args.html:
-        html_dir = Path(args.html).resolve().parent
-        if not html_dir.is_dir():  # checked before simulating, so a typo costs nothing
-            raise UsageError(f"--html {args.html}: the directory {html_dir} does not exist")
+    if args.html:  # checked before simulating, so a typo (or a link at the name) costs nothing
+        check_output(args.html, "--html")
     scene = scene_for(args.program, args.scene)
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
@@ -106,10 +104,12 @@ def _check(args: argparse.Namespace) -> int:
             print(f"robocritics: no replay written to {args.html}: the program did not run", file=sys.stderr)
         return 1
     if args.html:
-        from ..viz import write_replay_html
+        from .._files import OutputFileError, write_file_atomically
+        from ..viz import replay_html
 
+        page = replay_html(execution, report, title=f"{args.program} in {scene.name}: {report.score_text}")
         try:
-            write_replay_html(args.html, execution, report, title=f"{args.program} in {scene.name}: {report.score_text}")
-        except OSError as exc:
-            raise UsageError(f"--html {args.html}: cannot write the replay: {exc.strerror or exc}") from None
+            write_file_atomically(args.html, page, "--html")
+        except OutputFileError as exc:
+            raise UsageError(str(exc)) from None
     return 1 if report.has_errors else 0
