@@ -387,3 +387,19 @@ def test_robot_options_refuse_what_they_cannot_do(tmp_path, capsys, argv, messag
     program.write_text(_PICK)
     assert cli.main(["check", str(program), *argv]) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["fix", "deploy", "batch"])
+def test_every_command_takes_robot_and_names_a_bad_urdf(tmp_path, capsys, command):
+    from robocritics import cli
+
+    bad = tmp_path / "arm.urdf"
+    bad.write_text('<robot name="a"><link name="base"/></robot>')
+    program = tmp_path / "pick.py"
+    program.write_text(_PICK)
+    rows = tmp_path / "in.jsonl"
+    rows.write_text('{"id": "a", "scene": "sorting", "program": "lib.home()"}\n')
+    argv = {"fix": ["fix", str(program)], "deploy": ["deploy", str(program), "--dry-run"],
+            "batch": ["batch", str(rows), "-o", str(tmp_path / "out.jsonl")]}[command]
+    assert cli.main([*argv, "--robot", str(bad)]) == 2
+    assert "no moving joint" in capsys.readouterr().err
