@@ -403,3 +403,26 @@ def test_every_command_takes_robot_and_names_a_bad_urdf(tmp_path, capsys, comman
             "batch": ["batch", str(rows), "-o", str(tmp_path / "out.jsonl")]}[command]
     assert cli.main([*argv, "--robot", str(bad)]) == 2
     assert "no moving joint" in capsys.readouterr().err
+
+
+def test_a_five_joint_arm_points_its_fingers_with_the_yaw_free():
+    """SO-100 (5 joints): pointing IK reaches a position with the finger axis along a direction (five
+    constraints), from configurations the arm can take."""
+    from robocritics.robot.ik import pointing_ik
+
+    path = _erd() / "so_arm_description/urdf/so100.urdf" if _erd() else None
+    if path is None or not path.is_file():
+        pytest.skip("example-robot-data is not installed")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        robot = Robot.from_urdf(path, tip="gripper", tool="none")
+    assert robot.n == 5
+    rng = np.random.default_rng(3)
+    for made in rng.uniform(robot.lower, robot.upper, size=(10, robot.n)):
+        pose = robot.tcp_pose(made)
+        seed = np.clip(made + rng.normal(0, 0.2, robot.n), robot.lower, robot.upper)
+        q = pointing_ik(robot.model, robot.data, robot._tcp_frame_id, pose[:3, 3], pose[:3, 2], seed, robot.lower, robot.upper)
+        reached = robot.tcp_pose(q)
+        np.testing.assert_allclose(reached[:3, 3], pose[:3, 3], atol=1e-8)
+        np.testing.assert_allclose(reached[:3, 2], pose[:3, 2], atol=1e-8)
+        assert robot.in_limits(q)

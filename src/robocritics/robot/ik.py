@@ -1224,3 +1224,60 @@ def numeric_ik(
         f"{p_des[2]:.3f}) m for frame {model.frames[fid].name!r} after {restarts + 1} attempts: "
         f"best residual {dp:.3g} m, {dr:.3g} rad (tolerance {tol:g})"
     )
+
+
+def pointing_ik(model: Any, data: Any, fid: int, position: Any, axis: Any, seed: Any, lower: Any, upper: Any, *,
+                max_iter: int = 200, tol: float = 1e-9, restarts: int = 20, max_step: float = 0.5, rng: int = 0) -> np.ndarray:
+    """IK for the frame ``fid`` at ``position`` (m) with its +z axis along ``axis`` and the turn about that axis
+    free: five constraints, for arms with fewer than six joints (a 5-joint arm cannot choose the yaw of a
+    fingers-down grasp as well). Damped least squares on ``e = [p* - p, z x z*]`` with the rows
+    ``[J_v; (J_w x z) x z*]`` (world-aligned frame Jacobian), clipped to the limits; restarts as
+    :func:`numeric_ik` (the seed first, then near it, then anywhere, deterministic). Raises PlanningError."""
+    p_des = np.asarray(position, float).reshape(3)
+    z_des = np.asarray(axis, float).reshape(3)
+    z_des = z_des / np.linalg.norm(z_des)
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    gen = np.random.default_rng(rng)
+    q0 = np.clip(np.asarray(seed, float).reshape(model.nq), lo, hi)
+
+    def attempt(q):
+        best_q, best = q, (math.inf, math.inf)
+        for _ in range(max_iter):
+            pin.computeJointJacobians(model, data, q)
+            pin.framesForwardKinematics(model, data, q)
+            oMf = data.oMf[fid]
+            z = oMf.rotation[:, 2]
+            e = np.concatenate([p_des - oMf.translation, np.cross(z, z_des)])
+            dp, dr = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])) + (2.0 if z @ z_des < 0 else 0.0)
+            if dp + dr < best[0] + best[1]:
+                best_q, best = q, (dp, dr)
+            if dp <= tol and dr <= tol:
+                break
+            J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+            Jr = np.cross(np.cross(J[3:].T, z), z_des).T  # d(z x z*)/dq: z moves by w x z
+            A = np.vstack([J[:3], -Jr])
+            lam = 1e-10 + 1e-3 * float(e @ e)
+            dq = A.T @ np.linalg.solve(A @ A.T + lam * np.eye(6), e)
+            big = float(np.abs(dq).max())
+            if big > max_step:
+                dq *= max_step / big
+            q = np.clip(pin.integrate(model, q, dq), lo, hi)
+        return best_q, best[0], best[1]
+
+    best = (q0, math.inf, math.inf)
+    for k in range(restarts + 1):
+        if k == 0:
+            start = q0
+        elif k <= 4:
+            start = np.clip(q0 + gen.normal(0.0, 0.15 * k, q0.shape), lo, hi)
+        else:
+            start = gen.uniform(np.where(np.isfinite(lo), lo, -_PI), np.where(np.isfinite(hi), hi, _PI))
+        q, dp, dr = attempt(start)
+        if dp + dr < best[1] + best[2]:
+            best = (q, dp, dr)
+        if dp <= tol and dr <= tol:
+            return np.array(q, dtype=float)
+    _, dp, dr = best
+    raise PlanningError(f"numeric IK did not reach ({p_des[0]:.3f}, {p_des[1]:.3f}, {p_des[2]:.3f}) m with the finger "
+                        f"axis along {np.round(z_des, 3).tolist()} after {restarts + 1} attempts: best residual "
+                        f"{dp:.3g} m, {dr:.3g} rad")

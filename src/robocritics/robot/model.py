@@ -726,7 +726,9 @@ class Robot:
 
         ``orientation`` is a 3x3 rotation of the tcp frame (default: fingers straight
         down, turned by ``yaw_rad``). Among all solutions within the joint limits
-        the one nearest ``seed`` (default: the home pose) is returned. UR arms use
+        the one nearest ``seed`` (default: the home pose) is returned. An arm with fewer than six joints
+        cannot choose the yaw as well: with the default orientation its fingers point down and the yaw is
+        what its wrist allows (:func:`~robocritics.robot.ik.pointing_ik`). UR arms use
         closed-form IK (all 8 branches); others Pinocchio damped least squares.
         Raises :class:`PlanningError` naming the target and why.
         """
@@ -743,6 +745,9 @@ class Robot:
             if self.dh is not None and self.tcp_in_flange is not None:
                 flange = target @ self._flange_in_tcp
                 return _ik.ur_ik(self.dh, flange, seed, self.lower, self.upper)
+            if orientation is None and self.n < 6:
+                # fewer than six joints cannot also choose the yaw: fingers down, turned as the wrist allows
+                return _ik.pointing_ik(self.model, self.data, self._tcp_frame_id, p, R[:, 2], seed, self.lower, self.upper)
             return _ik.numeric_ik(self.model, self.data, self._tcp_frame_id, target, seed, self.lower, self.upper)
         except PlanningError as exc:
             pose = "with the fingers down" if orientation is None else "in the requested orientation"
