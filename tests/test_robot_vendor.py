@@ -294,6 +294,12 @@ def test_missing_and_oversized_meshes_are_named(tmp_path):
     (tmp_path / "meshes" / "upper.stl").write_bytes(b"solid junk\nthis is not an stl\n")
     with pytest.raises(RobotModelError, match=r"line 4: <mesh> of link 'upper': mesh .*upper.stl"):
         Robot.from_urdf(path)
+    # a COLLADA file is XML: an entity bomb never reaches assimp
+    path.write_text(meshed.replace("upper.stl", "upper.dae"))
+    (tmp_path / "meshes" / "upper.dae").write_text(
+        '<?xml version="1.0"?><!DOCTYPE C [<!ENTITY a "aaaa"><!ENTITY b "&a;&a;&a;&a;">]><COLLADA>&b;</COLLADA>')
+    with pytest.raises(RobotModelError, match=r"line 4: <mesh> of link 'upper': .*upper.dae.* DOCTYPE or ENTITY"):
+        Robot.from_urdf(path)
 
 
 def test_base_pose_mounts_the_arm_in_the_world(tmp_path):

@@ -83,6 +83,11 @@ def load_mesh(path: Path, scale=(1.0, 1.0, 1.0)) -> Mesh:
     suffix = path.suffix.lower()
     if suffix not in (".stl", ".dae", ".obj"):
         raise RobotModelError(f"mesh {str(path)!r}: robocritics reads STL, DAE and OBJ meshes, not {suffix or 'this file'}")
+    if suffix == ".dae":  # COLLADA is XML: no DTD reaches assimp's parser (entity expansion, external entities)
+        with open(path, "rb") as f:
+            head = f.read(1 << 16).upper()
+        if b"<!DOCTYPE" in head or b"<!ENTITY" in head:
+            raise RobotModelError(f"mesh {str(path)!r} has a DOCTYPE or ENTITY declaration; a COLLADA mesh needs neither")
     try:
         model = coal.MeshLoader().load(str(path), np.asarray(scale, dtype=float))
     except Exception as exc:  # assimp's errors arrive as RuntimeError or ValueError, with its text
