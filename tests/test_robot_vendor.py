@@ -432,3 +432,65 @@ def test_a_five_joint_arm_points_its_fingers_with_the_yaw_free():
         np.testing.assert_allclose(reached[:3, 3], pose[:3, 3], atol=1e-8)
         np.testing.assert_allclose(reached[:3, 2], pose[:3, 2], atol=1e-8)
         assert robot.in_limits(q)
+
+
+def test_a_tool_urdf_brings_its_tcp_fingers_and_gripper_links(tmp_path):
+    tool = tmp_path / "suction_cup_gripper.urdf"
+    tool.write_text("""<robot name="my_gripper">
+  <link name="adapter"><collision><geometry><box size="0.06 0.06 0.04"/></geometry></collision></link>
+  <link name="jaw_a"><collision><origin xyz="0 0 0.02"/><geometry><cylinder radius="0.008" length="0.04"/></geometry></collision></link>
+  <link name="jaw_b"><collision><origin xyz="0 0 0.02"/><geometry><cylinder radius="0.008" length="0.04"/></geometry></collision></link>
+  <link name="tcp"/>
+  <joint name="a" type="fixed"><parent link="adapter"/><child link="jaw_a"/><origin xyz="0 0.03 0.05"/></joint>
+  <joint name="b" type="fixed"><parent link="adapter"/><child link="jaw_b"/><origin xyz="0 -0.03 0.05"/></joint>
+  <joint name="t" type="fixed"><parent link="adapter"/><child link="tcp"/><origin xyz="0 0 0.12"/></joint>
+  <gripper max_opening="0.044" fingers="jaw_a jaw_b"/>
+</robot>""")
+    robot = Robot.from_urdf(_arm(tmp_path), tool=str(tool))
+    assert robot.max_opening_m == 0.044 and robot.finger_links == ("jaw_a", "jaw_b")
+    assert {c.frame for c in robot.capsules if c.group == "gripper"} == {"adapter", "jaw_a", "jaw_b"}
+    assert {c.frame for c in robot.capsules if c.group == "arm"} == {"base", "upper"}
+    pose = robot.forward(np.array([0.2]))
+    flange = pose[robot.frame_names.index("tool0")]
+    np.testing.assert_allclose(np.linalg.inv(flange) @ pose[robot.tcp_index][:, 3], (0, 0, 0.12, 1), atol=1e-12)
+    # a tool whose joint moves is refused, naming it
+    tool.write_text(tool.read_text().replace('<joint name="a" type="fixed">', '<joint name="a" type="prismatic">'
+                                             ).replace('<origin xyz="0 0.03 0.05"/></joint>',
+                                                       '<origin xyz="0 0.03 0.05"/><limit lower="0" upper="0.02" velocity="0.1"/></joint>'))
+    with pytest.raises(RobotModelError, match=r"line \d+: tool joint 'a' is prismatic"):
+        Robot.from_urdf(_arm(tmp_path), tool=str(tool))
+
+
+def test_inferred_facts_can_be_overridden(tmp_path):
+    path = _arm(tmp_path)
+    robot = Robot.from_urdf(path, tool="none", fixed_links=("base",), reach_m=0.4, home_q=[0.5],
+                            joint_limits={"shoulder": (-0.5, 0.8)}, name="mine")
+    assert robot.fixed_links == ("base",) and robot.reach_m == 0.4 and robot.home_q.tolist() == [0.5]
+    assert robot.lower.tolist() == [-0.5] and robot.upper.tolist() == [0.8] and robot.name == "mine"
+    assert robot.max_opening_m == 0.0  # tool "none": the TCP is the flange and nothing grasps
+    np.testing.assert_allclose(robot.tcp_pose(np.array([0.1])), robot.forward(np.array([0.1]))[robot.frame_names.index("tool0")])
+    with pytest.raises(RobotModelError, match="joint_limits names 'elbow'"):
+        Robot.from_urdf(path, joint_limits={"elbow": (0, 1)})
+    with pytest.raises(RobotModelError, match="no bundled tool 'vacuum'"):
+        Robot.from_urdf(path, tool="vacuum")
+
+
+def test_fitted_capsules_of_a_vendor_mesh_hold_the_bound():
+    """The UR5's upper arm as example-robot-data ships it: three capsules (a 0.057 m tube between two housings),
+    and the capsule distance against a brute-force point-to-triangle distance within the slack."""
+    robots = _erd()
+    if robots is None:
+        pytest.skip("example-robot-data is not installed")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        mesh = fit.load_mesh(robots / "ur_description/meshes/ur5/collision/upperarm.stl")
+    capsules = fit.fit_capsules(mesh)
+    assert len(capsules) == 3 and min(c.radius_m for c in capsules) < 0.06
+    rng = np.random.default_rng(4)
+    lo, hi = mesh.vertices.min(axis=0) - 0.1, mesh.vertices.max(axis=0) + 0.1
+    for p in rng.uniform(lo, hi, size=(25, 3)):
+        d_caps = min(_capsule_distance(p, c) for c in capsules)
+        d_mesh = _mesh_distance(p, mesh)
+        assert d_caps <= d_mesh + 1e-9
+        if d_caps > 0:
+            assert d_mesh - d_caps <= max(c.slack_m for c in capsules) + 1e-9

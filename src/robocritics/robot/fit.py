@@ -22,7 +22,6 @@ hypothesis against a plain point-to-triangle reference.
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +39,7 @@ MAX_CAPSULES_PER_LINK = 3
 #: A split must shrink the capsules' volume by this fraction for each capsule it adds (fewer pairs to check).
 SPLIT_GAIN = 0.1
 #: Positions tried for each cut across a link's long axis (equally spaced).
-CUT_GRID = 6
+CUT_GRID = 16
 #: Spacing of the grid on which a capsule's slack is measured [m]; added to the measured slack.
 SLACK_GRID_M = 0.006
 
@@ -183,8 +182,8 @@ def fit_capsules(mesh: Mesh, max_capsules: int = MAX_CAPSULES_PER_LINK) -> list[
 def fit_capsules_uncached(mesh: Mesh, max_capsules: int = MAX_CAPSULES_PER_LINK) -> list[FittedCapsule]:
     """One to ``max_capsules`` capsules that together enclose every triangle of ``mesh`` (link frame, m).
 
-    The mesh is cut across its long axis into slabs (cuts searched on a grid of :data:`CUT_GRID` positions,
-    on a subsample of the vertices); each capsule encloses the triangles that reach into its slab (a
+    The mesh is cut across its long axis into slabs (each cut the best of :data:`CUT_GRID` positions given the
+    cuts before it, judged on a subsample of the vertices); each capsule encloses the triangles that reach into its slab (a
     triangle across a cut belongs to both sides, so it lies wholly inside one capsule). A split is taken when
     each capsule it adds shrinks the total volume by :data:`SPLIT_GAIN`: a link with a housing at each end of
     a thinner tube gets three capsules, a plain tube one.
@@ -219,11 +218,16 @@ def fit_capsules_uncached(mesh: Mesh, max_capsules: int = MAX_CAPSULES_PER_LINK)
     def volume(pieces) -> float:
         return math.inf if pieces is None else sum(_volume(r, float(np.linalg.norm(p1 - p0))) for p0, p1, r in pieces)
 
+    # cuts chosen greedily: the best one, then the best next one given it (a housing at each end of a tube
+    # needs both), each split kept when it shrinks the volume by SPLIT_GAIN per added capsule
     best_cuts: tuple = ()
     best_volume = volume(pieces_for((), step))
+    cuts: tuple = ()
     for k in range(2, max_capsules + 1):
-        estimate, cuts = min(((volume(pieces_for(c, step)), c) for c in itertools.combinations(grid.tolist(), k - 1)),
-                             key=lambda option: option[0])
+        options = [tuple(sorted((*cuts, c))) for c in grid.tolist() if c not in cuts]
+        if not options:
+            break
+        estimate, cuts = min(((volume(pieces_for(c, step)), c) for c in options), key=lambda option: option[0])
         if estimate < best_volume * (1 - SPLIT_GAIN) ** (k - 1 - len(best_cuts)):
             best_volume, best_cuts = estimate, cuts
     pieces = pieces_for(best_cuts, 1)

@@ -9,8 +9,9 @@ Conventions
   "Fingers straight down" is the rotation ``Rz(yaw) @ Rx(pi)``.
 * Collision geometry: each ``<cylinder>`` collision element of the URDF is read
   as the segment of a **capsule** of the same radius (URDF has no capsule
-  primitive), a ``<sphere>`` as a capsule of zero length; a ``<mesh>`` or
-  ``<box>`` is refused with a :class:`RobotModelError` naming the link. The two
+  primitive), a ``<sphere>`` as a capsule of zero length; :meth:`Robot.from_urdf`
+  encloses a vendor file's ``<mesh>`` and ``<box>`` geometry in fitted capsules
+  (:mod:`robocritics.robot.fit`, :mod:`robocritics.robot.vendor`). The two
   finger capsules are declared at full opening and slide along the tcp y axis
   with the gripper opening.
 * ``continuous`` joints are read as revolute joints limited to +-2 pi rad (one
