@@ -1,6 +1,7 @@
 """Vendor arms from pip packages loaded as shipped: per arm the package, joints, load CPU, FK error against
 Pinocchio on the raw file, and a pick-and-place scaled to its reach (score, CPU per program for simulate +
-critique, warm), beside the built-in UR3e on the same program. CPU time (process_time), not wall time.
+critique, warm), beside the built-in UR3e on the same program measured right after each arm (the ratio is
+of those two, as the load of a shared machine drifts). CPU time (process_time), not wall time.
 
 Needs the test extra (example-robot-data, rtb-data, airo-models, pybullet).
 Run: .venv/bin/python benchmarks/bench_vendor_arms.py [REPEATS]
@@ -128,6 +129,7 @@ def main(repeats: int = 3) -> None:
             continue
         load = time.process_time() - t0
         cpu, score, notes = program_cpu(robot, repeats)
+        ref_cpu = program_cpu(ur3e, repeats)[0]  # beside each arm: the machine's load drifts between arms
         print(f"{package:<19} {name:<16} {robot.n:>3} {'yes':>5} {load:>10.2f} {fk_error(robot, path):>9.1e} "
               f"{len(robot.capsules):>8} {robot.reach_m:>7.3f} {score:>6} {cpu:>13.3f} {cpu / ref_cpu:>7.2f}  {notes}")
     print(f"\nreproduce: .venv/bin/python benchmarks/bench_vendor_arms.py {repeats}")
