@@ -27,6 +27,9 @@ cause                rule
 ``program_running``  ``runtime_state`` is not STOPPED (another program runs)
 ``start_mismatch``   the first sample is farther than ``start_tolerance_rad``
                      from ``actual_q`` on some joint
+``non_finite``       the robot reported NaN or ±inf in a field (the RTDE
+                     guard :func:`~robocritics.deploy.rtde.first_non_finite`);
+                     no other robot rule is judged on such a state
 ``arm_model``        the dashboard's ``get robot model`` is not the arm the
                      trajectory was planned for (found by its
                      ``kinematic_hash``, e.g. a UR10e plan on a UR5e; a chain
@@ -46,12 +49,13 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from robocritics.deploy.rtde import RobotMode, RuntimeState, SafetyMode, mode_name
+from robocritics._text import safe_text
+from robocritics.deploy.rtde import RobotMode, RuntimeState, SafetyMode, first_non_finite, mode_name
 from robocritics.deploy.stream import StreamPlan
 from robocritics.errors import DeployError
 from robocritics.robot.arms import ARMS
 from robocritics.report import Report
-from robocritics.simulate import Execution
+from robocritics.execution import Execution
 from robocritics.trajectory import Trajectory
 
 __all__ = [
@@ -144,11 +148,14 @@ def check_trajectory(trajectory: Trajectory, plan: StreamPlan) -> list[Reason]:
     if len(plan) < 2:
         return []
     vlim = np.asarray(trajectory.limits.velocity_rad_s, dtype=float)
+    if vlim.shape != (6,) or not np.all(np.isfinite(vlim) & (vlim > 0)):
+        return [("setpoint_speed", f"the trajectory's joint speed limits {safe_text(vlim.tolist(), 200)} rad/s are "
+                                   "not 6 finite positive numbers; no speed can be checked against them")]
     speed = np.abs(np.diff(plan.q, axis=0)) * plan.rate_hz
     ratio = speed / vlim
-    worst = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-    if ratio[worst] <= 1.0 + 1e-6:
+    if np.all(ratio <= 1.0 + 1e-6):  # written so that a NaN fails the rule
         return []
+    worst = np.unravel_index(int(np.argmax(np.where(np.isnan(ratio), np.inf, ratio))), ratio.shape)
     k, j = int(worst[0]) + 1, int(worst[1])
     return [(
         "setpoint_speed",
@@ -171,14 +178,14 @@ def check_model(trajectory: Trajectory, reported_model: str | None, *, dashboard
     # keyed on what the joint angles mean (Robot.kinematic_hash: flange poses in the base frame), not on the
     # name: a URDF that calls itself "ur3e" in ROS's base convention puts the TCP on the other side of the base
     known = ", ".join(ARMS)
-    name = trajectory.robot_name or "an unnamed robot"
+    name = (trajectory.robot_name or "an unnamed robot")[:60]  # a name from a file: clipped (repr escapes it)
     if not trajectory.kinematic_hash:
         return [("arm_model", f"the trajectory planned for {name!r} does not say which kinematics it was planned for "
                               "(no kinematic_hash: written before robocritics recorded it); plan it again")]
     matches = [arm for arm, digest in bundled_kinematic_hashes().items() if digest == trajectory.kinematic_hash]
     if not matches:
         return [("arm_model", f"the trajectory was planned for {name!r}, whose kinematics (hash "
-                              f"{trajectory.kinematic_hash}) are none of the UR arms deploy knows ({known}) in UR's "
+                              f"{trajectory.kinematic_hash[:20]!r}) are none of the UR arms deploy knows ({known}) in UR's "
                               "base convention; plan it with Robot.ur5e() etc.")]
     spec = ARMS[matches[0]]
     if reported_model is None:
@@ -218,6 +225,12 @@ def check_robot(
     """The robot rules on one RTDE state package (``robot_mode``, ``safety_mode``,
     ``runtime_state``, ``actual_q``) and the dashboard's answer to ``is in remote control``
     (``remote_control``; None with ``dashboard_error`` when it could not be asked)."""
+    bad = first_non_finite(state)
+    if bad is not None:  # the robot says something that is not a number: judge nothing else on it
+        name, index, value = bad
+        where = name if index is None else f"{name}[{index}]"
+        return [("non_finite", f"the controller reported {where} = {safe_text(value, 40)}, not a finite number; "
+                               "nothing is sent on a state with a value that is not a number")]
     reasons: list[Reason] = []
     rm, sm, rs = state.get("robot_mode"), state.get("safety_mode"), state.get("runtime_state")
     if rm != RobotMode.RUNNING:
@@ -246,8 +259,8 @@ def check_robot(
         reasons.append(("start_mismatch", f"the controller reported actual_q {actual.tolist()}, not 6 joint positions"))
         return reasons
     dev = np.abs(np.asarray(first_q, dtype=float) - actual)
-    j = int(np.argmax(dev))
-    if dev[j] > start_tolerance_rad:
+    j = int(np.argmax(np.where(np.isnan(dev), np.inf, dev)))
+    if not dev[j] <= start_tolerance_rad:  # a NaN fails the rule too
         reasons.append((
             "start_mismatch",
             f"the trajectory starts {dev[j]:.4f} rad away from the arm on joint {j} (> start_tolerance_rad "
