@@ -32,8 +32,9 @@ from ..errors import RobotModelError
 
 __all__ = ["Mesh", "FittedCapsule", "load_mesh", "box_mesh", "fit_capsules", "fit_capsules_uncached", "MAX_TRIANGLES", "MAX_CAPSULES_PER_LINK", "SLACK_GRID_M"]
 
-#: Most triangles of one mesh file (vendor collision meshes have 100-20,000; visual OBJs up to ~200,000).
-MAX_TRIANGLES = 1_000_000
+#: Most triangles of one mesh file (vendor collision meshes have 100-20,000, visual OBJs ~20,000; fitting
+#: 300,000 takes a few seconds of CPU).
+MAX_TRIANGLES = 300_000
 #: Most capsules fitted to one link.
 MAX_CAPSULES_PER_LINK = 3
 #: A split must shrink the capsules' volume by this fraction for each capsule it adds (fewer pairs to check).
