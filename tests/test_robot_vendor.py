@@ -395,7 +395,7 @@ def test_robot_options_refuse_what_they_cannot_do(tmp_path, capsys, argv, messag
     assert message in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("command", ["fix", "deploy", "batch"])
+@pytest.mark.parametrize("command", ["fix", "deploy", "batch", "studio", "run"])
 def test_every_command_takes_robot_and_names_a_bad_urdf(tmp_path, capsys, command):
     from robocritics import cli
 
@@ -406,7 +406,9 @@ def test_every_command_takes_robot_and_names_a_bad_urdf(tmp_path, capsys, comman
     rows = tmp_path / "in.jsonl"
     rows.write_text('{"id": "a", "scene": "sorting", "program": "lib.home()"}\n')
     argv = {"fix": ["fix", str(program)], "deploy": ["deploy", str(program), "--dry-run"],
-            "batch": ["batch", str(rows), "-o", str(tmp_path / "out.jsonl")]}[command]
+            "batch": ["batch", str(rows), "-o", str(tmp_path / "out.jsonl")],
+            "studio": ["studio", "--program", str(program), "--no-browser", "--port", "0"],
+            "run": ["run", "put the apple in the box", "--scene", "sorting", "--base-url", "http://127.0.0.1:9/v1", "--model", "m"]}[command]
     assert cli.main([*argv, "--robot", str(bad)]) == 2
     assert "no moving joint" in capsys.readouterr().err
 

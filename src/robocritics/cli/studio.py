@@ -22,12 +22,14 @@ from ._common import (
     UsageError,
     add_goal_option,
     add_llm_options,
+    add_robot_options,
     host,
     llm_api_key,
     llm_client,
     one_line,
     port,
     read_text,
+    robot_for,
     scene_for,
     subcommand,
 )
@@ -47,6 +49,7 @@ def _build_studio(sub) -> None:
     p.add_argument("--scene", metavar="NAME|PATH", help="scene name or JSON file (default as for `check`)")
     p.add_argument("--program", metavar="FILE", help="program file to open in the editor")
     add_goal_option(p)
+    add_robot_options(p)
     p.add_argument("--host", type=host, default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8765, help="port to bind (default 8765; 0: any free port)")
     p.add_argument("--token", metavar="SECRET", help="require this token on every request (needed off loopback)")
@@ -79,7 +82,8 @@ def studio_command(args: argparse.Namespace) -> int:
         deploy = {"host": args.deploy_host, "rtde_port": args.deploy_rtde_port,
                   "dashboard_port": args.deploy_dashboard_port, "secondary_port": args.deploy_secondary_port}
     studio = Studio(scene, program, host=args.host, port=args.port, token=args.token, model=model, deploy=deploy,
-                    goals=args.goals, no_model_reason=reason, run_program=bool(args.program))
+                    goals=args.goals, no_model_reason=reason, run_program=bool(args.program),
+                    robot=robot_for(args, scene))
     try:
         studio.start()
     except OSError as exc:
