@@ -58,10 +58,25 @@ def arms() -> list[tuple[str, Path, dict]]:
         ("rtb-data", "iiwa14 R820", rtb and rtb / "xacro/kuka_description/kuka_lbr_iiwa/urdf/lbr_iiwa_14_r820.urdf", {}),
         ("rtb-data", "KUKA KR16-2", rtb and rtb / "xacro/kuka_description/kuka_kr16/urdf/kr16_2.urdf", {}),
         ("rtb-data", "Puma560", rtb and rtb / "xacro/unimation_puma560_description/urdf/puma560_robot.urdf", {}),
+        # the same file with speed limits given (it ships 0 rad/s; 1 rad/s assumed, not a datasheet value)
+        ("rtb-data", "Puma560 +speeds", rtb and rtb / "xacro/unimation_puma560_description/urdf/puma560_robot.urdf",
+         {"joint_limits": "file limits, 1 rad/s"}),
         ("airo-models", "UR3e", airo and airo / "arms/ur3e/ur3e.urdf", {}),
         ("airo-models", "UR5e", airo and airo / "arms/ur5e/ur5e.urdf", {}),
     ]
     return [(pkg, name, path, kw) for pkg, name, path, kw in rows]
+
+
+def with_speeds(path: Path, speed_rad_s: float = 1.0) -> dict:
+    """The file's own position limits with ``speed_rad_s`` as every moving joint's speed limit."""
+    import xml.etree.ElementTree as ET
+
+    out = {}
+    for joint in ET.parse(path).getroot().iter("joint"):
+        limit = joint.find("limit")
+        if joint.get("type") in ("revolute", "prismatic") and limit is not None:
+            out[joint.get("name")] = (float(limit.get("lower", 0)), float(limit.get("upper", 0)), speed_rad_s)
+    return out
 
 
 def scene_for(reach_m: float) -> Scene:
@@ -121,6 +136,8 @@ def main(repeats: int = 3) -> None:
         if path is None or not Path(path).is_file():
             print(f"{package:<19} {name:<16} {'':>3} {'no':>5}  (package not installed)")
             continue
+        if kwargs.get("joint_limits") == "file limits, 1 rad/s":
+            kwargs = {**kwargs, "joint_limits": with_speeds(path)}
         t0 = time.process_time()
         try:
             robot = Robot.from_urdf(path, **{"tool": "robotiq_2f85", **kwargs})

@@ -471,10 +471,17 @@ def test_inferred_facts_can_be_overridden(tmp_path):
     assert robot.lower.tolist() == [-0.5] and robot.upper.tolist() == [0.8] and robot.name == "mine"
     assert robot.max_opening_m == 0.0  # tool "none": the TCP is the flange and nothing grasps
     np.testing.assert_allclose(robot.tcp_pose(np.array([0.1])), robot.forward(np.array([0.1]))[robot.frame_names.index("tool0")])
-    with pytest.raises(RobotModelError, match="joint_limits names 'elbow'"):
+    with pytest.raises(RobotModelError, match="joint_limits names 'elbow', not a moving joint"):
         Robot.from_urdf(path, joint_limits={"elbow": (0, 1)})
+    with pytest.raises(RobotModelError, match=r"joint_limits\['shoulder'\]"):
+        Robot.from_urdf(path, joint_limits={"shoulder": (0, float("nan"))})
     with pytest.raises(RobotModelError, match="no bundled tool 'vacuum'"):
         Robot.from_urdf(path, tool="vacuum")
+    # a zero speed limit as shipped is refused naming the joint; given here, the arm loads with it
+    slow = _arm(tmp_path, velocity="0")
+    with pytest.raises(RobotModelError, match="joint 'shoulder': velocity must be positive"):
+        Robot.from_urdf(slow)
+    assert Robot.from_urdf(slow, joint_limits={"shoulder": (-1, 1, 0.7)}).velocity_limits.tolist() == [0.7]
 
 
 def test_fitted_capsules_of_a_vendor_mesh_hold_the_bound():

@@ -323,7 +323,8 @@ class Robot:
         ``home_q`` (rad), ``reach_m`` (m), ``fixed_links`` (links whose table distance is not reported):
         inferred unless given (a collision-free home inside the limits; the farthest sampled flange distance
         from the shoulder; the links whose height no joint changes). ``joint_limits``: ``{joint: (lower,
-        upper)}`` overrides. Other keywords as for the constructor (``dh=``, ``acceleration_limits=``,
+        upper)}`` or ``(lower, upper, velocity)`` overrides (rad or m, rad/s or m/s), applied before the
+        file's limits are checked. Other keywords as for the constructor (``dh=``, ``acceleration_limits=``,
         ``jerk_limits=``, ``self_pairs=``; ``home=`` is ``home_q``). Raises :class:`RobotModelError` naming
         the element, joint or link and the line.
         """

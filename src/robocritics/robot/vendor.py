@@ -73,6 +73,7 @@ def arm_tree(
     """The contract URDF tree of the vendor file at ``path`` and facts about it (``tip``, ``tool``,
     ``slack_m`` per capsule name). Raises :class:`RobotModelError` naming element, link or joint and line."""
     doc = _urdf.read_urdf(path)
+    _override_limits(doc, joint_limits or {})
     _urdf.check_numbers(doc)
     tree = _urdf.kinematic_tree(doc)
     # a file in robocritics' own contract (a <gripper> element, or its own TCP link) keeps its tool
@@ -95,11 +96,6 @@ def arm_tree(
                 kept_joints.append(joint)
                 todo.append(child)
     out = ET.Element("robot", name=name or doc.root.get("name") or path.stem)
-    limits = dict(joint_limits or {})
-    unknown = [j for j in limits if j not in {k.get("name") for k in joints}]
-    if unknown:
-        raise RobotModelError(f"joint_limits names {', '.join(map(repr, unknown))}, not joints of the arm "
-                              f"({', '.join(j.get('name') for j in joints if j.get('type') in _urdf.MOVING_JOINT_TYPES)})")
     slack: dict[str, float] = {}
     root_name = tree.root
     if base_pose is not None:
@@ -117,7 +113,7 @@ def arm_tree(
     for link_name in keep:
         out.append(_capsule_link(doc, tree.links[link_name], package_paths, slack))
     for joint in kept_joints:
-        out.append(_clean_joint(joint, limits.get(joint.get("name"))))
+        out.append(_clean_joint(joint))
     if contract:
         if doc.root.find("gripper") is not None:
             out.append(doc.root.find("gripper"))
@@ -162,7 +158,7 @@ def _tool(tool, path: Path, package_paths) -> Tool | tuple[list[ET.Element], str
     for link in tree.links.values():
         elements.append(_capsule_link(doc, link, package_paths, slack))
     for joint in tree.joints.values():
-        elements.append(_clean_joint(joint, None))
+        elements.append(_clean_joint(joint))
     mount = ET.Element("joint", name="tool_mount", type="fixed")
     ET.SubElement(mount, "parent", link="__TIP__")
     ET.SubElement(mount, "child", link=tree.root)
@@ -185,7 +181,36 @@ def _tool(tool, path: Path, package_paths) -> Tool | tuple[list[ET.Element], str
     return elements, tool_path.stem
 
 
-def _clean_joint(joint: ET.Element, limit_override) -> ET.Element:
+def _override_limits(doc: _urdf.UrdfDocument, joint_limits: dict) -> None:
+    """Write ``joint_limits`` (``{joint: (lower, upper)}`` rad or m, or ``(lower, upper, velocity)`` with the speed
+    limit in rad/s or m/s) into the file's ``<limit>`` elements before they are checked: a file that ships a
+    zero speed limit (rtb-data's Puma560) loads with the speeds given here."""
+    moving = {j.get("name"): j for j in doc.root.findall("joint") if j.get("type") in _urdf.MOVING_JOINT_TYPES}
+    for name, values in joint_limits.items():
+        if name not in moving:
+            raise RobotModelError(f"joint_limits names {name!r}, not a moving joint of {doc.path.name} "
+                                  f"({', '.join(list(moving)[:20])})")
+        try:
+            numbers = [float(v) for v in values]
+        except (TypeError, ValueError):
+            numbers = []
+        if len(numbers) not in (2, 3) or not all(math.isfinite(v) for v in numbers) or numbers[0] > numbers[1] \
+                or max(abs(numbers[0]), abs(numbers[1])) > 100 or (len(numbers) == 3 and not 0 < numbers[2] <= 1e6):
+            raise RobotModelError(f"joint_limits[{name!r}] = {values!r}: give (lower, upper) rad or m, lower <= upper, "
+                                  "at most 100 in size, or (lower, upper, velocity) with a positive speed limit")
+        joint = moving[name]
+        limit = joint.find("limit")
+        if limit is None:
+            limit = ET.SubElement(joint, "limit", effort="0")
+        limit.set("lower", repr(numbers[0]))
+        limit.set("upper", repr(numbers[1]))
+        if len(numbers) == 3:
+            limit.set("velocity", repr(numbers[2]))
+        if joint.get("type") == "continuous":
+            joint.set("type", "revolute")
+
+
+def _clean_joint(joint: ET.Element) -> ET.Element:
     """The joint with only what Pinocchio and robocritics read (no transmissions, no foreign attributes)."""
     out = ET.Element("joint", name=joint.get("name"), type=joint.get("type"))
     for tag in ("parent", "child"):
@@ -200,16 +225,6 @@ def _clean_joint(joint: ET.Element, limit_override) -> ET.Element:
     if limit is not None:
         attrs = {k: limit.get(k) for k in ("lower", "upper", "velocity", "effort") if limit.get(k) is not None}
         attrs.setdefault("effort", "0")
-        if limit_override is not None:
-            try:
-                lower, upper = (float(v) for v in limit_override)
-            except (TypeError, ValueError):
-                raise RobotModelError(f"joint_limits[{joint.get('name')!r}] must be (lower, upper) rad or m") from None
-            if not (math.isfinite(lower) and math.isfinite(upper) and lower <= upper and max(abs(lower), abs(upper)) <= 100):
-                raise RobotModelError(f"joint_limits[{joint.get('name')!r}] = ({lower}, {upper}) is not a finite range")
-            attrs["lower"], attrs["upper"] = repr(lower), repr(upper)
-            if out.get("type") == "continuous":
-                out.set("type", "revolute")
         ET.SubElement(out, "limit", **attrs)
     return out
 
