@@ -8,9 +8,11 @@ from ._common import (
     UsageError,
     add_critic_options,
     add_goal_option,
+    add_robot_options,
     check_output,
     load_params,
     read_text,
+    robot_for,
     scene_for,
     subcommand,
 )
@@ -34,6 +36,7 @@ def _build_fix(sub) -> None:
     )
     add_critic_options(p)
     add_goal_option(p)
+    add_robot_options(p)
     p.add_argument("-o", "--output", metavar="OUT.py", help="write the repaired program here")
     p.set_defaults(func=_cmd_fix)
 
@@ -47,7 +50,9 @@ def _cmd_fix(args: argparse.Namespace) -> int:
         check_output(args.output, "-o")
     scene = scene_for(args.program, args.scene)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
-    result = repair(source, scene, goal=args.goals or None, critics=critics, params=load_params(args.params))
+    result = repair(
+        source, scene, goal=args.goals or None, critics=critics, robot=robot_for(args, scene), params=load_params(args.params)
+    )
     print(result.diff or "(no change)")
     for change in result.changes:
         print(f"changed: {change}")

@@ -23,12 +23,14 @@ from ._common import (
     UsageError,
     add_goal_option,
     add_llm_options,
+    add_robot_options,
     host,
     llm_api_key,
     llm_client,
     one_line,
     port,
     read_text,
+    robot_for,
     scene_for,
     subcommand,
 )
@@ -52,6 +54,7 @@ def _build_studio(sub) -> None:
                    "replayed (docs/formats.md)")
     add_goal_option(p)
     add_motion_options(p)
+    add_robot_options(p)
     p.add_argument("--host", type=host, default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8765, help="port to bind (default 8765; 0: any free port)")
     p.add_argument("--token", metavar="SECRET", help="require this token on every request (needed off loopback)")
@@ -88,7 +91,7 @@ def studio_command(args: argparse.Namespace) -> int:
                   "dashboard_port": args.deploy_dashboard_port, "secondary_port": args.deploy_secondary_port}
     studio = Studio(scene, program, host=args.host, port=args.port, token=args.token, model=model, deploy=deploy,
                     goals=args.goals, no_model_reason=reason, run_program=bool(args.program), motion=motion,
-                    motion_options=_motion_options(args, motion))
+                    motion_options=_motion_options(args, motion), robot=robot_for(args, scene))
     try:
         studio.start()
     except OSError as exc:

@@ -98,7 +98,7 @@ def build_trajectory(
         p0, p1 = segments
     object_poses = dict(object_poses or {})
     capsule_group = dict(zip(robot.capsule_names, robot.capsule_groups))
-    fixed_capsules = {c.name for c in robot.capsules if c.frame in robot.fixed_links}
+    fixed_capsules = {c.name for c in robot.capsules if c.frame in robot.fixed_links} | set(getattr(robot, "table_fixed_capsules", ()))
     entities = _entity_groups(scene)
     carried = _carried_ids(attached_arr)
 
@@ -169,5 +169,6 @@ def build_trajectory(
         steps=steps,
         limits=robot.limits,
         robot_name=robot.name,
+        kinematic_hash=robot.kinematic_hash,
         tcp_frame=robot.tcp_frame,
     )

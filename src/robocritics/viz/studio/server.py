@@ -64,7 +64,7 @@ class Studio:
 
     def __init__(self, scene, program: str | None = None, *, host: str = "127.0.0.1", port: int = 0,
                  token: str | None = None, model=None, deploy: dict[str, Any] | None = None, critics=None,
-                 goals=None, timeout_s: float = 60.0, run_program: bool = False,
+                 goals=None, timeout_s: float = 60.0, run_program: bool = False, robot=None,
                  approval_timeout_s: float = APPROVAL_TIMEOUT_S,
                  no_model_reason: str = "no LLM endpoint is configured (start the studio with --base-url and --model)",
                  motion=None, motion_options: dict[str, Any] | None = None):
@@ -91,6 +91,7 @@ class Studio:
             self.motion.pop("text", None)
         self.timeout_s = float(timeout_s)
         self.run_program = bool(run_program)
+        self.robot = robot  # None: the UR3e (Robot.from_urdf for a vendor arm; docs/robots.md)
         self.revisions: list[Revision] = []
         self.chat_log: list[dict[str, str]] = []
         self.chat_version = 0  # entries ever said (the log keeps the last CHAT_LOG_ENTRIES)
@@ -191,7 +192,7 @@ class Studio:
             if self._evaluator is None:
                 from .worker import Evaluator
 
-                self._evaluator = Evaluator(self.scene, critics=self.critics, goals=self.goals,
+                self._evaluator = Evaluator(self.scene, self.robot, critics=self.critics, goals=self.goals,
                                             timeout_s=self.timeout_s)
             return self._evaluator
 
@@ -320,7 +321,8 @@ class Studio:
         from ...llm.loop import Loop
 
         if self._loop is None:
-            self._loop = Loop(self.model, self.scene, critics=self.critics, goals=self.goals, approve=self._approve,
+            self._loop = Loop(self.model, self.scene, robot=self.robot, critics=self.critics, goals=self.goals,
+                              approve=self._approve,
                               simulate=self._loop_simulate, repairs=self._loop_repair,
                               on_attempt=self._on_attempt)
         self._loop.automation = automation
