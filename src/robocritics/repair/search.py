@@ -23,10 +23,13 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..scene import Scene
     from ..simulate import Execution
 
-__all__ = ["search", "Repair", "Change", "NotRun", "MAX_ROUNDS"]
+__all__ = ["search", "Repair", "Change", "NotRun", "MAX_ROUNDS", "MAX_SIMULATIONS"]
 
-#: Most accepted edits per repair() call (each one re-simulates the program).
-MAX_ROUNDS = 12
+#: Most accepted edits per repair() call.
+MAX_ROUNDS = 16
+#: Most candidate programs re-simulated per repair() call: the search's CPU bound (a bundled-scene program
+#: simulates and is critiqued in about 0.05-0.3 s of CPU, so a repair costs at most about 25 s).
+MAX_SIMULATIONS = 80
 
 
 @dataclass(frozen=True)
@@ -103,7 +106,7 @@ def _flags(report: Report) -> dict[str, int]:
     return {v.critic: v.score for v in report.verdicts}
 
 
-#: Fraction by which an Error's distance from its threshold must shrink to count as progress.
+#: Fraction by which a flag's distance from its threshold must shrink to count as progress.
 PROGRESS = 0.25
 
 
@@ -117,15 +120,16 @@ def _progress(before: Report, after: Report, critic: str) -> bool:
 
 
 def _acceptable(before: Report, after: Report, critic: str) -> bool:
-    """``after`` scores no verdict lower than ``before`` and makes progress on an Error.
+    """``after`` scores no verdict lower than ``before`` and makes progress on ``critic``'s flag.
 
-    Progress is one of: ``critic`` is out of Error; its Error is clearly smaller
-    (:data:`PROGRESS`: the measured value moved toward the threshold by that
-    fraction, e.g. a 6 cm penetration that became 2.9 cm, so a repair that uncovers
-    the next, lesser fault of the same critic still counts and the next round can
-    fix that one); or another critic's Error is gone (e.g. picking the cupcake
-    first puts it on the plate, while the collision it caused moves elsewhere).
-    For the ``runtime`` Error of a program that did not run, progress is that it runs.
+    Progress is one of: ``critic``'s flag is lifted (an Error to a Warning or OK, a
+    Warning to OK); its flag is clearly smaller (:data:`PROGRESS`: the measured value
+    moved toward the threshold by that fraction, e.g. a 6 cm penetration that became
+    2.9 cm, so a repair that uncovers the next, lesser fault of the same critic still
+    counts and the next round can fix that one); or another critic's Error is gone
+    (e.g. picking the cupcake first puts it on the plate, while the collision it
+    caused moves elsewhere). For the ``runtime`` Error of a program that did not run,
+    progress is that it runs.
     """
     old, new = _flags(before), _flags(after)
     if critic == RUNTIME:  # the program did not run: running at all is the progress; later rounds fix the rest
@@ -134,7 +138,7 @@ def _acceptable(before: Report, after: Report, critic: str) -> bool:
         return False
     if not all(name in old or score > 0 for name, score in new.items()):
         return False
-    if new.get(critic, 2) > 0 or _progress(before, after, critic):
+    if new.get(critic, 2) > old.get(critic, 2) or _progress(before, after, critic):
         return True
     return sum(s == 0 for s in new.values()) < sum(s == 0 for s in old.values())
 
@@ -153,8 +157,29 @@ def _offered_edits(hook, verdict, execution, source: str) -> list:
     return edits
 
 
+def _merit(report: Report, execution) -> tuple:
+    """How good a candidate is, best highest: fewest Errors, then the score, then the shortest cycle."""
+    errors = sum(v.flag == Flag.ERROR for v in report.verdicts)
+    return (-errors, report.score, -(execution.duration_s if execution is not None else float("inf")))
+
+
+def _flagged(report: Report) -> list:
+    """The verdicts to repair, Errors first (the ``runtime`` one before all), then Warnings, each in report order."""
+    bad = [v for v in report.verdicts if v.flag != Flag.OK]
+    return sorted(bad, key=lambda v: (v.critic != RUNTIME, v.flag != Flag.ERROR))
+
+
 def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any, params: Any) -> Repair:
-    """The body of :func:`robocritics.repair.repair` (its arguments and result are documented there)."""
+    """The body of :func:`robocritics.repair.repair` (its arguments and result are documented there).
+
+    A bounded greedy search: each round asks the flagged critics (Errors first, then
+    Warnings) for edits, re-simulates every candidate of one verdict and keeps the best
+    acceptable one (:func:`_acceptable`, ranked by :func:`_merit`: fewer Errors, higher
+    score, shorter cycle); the next round starts from it. It stops when nothing is
+    flagged, no candidate is acceptable, or after :data:`MAX_ROUNDS` accepted edits or
+    :data:`MAX_SIMULATIONS` re-simulations. Since only improvements are kept, the
+    last program is the best one found.
+    """
     from ..critic import check_program
     from ..robot.model import Robot
     from ..scene import Scene
@@ -173,35 +198,38 @@ def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any
     source = program
     execution, report = evaluate(source)
     changes: list[Change] = []
+    budget = MAX_SIMULATIONS
+    tried_sources = {source}
     for _ in range(MAX_ROUNDS):
-        errors = [v for v in report.verdicts if v.flag == Flag.ERROR]
-        accepted = False
-        for verdict in errors:
-            candidates = _offered_edits(hook, verdict, execution or not_run, source)
-            tried = []
-            for edit in candidates:
+        best = None
+        for verdict in _flagged(report):
+            if budget <= 0:
+                break
+            for edit in _offered_edits(hook, verdict, execution or not_run, source):
                 try:
                     new_source = apply_edits(source, edit.ops)
+                except (RoboCriticsError, SyntaxError, ValueError):
+                    continue
+                if new_source in tried_sources or budget <= 0:
+                    continue  # the same program again (or out of budget): nothing to learn
+                tried_sources.add(new_source)
+                budget -= 1
+                try:
                     new_execution, new_report = evaluate(new_source)
                 except (RoboCriticsError, SyntaxError):
                     continue  # e.g. an edit that is no longer valid Python: not a repair
                 if not _acceptable(report, new_report, verdict.critic):
                     continue
-                tried.append((edit, new_source, new_execution, new_report))
-                if verdict.critic != RUNTIME:
-                    break  # the first acceptable edit is kept
-            # a program that did not run: every edit that makes it run is acceptable, so the best-scoring one
-            # (highest summed verdict score, then the first offered) is kept rather than the first
-            ranked = sorted(range(len(tried)), key=lambda i: (-sum(v.score for v in tried[i][3].verdicts), i))
-            for edit, new_source, new_execution, new_report in [tried[i] for i in ranked[:1]]:
-                # a program that did not run had no cycle to compare with: its first running version costs 0
-                cost = new_execution.duration_s - execution.duration_s if execution and new_execution else 0.0
-                changes.append(Change(edit.critic, edit.line, edit.what, edit.why, cost))
-                source, execution, report = new_source, new_execution, new_report
-                accepted = True
-                break
-            if accepted:
-                break
-        if not accepted:
+                merit = _merit(new_report, new_execution)
+                if best is None or merit > best[0]:
+                    best = (merit, edit, new_source, new_execution, new_report)
+            if best is not None:
+                break  # the best edit for the first verdict that has one; the next round looks again
+        if best is None:
             break
+        _, edit, new_source, new_execution, new_report = best
+        # a program that did not run had no cycle to compare with: its first running version costs 0
+        cost = new_execution.duration_s - execution.duration_s if execution and new_execution else 0.0
+        changes.append(Change(edit.critic, edit.line, edit.what, edit.why, cost))
+        source, execution, report = new_source, new_execution, new_report
     return Repair(program, source, report, execution, changes)
