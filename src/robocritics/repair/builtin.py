@@ -142,11 +142,61 @@ def _loop_variable(tree: ast.Module, line: int) -> str | None:
     return found[1] if found else None
 
 
+#: Skills that set how the next moves run without moving: they do not separate a move from the release after it.
+_SETTINGS = {"set_speed", "reduce_speed", "avoid_collision"}
+
+
+def _release_lines(execution, box) -> list[int]:
+    """The lines of the moves that end above ``box`` with an ``open_gripper`` next: where objects are let go in it."""
+    calls = [c for c in execution.plan.calls if c.skill not in _SETTINGS]
+    lines = []
+    for i, c in enumerate(calls):
+        if c.skill not in ("move_to", "move_linear", "move_above") or i + 1 >= len(calls):
+            continue
+        if calls[i + 1].skill != "open_gripper":
+            continue
+        if c.skill == "move_above":
+            inside = c.args.get("object") == box.id
+        else:
+            x, y, _ = c.args["target"]
+            inside = box.contains_point((x, y, box.floor_top + 1e-3))
+        if inside and c.line not in lines:
+            lines.append(c.line)
+    return lines
+
+
+def _offset_release(program: str, tree: ast.Module, line: int, dx: str, dy: str):
+    """The ops that shift the release move on ``line`` by ``dx``, ``dy`` (expressions, m); None if not possible.
+
+    ``move_to``/``move_linear(x, y, z)`` get ``x + dx``, ``y + dy``; ``move_above(box, h)`` becomes
+    ``move_to(box.x + dx, box.y + dy, box.top + h)`` (the same point, shifted).
+    """
+    for skill in ("move_to", "move_linear"):
+        call = _call_named(tree, line, skill)
+        if call is not None and len(call.args) == 3 and all(a.lineno == a.end_lineno == line for a in call.args[:2]):
+            x, y = (ast.get_source_segment(program, a) for a in call.args[:2])
+            return [
+                ReplaceSpan(line, call.args[1].col_offset, call.args[1].end_col_offset, f"{y} + {dy}"),
+                ReplaceSpan(line, call.args[0].col_offset, call.args[0].end_col_offset, f"{x} + {dx}"),
+            ]
+    call = _call_named(tree, line, "move_above")
+    if call is None or call.lineno != call.end_lineno or not call.args:
+        return None
+    height = next((k.value for k in call.keywords if k.arg == "height"), call.args[1] if len(call.args) > 1 else None)
+    h = ast.get_source_segment(program, height) if height is not None else "0.1"
+    obj = ast.get_source_segment(program, call.args[0])
+    func = ast.get_source_segment(program, call.func).replace("move_above", "move_to")
+    text = f"{func}({obj}.x + {dx}, {obj}.y + {dy}, {obj}.top + {h})"
+    return [ReplaceSpan(line, call.col_offset, call.end_col_offset, text)]
+
+
 def _spread(verdict, execution, program) -> list[Edit]:
     """Objects released at the same spot of a container collide: give each its own spot inside it.
 
-    The release move of a loop (``move_to(bin.x, bin.y, ...)``) gets a per-object
-    offset, on a circle of :data:`SPREAD_RADIUS` of the container's inner half-width.
+    Every release move into that container (a move ending above it, then ``open_gripper``)
+    gets an offset on a circle of :data:`SPREAD_RADIUS` of the container's inner
+    half-width: in a ``for`` loop through a ``release_spots`` table keyed by the loop
+    object's id, outside a loop one spot per release line.
     """
     final = execution.final_scene
     ids = {o.id for o in final.objects}
@@ -156,41 +206,45 @@ def _spread(verdict, execution, program) -> list[Edit]:
         pair = [pair[0], execution.resting_on[pair[0]]] if pair else []
     if len(pair) != 2:
         return []
-    holder = final.container_holding(pair[1])
-    if holder is None or (verdict.critic != "task_outcome" and final.container_holding(pair[0]) != holder):
+    box = final.container_holding(pair[1])  # what was hit lies in a container: the carried one goes there too
+    if box is None:
         return []
-    box = holder
+    tree = ast.parse(program)
+    if "release_spots" in program:
+        return []  # spread once; a second spread would add offsets to offsets
+    lines = _release_lines(execution, box)
     inside = [o.id for o in final.objects if (h := final.container_holding(o.id)) is not None and h.id == box.id]
     inside += [p for p in pair if p not in inside]
+    loops = {ln: _loop_variable(tree, ln) for ln in lines}
+    n = max(len(inside), sum(1 for v in loops.values() if v is None))
     radius = SPREAD_RADIUS * (min(box.size[0], box.size[1]) / 2 - box.wall_m)
-    spots = {
-        oid: (round(radius * math.cos(2 * math.pi * k / len(inside)), 3), round(radius * math.sin(2 * math.pi * k / len(inside)), 3))
-        for k, oid in enumerate(inside)
-    }
-    tree = ast.parse(program)
-    text = program.splitlines()
+    circle = [(round(radius * math.cos(2 * math.pi * k / n), 3), round(radius * math.sin(2 * math.pi * k / n), 3))
+              for k in range(n)]  # fmt: skip
+    spots = dict(zip(inside, circle))
+    load = _load_per_step(execution.trajectory)
+    carried = {load.get(i, "") for i, st in enumerate(execution.trajectory.steps) if st.line in lines}
+    spots.update({oid: (0.0, 0.0) for oid in sorted(carried - set(spots) - {""})})  # e.g. released in another box
     ops: list = []
-    lines = sorted({c.line for c in execution.plan.calls if c.skill in ("move_to", "move_linear")})
+    free = iter(circle)
     for ln in lines:
-        if f"{box.id}.x" not in text[ln - 1] or f"{box.id}.y" not in text[ln - 1]:
-            continue
-        var = _loop_variable(tree, ln)
-        if var is None:
-            continue
-        ops += [
-            ReplaceText(ln, f"{box.id}.x", f"{box.id}.x + release_spots[{var}.id][0]"),
-        ]
-        ops.append(ReplaceText(ln, f"{box.id}.y", f"{box.id}.y + release_spots[{var}.id][1]"))
+        var = loops[ln]
+        if var is not None:
+            shift = _offset_release(program, tree, ln, f"release_spots[{var}.id][0]", f"release_spots[{var}.id][1]")
+        else:
+            dx, dy = next(free, (0.0, 0.0))
+            shift = _offset_release(program, tree, ln, f"{dx:g}", f"{dy:g}")
+        ops += shift or []
     if not ops:
         return []
-    first = min(c.line for c in execution.plan.calls)
-    top = next(s for s in tree.body if s.lineno <= first <= (s.end_lineno or s.lineno))
-    ops.append(Insert(top.lineno, before=(f"release_spots = {spots!r}  # each object at its own spot in {box.id}",)))
+    if any(v is not None for v in loops.values()):
+        first = min(c.line for c in execution.plan.calls)
+        top = next(s for s in tree.body if s.lineno <= first <= (s.end_lineno or s.lineno))
+        ops.append(Insert(top.lineno, before=(f"release_spots = {spots!r}  # each object at its own spot in {box.id}",)))
     return [
         Edit(
             verdict.critic,
-            ops[0].line,
-            f"release at its own spot in {box.id} on line {ops[0].line} (spots {spots})",
+            lines[0],
+            f"release at its own spot in {box.id} on line{'s' if len(lines) > 1 else ''} {', '.join(map(str, lines))}",
             f"{pair[0]} and {pair[1]} are released at the same spot of {box.id}",
             ops,
         )

@@ -119,6 +119,14 @@ def _progress(before: Report, after: Report, critic: str) -> bool:
     return gap_old * gap_new > 0 and abs(gap_new) <= (1 - PROGRESS) * abs(gap_old)
 
 
+def _runtime_moved_on(before: Report, after: Report) -> bool:
+    """The program still does not run, but fails on another call or target: e.g. the first unreachable hover is
+    fixed and the next one is reached (in a loop that can be an earlier line, for the next object). The search
+    never revisits a program and its rounds are bounded, so a different failure is taken as a step forward."""
+    old, new = (next(v for v in r.verdicts if v.critic == RUNTIME) for r in (before, after))
+    return new.message != old.message
+
+
 def _acceptable(before: Report, after: Report, critic: str) -> bool:
     """``after`` scores no verdict lower than ``before`` and makes progress on ``critic``'s flag.
 
@@ -132,8 +140,8 @@ def _acceptable(before: Report, after: Report, critic: str) -> bool:
     progress is that it runs.
     """
     old, new = _flags(before), _flags(after)
-    if critic == RUNTIME:  # the program did not run: running at all is the progress; later rounds fix the rest
-        return RUNTIME not in new
+    if critic == RUNTIME:  # the program did not run: running at all, or failing later, is the progress
+        return RUNTIME not in new or _runtime_moved_on(before, after)
     if not all(new.get(name, 2) >= score for name, score in old.items()):
         return False
     if not all(name in old or score > 0 for name, score in new.items()):
