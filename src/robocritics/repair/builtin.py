@@ -12,12 +12,15 @@ import math
 import re
 
 from ..hookspecs import hookimpl
+from ..verdict import Flag
 from .edit import Edit, Insert, InsertText, MoveBlock, ReplaceSpan, ReplaceText, ScaleNumbers, paragraphs
 
 #: Headroom under a speed threshold a slowdown aims for (fraction of the threshold).
 SPEED_MARGIN = 0.85
-#: Factors tried on hover/transit heights that leave the workspace.
-HEIGHT_FACTORS = (0.5,)
+#: Factors tried on hover/transit heights that leave the workspace (or sweep too much of it), mildest first.
+HEIGHT_FACTORS = (0.8, 0.5)
+#: Groups of lines lowered: all flagged lines together, then the first few alone.
+MAX_HEIGHT_GROUPS = 4
 _MOVES = {"move_to", "move_linear", "move_above", "move_down", "move_up", "home"}
 
 
@@ -78,19 +81,30 @@ def _avoid(verdict, execution, program) -> list[Edit]:
 
 
 def _lower_heights(verdict, execution, program) -> list[Edit]:
-    """Lower the hover/transit heights (float literals) on the offending move lines."""
+    """Lower the hover/transit heights (float literals) on the offending move lines: all together, then each alone.
+
+    Each factor of :data:`HEIGHT_FACTORS` is offered, the mildest first: a lower move keeps
+    the arm closer to the table (and the wrist inside the workspace) and is shorter.
+    """
     lines = [ln for ln in _move_lines(verdict, execution)]
+    groups = [lines] + ([[ln] for ln in lines] if len(lines) > 1 else [])
+    part = verdict.evidence.links[0] if verdict.evidence.links else "robot"
+    why = (
+        f"the {part} leaves the workspace by {verdict.value:.3g} m"
+        if verdict.flag == Flag.ERROR
+        else f"the motion sweeps {verdict.value:.3g} {verdict.unit} (over {verdict.threshold:.3g} {verdict.unit})"
+    )
     return [
         Edit(
             verdict.critic,
-            lines[0],
-            f"heights on lines {', '.join(map(str, lines))} scaled by {f:g}",
-            f"the {verdict.evidence.links[0] if verdict.evidence.links else 'robot'} leaves the workspace "
-            f"by {verdict.value:.3g} m",
-            [ScaleNumbers(ln, f) for ln in lines],
+            group[0],
+            f"heights on line{'s' if len(group) > 1 else ''} {', '.join(map(str, group))} scaled by {f:g}",
+            why,
+            [ScaleNumbers(ln, f) for ln in group],
         )
+        for group in groups[:MAX_HEIGHT_GROUPS]
         for f in HEIGHT_FACTORS
-        if lines
+        if group
     ]
 
 

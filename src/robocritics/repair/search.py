@@ -28,8 +28,11 @@ __all__ = ["search", "Repair", "Change", "NotRun", "MAX_ROUNDS", "MAX_SIMULATION
 #: Most accepted edits per repair() call.
 MAX_ROUNDS = 16
 #: Most candidate programs re-simulated per repair() call: the search's CPU bound (a bundled-scene program
-#: simulates and is critiqued in about 0.05-0.3 s of CPU, so a repair costs at most about 25 s).
-MAX_SIMULATIONS = 80
+#: simulates and is critiqued in about 0.05-0.3 s of CPU, so a repair costs at most about 35 s).
+MAX_SIMULATIONS = 120
+#: Edits that may be combined beyond the first when no single one helps, and how many first edits are tried.
+DEPTH = 1
+LOOKAHEAD = 3
 
 
 @dataclass(frozen=True)
@@ -166,9 +169,16 @@ def _offered_edits(hook, verdict, execution, source: str) -> list:
 
 
 def _merit(report: Report, execution) -> tuple:
-    """How good a candidate is, best highest: fewest Errors, then the score, then the shortest cycle."""
+    """How good a candidate is, best highest: it runs, fewest Errors, then the score, then the shortest cycle."""
     errors = sum(v.flag == Flag.ERROR for v in report.verdicts)
+    if any(v.critic == RUNTIME for v in report.verdicts):
+        errors = 1_000  # a program that does not run is worse than any that runs
     return (-errors, report.score, -(execution.duration_s if execution is not None else float("inf")))
+
+
+def _better(before: Report, after: Report) -> bool:
+    """``after`` has fewer Errors, or as many and a higher score (an Error traded for a Warning is better)."""
+    return _merit(after, None)[:2] > _merit(before, None)[:2]
 
 
 def _flagged(report: Report) -> list:
@@ -177,16 +187,83 @@ def _flagged(report: Report) -> list:
     return sorted(bad, key=lambda v: (v.critic != RUNTIME, v.flag != Flag.ERROR))
 
 
+@dataclass
+class _State:
+    """One program the search reached: its source, execution (None: it does not run) and report."""
+
+    source: str
+    execution: Any
+    report: Any
+
+
+@dataclass
+class _Step:
+    edit: Edit
+    state: _State
+
+
+class _Search:
+    """The bounded search of :func:`search`: re-simulates at most ``budget`` candidate programs, never one twice."""
+
+    def __init__(self, evaluate, hook, not_run, budget: int):
+        self.evaluate, self.hook, self.not_run, self.budget = evaluate, hook, not_run, budget
+        self.tried: set[str] = set()
+
+    def candidates(self, state: _State, verdict) -> list[_Step]:
+        """Every edit offered for ``verdict``, applied and re-simulated (within the budget)."""
+        out = []
+        for edit in _offered_edits(self.hook, verdict, state.execution or self.not_run, state.source):
+            try:
+                source = apply_edits(state.source, edit.ops)
+            except (RoboCriticsError, SyntaxError, ValueError):
+                continue
+            if source in self.tried or self.budget <= 0:
+                continue  # the same program again (or out of budget): nothing to learn
+            self.tried.add(source)
+            self.budget -= 1
+            try:
+                execution, report = self.evaluate(source)
+            except (RoboCriticsError, SyntaxError):
+                continue  # e.g. an edit that is no longer valid Python: not a repair
+            out.append(_Step(edit, _State(source, execution, report)))
+        return out
+
+    def step(self, state: _State, depth: int) -> list[_Step] | None:
+        """The edits (one, or with ``depth`` > 0 up to ``depth + 1`` combined) that take ``state`` forward.
+
+        One edit: the best (:func:`_merit`) acceptable candidate (:func:`_acceptable`) for the first
+        flagged verdict that has one. Else, with ``depth`` left, the :data:`LOOKAHEAD` most promising
+        candidates that run are each followed by their own best step, and the first combination that is
+        :func:`_better` than ``state`` is taken (e.g. a release moved to its own spot leaves the workspace;
+        the heights lowered after it bring it back).
+        """
+        pool: list[_Step] = []
+        for verdict in _flagged(state.report):
+            steps = self.candidates(state, verdict)
+            good = [s for s in steps if _acceptable(state.report, s.state.report, verdict.critic)
+                    or _better(state.report, s.state.report)]  # fmt: skip
+            if good:
+                return [max(good, key=lambda s: _merit(s.state.report, s.state.execution))]
+            pool += [s for s in steps if s.state.execution is not None]
+        if depth <= 0 or state.execution is None:
+            return None
+        pool.sort(key=lambda s: _merit(s.state.report, s.state.execution), reverse=True)
+        for first in pool[:LOOKAHEAD]:
+            follow = self.step(first.state, depth - 1)
+            if follow and _better(state.report, follow[-1].state.report):
+                return [first, *follow]
+        return None
+
+
 def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any, params: Any) -> Repair:
     """The body of :func:`robocritics.repair.repair` (its arguments and result are documented there).
 
-    A bounded greedy search: each round asks the flagged critics (Errors first, then
-    Warnings) for edits, re-simulates every candidate of one verdict and keeps the best
-    acceptable one (:func:`_acceptable`, ranked by :func:`_merit`: fewer Errors, higher
-    score, shorter cycle); the next round starts from it. It stops when nothing is
-    flagged, no candidate is acceptable, or after :data:`MAX_ROUNDS` accepted edits or
-    :data:`MAX_SIMULATIONS` re-simulations. Since only improvements are kept, the
-    last program is the best one found.
+    A bounded search: each round asks the flagged critics (Errors first, then Warnings)
+    for edits and keeps the best acceptable one, or a combination of up to
+    :data:`DEPTH` + 1 edits that is better together (:meth:`_Search.step`); the next
+    round starts from there. It stops when nothing is flagged, nothing helps, or after
+    :data:`MAX_ROUNDS` rounds or :data:`MAX_SIMULATIONS` re-simulations. Only
+    improvements are kept, so the last program is the best one found.
     """
     from ..critic import check_program
     from ..robot.model import Robot
@@ -202,42 +279,19 @@ def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any
     def evaluate(source: str):
         return check_program(source, scene, goals=goals, critics=critics, params=params, robot=robot)
 
-    hook = _manager().hook
-    source = program
-    execution, report = evaluate(source)
+    state = _State(program, *evaluate(program))
+    finder = _Search(evaluate, _manager().hook, not_run, MAX_SIMULATIONS)
+    finder.tried.add(program)
     changes: list[Change] = []
-    budget = MAX_SIMULATIONS
-    tried_sources = {source}
     for _ in range(MAX_ROUNDS):
-        best = None
-        for verdict in _flagged(report):
-            if budget <= 0:
-                break
-            for edit in _offered_edits(hook, verdict, execution or not_run, source):
-                try:
-                    new_source = apply_edits(source, edit.ops)
-                except (RoboCriticsError, SyntaxError, ValueError):
-                    continue
-                if new_source in tried_sources or budget <= 0:
-                    continue  # the same program again (or out of budget): nothing to learn
-                tried_sources.add(new_source)
-                budget -= 1
-                try:
-                    new_execution, new_report = evaluate(new_source)
-                except (RoboCriticsError, SyntaxError):
-                    continue  # e.g. an edit that is no longer valid Python: not a repair
-                if not _acceptable(report, new_report, verdict.critic):
-                    continue
-                merit = _merit(new_report, new_execution)
-                if best is None or merit > best[0]:
-                    best = (merit, edit, new_source, new_execution, new_report)
-            if best is not None:
-                break  # the best edit for the first verdict that has one; the next round looks again
-        if best is None:
+        steps = finder.step(state, DEPTH)
+        if not steps:
             break
-        _, edit, new_source, new_execution, new_report = best
-        # a program that did not run had no cycle to compare with: its first running version costs 0
-        cost = new_execution.duration_s - execution.duration_s if execution and new_execution else 0.0
-        changes.append(Change(edit.critic, edit.line, edit.what, edit.why, cost))
-        source, execution, report = new_source, new_execution, new_report
-    return Repair(program, source, report, execution, changes)
+        for step in steps:
+            # a program that did not run had no cycle to compare with: its first running version costs 0
+            before, after = state.execution, step.state.execution
+            cost = after.duration_s - before.duration_s if before is not None and after is not None else 0.0
+            edit = step.edit
+            changes.append(Change(edit.critic, edit.line, edit.what, edit.why, cost))
+            state = step.state
+    return Repair(program, state.source, state.report, state.execution, changes)
