@@ -610,10 +610,104 @@ def _reach_edit(verdict, exc, program: str, dz: float) -> Edit | None:
     )
 
 
+#: Clearance a transit lift leaves between the lowest point of the load (or the fingertips) and the highest
+#: thing in the scene, m: the collision critic's warning distance (5 cm) plus 1 cm.
+TRANSIT_CLEARANCE_M = 0.06
+_TRANSITS = ("move_to", "move_linear", "move_above")
+
+
+def _entity_tops(execution, row: int, skip: str) -> float:
+    """The highest top (m) of the scene's objects (at sample ``row``, moved ones where they are then) and
+    containers, except object ``skip`` and the table."""
+    tops = [c.top for c in execution.scene.containers]
+    for o in execution.scene.objects:
+        if o.id == skip:
+            continue
+        poses = execution.object_poses.get(o.id)
+        tops.append(float(poses[row, 2, 3]) + o.half_height if poses is not None else o.top)
+    return max(tops, default=execution.scene.table.top_z)
+
+
+def _transit_need(execution, line: int) -> tuple[float, float] | None:
+    """For the move on ``line``: the clearance height (m) for the TCP and the largest lift (m) from where the
+    move starts to it, over every time the line runs (a loop: each object carried there)."""
+    traj = execution.trajectory
+    objects = {o.id: o for o in execution.scene.objects}
+    clear_z, lift = -math.inf, 0.0
+    load = _load_per_step(traj)
+    import numpy as np
+
+    firsts = {int(s): int(r) for s, r in zip(*np.unique(traj.step, return_index=True))}
+    for i, step in enumerate(traj.steps):
+        if step.line != line or i not in firsts:
+            continue
+        row = firsts[i]
+        tcp_z = float(traj.tcp[row, 2, 3])
+        carried = load.get(i, "")
+        below = 0.0
+        if carried and carried in execution.object_poses:  # how far the load hangs under the fingertips
+            below = max(0.0, tcp_z - (float(execution.object_poses[carried][row, 2, 3]) - objects[carried].half_height))
+        z = _entity_tops(execution, row, carried) + below + TRANSIT_CLEARANCE_M
+        clear_z, lift = max(clear_z, z), max(lift, z - tcp_z)
+    return (clear_z, lift) if clear_z > -math.inf else None
+
+
+def _target_xy(program: str, tree: ast.Module, line: int) -> tuple[str, str] | None:
+    """The x and y expressions (source text) of the transit move on ``line``."""
+    for skill in ("move_to", "move_linear"):
+        call = _call_named(tree, line, skill)
+        if call is not None and len(call.args) == 3:
+            return ast.get_source_segment(program, call.args[0]), ast.get_source_segment(program, call.args[1])
+    call = _call_named(tree, line, "move_above")
+    if call is not None and call.args:
+        obj = ast.get_source_segment(program, call.args[0])
+        return f"{obj}.x", f"{obj}.y"
+    return None
+
+
+def _transit(verdict, execution, program) -> list[Edit]:
+    """The arm or its load crosses something *during* a move (not where it ends): go over it.
+
+    For each flagged transit move (``move_to``, ``move_linear``, ``move_above``), the
+    clearance height is derived from the scene at that time (:func:`_transit_need`: the
+    highest object or container top, plus how far the load hangs below the fingertips,
+    plus :data:`TRANSIT_CLEARANCE_M`). Offered, cheapest first: a lift (``move_up``) to
+    it before the move, and the lift plus a via point at that height above the move's
+    target (``move_to(x, y, clear_z)``), so the move itself ends as a descent. The
+    move's own target (a release, say) is never changed.
+    """
+    calls = execution.plan.calls
+    skills = {c.line: c.skill for c in calls}
+    tree = ast.parse(program)
+    edits = []
+    for line in dict.fromkeys(verdict.evidence.lines):
+        if skills.get(line) not in _TRANSITS:
+            continue
+        need = _transit_need(execution, line)
+        xy = _target_xy(program, tree, line)
+        if need is None or xy is None or need[1] <= 0.005:
+            continue
+        clear_z, lift = need
+        up = f"move_up({_cm_up(lift):g})"
+        via = f"move_to({xy[0]}, {xy[1]}, {_cm_up(clear_z):g})"
+        why = (
+            f"during line {line} the robot or what it carries passes {verdict.value:.3g} m from "
+            f"{verdict.details.get('closest_pair', 'the scene').replace('|', ' and ')}; the scene's highest top "
+            f"there needs the fingertips at {clear_z:.3f} m"
+        )
+        edits.append(Edit(verdict.critic, line, f"lift {_cm_up(lift):g} m before line {line}", why,
+                          [Insert(line, before=(up,))]))  # fmt: skip
+        edits.append(Edit(verdict.critic, line, f"lift {_cm_up(lift):g} m and pass above the target at "
+                          f"z = {_cm_up(clear_z):g} m before line {line}", why, [Insert(line, before=(up, via))]))  # fmt: skip
+        edits.append(Edit(verdict.critic, line, f"pass above the target at z = {_cm_up(clear_z):g} m before line {line}",
+                          why, [Insert(line, before=(via,))]))  # fmt: skip
+    return edits
+
+
 _BY_CRITIC = {
     "joint_speed": [_slowdowns],
     "end_effector_pose": [_slowdowns],
-    "collision": [_spread, _raise_release, _avoid, _pick_first, _slowdowns],
+    "collision": [_spread, _raise_release, _transit, _avoid, _pick_first, _slowdowns],
     "space_usage": [_lower_heights],
     "task_outcome": [_spread],
     "pinch_point": [_natural_posture],
