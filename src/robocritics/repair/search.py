@@ -119,7 +119,11 @@ def _progress(before: Report, after: Report, critic: str) -> bool:
     if old is None or new is None or None in (old.value, old.threshold, new.value) or old.threshold != new.threshold:
         return False
     gap_old, gap_new = old.value - old.threshold, new.value - new.threshold
-    return gap_old * gap_new > 0 and abs(gap_new) <= (1 - PROGRESS) * abs(gap_old)
+    if gap_old * gap_new > 0 and abs(gap_new) <= (1 - PROGRESS) * abs(gap_old):
+        return True
+    # as bad at its worst, but over clearly fewer samples: one of several faults of that critic is gone
+    fewer = new.evidence.samples_flagged <= (1 - PROGRESS) * old.evidence.samples_flagged
+    return new.flag == old.flag and abs(gap_new) <= abs(gap_old) and fewer
 
 
 def _runtime_moved_on(before: Report, after: Report) -> bool:
@@ -137,7 +141,8 @@ def _acceptable(before: Report, after: Report, critic: str) -> bool:
     Warning to OK); its flag is clearly smaller (:data:`PROGRESS`: the measured value
     moved toward the threshold by that fraction, e.g. a 6 cm penetration that became
     2.9 cm, so a repair that uncovers the next, lesser fault of the same critic still
-    counts and the next round can fix that one); or another critic's Error is gone
+    counts and the next round can fix that one), or no worse and flagged on that
+    fraction fewer samples (one of several collisions gone); or another critic's Error is gone
     (e.g. picking the cupcake first puts it on the plate, while the collision it
     caused moves elsewhere). For the ``runtime`` Error of a program that did not run,
     progress is that it runs.
