@@ -704,14 +704,97 @@ def _transit(verdict, execution, program) -> list[Edit]:
     return edits
 
 
+#: Gripper yaw (rad) a turned grasp uses: the fingers close across the object's other horizontal axis.
+TURNED_YAW_RAD = round(math.pi / 2, 4)
+
+
+def _turn_fingers(verdict, execution, program) -> list[Edit]:
+    """The fingers land on the object they then grasp (e.g. along a fork's handle): grasp it turned 90 degrees.
+
+    For a flagged finger contact with an object the program grasps, ``rotate_gripper``
+    by :data:`TURNED_YAW_RAD` goes before the joint move that approaches that grasp and
+    ``rotate_gripper(0)`` after the ``open_gripper`` that lets the object go, so the
+    rest of the program keeps its orientation.
+    """
+    traj = execution.trajectory
+    P = traj.proximity
+    grasped = {e.detail.removeprefix("grasped "): e.line for e in execution.events if e.kind == "grasp"}
+    hit = {traj.pairs[k].b_entity for k in range(len(traj.pairs))
+           if traj.pairs[k].group_a == "gripper" and traj.pairs[k].b_entity in grasped and P[:, k].min() < 0}  # fmt: skip
+    calls = execution.plan.calls
+    edits = []
+    for obj in sorted(hit):
+        close = grasped[obj]
+        i = next(i for i, c in enumerate(calls) if c.line == close and c.skill == "close_gripper")
+        approach = next((c for c in reversed(calls[:i]) if c.skill in _JOINT_MOVES), None)
+        release = next((c for c in calls[i:] if c.skill == "open_gripper"), None)
+        if approach is None or release is None or any(c.skill == "rotate_gripper" for c in calls[calls.index(approach) : i]):
+            continue
+        ops = [Insert(approach.line, before=(f"rotate_gripper({TURNED_YAW_RAD:g})",)),
+               Insert(release.line, after=("rotate_gripper(0)",))]  # fmt: skip
+        edits.append(Edit(verdict.critic, approach.line,
+                          f"fingers turned {TURNED_YAW_RAD:g} rad before line {approach.line}, back after line {release.line}",
+                          f"the fingers land on the {obj} they grasp on line {close}", ops))  # fmt: skip
+    return edits
+
+
+def _joint_instead(verdict, execution, program) -> list[Edit]:
+    """A straight line the arm cannot follow (it passes too close to the base, or out of reach): a joint move."""
+    if verdict.critic != "runtime" or verdict.details.get("error") != "PlanningError":
+        return []
+    exc = _unreached(execution, program)
+    call = getattr(exc, "call", None)
+    if call is None or call.skill != "move_linear":
+        return []
+    node = _call_named(ast.parse(program), call.line, "move_linear")
+    if node is None:
+        return []
+    name = node.func.attr if isinstance(node.func, ast.Attribute) else node.func.id
+    func = node.func
+    end = func.end_col_offset
+    return [Edit(verdict.critic, call.line, f"move_linear -> move_to on line {call.line} (a joint move)",
+                 f"the straight line of line {call.line} leaves what the arm can follow",
+                 [ReplaceSpan(call.line, end - len(name), end, "move_to")])]  # fmt: skip
+
+
+def _shorter_descent(verdict, execution, program) -> list[Edit]:
+    """The load is pushed into what is under it by the ``move_down`` before its release: descend less.
+
+    The descent is shortened by the vertical overlap measured in the trace
+    (:func:`_vertical_overlaps`) plus :data:`RELEASE_CLEARANCE_M`, rounded up to a
+    centimetre (with the largest overlap over every time that line runs); a descent
+    that would vanish is not offered.
+    """
+    if verdict.value is None or verdict.value > 0:
+        return []
+    calls = [c for c in execution.plan.calls if c.skill not in _SETTINGS]
+    tree = ast.parse(program)
+    lines = set(verdict.evidence.lines)
+    edits = []
+    for i, c in enumerate(calls[:-1]):
+        if c.skill != "move_down" or calls[i + 1].skill != "open_gripper" or not {c.line, calls[i + 1].line} & lines:
+            continue
+        need = max(_vertical_overlaps(execution, c.line).values(), default=0.0)
+        node = _call_named(tree, c.line, "move_down")
+        if need <= 0 or node is None or not node.args or any(e.line == c.line for e in edits):
+            continue
+        d = _cm_up(need + RELEASE_CLEARANCE_M)
+        op = _shifted(program, node.args[0], -d, floor=0.0)
+        if op is not None:
+            edits.append(Edit(verdict.critic, c.line, f"descend {d:g} m less on line {c.line} before the release",
+                              f"the load sinks {need:.3g} m into what is under it at the end of line {c.line}",
+                              [op]))  # fmt: skip
+    return edits
+
+
 _BY_CRITIC = {
     "joint_speed": [_slowdowns],
     "end_effector_pose": [_slowdowns],
-    "collision": [_spread, _raise_release, _transit, _avoid, _pick_first, _slowdowns],
+    "collision": [_spread, _raise_release, _shorter_descent, _transit, _turn_fingers, _avoid, _pick_first, _slowdowns],
     "space_usage": [_lower_heights],
     "task_outcome": [_spread],
     "pinch_point": [_natural_posture],
-    "runtime": [_reachable],
+    "runtime": [_reachable, _joint_instead],
 }
 
 
