@@ -119,25 +119,26 @@ def _pick_first(verdict, execution, program) -> list[Edit]:
         return []
     groups = paragraphs(program)
     text = program.splitlines()
-    line = verdict.evidence.lines[0]
-    here = next((g for g in groups if g[0] <= line <= g[1]), None)
+    # each paragraph with a flagged line, the latest first: the smallest reordering is offered first
+    flagged = [g for g in groups if any(g[0] <= ln <= g[1] for ln in verdict.evidence.lines)]
     edits = []
-    for name in dict.fromkeys([*str(verdict.details.get("closest_pair", "")).split("|"), *verdict.evidence.objects]):
-        if not name or here is None:
-            continue
-        group = next((g for g in groups if g[0] > here[1] and f"{name}." in text[g[0] - 1]), None)
-        if group and text[group[1] - 1].strip() == "home()" and group[1] > group[0]:
-            group = (group[0], group[1] - 1)  # the program still ends at home
-        if group:
-            edits.append(
-                Edit(
-                    verdict.critic,
-                    here[0],
-                    f"lines {group[0]}-{group[1]} (picking {name}) moved above line {here[0]}",
-                    f"the robot hits {name} during lines {', '.join(map(str, verdict.evidence.lines))}",
-                    [MoveBlock(here[0], *group)],
+    for here in reversed(flagged):
+        for name in dict.fromkeys([*str(verdict.details.get("closest_pair", "")).split("|"), *verdict.evidence.objects]):
+            if not name:
+                continue
+            group = next((g for g in groups if g[0] > here[1] and f"{name}." in text[g[0] - 1]), None)
+            if group and text[group[1] - 1].strip() == "home()" and group[1] > group[0]:
+                group = (group[0], group[1] - 1)  # the program still ends at home
+            if group:
+                edits.append(
+                    Edit(
+                        verdict.critic,
+                        here[0],
+                        f"lines {group[0]}-{group[1]} (picking {name}) moved above line {here[0]}",
+                        f"the robot hits {name} during lines {', '.join(map(str, verdict.evidence.lines))}",
+                        [MoveBlock(here[0], *group)],
+                    )
                 )
-            )
     return edits
 
 
@@ -716,11 +717,12 @@ def _turn_fingers(verdict, execution, program) -> list[Edit]:
     ``rotate_gripper(0)`` after the ``open_gripper`` that lets the object go, so the
     rest of the program keeps its orientation.
     """
+    from ..critics.collision import Params as CollisionParams
+
     traj = execution.trajectory
-    P = traj.proximity
+    deep = traj.proximity.min(axis=0, initial=math.inf) < -CollisionParams().contact_tolerance_m  # not just touching
     grasped = {e.detail.removeprefix("grasped "): e.line for e in execution.events if e.kind == "grasp"}
-    hit = {traj.pairs[k].b_entity for k in range(len(traj.pairs))
-           if traj.pairs[k].group_a == "gripper" and traj.pairs[k].b_entity in grasped and P[:, k].min() < 0}  # fmt: skip
+    hit = {p.b_entity for p, d in zip(traj.pairs, deep.tolist()) if p.group_a == "gripper" and p.b_entity in grasped and d}
     calls = execution.plan.calls
     edits = []
     for obj in sorted(hit):
