@@ -29,6 +29,18 @@ def _move_lines(verdict, execution) -> list[int]:
     return [ln for ln in verdict.evidence.lines if skills.get(ln) in _MOVES]
 
 
+_SET_SPEED = re.compile(r"(?:lib\.)?set_speed\([0-9.]+\)")
+
+
+def _speed_wrapper(text: list[str], line: int) -> str | None:
+    """The ``set_speed(f)`` call alone on the line above ``line`` when another ``set_speed`` is alone on the line
+    below: a speed set for that one move (by an earlier slowdown), or None."""
+    if not 1 < line < len(text):
+        return None
+    above, below = text[line - 2].strip(), text[line].strip()
+    return above if _SET_SPEED.fullmatch(above) and _SET_SPEED.fullmatch(below) else None
+
+
 def _slowdowns(verdict, execution, program) -> list[Edit]:
     """The smallest speed fraction on the offending moves that brings the peak under the threshold.
 
@@ -39,13 +51,18 @@ def _slowdowns(verdict, execution, program) -> list[Edit]:
     if not verdict.value or not verdict.threshold or verdict.value <= verdict.threshold:
         return []
     lines = _move_lines(verdict, execution)
+    text = program.splitlines()
     edits = []
     for margin in (SPEED_MARGIN, SPEED_MARGIN**2, SPEED_MARGIN**4):
         ops, parts = [], []
         for ln in lines:
             prev = execution.plan.speed_at(ln)
             f = max(0.01, round(prev * margin * verdict.threshold / verdict.value, 2))
-            ops.append(Insert(ln, before=(f"set_speed({f:g})",), after=(f"set_speed({prev:g})",)))
+            wrapper = _speed_wrapper(text, ln)
+            if wrapper is not None:  # slowed before: change that speed instead of wrapping the move again
+                ops.append(ReplaceText(ln - 1, wrapper, f"set_speed({f:g})"))
+            else:
+                ops.append(Insert(ln, before=(f"set_speed({f:g})",), after=(f"set_speed({prev:g})",)))
             parts.append(f"line {ln}: speed {prev:g} -> {f:g}")
         if ops:
             edits.append(
@@ -691,10 +708,11 @@ def _transit(verdict, execution, program) -> list[Edit]:
         clear_z, lift = need
         up = f"move_up({_cm_up(lift):g})"
         via = f"move_to({xy[0]}, {xy[1]}, {_cm_up(clear_z):g})"
+        pair = str(verdict.details.get("closest_pair", "the robot|the scene")).split("|")
+        how = f"sinks {-verdict.value:.3g} m into" if verdict.value < 0 else f"passes {verdict.value:.3g} m from"
         why = (
-            f"during line {line} the robot or what it carries passes {verdict.value:.3g} m from "
-            f"{verdict.details.get('closest_pair', 'the scene').replace('|', ' and ')}; the scene's highest top "
-            f"there needs the fingertips at {clear_z:.3f} m"
+            f"during line {line} the {pair[0]} {how} the {pair[-1]}; the scene's highest top there needs the "
+            f"fingertips at {clear_z:.3f} m"
         )
         edits.append(Edit(verdict.critic, line, f"lift {_cm_up(lift):g} m before line {line}", why,
                           [Insert(line, before=(up,))]))  # fmt: skip

@@ -67,6 +67,9 @@ class Repair:
     report: Report
     execution: Execution | None
     changes: list[Change] = field(default_factory=list)
+    #: The original program's score (0-10) and cycle time (s; None when it did not run).
+    original_score: float = 0.0
+    original_cycle_s: float | None = None
 
     @property
     def diff(self) -> str:
@@ -81,6 +84,21 @@ class Repair:
     def errors(self) -> list:
         """The verdicts still flagged Error."""
         return [v for v in self.report.verdicts if v.flag == Flag.ERROR]
+
+    @property
+    def warnings(self) -> list:
+        """The verdicts still flagged Warning."""
+        return [v for v in self.report.verdicts if v.flag == Flag.WARNING]
+
+    def summary(self) -> str:
+        """One line: how many changes, the score and cycle time before and after, and what is left."""
+        after = f"{self.report.score:g}/10"
+        cycle = f", cycle {self.execution.duration_s:.2f} s" if self.execution is not None else ""
+        if self.original_cycle_s is not None and self.execution is not None:
+            cycle = f", cycle {self.original_cycle_s:.2f} s -> {self.execution.duration_s:.2f} s"
+        left = f"{len(self.errors)} Error(s) and {len(self.warnings)} Warning(s) left"
+        clean = "nothing left" if not self.errors and not self.warnings else left
+        return f"repair: {len(self.changes)} change(s), score {self.original_score:g}/10 -> {after}{cycle}; {clean}"
 
 
 @dataclass(frozen=True)
@@ -285,6 +303,7 @@ def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any
         return check_program(source, scene, goals=goals, critics=critics, params=params, robot=robot)
 
     state = _State(program, *evaluate(program))
+    original = state
     finder = _Search(evaluate, _manager().hook, not_run, MAX_SIMULATIONS)
     finder.tried.add(program)
     changes: list[Change] = []
@@ -299,4 +318,5 @@ def search(program: str, scene: Scene | str, goal: Any, critics: Any, robot: Any
             edit = step.edit
             changes.append(Change(edit.critic, edit.line, edit.what, edit.why, cost))
             state = step.state
-    return Repair(program, state.source, state.report, state.execution, changes)
+    return Repair(program, state.source, state.report, state.execution, changes, original.report.score,
+                  original.execution.duration_s if original.execution is not None else None)  # fmt: skip
