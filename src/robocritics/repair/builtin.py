@@ -369,12 +369,14 @@ def _raise_release(verdict, execution, program) -> list[Edit]:
         return []
     calls = execution.plan.calls
     skills = {c.line: c.skill for c in calls}
-    releases = sorted({c.line for c in calls if c.skill == "open_gripper"})
+    motion = [c for c in calls if c.skill not in _SETTINGS]
+    release_moves = {c.line for c, n in zip(motion, motion[1:]) if c.skill in ("move_to", "move_linear")
+                     and n.skill == "open_gripper"}  # fmt: skip
     tree = ast.parse(program)
     text = program.splitlines()
     needs: dict[int, dict[str, float]] = {}  # release move line -> per carried object, m
     for ln in verdict.evidence.lines:
-        if skills.get(ln) in ("move_to", "move_linear") and any(r > ln for r in releases):
+        if ln in release_moves:
             move = ln
         elif skills.get(ln) == "open_gripper":
             moves = [c.line for c in calls if c.line < ln and c.skill in ("move_to", "move_linear")]
@@ -807,10 +809,52 @@ def _shorter_descent(verdict, execution, program) -> list[Edit]:
     return edits
 
 
+#: How much higher than its measured overlap a grasp is moved, m (the fingers still close on the object).
+GRASP_CLEARANCE_M = 0.005
+
+
+def _grasp_higher(verdict, execution, program) -> list[Edit]:
+    """The gripper plunges into the object it then grasps (its body hits a tall object's top): grasp higher.
+
+    The approach (the move right before ``close_gripper``) ends higher by the deepest
+    overlap of the gripper with that object on that line plus :data:`GRASP_CLEARANCE_M`:
+    its z argument (``move_to``/``move_linear``) or a shorter ``move_down``.
+    """
+    from ..critics.collision import Params as CollisionParams
+
+    traj = execution.trajectory
+    motion = [c for c in execution.plan.calls if c.skill not in _SETTINGS]
+    grasps = {e.line: e.detail.removeprefix("grasped ") for e in execution.events if e.kind == "grasp"}
+    tree = ast.parse(program)
+    import numpy as np
+
+    edits = []
+    for c, n in zip(motion, motion[1:]):
+        obj = grasps.get(n.line) if n.skill == "close_gripper" else None
+        if obj is None or c.line not in verdict.evidence.lines or any(e.line == c.line for e in edits):
+            continue
+        rows = np.isin(traj.step, [i for i, st in enumerate(traj.steps) if st.line == c.line])
+        cols = [k for k, p in enumerate(traj.pairs) if p.group_a == "gripper" and p.b_entity == obj]
+        depth = -float(traj.proximity[np.ix_(rows, cols)].min(initial=0.0)) if cols and rows.any() else 0.0
+        if depth <= CollisionParams().contact_tolerance_m:
+            continue
+        d = _cm_up(depth + GRASP_CLEARANCE_M)
+        node = _call_named(tree, c.line, c.skill)
+        op = None
+        if node is not None and c.skill in ("move_to", "move_linear") and len(node.args) == 3:
+            op = _shifted(program, node.args[2], d)
+        elif node is not None and c.skill == "move_down" and node.args:
+            op = _shifted(program, node.args[0], -d, floor=0.0)
+        if op is not None:
+            edits.append(Edit(verdict.critic, c.line, f"grasp {d:g} m higher on line {c.line}",
+                              f"the gripper sinks {depth:.3g} m into the {obj} it grasps on line {n.line}", [op]))  # fmt: skip
+    return edits
+
+
 _BY_CRITIC = {
     "joint_speed": [_slowdowns],
     "end_effector_pose": [_slowdowns],
-    "collision": [_spread, _raise_release, _shorter_descent, _transit, _turn_fingers, _avoid, _pick_first, _slowdowns],
+    "collision": [_spread, _raise_release, _shorter_descent, _grasp_higher, _transit, _turn_fingers, _avoid, _pick_first, _slowdowns],
     "space_usage": [_lower_heights],
     "task_outcome": [_spread],
     "pinch_point": [_natural_posture],

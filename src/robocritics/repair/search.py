@@ -127,6 +127,9 @@ def _flags(report: Report) -> dict[str, int]:
     return {v.critic: v.score for v in report.verdicts}
 
 
+#: The critic of the task goals: a repair never trades a goal for anything else.
+TASK_OUTCOME = "task_outcome"
+
 #: Fraction by which a flag's distance from its threshold must shrink to count as progress.
 PROGRESS = 0.25
 
@@ -200,7 +203,11 @@ def _merit(report: Report, execution) -> tuple:
 
 
 def _better(before: Report, after: Report) -> bool:
-    """``after`` has fewer Errors, or as many and a higher score (an Error traded for a Warning is better)."""
+    """``after`` has fewer Errors, or as many and a higher score (an Error traded for a Warning is better);
+    never at the cost of a task goal (the ``task_outcome`` verdict) or of running at all."""
+    old, new = _flags(before), _flags(after)
+    if any(new.get(name, 2) < old.get(name, 2) for name in (TASK_OUTCOME, RUNTIME)):
+        return False
     return _merit(after, None)[:2] > _merit(before, None)[:2]
 
 
