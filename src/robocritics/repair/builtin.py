@@ -179,14 +179,19 @@ _SETTINGS = {"set_speed", "reduce_speed", "avoid_collision"}
 
 
 def _release_lines(execution, box) -> list[int]:
-    """The lines of the moves that end above ``box`` with an ``open_gripper`` next: where objects are let go in it."""
+    """The lines of the moves that end above ``box`` with an ``open_gripper`` next (or after a straight descent):
+    where objects are let go in it."""
     calls = [c for c in execution.plan.calls if c.skill not in _SETTINGS]
     lines = []
-    for i, c in enumerate(calls):
-        if c.skill not in ("move_to", "move_linear", "move_above") or i + 1 >= len(calls):
+    for j, release in enumerate(calls):
+        if release.skill != "open_gripper":
             continue
-        if calls[i + 1].skill != "open_gripper":
+        i = j - 1
+        while i >= 0 and calls[i].skill in ("move_down", "move_up"):
+            i -= 1  # a straight descent onto the release point: the move before it sets where
+        if i < 0 or calls[i].skill not in ("move_to", "move_linear", "move_above"):
             continue
+        c = calls[i]
         if c.skill == "move_above":
             inside = c.args.get("object") == box.id
         else:
