@@ -117,12 +117,35 @@ def _lower_heights(verdict, execution, program) -> list[Edit]:
             group[0],
             f"heights on line{'s' if len(group) > 1 else ''} {', '.join(map(str, group))} scaled by {f:g}",
             why,
-            [ScaleNumbers(ln, f) for ln in group],
+            [*(ScaleNumbers(ln, f) for ln in group), *_keep_descents(execution, program, group, f)],
         )
         for group in groups[:MAX_HEIGHT_GROUPS]
         for f in HEIGHT_FACTORS
         if group
     ]
+
+
+def _keep_descents(execution, program: str, group: list[int], factor: float) -> list:
+    """A hover lowered by ``factor`` with a ``move_down(dz)`` after it (on a line not scaled): the descent is
+    shortened by as much, so it still ends where it did (at the grasp or the release)."""
+    motion = [c for c in execution.plan.calls if c.skill not in _SETTINGS]
+    tree = ast.parse(program)
+    ops, done = [], set()
+    for c, n in zip(motion, motion[1:]):
+        if c.line not in group or n.skill != "move_down" or n.line in group or n.line in done:
+            continue
+        stmt = _call_named(tree, c.line, c.skill)
+        literals = [x.value for x in ast.walk(stmt) if isinstance(x, ast.Constant) and type(x.value) is float
+                    and x.value > 0] if stmt is not None else []  # fmt: skip
+        down = _call_named(tree, n.line, "move_down")
+        if len(literals) != 1 or down is None or not down.args:
+            continue
+        lowered = literals[0] - round(literals[0] * factor, 4)
+        op = _shifted(program, down.args[0], -lowered, floor=0.0)
+        if op is not None:
+            ops.append(op)
+            done.add(n.line)
+    return ops
 
 
 def _pick_first(verdict, execution, program) -> list[Edit]:
