@@ -22,7 +22,7 @@ import pytest
 from robocritics.batch import BatchError, LocalEngine, evaluate, reward
 from robocritics.batch.local import WORKER_ENV
 from robocritics.batch.rows import OUTPUT_KEYS
-from robocritics.cli.batch import Progress, done_rows
+from robocritics.cli.batch import Progress, finished_jsonl
 from robocritics.critic import critique
 from robocritics.scene import Scene
 from robocritics.simulate import simulate
@@ -289,7 +289,7 @@ def test_cli_bad_usage_exits_2_with_one_line(tmp_path, args, message):
 def test_done_rows_of_a_file_with_only_a_torn_line(tmp_path):
     out = tmp_path / "out.jsonl"
     out.write_text('{"id": "a", "sco')
-    assert done_rows(out) == [] and out.read_text() == ""
+    assert len(finished_jsonl(out)) == 0 and out.read_text() == ""
 
 
 def _vm_size_bytes(pid: int) -> int:

@@ -27,7 +27,7 @@ from hypothesis import strategies as st
 from robocritics.batch import LocalEngine, RowError, evaluate, reward
 from robocritics.batch.rows import MAX_MESSAGE_CHARS, OUTPUT_KEYS, SceneCache, check_row, error_row, evaluate_job
 from robocritics.cli import batch as cli_batch
-from robocritics.cli.batch import Progress, count_rows, done_rows, read_rows
+from robocritics.cli.batch import Progress, count_rows, finished_jsonl, read_rows
 from robocritics.cli.main import main
 from robocritics.critic import CriticParams, register, unregister
 from robocritics.errors import CriticError, GoalError, SceneError
@@ -242,7 +242,7 @@ def test_done_rows_cuts_a_torn_last_line(tmp_path):
     good = [error_row("a", "RowError", "m"), error_row(7, "RowError", "m")]
     kept = "".join(json.dumps(r) + "\n" for r in good)
     out.write_text(kept + '{"id": "torn", "sco')
-    assert done_rows(out) == good and out.read_text() == kept
+    assert finished_jsonl(out).keys == {'"a"', "7"} and out.read_text() == kept
 
 
 @pytest.mark.parametrize(
@@ -260,7 +260,7 @@ def test_resume_refuses_an_output_file_that_is_not_a_batch_output_and_leaves_it_
     out.write_bytes(json.dumps(error_row("a", "RowError", "m")).encode() + b"\n" + b"\n".join(lines) + b"\npartial last line")
     before = out.read_bytes()
     with pytest.raises(cli_batch.UsageError, match=f"line {bad} of .* is not an output row"):
-        done_rows(out)
+        finished_jsonl(out)
     assert out.read_bytes() == before
 
 
@@ -275,7 +275,11 @@ def test_parquet_round_trip_equals_the_jsonl_rows(tmp_path):
         error_row(None, "RowError", "input line 3: not valid JSON"),
         error_row(-3, "ProgramError", "line 2: bad", line=2, duration_s=0.01),
     ]  # fmt: skip
-    writer = cli_batch.ParquetWriter(tmp_path / "out.parquet", rows[:2])
+    first = cli_batch.ParquetWriter(tmp_path / "out.parquet")
+    for row in rows[:2]:
+        first.write(row)
+    first.close()
+    writer = cli_batch.ParquetWriter(tmp_path / "out.parquet", resume=True)  # copies the first file's rows
     for row in rows[2:]:
         writer.write(row)
     writer.close()
@@ -286,7 +290,7 @@ def test_parquet_round_trip_equals_the_jsonl_rows(tmp_path):
     back = cli_batch.parquet_rows(tmp_path / "out.parquet")
     assert back == _rows(tmp_path / "out.jsonl") == rows
     assert [type(r["id"]) for r in back] == [int, str, int, str, type(None), int]
-    assert not (tmp_path / "out.parquet.partial").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.jsonl", "out.parquet"]  # no temporary file left
 
 
 # --- the command: usage errors before any work ----------------------------------------------------
@@ -344,13 +348,33 @@ def test_resume_into_a_parquet_file_that_is_not_a_batch_output_is_a_one_line_err
     assert code == 2 and "--resume" in cap.err and len(cap.err.strip().splitlines()) == 1, cap.err
 
 
-def test_a_full_disk_is_a_one_line_error_naming_the_output(capsys, tmp_path):
-    if not Path("/dev/full").exists():
-        pytest.skip("no /dev/full here")
+def _file_size_limit(limit_bytes: int):
+    """A preexec_fn: files the child writes may grow to ``limit_bytes`` (RLIMIT_FSIZE); past it a write fails with
+    EFBIG (SIGXFSZ ignored), as on a full disk."""
+
+    def limit() -> None:
+        import resource
+
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    return limit
+
+
+def test_a_full_disk_is_a_one_line_error_naming_the_output(tmp_path):
+    src = _write(tmp_path / "in.jsonl", [_row(id=i, program="home(") for i in range(8)])
+    out = tmp_path / "out.jsonl"
+    done = subprocess.run([*CLI, "batch", str(src), "-o", str(out), "--workers", "1"], capture_output=True, text=True,
+                          timeout=300, preexec_fn=_file_size_limit(600))  # fmt: skip
+    assert done.returncode == 2 and "File too large" in done.stderr and "--resume" in done.stderr, done.stderr
+    assert str(out) in done.stderr and "Traceback" not in done.stderr
+    assert 0 < out.read_bytes().count(b"\n") < 8  # some rows were written before the disk "filled"
+
+
+def test_a_device_at_the_output_path_is_refused_before_any_work(capsys, tmp_path):
     src = _write(tmp_path / "in.jsonl", [_row(id=1, program="home(")])
     code, cap = _main(capsys, "batch", str(src), "-o", "/dev/full", "--workers", "1")
-    assert code == 2 and "No space left on device" in cap.err and "--resume" in cap.err
-    assert "Traceback" not in cap.err
+    assert code == 2 and "'/dev/full' is not a regular file" in cap.err and "Traceback" not in cap.err
 
 
 # --- the command against a hostile input file ------------------------------------------------------
@@ -546,7 +570,7 @@ def test_sigterm_completes_the_parquet_file_and_resume_finishes_it_equal_to_json
             proc.kill()
     assert proc.returncode == 130, err
     first = cli_batch.parquet_rows(parquet)  # a complete Parquet file, not a .partial
-    assert 2 <= len(first) < len(rows) and not (tmp_path / "out.parquet.partial").exists()
+    assert 2 <= len(first) < len(rows) and not any(p.name.endswith(".partial") for p in tmp_path.iterdir())
     for args in ([str(parquet), "--resume"], [str(jsonl)]):
         done = subprocess.run([*CLI, "batch", str(src), "-o", *args, "--workers", "1"], capture_output=True, text=True, timeout=600)
         assert done.returncode == 0, done.stderr

@@ -220,3 +220,43 @@ def test_verdict_is_immutable_and_validated():
         v.flag = Flag.OK
     with pytest.raises(Exception):
         Verdict(critic="x", flag="BAD", message="m")
+
+
+def test_the_contract_is_told_apart_by_arity_and_anything_else_is_refused(traj):
+    from robocritics.critic import takes_execution
+
+    class RunContract(Always):
+        name = "run_contract"
+
+        def check(self, execution, params):
+            assert execution.plan is None and execution.robot is None and execution.source == "trajectory"
+            return Verdict(critic=self.name, flag=Flag.OK, message=f"{len(execution.trajectory)} samples")
+
+    class TwoMany(Always):
+        name = "too_many"
+
+        def check(self, a, b, c, d):
+            raise AssertionError("never called")
+
+    assert takes_execution(RunContract()) and not takes_execution(Always())
+    r = critique(traj, Scene(), critics=[RunContract(), Always()])
+    assert r.critics == ["run_contract", "always"] and r.verdict("run_contract").message == f"{len(traj)} samples"
+    with pytest.raises(CriticError, match=r"takes 4 parameters; a critic's check is check\(execution, params\)"):
+        critique(traj, Scene(), critics=[TwoMany()])
+
+
+def test_an_on_demand_critic_runs_when_the_run_asks_or_when_named(traj):
+    class OnDemand(Always):
+        name = "on_demand"
+
+        def requested(self, execution):
+            return execution.trajectory.duration_s > 100.0
+
+    from robocritics.critic import register, unregister
+
+    register(OnDemand())
+    try:
+        assert "on_demand" not in critique(traj, Scene()).critics  # not asked for by this 1-s run
+        assert "on_demand" in critique(traj, Scene(), critics=["on_demand"]).critics  # named
+    finally:
+        unregister("on_demand")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -9,6 +10,7 @@ import pytest
 from robocritics.critic import Flag, check_program, critique, get_critics
 from robocritics.critics.task_outcome import GoalOutcome, TaskOutcomeCritic
 from robocritics.errors import CriticError, GoalError
+from robocritics.goals import Goal
 from robocritics.scene import Scene
 from robocritics.simulate import simulate
 
@@ -85,19 +87,17 @@ def test_goals_are_checked_whichever_critics_were_chosen(careful):
     assert report.score == 10.0
 
 
-def test_the_critic_alone_on_outcomes():
+def test_the_critic_alone_reads_the_goals_of_the_run(careful):
+    """An ordinary critic of the run contract: the goals travel in the Execution, not in its params."""
     critic = TaskOutcomeCritic()
-    params = critic.Params(
-        outcomes=[
-            GoalOutcome(goal="a in b", met=True, where="a ended in b", object="a"),
-            GoalOutcome(goal="c on d", met=False, where="c ended on the table at (0.10, 0.20) m, 0.30 m from d", object="c", lines=(4,)),
-        ]
-    )
-    verdict = critic.check(None, None, params)
+    run = replace(careful["sorting"], goals=(Goal.parse("green_apple in brown_box"), Goal.parse("green_apple in white_box")))
+    assert critic.requested(run) and not critic.requested(replace(run, goals=(), plan=None))
+    verdict = critic.check(run, critic.Params())
     assert verdict.flag is Flag.ERROR and verdict.value == 1.0 and verdict.threshold == 2.0
-    assert verdict.evidence.lines == [4] and verdict.evidence.objects == ["c"]
-    assert "'c on d' — c ended on the table at (0.10, 0.20) m, 0.30 m from d" in verdict.message
-    assert [g["goal"] for g in verdict.details["goals"]] == ["a in b", "c on d"]
+    assert verdict.evidence.objects == ["green_apple"]
+    assert "'green_apple in brown_box' — green_apple ended in white_box" in verdict.message
+    assert [g["goal"] for g in verdict.details["goals"]] == ["green_apple in brown_box", "green_apple in white_box"]
+    assert critique(run, critics="joint_speed").flag_of("task_outcome") is Flag.ERROR  # asked for by the run
 
 
 def test_registered_like_the_others_when_its_entry_point_is_installed():

@@ -330,3 +330,46 @@ def test_a_distributions_metadata_is_read_once_for_all_its_entry_points(tmp_path
     (info / "METADATA").unlink()
     (bare,) = [ep for ep in PathDistribution(info).entry_points if ep.name == "first"]
     assert plugins._dist_of(bare) == ("", "")  # no metadata: an unknown package, as before
+
+
+def test_a_run_contract_critic_and_the_old_contract_plugin_in_one_report(plugin_site):
+    """The example plugin keeps ``check(trajectory, scene, params)``; a critic of the run contract
+    ``check(execution, params)`` reads the plan and the robot; both judge the same run in one report."""
+    done = run_python(
+        plugin_site,
+        """
+        import json
+        from pydantic import Field
+        from robocritics import Robot, Scene, critique, simulate
+        from robocritics.critic import CriticParams, Flag, Verdict, register, takes_execution, get_critics
+
+        class SkillCount:
+            name = "skill_count"
+            description = "Number of skill calls in the program's plan against a budget."
+
+            class Params(CriticParams):
+                max_calls: int = Field(3, ge=0, description="most skill calls allowed (count)")
+
+            def check(self, execution, params):
+                calls = len(execution.plan.calls) if execution.plan is not None else 0
+                flag = Flag.WARNING if calls > params.max_calls else Flag.OK
+                return Verdict(critic=self.name, flag=flag, message=f"{calls} calls on the {execution.robot.name}",
+                               value=float(calls), threshold=float(params.max_calls), unit="calls")
+
+        register(SkillCount())
+        run = simulate("move_to(green_apple)\\nhome()\\nhome()\\nhome()\\n", Scene.builtin("sorting"), Robot.ur3e())
+        report = critique(run, critics=["skill_count", "cycle_time"],
+                          params={"cycle_time": {"max_cycle_time_s": 1.0, "target_cycle_time_s": 0.5}})
+        print(json.dumps({"critics": report.critics, "flags": [v.flag.value for v in report.verdicts],
+                          "message": report.verdict("skill_count").message,
+                          "contracts": [takes_execution(get_critics()[n]) for n in report.critics]}))
+        """,
+    )
+    assert done.returncode == 0, done.stderr
+    import json
+
+    data = json.loads(done.stdout)
+    assert data["critics"] == ["skill_count", "cycle_time"]
+    assert data["contracts"] == [True, False]
+    assert data["flags"] == ["WARNING", "ERROR"]  # 4 calls > 3; the motion takes longer than 1 s
+    assert data["message"] == "4 calls on the ur3e"

@@ -12,6 +12,7 @@ ROOT_NAMES = {
     "Robot",
     "Scene",
     "Trajectory",
+    "Execution",
     "simulate",
     "critique",
     "repair",
@@ -45,6 +46,7 @@ def test_the_root_exports_exactly_the_designed_names():
 
 def test_each_root_name_is_the_object_its_module_defines():
     from robocritics.critic import Critic, CriticParams, critique
+    from robocritics.execution import Execution
     from robocritics.hookspecs import hookimpl
     from robocritics.llm.loop import Loop
     from robocritics.report import Report
@@ -62,6 +64,7 @@ def test_each_root_name_is_the_object_its_module_defines():
         "Robot": Robot,
         "Scene": Scene,
         "Trajectory": Trajectory,
+        "Execution": Execution,
         "simulate": simulate_module.simulate,
         "repair": repair_package.repair,
         "critique": critique,
@@ -88,7 +91,6 @@ def test_each_root_name_is_the_object_its_module_defines():
     "name, module",
     [
         ("State", "robocritics.trajectory"),
-        ("Execution", "robocritics.simulate"),
         ("Evidence", "robocritics.critic"),
         ("get_critics", "robocritics.critic"),
         ("critic_sources", "robocritics.critic"),

@@ -22,7 +22,7 @@ def test_builtin_scenes_are_within_reach(name):
 def test_builtin_scene_files_load_by_path():
     # the package's JSON files are the only copy: by path they load to the same scenes as by name
     folder = resources.files("robocritics.scenes")
-    assert Scene.builtin_names() == ["breakfast", "recycling", "sorting"]
+    assert Scene.builtin_names() == ["breakfast", "recycling", "sorting", "workbench"]
     for name in Scene.builtin_names():
         path = str(folder / f"{name}.json")
         assert Scene.load(path) == Scene.builtin(name) == Scene.resolve(path) == Scene.resolve(name)

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import robocritics as rc
-from browser import SCREENSHOTS, canvas_pixels, canvas_stats, chromium, severe_console_errors, wait_for
+from browser import canvas_pixels, canvas_stats, chromium, save_screenshot, severe_console_errors, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "examples" / "programs" / "sorting_naive.py"
@@ -55,7 +55,7 @@ def test_offline_file_renders_the_scene_from_file_url_with_no_network(driver, of
     assert severe_console_errors(driver) == []
     # the report table is below the replay
     assert "RoboCritics report" in driver.find_element("css selector", ".rc-page-report").text
-    driver.save_screenshot(str(SCREENSHOTS / "replay.png"))
+    save_screenshot(driver, "replay.png")
 
 
 def test_timeline_marks_every_flagged_window_in_its_flag_colour(driver, offline_file):

@@ -35,9 +35,27 @@ def test_html_into_a_missing_directory_fails_before_simulating(tmp_path, capsys)
     assert not out.exists()
 
 
-def test_html_that_cannot_be_written_is_a_clear_error(tmp_path, capsys):
+def test_html_at_a_directory_is_refused_before_simulating(tmp_path, capsys):
     target = tmp_path / "taken"
     target.mkdir()  # a directory where the file should go
     assert main(["check", str(EXAMPLE), "--html", str(target)]) == 2
-    err = capsys.readouterr().err
-    assert "cannot write the replay" in err and "Traceback" not in err
+    captured = capsys.readouterr()
+    assert "is a directory" in captured.err and "Traceback" not in captured.err and captured.out == ""
+
+
+def test_html_that_cannot_be_written_is_a_clear_error(tmp_path):
+    """A disk that fills while the page is written (RLIMIT_FSIZE in the child): one line, and no partial file."""
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    def small_files() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (10_000, 10_000))
+
+    out = tmp_path / "replay.html"
+    done = subprocess.run([sys.executable, "-m", "robocritics.cli", "check", str(EXAMPLE), "--html", str(out)],
+                          capture_output=True, text=True, timeout=300, preexec_fn=small_files)  # fmt: skip
+    assert done.returncode == 2 and "cannot write --html" in done.stderr and "File too large" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and sorted(p.name for p in tmp_path.iterdir()) == []

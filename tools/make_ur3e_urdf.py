@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+from robocritics._files import write_file_atomically  # noqa: E402  (never writes through a link at a model's name)
 from robocritics.robot.arms import ARMS, PANDA  # noqa: E402  (the one source of the arms' numbers)
 
 # Per arm: shoulder offset, elbow offset (m), housing scale vs the UR3e, base mass (kg, not published)
@@ -221,7 +222,7 @@ def panda_urdf_text() -> str:
 def main(argv: list[str]) -> None:
     models = Path(__file__).resolve().parents[1] / "src/robocritics/robot/models"
     for arm in argv or [*GEOMETRY, "panda"]:
-        models.joinpath(f"{arm}.urdf").write_text(panda_urdf_text() if arm == "panda" else urdf_text(arm))
+        write_file_atomically(models / f"{arm}.urdf", panda_urdf_text() if arm == "panda" else urdf_text(arm), "model")
 
 
 if __name__ == "__main__":

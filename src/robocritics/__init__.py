@@ -9,7 +9,7 @@ and pinch-point problems with explanations and fix hints (:class:`Report`);
 deployed to a UR3e (:mod:`robocritics.deploy`).
 
 The root holds the names most programs need; everything else lives in its
-module: ``robocritics.simulate.Execution``, ``robocritics.trajectory.State``,
+module: ``robocritics.trajectory.State``,
 ``robocritics.critic`` (``Evidence``, ``get_critics``, ``critic_sources``,
 ``register``, the verdict helpers), ``robocritics.llm`` (``OpenAICompatible``,
 ``Attempt``), ``robocritics.deploy`` (``URArm``).
@@ -29,6 +29,7 @@ _EXPORTS = {
     "Robot": "robocritics.robot.model",
     "Scene": "robocritics.scene",
     "Trajectory": "robocritics.trajectory",
+    "Execution": "robocritics.execution",
     "critique": "robocritics.critic",
     "Critic": "robocritics.critic",
     "CriticParams": "robocritics.critic",
@@ -41,7 +42,6 @@ _EXPORTS = {
 # Names that used to be exported here, and the module to import them from.
 _MOVED = {
     "State": "robocritics.trajectory",
-    "Execution": "robocritics.simulate",
     "Evidence": "robocritics.critic",
     "get_critics": "robocritics.critic",
     "critic_sources": "robocritics.critic",
@@ -88,6 +88,7 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), moved=_MOVED)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .critic import Critic, CriticParams, critique
+    from .execution import Execution
     from .hookspecs import hookimpl
     from .llm.loop import Loop
     from .report import Report

@@ -26,7 +26,7 @@ from collections.abc import Callable, Mapping
 
 from ._threads import SINGLE_THREADED_ENV
 
-__all__ = ["Child", "MAX_JOBS_PER_CHILD", "SINGLE_THREADED_ENV", "WORKER_ENV", "MALLOC_TUNABLES", "cpu_seconds", "limit_address_space"]
+__all__ = ["Child", "MAX_JOBS_PER_CHILD", "SINGLE_THREADED_ENV", "WORKER_ENV", "MALLOC_TUNABLES", "address_space_limit", "cpu_seconds", "limit_address_space"]
 
 #: glibc malloc settings of a warm child (``GLIBC_TUNABLES``, read when the interpreter starts; other C libraries
 #: ignore it): arrays up to 32 MiB come from the heap instead of fresh ``mmap`` pages, and up to 64 MiB of freed heap
@@ -48,10 +48,20 @@ WORKER_ENV: Mapping[str, str] = {**SINGLE_THREADED_ENV, "GLIBC_TUNABLES": MALLOC
 _ENV_LOCK = threading.Lock()
 
 
-def limit_address_space(memory_bytes: int) -> None:
-    """In the child: cap its address space at ``memory_bytes`` bytes (``RLIMIT_AS``); an allocation past it
-    raises MemoryError (or kills a native library that does not check)."""
-    resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+def address_space_limit(memory_bytes: int) -> int:
+    """The address-space limit a child can set for a wanted ``memory_bytes``, bytes: the lower of it and this
+    process's hard ``RLIMIT_AS`` (``ulimit -v``), which a child inherits and may lower but never raise."""
+    hard = resource.getrlimit(resource.RLIMIT_AS)[1]
+    return memory_bytes if hard == resource.RLIM_INFINITY else min(memory_bytes, hard)
+
+
+def limit_address_space(memory_bytes: int) -> int:
+    """In the child: cap its address space at ``memory_bytes`` bytes, or at the hard limit it inherited if that is
+    lower (:func:`address_space_limit`; ``RLIMIT_AS``); an allocation past it raises MemoryError (or kills a native
+    library that does not check). Returns the limit set, bytes."""
+    limit = address_space_limit(memory_bytes)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    return limit
 
 
 def cpu_seconds(pid: int) -> float:

@@ -1,7 +1,8 @@
 """The critic SDK: the :class:`Critic` protocol, :func:`critique`, and what critics return.
 
-A critic reads a whole :class:`~robocritics.trajectory.Trajectory` (the
-paper's s_1..s_T) and the :class:`~robocritics.scene.Scene` and returns one
+A critic reads a whole run, an :class:`~robocritics.execution.Execution` (its
+:class:`~robocritics.trajectory.Trajectory`, the paper's s_1..s_T, the scene at start
+and end, the robot, the program's plan when there is one, the goals), and returns one
 :class:`Verdict`: a :class:`Flag` (OK / WARNING / ERROR, scoring 2 / 1 / 0), a
 message saying what is wrong, a hint saying how to fix it, the measured value
 against its threshold, and evidence (time window, samples, links, objects,
@@ -26,7 +27,8 @@ Writing a critic::
         class Params(CriticParams):
             target_s: float = Field(30.0, gt=0, description="target cycle time, s (task-specific)")
 
-        def check(self, trajectory, scene, params):
+        def check(self, execution, params):
+            duration_s = execution.trajectory.duration_s
             ...
             return Verdict(critic=self.name, flag=Flag.OK, message="...")
 
@@ -39,9 +41,10 @@ Writing a critic::
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Iterable, Mapping, Protocol, Union, runtime_checkable
+from typing import TYPE_CHECKING, Annotated, Any, Iterable, Mapping, Protocol, Union, runtime_checkable
 
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StringConstraints, ValidationError
+
 
 from ._suggest import did_you_mean
 from .errors import CriticError, RoboCriticsError
@@ -51,6 +54,7 @@ from .plugins import (
     get_critics,
     plugin_errors,
     register,
+    takes_execution,
     unregister,
     validate_critic,
 )
@@ -76,7 +80,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .goals import Goal
     from .program.plan import Plan
     from .scene import Scene
-    from .simulate import Execution
+    from .execution import Execution
     from .trajectory import Trajectory
 
 __all__ = [
@@ -88,6 +92,8 @@ __all__ = [
     "Verdict",
     "Report",
     "critique",
+    "as_execution",
+    "takes_execution",
     "check_program",
     "runtime_report",
     "RUNTIME",
@@ -100,6 +106,10 @@ __all__ = [
     "unregister",
     "validate_critic",
     "resolve_params",
+    "ParamName",
+    "ParamNames",
+    "MAX_PARAM_NAMES",
+    "MAX_PARAM_NAME_CHARS",
     "BUILTIN_CRITICS",
     "ALL_PASSED",
     "MAX_SIGNAL_POINTS",
@@ -127,21 +137,50 @@ class Critic(Protocol):
     * ``Params``: a pydantic model of the critic's thresholds; every field has a
       default, says its unit (in its name or description) and where the number
       comes from;
-    * ``check(trajectory, scene, params) -> Verdict``: pure (no I/O, no global
-      state, deterministic), vectorised over samples.
+    * ``check(execution, params) -> Verdict``: pure (no I/O, no global state, deterministic), vectorised over
+      samples. ``execution`` is the run (:class:`~robocritics.execution.Execution`: the trajectory, the scene at
+      start and end, the robot, the plan or None, the goals, where the motion came from). The older
+      ``check(trajectory, scene, params)`` is still accepted: the two are told apart by the number of
+      parameters (:func:`takes_execution`);
+    * optionally ``requested(execution) -> bool``: an on-demand critic, run when the run asks for it (or when
+      named) rather than by default.
     """
 
     name: str
     description: str
     Params: type[BaseModel]
 
-    def check(self, trajectory: "Trajectory", scene: "Scene", params: Any) -> Verdict: ...
+    def check(self, execution: "Execution", params: Any) -> Verdict: ...
 
 
 class CriticParams(BaseModel):
-    """Base for critics' ``Params``: frozen, and unknown fields are rejected (typos are caught)."""
+    """Base for critics' ``Params``: frozen, unknown fields are rejected (typos are caught), and a number must be
+    finite (a NaN threshold compares False with everything and would pass every check)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+
+#: Most names one list parameter holds (frames, proximity pairs): a robot has tens of frames and a scene a few hundred
+#: pairs; 10,000 frame names made a 30-s program's per-sample arrays take 5 GB.
+MAX_PARAM_NAMES = 1_000
+#: Longest name in a parameter, characters (frame and pair names are identifiers).
+MAX_PARAM_NAME_CHARS = 200
+
+
+def _distinct(names: tuple[str, ...]) -> tuple[str, ...]:
+    """``names`` if none repeats: a repeated name would be checked (and cost) once per repeat."""
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            raise ValueError(f"names {name[:60]!r} more than once")
+        seen.add(name)
+    return names
+
+
+#: A name in a critic's parameters (a frame, a proximity pair): 1 to :data:`MAX_PARAM_NAME_CHARS` characters.
+ParamName = Annotated[str, StringConstraints(min_length=1, max_length=MAX_PARAM_NAME_CHARS)]
+#: A list of distinct :data:`ParamName` values, at most :data:`MAX_PARAM_NAMES` of them.
+ParamNames = Annotated[tuple[ParamName, ...], Field(max_length=MAX_PARAM_NAMES), AfterValidator(_distinct)]
 
 
 ParamsArg = Union[Mapping[str, Any], BaseModel, None]
@@ -181,8 +220,17 @@ def resolve_params(critic: Critic, given: ParamsArg) -> BaseModel:
             msg = err["msg"]
             if msg.startswith("Value error, "):
                 msg = msg[len("Value error, ") :]
-            message = f"{field}: {msg}" + (f" (got {err['input']!r})" if "input" in err and not isinstance(err["input"], dict) else "")
+            shown = f" (got {_clipped(err['input'])})" if "input" in err and not isinstance(err["input"], dict) else ""
+            message = f"{field}: {msg}{shown}"
         raise CriticError(f"invalid params for critic {critic.name!r}: {message}") from None
+
+
+def _clipped(value: Any, max_chars: int = 80) -> str:
+    """``repr(value)`` cut to ``max_chars`` characters (an invalid value may be a list of 10,000 names)."""
+    if isinstance(value, (list, tuple)) and len(value) > 8:
+        return f"a list of {len(value):,} items"
+    text = repr(value)
+    return text if len(text) <= max_chars else f"{text[:max_chars]}... ({len(text):,} characters)"
 
 
 def _select(critics: Any, available: dict[str, Any]) -> list[Any]:
@@ -226,106 +274,136 @@ def select_critics(
     selected_names = {c.name for c in selected}
     for name in params:
         if not isinstance(name, str) or (name not in available and name not in selected_names):
-            raise CriticError(_unknown("params given for unknown critic", str(name), available))
+            raise CriticError(_unknown("params given for unknown critic", str(name)[:MAX_PARAM_NAME_CHARS], available))
     return [(critic, resolve_params(critic, params.get(critic.name))) for critic in selected]
 
 
 def critique(
-    trajectory: "Trajectory | Execution",
+    run: "Execution | Trajectory",
     scene: "Scene | None" = None,
     critics: Iterable[str | Critic] | str | None = None,
     params: Mapping[str, ParamsArg] | None = None,
     *,
     goals: "Iterable[str | Goal] | str | Goal | None" = None,
+    robot: Any = None,
 ) -> Report:
-    """Run critics on a trajectory in a scene and collect their verdicts in a :class:`Report`.
+    """Run critics on a run and collect their verdicts in a :class:`Report`.
 
-    ``trajectory``: a :class:`~robocritics.trajectory.Trajectory`, or the
-    :class:`~robocritics.simulate.Execution` that :func:`robocritics.simulate` returns
-    (its trajectory is judged, and ``scene`` defaults to the scene it was simulated in).
-    ``critics``: names (or a comma-separated string, or critic objects, validated like
-    registered ones) to run, in that order; default every installed critic
-    (:func:`get_critics`: the five built-ins plus any plugin's or :func:`register`'s).
+    ``run``: the :class:`~robocritics.execution.Execution` that :func:`robocritics.simulate` (or a loader of
+    motion from another tool) returns, or a bare :class:`~robocritics.trajectory.Trajectory` with the ``scene``
+    it moves in (and, optionally, the ``robot``): it is judged as a run with no plan whose scene does not change.
+    ``scene`` given with an Execution replaces the scene it was simulated in.
+    ``critics``: names (or a comma-separated string, or critic objects, validated like registered ones) to run,
+    in that order; default every installed critic (:func:`get_critics`) except the on-demand ones the run does
+    not ask for (a critic with ``requested(execution)``, such as ``task_outcome`` when there are no goals).
+    An on-demand critic that the run asks for runs whatever ``critics`` says.
     ``params``: ``{critic_name: {field: value} | ParamsInstance}`` overriding thresholds.
-    Unknown critic names, unknown or invalid parameters raise :class:`CriticError` naming
-    the critic and the field; so does a critic that fails or returns something other than
-    a :class:`Verdict`.
-    ``goals``: task goals (``"green_apple in white_box"`` or :class:`~robocritics.goals.Goal`) checked by the
-    ``task_outcome`` critic on an Execution's final scene, together with the program's ``expect(...)`` calls;
-    a bad goal raises :class:`~robocritics.errors.GoalError`. With goals, ``task_outcome`` runs whatever
-    ``critics`` says; with none, the default selection skips it (naming it runs it: OK, nothing to check).
+    Unknown critic names, unknown or invalid parameters raise :class:`CriticError` naming the critic and the
+    field; so does a critic that fails or returns something other than a :class:`Verdict`.
+    ``goals``: task goals (``"green_apple in white_box"`` or :class:`~robocritics.goals.Goal`) added to the run's
+    own; a bad goal raises :class:`~robocritics.errors.GoalError`. Goals are checked on the final scene, which
+    only an Execution has.
     """
-    from .simulate import Execution
-    from .trajectory import Trajectory
-
-    outcomes: list = []
-    if isinstance(trajectory, Execution):
-        from .goals import check_outcomes
-
-        scene = trajectory.scene if scene is None else scene
-        outcomes = check_outcomes(trajectory, goals)
-        trajectory = trajectory.trajectory
-    elif goals:
-        raise CriticError(
-            "critique(..., goals=...) checks goals on the final scene, which only an Execution has: "
-            "pass the Execution that simulate() returned, not its trajectory"
-        )
-    critics, params = _task_outcome_selection(critics, params, outcomes)
-    if not isinstance(trajectory, Trajectory):
-        raise CriticError(f"critique() judges a Trajectory or an Execution, got {type(trajectory).__name__}")
-    if scene is None:
-        raise CriticError("critique(trajectory) needs the scene the trajectory moves in: critique(trajectory, scene)")
+    execution = as_execution(run, scene, goals=goals, robot=robot)
     verdicts: list[Verdict] = []
     used: dict[str, dict[str, Any]] = {}
-    for critic, p in select_critics(critics, params):
-        try:
-            verdict = critic.check(trajectory, scene, p)
-        except CriticError as exc:
-            raise CriticError(f"critic {critic.name!r}: {exc}") from exc
-        except RoboCriticsError as exc:
-            raise CriticError(f"critic {critic.name!r} cannot judge this trajectory: {exc}") from exc
-        except Exception as exc:  # a plugin's bug: say which critic
-            raise CriticError(f"critic {critic.name!r} failed: {type(exc).__name__}: {exc}") from exc
-        if not isinstance(verdict, Verdict):
-            raise CriticError(f"critic {critic.name!r} returned {type(verdict).__name__}, not a Verdict")
-        if verdict.critic != critic.name:
-            raise CriticError(f"critic {critic.name!r} returned a verdict labelled {verdict.critic!r}")
+    for critic, p in select_critics(_requested_selection(critics, execution), params):
+        verdict = _run_critic(critic, execution, p)
         verdicts.append(verdict)
         used[critic.name] = p.model_dump(mode="json")
+    trajectory = execution.trajectory
     return Report(
         verdicts=verdicts,
         trajectory_hash=trajectory.content_hash(),
         samples=len(trajectory),
         duration_s=trajectory.duration_s,
         params=used,
+        source=None if execution.source in ("program", "trajectory") else execution.source,
     )
 
 
-def _task_outcome_selection(critics: Any, params: Mapping[str, ParamsArg] | None, outcomes: list) -> tuple[Any, dict]:
-    """The critic selection and params with the ``task_outcome`` critic fed the goals' ``outcomes``.
+def as_execution(
+    run: "Execution | Trajectory",
+    scene: "Scene | None" = None,
+    *,
+    goals: "Iterable[str | Goal] | str | Goal | None" = None,
+    robot: Any = None,
+) -> "Execution":
+    """The :class:`~robocritics.execution.Execution` a critic reads, from an Execution or a bare Trajectory.
 
-    It runs whenever there are goals (added to any selection, installed or not: it ships with robocritics) and
-    whenever it is named; the default selection skips it when there are none. A trajectory carries no object
-    poses, so its params carry the outcomes.
+    Raises :class:`CriticError` for anything else, for a Trajectory without its scene, and for goals on a bare
+    Trajectory (goals are checked on the final scene, which only an Execution has).
     """
-    from .critics.task_outcome import NAME, TaskOutcomeCritic
+    from dataclasses import replace
 
+    from .execution import Execution
+    from .goals import parse_goals
+    from .trajectory import Trajectory
+
+    if isinstance(run, Execution):
+        execution = run if scene is None else replace(run, scene=scene)
+        if robot is not None:
+            execution = replace(execution, robot=robot)
+        if goals:
+            added = [g for g in parse_goals(goals, execution.scene) if g not in execution.goals]
+            execution = replace(execution, goals=tuple(execution.goals) + tuple(added))
+        return execution
+    if not isinstance(run, Trajectory):
+        raise CriticError(f"critique() judges a Trajectory or an Execution, got {type(run).__name__}")
+    if goals:
+        raise CriticError(
+            "critique(..., goals=...) checks goals on the final scene, which only an Execution has: "
+            "pass the Execution that simulate() returned, not its trajectory"
+        )
+    if scene is None:
+        raise CriticError("critique(trajectory) needs the scene the trajectory moves in: critique(trajectory, scene)")
+    return Execution(
+        trajectory=run, plan=None, events=[], final_scene=scene, scene=scene, robot=robot, source="trajectory"
+    )
+
+
+def _requested_selection(critics: Any, execution: "Execution") -> Any:
+    """The selection with the on-demand critics (those with ``requested(execution)``) the run asks for added,
+    and, for the default selection, those it does not ask for left out."""
     available = get_critics()
-    builtin = available.get(NAME) or TaskOutcomeCritic()
     if critics is None:
-        critics = [c for c in available.values() if c.name != NAME] + ([builtin] if outcomes else [])
-    else:
-        if isinstance(critics, str):
-            critics = [c.strip() for c in critics.split(",") if c.strip()]
-        critics = [builtin if c == NAME else c for c in critics]
-        if outcomes and not any(getattr(c, "name", None) == NAME for c in critics):
-            critics.append(builtin)  # goals are a request to check them, whichever motion critics were chosen
-    params = dict(params or {})
-    if outcomes or NAME in params:
-        given = params.get(NAME)
-        given = given.model_dump() if isinstance(given, BaseModel) else dict(given or {})
-        params[NAME] = {**given, "outcomes": [o.model_dump() for o in outcomes]}
-    return critics, params
+        return [c for c in available.values() if _asked(c, execution) is not False]
+    if isinstance(critics, str):
+        critics = [c.strip() for c in critics.split(",") if c.strip()]
+    critics = list(critics)
+    named = {c if isinstance(c, str) else getattr(c, "name", None) for c in critics}
+    return critics + [c for name, c in available.items() if name not in named and _asked(c, execution)]
+
+
+def _asked(critic: Any, execution: "Execution") -> "bool | None":
+    """``requested(execution)`` of an on-demand critic; None for a critic that always runs by default."""
+    requested = getattr(critic, "requested", None)
+    if requested is None:
+        return None
+    try:
+        return bool(requested(execution))
+    except Exception as exc:  # a plugin's bug: say which critic
+        raise CriticError(f"critic {critic.name!r} failed in requested(): {type(exc).__name__}: {exc}") from exc
+
+
+def _run_critic(critic: Any, execution: "Execution", params: BaseModel) -> Verdict:
+    """One critic's verdict on the run, through whichever contract its ``check`` follows."""
+    try:
+        if takes_execution(critic):
+            verdict = critic.check(execution, params)
+        else:
+            verdict = critic.check(execution.trajectory, execution.scene, params)
+    except CriticError as exc:
+        raise CriticError(f"critic {critic.name!r}: {exc}") from exc
+    except RoboCriticsError as exc:
+        raise CriticError(f"critic {critic.name!r} cannot judge this trajectory: {exc}") from exc
+    except Exception as exc:  # a plugin's bug: say which critic
+        raise CriticError(f"critic {critic.name!r} failed: {type(exc).__name__}: {exc}") from exc
+    if not isinstance(verdict, Verdict):
+        raise CriticError(f"critic {critic.name!r} returned {type(verdict).__name__}, not a Verdict")
+    if verdict.critic != critic.name:
+        raise CriticError(f"critic {critic.name!r} returned a verdict labelled {verdict.critic!r}")
+    return verdict
 
 
 RUNTIME = "runtime"

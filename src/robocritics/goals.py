@@ -19,7 +19,7 @@ from .errors import GoalError
 
 if TYPE_CHECKING:
     from .scene import Scene
-    from .simulate import Execution
+    from .execution import Execution
 
 __all__ = ["Goal", "GoalError", "GoalOutcome", "parse_goals", "program_goals", "check_outcomes"]
 
@@ -183,9 +183,11 @@ def program_goals(plan) -> list[tuple[Goal, int]]:
 
 
 def check_outcomes(execution: "Execution", goals: "Iterable[str | Goal] | str | Goal | None" = None) -> list[GoalOutcome]:
-    """:class:`GoalOutcome` of every goal in ``goals`` and of the program's ``expect(...)`` calls, checked on
-    ``execution``'s final scene (each goal once, with all its lines)."""
+    """:class:`GoalOutcome` of every goal in ``goals``, in ``execution.goals`` and of the program's ``expect(...)``
+    calls, checked on ``execution``'s final scene (each goal once, with all its lines)."""
     lines: dict[Goal, list[int]] = {g: [] for g in parse_goals(goals, execution.scene)}
+    for goal in execution.goals:
+        lines.setdefault(goal, [])
     for goal, line in program_goals(execution.plan):
         lines.setdefault(goal, []).append(line)
     out = []

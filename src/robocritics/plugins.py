@@ -21,8 +21,10 @@ listed by :func:`get_critics` and run by ``critique()`` like an installed one.
 
 from __future__ import annotations
 
+import inspect
 import re
 import warnings
+import weakref
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from typing import Any
@@ -43,6 +45,7 @@ __all__ = [
     "critic_sources",
     "critic_distributions",
     "validate_critic",
+    "takes_execution",
     "register",
     "unregister",
     "ENTRY_POINT_GROUP",
@@ -168,7 +171,8 @@ def validate_critic(critic: Any) -> None:
 
     A critic is an object (not a class) with a ``name`` (letters, digits, ``_ . -``), a
     ``description`` string, a pydantic ``Params`` model class whose fields all have defaults,
-    and a ``check(trajectory, scene, params)`` method. Registered critics and critic objects
+    and a ``check(execution, params)`` method (or the older ``check(trajectory, scene, params)``, see
+    :func:`takes_execution`). Registered critics and critic objects
     passed to ``critique(critics=[...])`` are checked alike.
     """
     if isinstance(critic, type):
@@ -194,7 +198,45 @@ def validate_critic(critic: Any) -> None:
     except Exception as exc:  # noqa: BLE001
         raise CriticError(f"critic {name!r}: every field of Params needs a default ({exc})") from None
     if not callable(critic.check):
-        raise CriticError(f"critic {name!r}: `check` must be a method check(trajectory, scene, params)")
+        raise CriticError(f"critic {name!r}: `check` must be a method check(execution, params)")
+    takes_execution(critic)  # a check of neither contract is refused at registration
+
+
+def takes_execution(critic: Any) -> bool:
+    """Whether ``critic.check`` is the run contract ``check(execution, params)`` (True) or the older
+    ``check(trajectory, scene, params)`` (False), told apart by the number of positional parameters.
+
+    Raises :class:`CriticError` for a ``check`` that takes neither two nor three (a ``*args`` check is the new
+    contract).
+    """
+    check = critic.check
+    key = getattr(check, "__func__", check)
+    try:
+        return _arity_cache[key]
+    except (KeyError, TypeError):
+        pass
+    try:
+        params = inspect.signature(check).parameters.values()
+    except (TypeError, ValueError):  # a builtin without a signature: assume the run contract
+        return True
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) and p.default is p.empty]
+    if any(p.kind is p.VAR_POSITIONAL for p in params) or len(positional) == 2:
+        result = True
+    elif len(positional) == 3:
+        result = False
+    else:
+        raise CriticError(
+            f"critic {critic.name!r}: `check` takes {len(positional)} parameters; a critic's check is "
+            "check(execution, params) (or the older check(trajectory, scene, params))"
+        )
+    try:
+        _arity_cache[key] = result
+    except TypeError:  # an unhashable callable: not cached
+        pass
+    return result
+
+
+_arity_cache: "weakref.WeakKeyDictionary[Any, bool]" = weakref.WeakKeyDictionary()
 
 
 def _collect() -> None:

@@ -65,6 +65,7 @@ __all__ = [
     "Container",
     "Table",
     "Workspace",
+    "Human",
     "Scene",
     "Shape",
     "rpy_matrix",
@@ -553,6 +554,38 @@ class Workspace(_Model):
         return dx - self.radius_m
 
 
+MIN_HEIGHT_M = 1.40
+"""Smallest stature of a person in a scene [m]: below the 1st percentile of adult women (DIN 33402-2:2020)."""
+MAX_HEIGHT_M = 2.10
+"""Largest stature of a person in a scene [m]: above the 99th percentile of adult men (DIN 33402-2:2020)."""
+
+
+def _stature(value: Any) -> float:
+    v = _number(value, "length")
+    if not MIN_HEIGHT_M <= v <= MAX_HEIGHT_M:
+        raise ValueError(
+            f"{v:g} m is not an adult's stature (the body model is scaled for {MIN_HEIGHT_M:g}-{MAX_HEIGHT_M:g} m)"
+        )
+    return v
+
+
+class Human(_Model):
+    """A person in the cell, for the collaborative-operation critics (``contact_speed``, ``separation``).
+
+    ``position`` is where the feet stand (m, base frame, x and y); the person faces along ``yaw_rad`` (0: +x;
+    an operator across the bench from the robot faces it with ``yaw_rad`` pi); ``floor_z_m`` is the floor's
+    height relative to the table top (m, usually negative). The body regions of ISO/TS 15066 are built from
+    these by :func:`robocritics.humans.body_model`.
+    """
+
+    id: EntityId = Field(description="unique name, e.g. 'operator'")
+    position: tuple[Coordinate, Coordinate] = Field(description="where the feet stand [x, y], m, base frame")
+    yaw_rad: Angle = Field(0.0, description="the direction the person faces, rad about z (0 = +x)")
+    posture: Literal["standing", "seated"] = "standing"
+    height_m: Annotated[float, BeforeValidator(_stature)] = Field(1.75, description="stature, m")
+    floor_z_m: Coordinate = Field(-0.75, description="floor height relative to the robot base (table top), m")
+
+
 class Scene(_Model):
     """A complete task scene; see the module docstring for conventions."""
 
@@ -560,6 +593,9 @@ class Scene(_Model):
     description: Text = ""
     objects: Annotated[list[SceneObject], BeforeValidator(_entities)] = Field(default_factory=list)
     containers: Annotated[list[Container], BeforeValidator(_entities)] = Field(default_factory=list)
+    humans: Annotated[list[Human], BeforeValidator(_entities)] = Field(
+        default_factory=list, description="people in the cell (robocritics.humans builds their body model)"
+    )
     table: Table = Field(default_factory=Table)
     workspace: Workspace = Field(default_factory=Workspace)
     robot: Name = Field("", description="the robot this scene was made for (e.g. 'ur3e'); '' = any robot")
@@ -570,7 +606,7 @@ class Scene(_Model):
         if count > MAX_ENTITIES:
             raise ValueError(f"containers: {count} objects and containers; a scene holds at most {MAX_ENTITIES}")
         seen: dict[str, str] = {}
-        for group in ("objects", "containers"):
+        for group in ("objects", "containers", "humans"):
             for i, item in enumerate(getattr(self, group)):
                 if item.id in seen:
                     raise ValueError(f"{group}[{i}].id: duplicate id {item.id!r} (already used by {seen[item.id]})")
@@ -695,6 +731,8 @@ def _scene_error(exc: ValidationError, model: str = "Scene") -> SceneError:
         message = sub.group(2)
     if err["type"] == "literal_error" and path.endswith("shape"):
         message = f"unknown shape {_quoted(err.get('input'))}; use one of box, cylinder, sphere"
+    if err["type"] == "literal_error" and path.endswith("posture"):
+        message = f"unknown posture {_quoted(err.get('input'))}; use standing or seated"
     more = len(exc.errors()) - 1
     if more:
         message += f" (and {more} more problem{'s' if more > 1 else ''})"

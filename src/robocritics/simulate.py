@@ -13,16 +13,13 @@ The pipeline, one stage after another (each a plain function of its inputs):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from .errors import ProgramError, RobotModelError, SceneError
+from .execution import Execution
 
 if TYPE_CHECKING:  # pragma: no cover
-    import numpy as np
-
     from .program.plan import Plan
-    from .report import Report
     from .robot.model import Robot
     from .robot.planner import Event, MotionBudgetError, PlannerSettings
     from .scene import Scene
@@ -40,47 +37,6 @@ def __getattr__(name: str) -> Any:
         return getattr(planner, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-
-@dataclass
-class Execution:
-    """The result of :func:`simulate`.
-
-    ``trajectory`` is what the critics read and what is deployed; ``final_scene``
-    says where every object ended up.
-    """
-
-    trajectory: Trajectory
-    plan: Plan
-    events: list[Event]
-    final_scene: Scene
-    scene: Scene
-    robot: Robot = field(repr=False)
-    resting_on: dict[str, str] = field(default_factory=dict)
-    #: Per-sample pose ``(T, 4, 4)`` (m, base frame) of every object the program moved; the others stay put.
-    object_poses: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
-
-    @property
-    def duration_s(self) -> float:
-        return self.trajectory.duration_s
-
-    def show(self, report: Report | None = None, *, title: str | None = None):
-        """The 3-D replay of this run (with ``report``'s verdicts on its timeline), displayed inline in Jupyter.
-
-        Returns a :class:`robocritics.viz.Replay`; its ``save(path)`` writes the same
-        self-contained HTML page that ``robocritics check --html`` writes.
-        """
-        from .viz import Replay
-
-        return Replay(self, report, title=title)
-
-    def object_on(self, obj_id: str, support_id: str) -> bool:
-        """Whether object ``obj_id`` was last set down on ``support_id`` (an object, container or 'table')."""
-        return self.resting_on.get(obj_id) == support_id
-
-    def object_inside(self, obj_id: str, container_id: str) -> bool:
-        """Whether object ``obj_id`` ended inside container ``container_id``."""
-        holder = self.final_scene.container_holding(obj_id)
-        return holder is not None and holder.id == container_id
 
 #: Names the interpreter binds in every program besides skills, builtins and modules (it has no public list).
 _PROGRAM_LISTS = {"objects": "the list of the scene's objects", "containers": "the list of its containers"}

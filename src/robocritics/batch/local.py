@@ -21,16 +21,20 @@ from collections.abc import Iterator
 from multiprocessing.connection import wait
 from typing import Any
 
-from ..child import MAX_JOBS_PER_CHILD, SINGLE_THREADED_ENV, WORKER_ENV, Child, limit_address_space
+from ..child import MAX_JOBS_PER_CHILD, SINGLE_THREADED_ENV, WORKER_ENV, Child, address_space_limit, limit_address_space
 from ..errors import RoboCriticsError
 from .rows import Job, SceneCache, error_row, evaluate_job
 
-__all__ = ["LocalEngine", "BatchError", "WORKER_ENV", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_BYTES"]
+__all__ = ["LocalEngine", "BatchError", "WORKER_ENV", "DEFAULT_TIMEOUT_S", "DEFAULT_MEMORY_BYTES", "MAX_WORKERS_PER_CPU", "max_workers"]
 
 #: Wall-clock seconds one row may take in a worker.
 DEFAULT_TIMEOUT_S = 60.0
-#: Address-space limit of a worker, bytes (a checked bundled program peaks near 0.5 GB of address space).
+#: Address-space limit of a worker, bytes (a checked bundled program peaks near 0.5 GB of address space); lowered to
+#: the hard limit the batch runs under (``ulimit -v``) when that is lower.
 DEFAULT_MEMORY_BYTES = 3 * 1024**3
+#: Most local workers per CPU: a mistyped count (``workers=10**6``) must not start thousands of processes, and more
+#: workers than cores only queue for them.
+MAX_WORKERS_PER_CPU = 4
 #: Rows a worker evaluates before a fresh one replaces it (not counted as a restart; see MAX_JOBS_PER_CHILD).
 MAX_ROWS_PER_WORKER = MAX_JOBS_PER_CHILD
 #: Wall-clock seconds a worker may take to start (imports, the robot model).
@@ -39,6 +43,11 @@ STARTUP_TIMEOUT_S = 120.0
 MAX_START_FAILURES = 3
 # How often the parent wakes to check timeouts when no worker has answered, s.
 _TICK_S = 0.05
+
+
+def max_workers() -> int:
+    """The most local workers on this machine: :data:`MAX_WORKERS_PER_CPU` per CPU."""
+    return MAX_WORKERS_PER_CPU * (os.cpu_count() or 1)
 
 
 class BatchError(RoboCriticsError):
@@ -104,8 +113,12 @@ class LocalEngine:
     ):
         workers = (os.cpu_count() or 1) if workers is None else workers
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-            raise ValueError(f"workers must be a whole number of at least 1, got {workers!r}")
-        if not timeout_s > 0 or not memory_bytes > 0:
+            raise ValueError(f"workers must be a whole number of at least 1, got {workers!r:.40}")
+        if workers > max_workers():
+            raise ValueError(f"workers={workers}: at most {max_workers()} on this machine ({os.cpu_count() or 1} CPUs); "
+                             "each worker is a process with its own robot model, and more than the cores only queue "
+                             "for them")  # fmt: skip
+        if not timeout_s > 0 or not 0 < memory_bytes < 2**62:
             raise ValueError(f"timeout_s and memory_bytes must be positive, got {timeout_s}, {memory_bytes}")
         if isinstance(max_rows_per_worker, bool) or not isinstance(max_rows_per_worker, int) or max_rows_per_worker < 1:
             raise ValueError(f"max_rows_per_worker must be a whole number of at least 1, got {max_rows_per_worker!r}")
@@ -113,7 +126,7 @@ class LocalEngine:
         self.max_rows_per_worker = max_rows_per_worker
         self.recycled = 0  # workers replaced after max_rows_per_worker rows
         self.timeout_s = float(timeout_s)
-        self.memory_bytes = int(memory_bytes)
+        self.memory_bytes = address_space_limit(int(memory_bytes))  # what a worker can set under `ulimit -v`
         self._args = (robot, self.memory_bytes, float(sample_rate_hz))
         self._pool: list[_Worker] = []
         self._start_failures = 0
@@ -241,5 +254,6 @@ class LocalEngine:
         self._start_failures += 1
         if self._start_failures >= MAX_START_FAILURES:
             self.close()
-            raise BatchError(f"a batch worker could not start ({self._start_failures} times): {why}")
+            raise BatchError(f"a batch worker could not start ({self._start_failures} times, with an address-space "
+                             f"limit of {self.memory_bytes:,} bytes): {why}")  # fmt: skip
         self._replace(w)

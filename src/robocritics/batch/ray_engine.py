@@ -14,7 +14,15 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
-from .local import DEFAULT_TIMEOUT_S, MAX_ROWS_PER_WORKER, MAX_START_FAILURES, STARTUP_TIMEOUT_S, WORKER_ENV, BatchError
+from .local import (
+    DEFAULT_TIMEOUT_S,
+    MAX_ROWS_PER_WORKER,
+    MAX_START_FAILURES,
+    STARTUP_TIMEOUT_S,
+    WORKER_ENV,
+    BatchError,
+    max_workers,
+)
 from .rows import Job, SceneCache, error_row, evaluate_job
 
 __all__ = ["RayEngine", "import_ray"]
@@ -87,7 +95,9 @@ class RayEngine:
     ):
         ray = self._ray = import_ray(loopback=address is None)
         if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-            raise ValueError(f"workers must be a whole number of at least 1, got {workers!r}")
+            raise ValueError(f"workers must be a whole number of at least 1, got {workers!r:.40}")
+        if address is None and workers is not None and workers > max_workers():  # a local cluster: this machine's cap
+            raise ValueError(f"workers={workers}: at most {max_workers()} on this machine ({os.cpu_count() or 1} CPUs)")
         if not timeout_s > 0:
             raise ValueError(f"timeout_s must be positive, got {timeout_s}")
         self._owns_ray = not ray.is_initialized()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import signal
@@ -13,10 +14,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TextIO
 
-from ._common import UsageError, bounded_float, one_line, path_label, positive_int, shown_path, subcommand
+from ._common import UsageError, bounded_float, one_line, positive_int, shown_path, subcommand
 
-#: Most local workers per CPU (``--workers``): a mistyped count must not start thousands of processes.
-MAX_WORKERS_PER_CPU = 4
 #: Longest input line, bytes: a program is at most 100,000 characters and a scene is bounded; a longer
 #: line is an error row, not read whole.
 MAX_LINE_BYTES = 4_000_000
@@ -131,44 +130,97 @@ def _key(row_id: Any) -> str | None:
 _MAX_OUT_LINE_BYTES = 1 << 20
 
 
-def done_rows(path: Path) -> list[dict]:
-    """The rows already in the JSONL output file ``path``; a torn last line (an interrupted write) is cut off.
+class Finished:
+    """What ``--resume`` keeps of OUT's rows: the resume keys of their ids (:func:`_key`) and a 16-byte digest of
+    each id-less error row's error (an unreadable input line, reported once) — never the rows themselves, so a
+    million earlier rows cost their ids, not their text."""
 
-    Any other line that is not an output row means ``path`` is not a batch's output (a log, the wrong file):
-    a UsageError naming the line, and the file is left as it was."""
+    def __init__(self) -> None:
+        self.keys: set[str] = set()
+        self.reported: set[bytes] = set()
+
+    def add(self, row_id: Any, error: Any) -> None:
+        key = _key(row_id)
+        if key is not None:
+            self.keys.add(key)
+        elif row_id is None:
+            self.reported.add(error_digest(error))
+
+    def __len__(self) -> int:
+        return len(self.keys) + len(self.reported)
+
+
+def error_digest(error: Any) -> bytes:
+    """A 16-byte digest of an output row's ``error`` (its JSON text with sorted keys)."""
+    return hashlib.blake2b(json.dumps(error, sort_keys=True).encode("utf-8", "surrogatepass"), digest_size=16).digest()
+
+
+def _output_row(line: bytes) -> dict | None:
+    """The output row a JSONL line holds, or None if it holds something else: not JSON, nested too deep for the
+    decoder (a RecursionError, caught here: a line is at most 1 MiB), an integer of thousands of digits, another shape.
+
+    The standard decoder, not the input rows' bounded parser: a line is already bounded, and reading the ids of a
+    million rows with it costs a sixth of the CPU."""
     from ..batch.rows import OUTPUT_KEYS
 
-    if not path.exists():
-        return []
-    rows, end, number = [], 0, 0
-    with open(path, "rb+") as f:
+    try:
+        row = json.loads(line)
+    except (ValueError, RecursionError):  # ValueError: not JSON, not UTF-8, an integer of over 4,300 digits
+        return None
+    if not (isinstance(row, dict) and set(row) == set(OUTPUT_KEYS)):
+        return None
+    return row if row["id"] is None or _key(row["id"]) is not None else None  # an id no output row has: not ours
+
+
+def finished_jsonl(path: Path) -> Finished:
+    """The ids of the rows already in the JSONL output file ``path``, read a line at a time; a torn last line (an
+    interrupted write) is cut off.
+
+    Any other line that is not an output row (a log, the wrong file, JSON nested thousands deep) means ``path``
+    is not a batch's output: a UsageError naming the line, and the file is left as it was."""
+    finished = Finished()
+    if not os.path.lexists(path):
+        return finished
+    end, number = 0, 0
+    with _opened(path, os.O_RDWR) as f:
         while line := f.readline(_MAX_OUT_LINE_BYTES):
             number += 1
             row = None
             if line.endswith(b"\n"):
-                try:
-                    row = json.loads(line)
-                except ValueError:
-                    pass
+                row = _output_row(line)
             elif len(line) < _MAX_OUT_LINE_BYTES:  # readline stopped at the end of the file
                 break  # the torn last line
-            if not (isinstance(row, dict) and set(row) == set(OUTPUT_KEYS)):
+            if row is None:
                 raise UsageError(f"--resume: line {number} of {shown_path(path)} is not an output row of robocritics "
                                  "batch; is it the right file? (it was not changed)")  # fmt: skip
-            rows.append(row)
+            finished.add(row["id"], row["error"])
             end = f.tell()
         f.truncate(end)  # drop a torn last line, so the next row starts on its own line
-    return rows
+    return finished
+
+
+def _opened(path: Path, flags: int):
+    """``path`` opened by :func:`~robocritics._files.open_regular` (no link, FIFO or device), as a UsageError."""
+    from .._files import OutputFileError, open_regular
+
+    try:
+        return open_regular(path, flags, "--output")
+    except OutputFileError as exc:
+        raise UsageError(f"--resume: {exc}") from None
 
 
 class JsonlWriter:
-    """Output rows as JSON lines, flushed per row (a reader sees each row as it finishes)."""
+    """Output rows as JSON lines, flushed per row (a reader sees each row as it finishes). A new file is created
+    exclusively and renamed into place at once (:func:`~robocritics._files.open_new_stream`); ``append`` opens the
+    existing regular file (never a link)."""
 
     def __init__(self, path: Path, append: bool):
-        self.f = open(path, "a" if append else "w", encoding="utf-8")  # noqa: SIM115
+        from .._files import open_new_stream
+
+        self.f = _opened(path, os.O_WRONLY | os.O_APPEND) if append else open_new_stream(path, "--output")
 
     def write(self, row: dict) -> None:
-        self.f.write(json.dumps(row, allow_nan=False) + "\n")
+        self.f.write((json.dumps(row, allow_nan=False) + "\n").encode("utf-8"))
         self.f.flush()
 
     def close(self) -> None:
@@ -185,7 +237,7 @@ class StdoutWriter(JsonlWriter):
         sys.stdout.flush()
         self.saved = os.dup(1)
         os.dup2(2, 1)
-        self.f = os.fdopen(os.dup(self.saved), "w", encoding="utf-8")
+        self.f = os.fdopen(os.dup(self.saved), "wb")
 
     def close(self) -> None:
         try:
@@ -203,21 +255,37 @@ PARQUET_COLUMNS = ("id", "id_is_int", "score", "flags", "passed", "duration_s", 
 
 class ParquetWriter:
     """Output rows as Parquet (pyarrow), a row group per :data:`GROUP_ROWS` rows, with the columns
-    :data:`PARQUET_COLUMNS`. Parquet cannot be appended to, so the rows go to ``OUT.partial``, renamed to OUT
-    when the batch ends (or is interrupted); ``--resume`` rewrites the file with the old rows first."""
+    :data:`PARQUET_COLUMNS`. Parquet cannot be appended to, so the rows go to a temporary file beside OUT
+    (:class:`~robocritics._files.AtomicFile`: created exclusively, never through a link), renamed to OUT when the
+    batch ends (or is interrupted); ``resume`` first copies OUT's rows into it, a row group at a time."""
 
     GROUP_ROWS = 64
 
-    def __init__(self, path: Path, old_rows: list[dict]):
+    def __init__(self, path: Path, resume: bool = False):
+        from .._files import AtomicFile, OutputFileError
+
         self.pa, self.pq = _pyarrow()
-        self.path, self.tmp = path, path.with_name(path.name + ".partial")
         pa = self.pa
         types = (pa.string(), pa.bool_(), pa.float64(), pa.string(), pa.bool_(), pa.float64(), pa.int64(), pa.string())
         self.schema = pa.schema(list(zip(PARQUET_COLUMNS, types)))
-        self.writer = self.pq.ParquetWriter(str(self.tmp), self.schema)
+        try:
+            self.out = AtomicFile(path, "--output", suffix=".partial")
+        except OutputFileError as exc:
+            raise UsageError(str(exc)) from None
         self.pending: list[dict] = []
-        for row in old_rows:
-            self.write(row)
+        try:
+            self.writer = self.pq.ParquetWriter(self.out.file, self.schema)
+        except BaseException:
+            self.out.discard()
+            raise
+        try:
+            if resume and os.path.lexists(path):
+                for batch in _parquet_batches(path, self.GROUP_ROWS):
+                    self.writer.write_table(self.pa.Table.from_batches([batch]).cast(self.schema))
+        except BaseException:
+            self.writer.close()
+            self.out.discard()
+            raise
 
     @staticmethod
     def flat(row: dict) -> dict:
@@ -242,7 +310,7 @@ class ParquetWriter:
             self._flush()
         finally:
             self.writer.close()
-            os.replace(self.tmp, self.path)
+            self.out.commit()
 
 
 def _pyarrow():
@@ -254,28 +322,67 @@ def _pyarrow():
     return pa, pq
 
 
-def parquet_rows(path: Path) -> list[dict]:
-    """The output rows of the Parquet file ``path`` (written by :class:`ParquetWriter`), as JSONL would hold them."""
+def _parquet_batches(path: Path, batch_rows: int, columns: list[str] | None = None) -> Iterator[Any]:
+    """The record batches of our Parquet output ``path`` (``batch_rows`` rows each); a UsageError if it is not one."""
+    _, pq = _pyarrow()
+    f = _opened(path, os.O_RDONLY)
+    with f:
+        try:
+            parquet = pq.ParquetFile(f)
+            names = tuple(parquet.schema_arrow.names)
+        except Exception as exc:  # noqa: BLE001 - pyarrow's errors have no common base but Exception
+            raise UsageError(f"--resume: {shown_path(path)} is not a readable Parquet file: {one_line(exc)[:200]}") from None
+        if names != PARQUET_COLUMNS:
+            raise UsageError(f"--resume: {shown_path(path)} is not a robocritics batch output: its columns are "
+                             f"{', '.join(names)[:200]}, not {', '.join(PARQUET_COLUMNS)}")  # fmt: skip
+        try:
+            yield from parquet.iter_batches(batch_size=batch_rows, columns=columns)
+        except Exception as exc:  # noqa: BLE001 - as above
+            raise UsageError(f"--resume: {shown_path(path)} is not a readable Parquet file: {one_line(exc)[:200]}") from None
+
+
+def _parquet_record(rec: dict) -> dict:
+    """A Parquet record (:data:`PARQUET_COLUMNS`) as the output row JSONL would hold."""
     from ..batch.rows import OUTPUT_KEYS
 
-    if not path.exists():
-        return []
-    _, pq = _pyarrow()
+    is_int = rec.pop("id_is_int")
+    rec["id"] = int(rec["id"]) if is_int and rec["id"] is not None else rec["id"]
+    rec["flags"] = json.loads(rec["flags"] or "{}")
+    rec["error"] = None if rec["error"] is None else json.loads(rec["error"])
+    return {k: rec[k] for k in OUTPUT_KEYS}
+
+
+def finished_parquet(path: Path) -> Finished:
+    """The ids of the rows in the Parquet output ``path``, read a row group at a time (only the id and error columns)."""
+    finished = Finished()
+    if not os.path.lexists(path):
+        return finished
+    for batch in _parquet_batches(path, 4096, ["id", "id_is_int", "error"]):
+        for rec in batch.to_pylist():
+            try:
+                is_int, row_id, error = rec["id_is_int"], rec["id"], rec["error"]
+                row_id = int(row_id) if is_int and row_id is not None else row_id
+                finished.add(row_id, None if error is None else _output_error(error))
+            except (ValueError, TypeError):
+                raise UsageError(f"--resume: {shown_path(path)} holds a row that is not an output row of robocritics "
+                                 f"batch (id {str(rec.get('id'))[:60]!r}); is it the right file?") from None  # fmt: skip
+    return finished
+
+
+def _output_error(text: str) -> Any:
+    """A Parquet ``error`` cell's JSON (ValueError if it is not JSON or nested too deep for the decoder)."""
     try:
-        table = pq.read_table(str(path))
-    except Exception as exc:  # noqa: BLE001 - pyarrow's errors have no common base but Exception
-        raise UsageError(f"--resume: {shown_path(path)} is not a readable Parquet file: {one_line(exc)[:200]}") from None
-    if tuple(table.column_names) != PARQUET_COLUMNS:
-        raise UsageError(f"--resume: {shown_path(path)} is not a robocritics batch output: its columns are "
-                         f"{', '.join(table.column_names)[:200]}, not {', '.join(PARQUET_COLUMNS)}")  # fmt: skip
-    rows = []
-    for rec in table.to_pylist():
-        is_int = rec.pop("id_is_int")
-        rec["id"] = int(rec["id"]) if is_int and rec["id"] is not None else rec["id"]
-        rec["flags"] = json.loads(rec["flags"] or "{}")
-        rec["error"] = None if rec["error"] is None else json.loads(rec["error"])
-        rows.append({k: rec[k] for k in OUTPUT_KEYS})
-    return rows
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError("nested too deep") from None
+
+
+def parquet_rows(path: Path) -> list[dict]:
+    """Every output row of the Parquet file ``path`` (written by :class:`ParquetWriter`), as JSONL would hold them
+    (all in memory: for reading a result, not for ``--resume``)."""
+    if not os.path.lexists(path):
+        return []
+    return [_parquet_record(rec) for batch in _parquet_batches(path, 4096) for rec in batch.to_pylist()]
 
 
 # --- progress -------------------------------------------------------------------------------------
@@ -348,19 +455,17 @@ class Progress:
 # --- the command ----------------------------------------------------------------------------------
 
 
-def _check_output(out: Path, source: Path, resume: bool) -> None:
-    """A one-line UsageError for an output path the batch cannot write, before any work."""
-    shown = shown_path(out)
-    if out.exists():
-        if out.is_dir():
-            raise UsageError(f"--output {shown} is a directory; name a file in it")
-        if os.path.samefile(out, source):
-            raise UsageError(f"--output {shown} is the input file: writing it would destroy the input")
-        if resume and not out.is_file():
-            raise UsageError(f"--resume: --output {shown} is not a regular file, so it holds no rows to keep")
-    parent = out.resolve().parent
-    if not parent.is_dir():
-        raise UsageError(f"--output {shown}: the directory {path_label(parent)} does not exist")
+def _check_output(out: Path, source: Path) -> None:
+    """A one-line UsageError for an output path the batch cannot write safely (a link, a directory, a FIFO or
+    device, a missing directory: :func:`~robocritics._files.check_output_path`), or the input itself, before any work."""
+    from .._files import OutputFileError, check_output_path
+
+    try:
+        check_output_path(out, "--output")
+    except OutputFileError as exc:
+        raise UsageError(str(exc)) from None
+    if out.exists() and os.path.samefile(out, source):
+        raise UsageError(f"--output {shown_path(out)} is the input file: writing it would destroy the input")
 
 
 def _terminated(signum, frame) -> None:
@@ -371,14 +476,14 @@ def _terminated(signum, frame) -> None:
 
 def _cmd_batch(args: argparse.Namespace) -> int:
     from ..batch import evaluate
-    from ..batch.local import BatchError
+    from ..batch.local import BatchError, max_workers
 
     source = Path(args.input)
     if not source.is_file():
         raise UsageError(f"input {shown_path(args.input)} is not a file")
     cpus = os.cpu_count() or 1
-    if args.engine == "local" and args.workers is not None and args.workers > MAX_WORKERS_PER_CPU * cpus:
-        raise UsageError(f"--workers {args.workers}: at most {MAX_WORKERS_PER_CPU * cpus} on this machine ({cpus} "
+    if args.engine == "local" and args.workers is not None and args.workers > max_workers():
+        raise UsageError(f"--workers {args.workers}: at most {max_workers()} on this machine ({cpus} "
                          "CPUs); each worker is a process with its own robot model, and more than the cores only "
                          "queue for them")  # fmt: skip
     to_stdout = args.output == "-"
@@ -386,24 +491,25 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     if to_stdout and args.resume:
         raise UsageError("--resume needs an output file to read the finished rows from, not -o - (standard output)")
     if not to_stdout:
-        _check_output(out, source, args.resume)
+        _check_output(out, source)
     parquet = not to_stdout and out.suffix.lower() == ".parquet"
     if parquet:
         _pyarrow()  # fail before any work
     try:
-        old = (parquet_rows(out) if parquet else done_rows(out)) if args.resume else []
+        finished = (finished_parquet(out) if parquet else finished_jsonl(out)) if args.resume else Finished()
     except OSError as exc:
         raise UsageError(f"--resume: cannot read --output {shown_path(out)}: {exc.strerror or exc}") from None
-    done = {_key(r["id"]) for r in old} - {None}
-    reported = {json.dumps(r.get("error"), sort_keys=True) for r in old if r.get("id") is None}
-    unmatched = set(done)  # ids in OUT not seen in IN (a different input?): kept, and said so at the end
+    done, reported = finished.keys, finished.reported
+    matched: set[str] = set()  # ids of OUT seen in IN; the others (a different input?) are kept, and said so at the end
     progress = Progress(count_rows(args.input), sys.stderr)
 
     def pending() -> Iterator[Any]:
         for row in read_rows(args.input):
             key = _key(row.get("id")) if isinstance(row, dict) else None
-            if key in done:
-                unmatched.discard(key)
+            if key in done or key in matched:  # a repeated id of IN is skipped again, as before
+                if key in done:
+                    done.discard(key)  # matched: moved, so OUT's ids are held once
+                    matched.add(key)
                 progress.skip()
                 continue
             yield row
@@ -412,7 +518,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         if to_stdout:
             writer = StdoutWriter()
         else:
-            writer = ParquetWriter(out, old) if parquet else JsonlWriter(out, append=args.resume)
+            writer = ParquetWriter(out, args.resume) if parquet else JsonlWriter(out, append=args.resume)
     except OSError as exc:
         raise UsageError(f"--output {shown_path(args.output)}: cannot write it: {exc.strerror or exc}") from None
     rows = evaluate(pending(), args.engine, args.workers, timeout_s=args.timeout, ray_address=args.ray_address)
@@ -421,7 +527,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     previous = signal.signal(signal.SIGTERM, _terminated) if on_main_thread else None
     try:
         for row in rows:
-            if reported and row["id"] is None and json.dumps(row["error"], sort_keys=True) in reported:
+            if reported and row["id"] is None and error_digest(row["error"]) in reported:
                 progress.skip()
                 continue  # an unreadable line already reported before --resume
             try:
@@ -452,7 +558,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
                 signal.signal(signal.SIGTERM, previous)
             rows.close()  # stops the workers now, not when the generator is collected
     progress.finish()
-    if unmatched:
-        progress._say(f"robocritics batch: note: {len(unmatched)} rows of {shown_path(args.output)} have ids that are "
+    if done:  # what is left: OUT's ids not seen in IN
+        progress._say(f"robocritics batch: note: {len(done)} rows of {shown_path(args.output)} have ids that are "
                       f"not in {shown_path(args.input)} (from another input?); they were kept\n")  # fmt: skip
     return 0

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ._common import (
     UsageError,
     add_critic_options,
     add_goal_option,
+    check_output,
     load_params,
     one_line,
     read_text,
@@ -30,7 +30,13 @@ def _build_check(sub) -> None:
         "Exit status: 0 no Error verdict (from any critic), 1 at least one Error (or the program does not run), "
         "2 bad input.",
     )
-    p.add_argument("program", metavar="PROGRAM", help="robot program file (Python using the skill API)")
+    p.add_argument(
+        "program",
+        metavar="PROGRAM",
+        help="robot program file (Python using the skill API), or motion from another tool: URScript (.script, "
+        ".urscript), a ur_rtde or generic CSV recording, JointTrajectory JSON, MoveIt YAML, rosbag2 (.mcap, .db3) "
+        "(docs/formats.md)",
+    )
     p.add_argument(
         "--scene",
         metavar="NAME|PATH",
@@ -54,6 +60,9 @@ def _build_check(sub) -> None:
         help="trajectory sample rate, Hz, from 25 (sparser sampling hides fast motion from the critics) to 500 "
         "(the controller's rate); default 125",
     )
+    from ._motion import add_motion_options
+
+    add_motion_options(p)
     p.set_defaults(func=_cmd_check)
 
 
@@ -82,11 +91,15 @@ def _check(args: argparse.Namespace) -> int:
     from ..critic import check_program
     from ..goals import parse_goals
 
+    from ..formats import motion_kind
+
+    if motion_kind(args.program) is not None:
+        from ._motion import check_motion
+
+        return check_motion(args)
     source = read_text(args.program, "program")
-    if args.html:
-        html_dir = Path(args.html).resolve().parent
-        if not html_dir.is_dir():  # checked before simulating, so a typo costs nothing
-            raise UsageError(f"--html {args.html}: the directory {html_dir} does not exist")
+    if args.html:  # checked before simulating, so a typo (or a link at the name) costs nothing
+        check_output(args.html, "--html")
     scene = scene_for(args.program, args.scene)
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
@@ -100,10 +113,12 @@ def _check(args: argparse.Namespace) -> int:
             print(f"robocritics: no replay written to {args.html}: the program did not run", file=sys.stderr)
         return 1
     if args.html:
-        from ..viz import write_replay_html
+        from .._files import OutputFileError, write_file_atomically
+        from ..viz import replay_html
 
+        page = replay_html(execution, report, title=f"{args.program} in {scene.name}: {report.score_text}")
         try:
-            write_replay_html(args.html, execution, report, title=f"{args.program} in {scene.name}: {report.score_text}")
-        except OSError as exc:
-            raise UsageError(f"--html {args.html}: cannot write the replay: {exc.strerror or exc}") from None
+            write_file_atomically(args.html, page, "--html")
+        except OutputFileError as exc:
+            raise UsageError(str(exc)) from None
     return 1 if report.has_errors else 0

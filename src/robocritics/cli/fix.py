@@ -3,9 +3,17 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from ._common import UsageError, add_critic_options, add_goal_option, load_params, read_text, scene_for, subcommand
+from ._common import (
+    UsageError,
+    add_critic_options,
+    add_goal_option,
+    check_output,
+    load_params,
+    read_text,
+    scene_for,
+    subcommand,
+)
 
 
 @subcommand("fix")
@@ -33,11 +41,12 @@ def _build_fix(sub) -> None:
 
 
 def _cmd_fix(args: argparse.Namespace) -> int:
+    from .._files import OutputFileError, write_file_atomically
     from ..repair import repair
 
     source = read_text(args.program, "program")
-    if args.output and not Path(args.output).resolve().parent.is_dir():
-        raise UsageError(f"-o {args.output}: the directory {Path(args.output).resolve().parent} does not exist")
+    if args.output:  # before the repair, so a typo (or a link at the name) costs nothing
+        check_output(args.output, "-o")
     scene = scene_for(args.program, args.scene)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
     result = repair(source, scene, goal=args.goals or None, critics=critics, params=load_params(args.params))
@@ -51,7 +60,7 @@ def _cmd_fix(args: argparse.Namespace) -> int:
     print(result.summary())
     if args.output:
         try:
-            Path(args.output).write_text(result.program)
-        except OSError as exc:
-            raise UsageError(f"-o {args.output}: cannot write: {exc.strerror or exc}") from None
+            write_file_atomically(args.output, result.program, "-o")
+        except OutputFileError as exc:
+            raise UsageError(str(exc)) from None
     return 1 if result.errors else 0

@@ -6,7 +6,8 @@
         [--host 127.0.0.1] [--port 8765] [--token SECRET] [--base-url URL --model NAME ...] \\
         [--deploy-host 127.0.0.1 --deploy-rtde-port 30004 ...] [--no-browser]
 
-Prints the URL and serves until Ctrl-C (exit 0). Binding a host that is not loopback (127.0.0.0/8, ::1,
+Prints the URL (for ``--host 0.0.0.0``: one per address of this machine) and serves until Ctrl-C (exit 0);
+``--program`` is Run as soon as the studio starts. Binding a host that is not loopback (127.0.0.0/8, ::1,
 localhost) without ``--token`` is refused with exit status 2: the studio can move a robot. Without
 ``--base-url``/``--model`` (or their environment variables) chat and Fix are disabled and the page says why.
 See docs/studio.md.
@@ -78,17 +79,20 @@ def studio_command(args: argparse.Namespace) -> int:
         deploy = {"host": args.deploy_host, "rtde_port": args.deploy_rtde_port,
                   "dashboard_port": args.deploy_dashboard_port, "secondary_port": args.deploy_secondary_port}
     studio = Studio(scene, program, host=args.host, port=args.port, token=args.token, model=model, deploy=deploy,
-                    goals=args.goals, no_model_reason=reason)
+                    goals=args.goals, no_model_reason=reason, run_program=bool(args.program))
     try:
         studio.start()
     except OSError as exc:
         print(f"robocritics studio: error: cannot bind {args.host}:{args.port}: {one_line(exc)}", file=sys.stderr)
         return 2
-    print(f"robocritics studio: {studio.url}  (scene {studio.scene.name!r}; Ctrl-C to stop)", flush=True)
+    urls = studio.urls()
+    print(f"robocritics studio: {urls[0]}  (scene {studio.scene.name!r}; Ctrl-C to stop)", flush=True)
+    for other in urls[1:]:
+        print(f"robocritics studio: also {other}", flush=True)
     if not args.no_browser:
         import webbrowser
 
-        webbrowser.open(studio.url)
+        webbrowser.open(urls[-1] if studio.host in ("0.0.0.0", "::") else urls[0])
     try:
         studio.serve_forever()
     except KeyboardInterrupt:

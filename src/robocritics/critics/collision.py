@@ -45,7 +45,7 @@ from pydantic import Field, model_validator
 
 from .._arrays import min_over_columns, run_starts
 from ..hookspecs import hookimpl  # not `from .. import`: the root imports the repairs, which import this module
-from ..critic import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
+from ..critic import CriticParams, Flag, ParamNames, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["CollisionCritic", "register_critics", "Counted", "counted_distances"]
 
@@ -57,7 +57,7 @@ class Params(CriticParams):
     penetration_m: float = Field(
         0.0, le=0, description="error when a counted pair's signed distance is at or below this, m (0 = any contact)"
     )
-    ignore_pairs: tuple[str, ...] = Field((), description="names of proximity pairs never to count (e.g. a mount plate)")
+    ignore_pairs: ParamNames = Field((), description="names of proximity pairs never to count (e.g. a mount plate)")
     contact_tolerance_m: float = Field(
         0.003,
         ge=0,

@@ -38,7 +38,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from .. import hookimpl
-from ..critic import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
+from ..critic import CriticParams, Flag, ParamName, Verdict, fmt_value, make_signal, threshold_verdict
 from ..errors import CriticError
 
 __all__ = ["EndEffectorPoseCritic", "register_critics", "spearing_speed"]
@@ -56,7 +56,7 @@ class Params(CriticParams):
         description="error above this spearing speed, m/s (source: Kirschner et al. 2024, edged/pointed tools "
         "at <= 0.5 m/s generally prevented open wounds)",
     )
-    frame: str | None = Field(
+    frame: ParamName | None = Field(
         None, description="frame at the fingertips whose z axis is the finger direction (default: the trajectory's TCP frame)"
     )
 

@@ -41,7 +41,7 @@ from pydantic import Field, model_validator
 
 from .. import hookimpl
 from .._arrays import row_any, row_max, squared_norms
-from ..critic import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
+from ..critic import CriticParams, Flag, ParamNames, Verdict, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["JointSpeedCritic", "register_critics", "link_speeds"]
 
@@ -71,7 +71,7 @@ class Params(CriticParams):
         description="fraction by which an angular joint speed may exceed the robot's joint velocity limit "
         "before it is an error, to absorb finite-difference error (0.01 = 1 %)",
     )
-    frames: tuple[str, ...] = Field(
+    frames: ParamNames = Field(
         (), description="names of the frames whose origins are checked; empty = every frame of the trajectory"
     )
 

@@ -45,7 +45,7 @@ from pydantic import Field
 
 from .. import hookimpl
 from .._arrays import row_max, squared_norms, unique_values
-from ..critic import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
+from ..critic import CriticParams, Flag, ParamNames, Verdict, fmt_length, make_signal, threshold_verdict
 from ..robot.hull import convex_hull
 
 __all__ = ["SpaceUsageCritic", "register_critics", "hull_points", "hull_volume", "volume_error_bound"]
@@ -69,7 +69,7 @@ class Params(CriticParams):
         description="points within this distance, m, of the chord between retained samples of the same frame are "
         "left out of the hull; bounds the volume under-estimate by ~hull area x tolerance (0 = exact hull)",
     )
-    frames: tuple[str, ...] = Field((), description="frames whose origins make up the swept points; empty = every frame")
+    frames: ParamNames = Field((), description="frames whose origins make up the swept points; empty = every frame")
 
 
 def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,16 +1,17 @@
 """Task outcome: did every object end where the task's goals say? (planning level)
 
 Goals (:class:`robocritics.goals.Goal`: ``"green_apple in white_box"``, ``"cupcake on plate"``) come from
-``critique(execution, goals=[...])``, ``--goal`` on the command line, and the program's own
-``expect(obj, inside=container)`` / ``expect(obj, on=support)`` calls. A trajectory carries no object poses,
-so :func:`robocritics.critique` checks the goals on the execution's final scene and hands the outcomes to this
-critic in its params (``outcomes``); the critic turns them into a verdict:
+``critique(execution, goals=[...])``, ``--goal`` on the command line (both end up in ``execution.goals``) and
+the program's own ``expect(obj, inside=container)`` / ``expect(obj, on=support)`` calls. The critic checks them
+on the execution's final scene:
 
 * ERROR when any goal is unmet, naming each object and where it ended (e.g. "green_apple ended on the table
   at (0.31, -0.12) m, 0.18 m from white_box");
 * OK when all are met;
-* OK with the message "no task goals were given: nothing to check" when there are none (it is not skipped, so
-  a report always says whether the outcome was checked).
+* OK with the message "no task goals were given: nothing to check" when there are none and it was named.
+
+It is an on-demand critic: ``requested(execution)`` is true when the run has goals, so the default selection
+runs it only then, and any selection runs it then.
 
 It is not part of the 0-10 score (:attr:`robocritics.report.Report.scored_verdicts`: the five motion
 critics), but its Error makes ``Report.has_errors`` true and ``Report.passed`` false.
@@ -18,9 +19,9 @@ critics), but its Error makes ``Report.has_errors`` true and ``Report.passed`` f
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict
 
-from ..goals import GoalOutcome
+from ..goals import GoalOutcome, check_outcomes, program_goals
 from ..hookspecs import hookimpl
 from ..verdict import Evidence, Flag, Verdict
 
@@ -31,11 +32,9 @@ NAME = "task_outcome"
 
 # a CriticParams (frozen, unknown fields rejected) without importing robocritics.critic, which imports this module
 class Params(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    """No thresholds: a goal is met or not (the tolerance of "on" is :data:`robocritics.goals.ON_TOLERANCE_M`)."""
 
-    outcomes: tuple[GoalOutcome, ...] = Field(
-        (), description="goals checked on the final scene (filled by critique() from its goals and the program's expect())"
-    )
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
 
 class TaskOutcomeCritic:
@@ -43,8 +42,12 @@ class TaskOutcomeCritic:
     description = "Task goals (object in container / on support) checked on the final scene."
     Params = Params
 
-    def check(self, trajectory, scene, params: Params) -> Verdict:
-        outcomes = params.outcomes
+    def requested(self, execution) -> bool:
+        """The run asks for this critic when it has goals: given ones or the program's ``expect(...)`` calls."""
+        return bool(execution.goals) or bool(program_goals(execution.plan))
+
+    def check(self, execution, params: Params) -> Verdict:
+        outcomes = check_outcomes(execution)
         if not outcomes:
             return Verdict(
                 critic=NAME,

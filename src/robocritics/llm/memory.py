@@ -54,6 +54,14 @@ read-only file is detected when the memory is opened and fails at once;
 other write failures are never retried (only a busy lock is waited for, up
 to ``busy_timeout_s``).
 
+The file is untrusted input (see :mod:`robocritics.llm.memory_guard`): its schema must be exactly the one
+robocritics creates (a trigger, view, virtual table or unknown object is refused when the file is opened, before
+anything runs), SQLite's limits bound every value and statement, every statement runs under a deadline
+(``statement_timeout_s``), and a value out of its column's contract (text in a numeric column, a negative count,
+a blob for text, a score outside 0–10, an unknown source) is an :class:`InteractionMemoryError`. The file, and
+SQLite's ``-wal``/``-shm``/``-journal`` files beside it, must not be symbolic links; a new file is created
+exclusively (never through a link placed at its name).
+
 Concurrency and durability: file databases run in WAL mode with
 ``synchronous=FULL`` and a busy timeout; every write is one ``BEGIN
 IMMEDIATE`` … ``COMMIT`` transaction, so several threads (sharing one
@@ -65,9 +73,11 @@ through ``fork`` opens its own connection in the child.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import sqlite3
+import stat
 import threading
 import time
 import uuid
@@ -80,6 +90,7 @@ from pathlib import Path
 import numpy as np
 
 from robocritics.errors import LLMError, RoboCriticsError
+from robocritics.llm import memory_guard as guard
 from robocritics.llm.bm25 import tokenize
 from robocritics.llm.client import EmbeddingModel, embedding_space_name
 from robocritics.llm.limits import (
@@ -221,7 +232,9 @@ class InteractionMemory:
     ``EmbeddingModel``, e.g. ``OpenAICompatible`` with an embedding model)
     switches ``search`` from BM25 to cosine similarity; it may be replaced at
     any time by assigning ``memory.embedder``. ``busy_timeout_s`` is how long a
-    write waits for another writer (seconds) before failing.
+    write waits for another writer (seconds) before failing; ``statement_timeout_s``
+    how long one statement or write transaction may run (seconds) before it is
+    interrupted (a hostile or damaged file must not hang the caller).
     ``embed_batch_size`` texts are embedded per call of the embedder, and
     ``scan_batch_size`` stored vectors compared per step of a search.
 
@@ -235,6 +248,7 @@ class InteractionMemory:
         embedder: EmbeddingModel | None = None,
         *,
         busy_timeout_s: float = DEFAULT_BUSY_TIMEOUT_S,
+        statement_timeout_s: float = guard.DEFAULT_STATEMENT_TIMEOUT_S,
         embed_batch_size: int = 64,
         scan_batch_size: int = DEFAULT_SCAN_BATCH_SIZE,
     ):
@@ -247,6 +261,11 @@ class InteractionMemory:
                 raise self._error(f"{name} must be a whole number >= 1, got {value!r}")
         if not (isinstance(busy_timeout_s, (int, float)) and math.isfinite(busy_timeout_s) and busy_timeout_s >= 0):
             raise self._error(f"busy_timeout_s must be a finite number of seconds >= 0, got {busy_timeout_s!r}")
+        timeout = statement_timeout_s
+        if isinstance(timeout, bool) or not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+            raise self._error(f"statement_timeout_s must be a finite number of seconds > 0, got {timeout!r:.40}")
+        self.statement_timeout_s = float(statement_timeout_s)
+        self._deadline: guard.Deadline | None = None
         self.embedder = embedder
         self.busy_timeout_s = float(busy_timeout_s)
         self.embed_batch_size = int(embed_batch_size)
@@ -278,6 +297,11 @@ class InteractionMemory:
             return "the file or its directory is read-only: make both writable, or use another path"
         if code in _BUSY:
             return f"another connection held the write lock for more than busy_timeout_s={self.busy_timeout_s:g} s"
+        if code == "SQLITE_INTERRUPT":
+            return (f"it ran longer than statement_timeout_s={self.statement_timeout_s:g} s: the file is damaged, "
+                    "hostile or far larger than expected")  # fmt: skip
+        if code == "SQLITE_TOOBIG":
+            return f"the file holds a value larger than {guard.MAX_VALUE_BYTES:,} bytes, which robocritics never stores"
         if code.startswith("SQLITE_FULL"):
             return "the disk is full"
         if code.startswith("SQLITE_CANTOPEN"):
@@ -297,6 +321,18 @@ class InteractionMemory:
         except sqlite3.Error as exc:
             raise self._failure(exc, doing) from exc
 
+    @contextmanager
+    def _contract(self) -> Iterator[None]:
+        """A stored value out of its column's contract (a ``ValueError`` of :mod:`.memory_guard`) as an
+        :class:`InteractionMemoryError`: the file was not written by robocritics, or was changed since."""
+        try:
+            yield
+        except ValueError as exc:
+            if isinstance(exc, InteractionMemoryError):
+                raise
+            raise self._error(f"interaction memory {self.path!r} holds a value robocritics never stores: {exc} "
+                              "(the file was changed by something else; move it away to start afresh)") from None  # fmt: skip
+
     def _check_path(self) -> None:
         """Fail at once, with the reason, for a path the memory could not be written at."""
         path = Path(self.path)
@@ -310,8 +346,24 @@ class InteractionMemory:
             ) from None
         if not path.parent.is_dir():
             raise self._error(f"{where} cannot be opened: {str(path.parent)!r} is not a directory")
-        if path.is_dir():
-            raise self._error(f"{where} cannot be opened: it is a directory, not a file")
+        for companion in (path, *(path.with_name(path.name + end) for end in ("-wal", "-shm", "-journal"))):
+            try:
+                info = os.lstat(companion)
+                mode = info.st_mode
+            except FileNotFoundError:
+                continue
+            except OSError as exc:
+                raise self._error(f"{where} cannot be opened: {str(companion)!r}: {exc.strerror or exc}") from None
+            if stat.S_ISLNK(mode):
+                raise self._error(f"{where} cannot be opened: {str(companion)!r} is a symbolic link; robocritics "
+                                  "does not write through links: use the file itself")  # fmt: skip
+            if stat.S_ISDIR(mode) and companion == path:
+                raise self._error(f"{where} cannot be opened: it is a directory, not a file")
+            if not stat.S_ISREG(mode):
+                raise self._error(f"{where} cannot be opened: {str(companion)!r} is not a regular file")
+            if info.st_nlink > 1:  # a hard link: writing it would change another file too
+                raise self._error(f"{where} cannot be opened: {str(companion)!r} has {info.st_nlink} hard links; "
+                                  "copy it to a file of its own")  # fmt: skip
         if path.exists() and not os.access(path, os.R_OK | os.W_OK):
             raise self._error(
                 f"{where} cannot be opened: the file is read-only (no read and write permission): make it "
@@ -323,6 +375,12 @@ class InteractionMemory:
                 f"{where} cannot be opened: its directory {str(path.parent)!r} is read-only (SQLite keeps its "
                 "journal files beside the database): make it writable, or use another path"
             )
+        try:  # a new file is created here, exclusively: O_EXCL refuses anything at the name, a link included
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666))
+        except FileExistsError:
+            pass  # the existing regular file checked above (or one another process has just created)
+        except OSError as exc:
+            raise self._error(f"{where} cannot be created: {exc.strerror or exc}") from None
 
     # -- connection ---------------------------------------------------------
 
@@ -340,11 +398,20 @@ class InteractionMemory:
             raise self._error(
                 f"interaction memory {self.path!r} cannot be opened: {exc} ({self._advice(exc)})"
             ) from exc
+        except ValueError as exc:  # a value out of contract met while upgrading an older file
+            self._conn = None
+            if isinstance(exc, InteractionMemoryError):
+                raise
+            raise self._error(f"interaction memory {self.path!r} cannot be opened: it holds a value robocritics never "
+                              f"stores: {exc}") from None  # fmt: skip
         return self._conn
 
     def _open(self) -> sqlite3.Connection:
         conn = sqlite3.connect(self.path, timeout=self.busy_timeout_s, isolation_level=None, check_same_thread=False)
         try:
+            guard.limit(conn)
+            self._deadline = guard.Deadline(conn, self.statement_timeout_s)
+            self._deadline.start()  # opening (and upgrading) is bounded like any statement
             conn.execute(f"PRAGMA busy_timeout = {int(self.busy_timeout_s * 1000)}")
             conn.execute("PRAGMA foreign_keys = ON")
             if not self._in_memory:
@@ -353,6 +420,7 @@ class InteractionMemory:
             conn.execute("BEGIN IMMEDIATE")
             try:
                 version = conn.execute("PRAGMA user_version").fetchone()[0]
+                self._check_schema(conn, complete=version >= SCHEMA_VERSION)
                 if version > SCHEMA_VERSION:
                     raise self._error(
                         f"interaction memory {self.path!r} cannot be opened: its schema version {version} is newer "
@@ -367,6 +435,7 @@ class InteractionMemory:
                     if "source" not in columns:  # versions 1 and 2 (a fresh file was created with it)
                         conn.execute(_SOURCE_COLUMN)
                     conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                    self._check_schema(conn, complete=True)
                 conn.execute("COMMIT")
             except BaseException:
                 if conn.in_transaction:
@@ -376,6 +445,24 @@ class InteractionMemory:
             conn.close()
             raise
         return conn
+
+    def _check_schema(self, conn: sqlite3.Connection, complete: bool) -> None:
+        """Refuse a file whose schema is not robocritics': any object but our tables and indexes (a trigger, a
+        view, a virtual table), and once ``complete`` (the current version), any table or index of another shape."""
+        where = f"interaction memory {self.path!r} cannot be opened"
+        foreign = guard.foreign_objects(conn, set(_reference_layout()), _INDEX_NAMES)
+        if foreign:
+            more = f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+            raise self._error(f"{where}: its schema holds {', '.join(foreign[:3])}{more}, which robocritics never "
+                              "creates (a trigger or view would run on every read or write): move the file away, or "
+                              "remove them")  # fmt: skip
+        if complete:
+            reference = _reference_layout()
+            found = guard.layout(conn, list(reference))
+            wrong = [table for table in reference if found[table] != reference[table]]
+            if wrong:
+                raise self._error(f"{where}: its table {wrong[0]!r} (or its indexes) is not the one robocritics "
+                                  "creates: move the file away to start afresh")  # fmt: skip
 
     def _enable_wal(self, conn: sqlite3.Connection) -> None:
         """Switch the file to WAL; retried only while another connection holds the file (a busy lock)."""
@@ -400,6 +487,7 @@ class InteractionMemory:
         with self._lock:
             conn = self._connection()
             with self._sqlite(doing):
+                self._start_deadline()  # the whole transaction: a write is a few statements
                 conn.execute("BEGIN IMMEDIATE")
                 try:
                     yield conn
@@ -413,7 +501,12 @@ class InteractionMemory:
         with self._lock:
             conn = self._connection()
             with self._sqlite(doing):
+                self._start_deadline()
                 return conn.execute(sql, parameters).fetchall()
+
+    def _start_deadline(self) -> None:
+        if self._deadline is not None:
+            self._deadline.start()
 
     def close(self) -> None:
         """Close the database connection (idempotent). Later calls raise ``InteractionMemoryError``."""
@@ -499,7 +592,8 @@ class InteractionMemory:
         rows = self._read(f"SELECT {_COLUMNS} FROM interactions WHERE id = ?", (int(interaction_id),))
         if not rows:
             raise KeyError(f"no interaction with id {interaction_id} in {self.path!r}")
-        return _interaction(rows[0])
+        with self._contract():
+            return _interaction(rows[0])
 
     def history(self, session: str) -> list[Interaction]:
         """Every interaction of ``session``, oldest first ([] for an unknown session)."""
@@ -508,11 +602,14 @@ class InteractionMemory:
         rows = self._read(
             f"SELECT {_COLUMNS} FROM interactions WHERE session_id = ? ORDER BY id", (session,), "reading a session"
         )
-        return [_interaction(r) for r in rows]
+        with self._contract():
+            return [_interaction(r) for r in rows]
 
     def sessions(self) -> list[str]:
         """Every session id, in order of creation."""
-        return [r[0] for r in self._read("SELECT id FROM sessions ORDER BY created_s, rowid")]
+        rows = self._read("SELECT id FROM sessions ORDER BY created_s, rowid")
+        with self._contract():
+            return [guard.text(r[0], "sessions.id", guard.MAX_SESSION_CHARS, 1) for r in rows]
 
     def __len__(self) -> int:
         return int(self._read("SELECT COUNT(*) FROM interactions")[0][0])
@@ -523,7 +620,8 @@ class InteractionMemory:
             return {}
         marks = ",".join("?" * len(ids))
         rows = self._read(f"SELECT {_COLUMNS} FROM interactions WHERE id IN ({marks})", list(ids), "searching")
-        return {int(r[0]): _interaction(r) for r in rows}
+        with self._contract():
+            return {i.id: i for i in map(_interaction, rows)}
 
     # -- retrieval -------------------------------------------------------------
 
@@ -564,7 +662,10 @@ class InteractionMemory:
         """(interactions, BM25 words of their requests) of ``session``, or of all sessions for None."""
         key = _ALL if session is None else session
         rows = self._read("SELECT documents, tokens FROM corpus_stats WHERE session_id = ?", (key,), "searching")
-        return (int(rows[0][0]), int(rows[0][1])) if rows else (0, 0)
+        if not rows:
+            return (0, 0)
+        with self._contract():
+            return (guard.whole(rows[0][0], "corpus_stats.documents"), guard.whole(rows[0][1], "corpus_stats.tokens"))
 
     def _count(self, session: str | None) -> int:
         return self._stats(session)[0]
@@ -609,7 +710,10 @@ class InteractionMemory:
         tail = parameters[2 * len(idf) :]
         bound = [*head, _BM25_K1, _BM25_K1, _BM25_B, _BM25_B, mean_length, *tail, _SCORE_DECIMALS, k]
         rows = self._read(sql, bound, "searching")
-        return [(int(i), float(score)) for i, score in rows if score > 0]
+        with self._contract():  # a score of text, a negative or missing count makes the sum NULL or not finite
+            what = "a BM25 score of request_terms.tf and interactions.request_tokens"
+            ranked = [(guard.whole(i, "request_terms.interaction_id", 1), guard.finite(s, what)) for i, s in rows]
+        return [(i, score) for i, score in ranked if score > 0]
 
     def _cosine_top(self, query: str, k: int, session: str | None) -> list[tuple[int, float]]:
         """The ``k`` best (id, cosine similarity) with the current embedder's vectors, read in batches.
@@ -642,8 +746,10 @@ class InteractionMemory:
             )
             if not rows:
                 break
-            ids = np.fromiter((r[0] for r in rows), dtype=np.int64, count=len(rows))
-            matrix = np.frombuffer(b"".join(r[1] for r in rows), dtype="<f8").reshape(len(rows), dim)
+            with self._contract():
+                ids = np.fromiter((guard.whole(r[0], "embeddings.interaction_id", 1) for r in rows), dtype=np.int64,
+                                  count=len(rows))  # fmt: skip
+                matrix = _vectors([r[1] for r in rows], dim)
             norms = np.linalg.norm(matrix, axis=1) * query_norm
             dots = matrix @ query_vector
             sims = np.divide(dots, norms, out=np.zeros_like(dots), where=norms > 0)
@@ -685,7 +791,10 @@ class InteractionMemory:
             rows = self._read(sql, parameters, "finding interactions to embed")
             if not rows:
                 return done
-            dim = self._embed_and_store(name, [(int(r[0]), r[1]) for r in rows], dim)
+            with self._contract():
+                batch = [(guard.whole(r[0], "interactions.id", 1), guard.text(r[1], "interactions.request", MAX_TASK_CHARS))
+                         for r in rows]  # fmt: skip
+            dim = self._embed_and_store(name, batch, dim)
             done += len(rows)
             last = int(rows[-1][0])
 
@@ -768,7 +877,7 @@ def _upgrade_from_1(conn: sqlite3.Connection) -> None:
         if not rows:
             return
         for interaction_id, session, request in rows:
-            terms = _document_terms(request)
+            terms = _document_terms(guard.text(request, f"interaction {interaction_id!r:.20}: request", MAX_TASK_CHARS))
             conn.execute(
                 "UPDATE interactions SET request_tokens = ? WHERE id = ?", (sum(terms.values()), interaction_id)
             )
@@ -777,13 +886,36 @@ def _upgrade_from_1(conn: sqlite3.Connection) -> None:
 
 
 def _interaction(row: tuple) -> Interaction:
-    return Interaction(
-        id=int(row[0]),
-        session=row[1],
-        request=row[2],
-        program=row[3],
-        feedback=row[4],
-        score=None if row[5] is None else float(row[5]),
-        created_s=float(row[6]),
-        source=row[7],
-    )
+    """An ``interactions`` row as an Interaction; ValueError naming the column if a value is out of contract."""
+    row_id, session, request, program, feedback, score, created_s, source = guard.checked_interaction(row, SOURCES)
+    return Interaction(row_id, session, request, program, feedback, score, created_s, source)
+
+
+def _vectors(blobs: list[object], dim: int) -> np.ndarray:
+    """Stored embedding blobs as a ``(len(blobs), dim)`` matrix; ValueError unless each is ``dim`` finite float64s."""
+    for blob in blobs:
+        if not isinstance(blob, bytes) or len(blob) != 8 * dim:
+            raise ValueError(f"embeddings.vector holds {guard.shown(blob)}, not {dim} float64 values ({8 * dim} bytes)")
+    matrix = np.frombuffer(b"".join(blobs), dtype="<f8").reshape(len(blobs), dim)  # type: ignore[arg-type]
+    if not np.isfinite(matrix).all():
+        raise ValueError("embeddings.vector holds a value that is not finite")
+    return matrix
+
+
+@functools.cache
+def _reference_layout() -> dict[str, object]:
+    """The layout (:func:`~robocritics.llm.memory_guard.layout`) of a file this version creates: what every opened
+    file's schema must equal."""
+    conn = sqlite3.connect(":memory:")
+    try:
+        _executescript(conn, _TABLES)
+        _executescript(conn, _INDEX_TABLES)
+        tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table' AND name != "
+                                             "'sqlite_sequence' ORDER BY name")]  # fmt: skip
+        return guard.layout(conn, tables)
+    finally:
+        conn.close()
+
+
+# Our indexes' names (an automatic index of a table's keys is SQLite's, and allowed by name pattern).
+_INDEX_NAMES = {"interactions_by_session", "embeddings_by_model", "request_terms_by_session", "embeddings_by_space"}

@@ -160,6 +160,17 @@ class ArmSpec:
     """Where each group of numbers comes from (field name -> citation or reason)."""
     modified_dh: ModifiedDH | None = None
     """The kinematics of an arm published in modified DH (``dh`` is None then)."""
+    rated_payload_kg: float | None = None
+    """Rated payload at the tool flange (tool plus workpiece) [kg]; None where not recorded here."""
+    payload_full_offset_m: float | None = None
+    """Centre-of-gravity offset from the flange up to which the rated payload holds [m]; beyond it the allowed
+    payload falls as ``rated * offset_full / offset`` (a constant wrist moment). None where not recorded."""
+    stopping_time_s: tuple[float, ...] = ()
+    """Published stopping times of the first three joints (base, shoulder, elbow) [s]."""
+    stopping_distance_rad: tuple[float, ...] = ()
+    """Published stopping distances of the first three joints (base, shoulder, elbow) [rad]."""
+    pose_repeatability_m: float | None = None
+    """Published pose repeatability (ISO 9283) [m]."""
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)
@@ -191,6 +202,17 @@ _UR_E_SERIES_SOURCES = {
     "link_masses_kg": "Universal Robots, 'DH parameters for calculations of kinematics and dynamics' (masses)",
     "control_period_s": "UR e-series: 500 Hz controller cycle (RTDE up to 500 Hz, servoj t = 0.002 s)",
     "reach_m": "UR e-series technical specifications: reach 500 / 850 / 1300 / 900 mm (UR3e / UR5e / UR10e / UR16e)",
+    "rated_payload_kg": "UR e-series technical specifications: payload 3 / 5 / 12.5 / 16 kg (UR3e / UR5e / "
+    "UR10e / UR16e)",
+    "payload_full_offset_m": "UR3e user manual (e-Series), 'Maximum payload': the figure of rated payload against "
+    "centre-of-gravity offset; its knee read off the figure (approximate: UR publishes the figure, not a table)",
+    "stopping_time_s": "UR3/CB3 user manual v3.10, Appendix A.1, Stop Category 0 at 100 % extension, 100 % speed "
+    "(183 deg/s), 3 kg payload: base 159 ms, shoulder 154 ms, elbow 92 ms. UR publishes the UR3e's (e-Series "
+    "manual, chapter 'Stopping time and stopping distance') as graphs only; the CB3 table of the same size of arm "
+    "is the numeric table we have",
+    "stopping_distance_rad": "UR3/CB3 user manual v3.10, Appendix A.1 (as stopping_time_s): base 0.18, shoulder "
+    "0.20, elbow 0.15 rad",
+    "pose_repeatability_m": "UR3e technical specification: pose repeatability per ISO 9283 +-0.03 mm",
 }
 
 UR3E = ArmSpec(
@@ -214,11 +236,21 @@ UR3E = ArmSpec(
     control_period_s=0.002,
     reach_m=0.5,
     sources=_UR_E_SERIES_SOURCES,
+    rated_payload_kg=3.0,
+    payload_full_offset_m=0.15,
+    stopping_time_s=(0.159, 0.154, 0.092),
+    stopping_distance_rad=(0.18, 0.20, 0.15),
+    pose_repeatability_m=0.00003,
 )
 """The UR3e (e-series)."""
 
+# the sources that hold for the whole family (the stopping and payload-curve data above are the UR3e's only)
+_FAMILY_SOURCES = {"dh", "lower_rad", "acceleration_rad_s2", "jerk_rad_s3", "link_masses_kg", "control_period_s",
+                   "reach_m", "rated_payload_kg"}
+
+
 def _ur_e_series(name: str, dh: DH, reach_m: float, velocity_rad_s, effort_nm, link_masses_kg, velocity_source: str,
-                 effort_source: str) -> ArmSpec:
+                 effort_source: str, rated_payload_kg: float) -> ArmSpec:
     """An e-series arm: the family shares joint names, ranges, acceleration/jerk choices and the 500 Hz cycle."""
     return ArmSpec(
         name=name,
@@ -233,7 +265,9 @@ def _ur_e_series(name: str, dh: DH, reach_m: float, velocity_rad_s, effort_nm, l
         link_masses_kg=link_masses_kg,
         control_period_s=UR3E.control_period_s,
         reach_m=reach_m,
-        sources={**_UR_E_SERIES_SOURCES, "velocity_rad_s": velocity_source, "effort_nm": effort_source},
+        sources={**{k: v for k, v in _UR_E_SERIES_SOURCES.items() if k in _FAMILY_SOURCES},
+                 "velocity_rad_s": velocity_source, "effort_nm": effort_source},
+        rated_payload_kg=rated_payload_kg,
     )
 
 
@@ -251,6 +285,7 @@ UR5E = _ur_e_series(
     link_masses_kg=(3.761, 8.058, 2.846, 1.37, 1.3, 0.365),
     velocity_source="UR5e technical specification / user manual v5.8: every joint 180 deg/s",
     effort_source="UR support article 'Max. joint torques': UR5e 150/150/150/28/28/28 N m",
+    rated_payload_kg=5.0,
 )
 """The UR5e (e-series), 850 mm reach."""
 
@@ -264,6 +299,7 @@ UR10E = _ur_e_series(
     velocity_source="UR10e technical specification / user manual v5.8: base, shoulder 120 deg/s; elbow, "
     "wrists 180 deg/s",
     effort_source="UR support article 'Max. joint torques': UR10e 330/330/150/56/56/56 N m",
+    rated_payload_kg=12.5,
 )
 """The UR10e (e-series), 1300 mm reach."""
 
@@ -277,6 +313,7 @@ UR16E = _ur_e_series(
     velocity_source="UR16e technical specification / user manual v5.8: base, shoulder 120 deg/s; elbow, "
     "wrists 180 deg/s",
     effort_source="UR support article 'Max. joint torques': UR16e 330/330/150/56/56/56 N m",
+    rated_payload_kg=16.0,
 )
 """The UR16e (e-series), 900 mm reach."""
 

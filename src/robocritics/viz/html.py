@@ -89,9 +89,10 @@ def write_replay_html(path: str | Path, execution: Execution, report: Report | N
 
 
 def _write(path: str | Path, page: str) -> Path:
-    path = Path(path)
-    path.write_text(page, encoding="utf-8")
-    return path
+    """``page`` written to ``path`` through the safe writer (a temporary file renamed over it, never through a link)."""
+    from .._files import write_file_atomically
+
+    return write_file_atomically(path, page, "replay page")
 
 
 class Replay:

@@ -14,7 +14,8 @@ notebook and an offline HTML file:
   each capsule's radius [m];
 * the scene: table and container boxes (static), objects with their shape, size
   [m] and colour, and per frame the pose of every object the program moved
-  (carried objects move with the gripper);
+  (carried objects move with the gripper); the people in the cell as the capsules
+  of their ISO/TS 15066 body regions (static; :mod:`robocritics.humans`);
 * provenance: per frame the program step, and the steps' skills and source lines;
 * the verdicts: flag, message, hint, measured value and threshold, flagged time
   windows [s], worst time [s], the links and objects of the evidence, and for
@@ -182,12 +183,38 @@ def _verdicts(execution: Execution, report: Report, time_s: np.ndarray) -> list[
                 "windows_s": [] if v.flag.value == "OK" else windows,
                 "worst_time_s": _finite(ev.worst_time_s),
                 "links": list(ev.links),
-                "objects": list(ev.objects),
+                "objects": list(ev.objects) + _people_involved(v.details),
                 "lines": list(ev.lines),
                 "segment": segment,
             }
         )
     return out
+
+
+def _people_involved(details: Any) -> list[str]:
+    """The person (``"operator"``) and body capsule (``"operator.abdomen"``) a verdict's details name, if any."""
+    if not isinstance(details, dict) or not isinstance(details.get("human"), str):
+        return []
+    human = details["human"]
+    capsule = details.get("body_capsule")
+    return [f"{human}.{capsule}"] if isinstance(capsule, str) else [human]
+
+
+def _humans(scene: Any) -> list[dict[str, Any]]:
+    """Every person's body-region capsules (m, base frame) for drawing."""
+    from ..humans import scene_bodies
+
+    return [
+        {
+            "id": body.human,
+            "capsules": [
+                {"name": f"{body.human}.{name}", "region": region, "p0": body.p0[i].tolist(),
+                 "p1": body.p1[i].tolist(), "radius_m": float(body.radius_m[i])}
+                for i, (name, region) in enumerate(zip(body.names, body.regions))
+            ],
+        }
+        for body in scene_bodies(scene)
+    ]
 
 
 def _keep_samples(report: Report | None) -> list[int]:
@@ -255,6 +282,7 @@ def replay_data(execution: Execution, report: Report | None = None, *, title: st
         "steps": steps,
         "objects": objects,
         "boxes": boxes,
+        "humans": _humans(scene),
         "workspace": {"center": list(scene.workspace.center), "radius_m": float(scene.workspace.radius_m)},
         "verdicts": [],
         "score_text": None,

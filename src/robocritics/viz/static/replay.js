@@ -214,7 +214,7 @@
     this.ends = decode(data.capsule_ends).values; // (F, C, 6)
     this.nCapsules = data.capsules.length;
     this.duration = data.duration_s;
-    this._frameCamera(data.workspace);
+    this._frameCamera(data.workspace, data.humans || []);
     this._buildScene(data);
     this._buildTimeline(data);
     this._buildVerdictList(data);
@@ -222,10 +222,20 @@
   };
 
   // Frame the robot's allowed workspace (its reach sphere): the same view on a UR3e as on a UR16e.
-  Replay.prototype._frameCamera = function (ws) {
+  Replay.prototype._frameCamera = function (ws, humans) {
     const r = ws.radius_m, st = this.orbit.state;
     st.target.set(ws.center[0] + 0.3 * r, ws.center[1], 0.24 * r);
     st.distance = 2.7 * r;
+    if (humans.length) {
+      // people in the cell: aim between the workspace and them, far enough back to see them whole
+      const box = new THREE.Box3(new THREE.Vector3(ws.center[0] - r, ws.center[1] - r, 0),
+        new THREE.Vector3(ws.center[0] + r, ws.center[1] + r, ws.center[2] + r));
+      for (const h of humans) for (const c of h.capsules) {
+        for (const p of [c.p0, c.p1]) box.expandByPoint(new THREE.Vector3(p[0], p[1], p[2]));
+      }
+      box.getCenter(st.target);
+      st.distance = Math.max(st.distance, 1.3 * box.getSize(new THREE.Vector3()).length());
+    }
     this.orbit.apply();
   };
 
@@ -266,6 +276,24 @@
       this.objectMeshes[o.id] = mesh;
       if (o.poses) this.movingObjects.push({ mesh: mesh, poses: decode(o.poses).values });
     }
+
+    // people: the capsules of their ISO/TS 15066 body regions (static)
+    this.humanMeshes = [];
+    for (const h of data.humans || []) {
+      for (const c of h.capsules) {
+        const a = new THREE.Vector3(c.p0[0], c.p0[1], c.p0[2]), b = new THREE.Vector3(c.p1[0], c.p1[1], c.p1[2]);
+        const axis = b.clone().sub(a);
+        const colour = c.region === "skull_forehead" || c.region === "face" ? "#d9a066" : "#e7b98a";
+        const mesh = new THREE.Mesh(new THREE.CapsuleGeometry(c.radius_m, axis.length(), 6, 18),
+          material(colour, { roughness: 0.8 }));
+        mesh.position.copy(a.clone().add(b).multiplyScalar(0.5));
+        if (axis.lengthSq() > 1e-12) mesh.quaternion.setFromUnitVectors(new THREE.Vector3(0, 1, 0), axis.normalize());
+        mesh.userData = { owner: c.name, person: h.id, base: new THREE.Color(colour) };
+        world.add(mesh);
+        this.humanMeshes.push(mesh);
+      }
+    }
+    this.element.dataset.people = String((data.humans || []).length);
 
     this.capsuleMeshes = [];
     const first = this.ends;
@@ -432,9 +460,9 @@
     this.selected = critic;
     const involved = new Set((v.links || []).concat(v.objects || []));
     const colour = new THREE.Color(HIGHLIGHT[v.flag]);
-    const meshes = this.capsuleMeshes.concat(this.boxMeshes, Object.values(this.objectMeshes));
+    const meshes = this.capsuleMeshes.concat(this.boxMeshes, Object.values(this.objectMeshes), this.humanMeshes);
     for (const m of meshes) {
-      const on = v.flag !== "OK" && involved.has(m.userData.owner);
+      const on = v.flag !== "OK" && (involved.has(m.userData.owner) || involved.has(m.userData.person));
       m.material.emissive = on ? colour : new THREE.Color(0x000000);
       m.material.emissiveIntensity = on ? 0.55 : 0;
     }

@@ -1,0 +1,79 @@
+"""``Execution``: one run as the critics see it.
+
+Everything a critic may read about a run, whatever produced it:
+
+* ``trajectory``: the timed motion (the paper's s_1..s_T) that the critics judge and the deploy gate streams;
+* ``scene`` and ``final_scene``: the cell at the start and where every object ended;
+* ``robot``: the arm the motion runs on (kinematics, limits, tool), or None when a bare trajectory was judged
+  without one;
+* ``plan``: the program's skill calls with their source lines, or None for motion that did not come from a
+  program in the skill API (URScript, a recording, a trajectory file);
+* ``goals``: the task goals the run is judged against (besides the program's own ``expect(...)`` calls);
+* ``source``: where the motion came from, in words (``"program"``, ``"URScript pick.script"``, ...).
+
+A critic's ``check(execution, params)`` receives this object (see :mod:`robocritics.critic`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Optional
+
+if TYPE_CHECKING:  # pragma: no cover
+    import numpy as np
+
+    from .goals import Goal
+    from .program.plan import Plan
+    from .report import Report
+    from .robot.model import Robot
+    from .robot.planner import Event
+    from .scene import Scene
+    from .trajectory import Trajectory
+
+__all__ = ["Execution"]
+
+
+@dataclass
+class Execution:
+    """One run: the result of :func:`robocritics.simulate`, or motion imported from another tool.
+
+    ``trajectory`` is what the critics read and what is deployed; ``final_scene``
+    says where every object ended up.
+    """
+
+    trajectory: Trajectory
+    plan: Optional[Plan]
+    events: list[Event]
+    final_scene: Scene
+    scene: Scene
+    robot: Optional[Robot] = field(repr=False)
+    resting_on: dict[str, str] = field(default_factory=dict)
+    #: Per-sample pose ``(T, 4, 4)`` (m, base frame) of every object the program moved; the others stay put.
+    object_poses: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    #: Task goals to judge the run against, besides the program's own ``expect(...)`` calls.
+    goals: tuple[Goal, ...] = ()
+    #: Where the motion came from, in words: ``"program"`` for the skill API, else the tool or file.
+    source: str = "program"
+
+    @property
+    def duration_s(self) -> float:
+        return self.trajectory.duration_s
+
+    def show(self, report: Report | None = None, *, title: str | None = None):
+        """The 3-D replay of this run (with ``report``'s verdicts on its timeline), displayed inline in Jupyter.
+
+        Returns a :class:`robocritics.viz.Replay`; its ``save(path)`` writes the same
+        self-contained HTML page that ``robocritics check --html`` writes.
+        """
+        from .viz import Replay
+
+        return Replay(self, report, title=title)
+
+    def object_on(self, obj_id: str, support_id: str) -> bool:
+        """Whether object ``obj_id`` was last set down on ``support_id`` (an object, container or 'table')."""
+        return self.resting_on.get(obj_id) == support_id
+
+    def object_inside(self, obj_id: str, container_id: str) -> bool:
+        """Whether object ``obj_id`` ended inside container ``container_id``."""
+        holder = self.final_scene.container_holding(obj_id)
+        return holder is not None and holder.id == container_id
