@@ -93,7 +93,7 @@ def test_the_search_is_bounded_by_its_simulation_budget(monkeypatch):
     assert result.report.score < 10
 
 
-@pytest.mark.parametrize("name", ["sorting_dash", "breakfast_drop", "recycling_drop_high"])
+@pytest.mark.parametrize("name", ["sorting_dash", "breakfast_drop", "recycling_drop_high", "breakfast_dash"])
 def test_new_naive_programs_finish_without_a_model(bench, name):
     """A handful of examples/programs/naive (the full table: benchmarks/repair_cycle_times.py): at least 9/10, no
     Error, every goal met, the cycle time within 1.5x the careful example's."""
