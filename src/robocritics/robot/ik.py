@@ -667,24 +667,9 @@ def _nearest_solution(
 
 
 def _nearest_elbow(
-    k: tuple[float, ...],
-    t: Sequence[float],
-    c1: float,
-    s1: float,
-    p5x: float,
-    p5y: float,
-    s5abs: float,
-    q5: float,
-    q6: float,
-    v1: float,
-    v5: float,
-    v6: float | None,
-    cost56: float,
-    best: float,
-    sd: Sequence[float],
-    lo: Sequence[float],
-    hi: Sequence[float],
-    w: Sequence[float],
+    k: tuple[float, ...], t: Sequence[float], c1: float, s1: float, p5x: float, p5y: float, s5abs: float,
+    q5: float, q6: float, v1: float, v5: float, v6: float | None, cost56: float, best: float,
+    sd: Sequence[float], lo: Sequence[float], hi: Sequence[float], w: Sequence[float],
     verify: Callable[[list[float]], bool] | None,
 ) -> tuple[float, list[float]] | None:
     """Step 4 of :func:`_nearest_solution` for one (shoulder, wrist) branch whose shoulder pan and wrist angles
