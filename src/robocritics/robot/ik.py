@@ -201,8 +201,8 @@ class _Chain:
         target ``t``: :meth:`error` within ``tol``, its sums written out (the same floats, half the time)."""
         pin.forwardKinematics(self.model, self.data, q)
         f = pin.updateFramePlacement(self.model, self.data, self.flange).homogeneous.ravel().tolist()
-        e3, e7, e11 = f[3] - t[3], f[7] - t[7], f[11] - t[11]
-        if not math.sqrt(e3 * e3 + e7 * e7 + e11 * e11) <= tol:
+        # ``** 2`` as in _pose_error: libm's pow may round x ** 2 differently from x * x
+        if not math.sqrt((f[3] - t[3]) ** 2 + (f[7] - t[7]) ** 2 + (f[11] - t[11]) ** 2) <= tol:
             return False
         e0, e1, e2, e4, e5, e6 = f[0] - t[0], f[1] - t[1], f[2] - t[2], f[4] - t[4], f[5] - t[5], f[6] - t[6]
         e8, e9, e10 = f[8] - t[8], f[9] - t[9], f[10] - t[10]
