@@ -140,3 +140,74 @@ def canvas_pixels(driver, canvas) -> bytes:
         canvas,
     )
     return base64.b64decode(data_url.split(",", 1)[1])
+
+
+# ---------------------------------------------------------------------------- real processes for the studio's tests
+
+
+@contextlib.contextmanager
+def command_process(args: list[str], first_line: str, *, start_timeout_s: float = 120.0):
+    """Run ``python -m robocritics ARGS`` (stderr to a file: a full pipe must never block it); yield
+    ``(proc, lines, stderr_path)`` once its first stdout line starts with ``first_line`` (``lines``: that line and
+    any printed right after it). Ctrl-C (SIGINT) ends it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    log = tempfile.NamedTemporaryFile(prefix="robocritics-", suffix=".log", delete=False)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "robocritics", *args], stdout=subprocess.PIPE, stderr=log, text=True,
+        env={**os.environ, "ROBOCRITICS_BASE_URL": "", "ROBOCRITICS_MODEL": ""},
+        # a suite started from a background shell ignores SIGINT, and children inherit that: give Ctrl-C back
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    try:
+        lines = [proc.stdout.readline()]
+        if not lines[0].startswith(first_line):
+            proc.kill()
+            proc.wait()
+            raise AssertionError(f"{args[0]} did not start: {lines[0]!r} {Path(log.name).read_text()[-2000:]}")
+        yield proc, lines, Path(log.name)
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        proc.stdout.close()
+        log.close()
+        Path(log.name).unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def studio_process(*args: str):
+    """``robocritics studio --port 0 --no-browser ARGS``; yields ``(url, proc)``."""
+    with command_process(["studio", "--port", "0", "--no-browser", *args], "robocritics studio: http") as (proc, lines, _):
+        yield lines[0].split()[2], proc
+
+
+@contextlib.contextmanager
+def ursim_process(*args: str):
+    """``robocritics ursim -v`` on free ports; yields ``(ports, stderr_path)`` with ``ports`` as
+    ``{"rtde": …, "dashboard": …, "secondary": …}`` (its event log, e.g. ``program_started``, is in the file)."""
+    with command_process(["ursim", "-v", "--rtde-port", "0", "--dashboard-port", "0", "--secondary-port", "0", *args],
+                         "URSim on 127.0.0.1") as (_, lines, log):
+        line = lines[0]
+        ports = {"rtde": int(line.split("RTDE ")[1].split(",")[0]),
+                 "dashboard": int(line.split("dashboard ")[1].split(",")[0]),
+                 "secondary": int(line.split("secondary ")[1].split(" ")[0])}
+        yield ports, log
+
+
+def click(driver, element_id: str) -> None:
+    """Click an element by id from JavaScript (a loaded renderer can be slow to report layout to WebDriver)."""
+    driver.execute_script("document.getElementById(arguments[0]).click()", element_id)
+
+
+def set_editor(driver, text: str) -> None:
+    """Type ``text`` into the studio's editor as a person would (an input event follows)."""
+    driver.execute_script("const e = document.getElementById('editor'); e.value = arguments[0];"
+                          "e.dispatchEvent(new Event('input'));", text)

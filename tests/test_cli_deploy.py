@@ -90,3 +90,33 @@ def test_a_bad_program_is_reported_before_connecting(tmp_path, capsys):
     program.write_text(PROGRAM)
     assert main(["deploy", str(program), "--rtde-port", str(closed_port)]) == 1
     assert f"cannot connect to RTDE at 127.0.0.1:{closed_port}" in capsys.readouterr().err
+
+
+def test_deploy_exits_1_when_the_arm_reports_joints_that_are_not_numbers(tmp_path, capsys):
+    """Issue 22: NaN joints at the gate passed the start-pose rule and the command exited 0."""
+    import math
+
+    program = tmp_path / "short.py"
+    program.write_text(PROGRAM)
+    with URSim(**stepped(idle_after_s=0.05)) as sim:
+        before = np.array(sim.q)
+        sim.corrupt_output("actual_q", math.nan, index=3)
+        assert main(["deploy", str(program), "--scene", "sorting", *ports(sim)]) == 1
+        np.testing.assert_array_equal(sim.q, before)
+        assert not sim.events("program_started")
+    out, err = capsys.readouterr()
+    assert "deploy stopped: RTDE 127.0.0.1" in err and "actual_q[3] = nan" in err and err.count("\n") == 1
+    assert "planned from" not in out  # nothing was planned from a NaN
+
+
+def test_deploy_exits_1_when_a_value_turns_infinite_mid_stream(tmp_path, capsys):
+    import math
+
+    program = tmp_path / "short.py"
+    program.write_text(PROGRAM)
+    with URSim(**stepped(idle_after_s=0.05)) as sim:
+        sim.at_program_time(0.3, lambda: sim.corrupt_output("timestamp", -math.inf))
+        assert main(["deploy", str(program), "--scene", "sorting", *ports(sim)]) == 1
+        sim.wait_for(lambda s: s.program is None and max(map(abs, s.qd)) == 0.0, 5.0, "the arm to stop")
+    err = capsys.readouterr().err
+    assert "deploy stopped [non_finite]" in err and "timestamp = -inf" in err

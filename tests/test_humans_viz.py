@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import robocritics as rc
-from browser import SCREENSHOTS, canvas_pixels, chromium, severe_console_errors, wait_for
+from browser import canvas_pixels, chromium, save_screenshot, severe_console_errors, wait_for
 from robocritics.humans import BODY_REGIONS
 from robocritics.viz.replay import replay_data
 
@@ -57,7 +57,7 @@ def test_the_operator_is_drawn_in_the_offline_file(naive, tmp_path):
         assert replay.get_attribute("data-people") == "1"
         assert severe_console_errors(driver) == []
         with_people = canvas_pixels(driver, driver.find_element("css selector", ".rc-canvas"))
-        driver.save_screenshot(str(SCREENSHOTS / "workbench.png"))
+        save_screenshot(driver, "workbench.png")
         driver.get(without.as_uri())
         wait_for(driver, READY, what="the first frame")
         assert driver.find_element("css selector", ".rc-replay").get_attribute("data-people") == "0"
@@ -83,5 +83,5 @@ def test_the_studio_shows_the_operator_and_the_separation_error(naive):
         assert driver.execute_script("return document.getElementById('replay').dataset.people") == "1"
         driver.execute_script("document.querySelector('#critics .critic[data-critic=\"separation\"]').click()")
         wait_for(driver, "return document.getElementById('replay').dataset.selected === 'separation'")
-        driver.save_screenshot(str(SCREENSHOTS / "studio_workbench.png"))
+        save_screenshot(driver, "studio_workbench.png")
         assert not [e for e in severe_console_errors(driver) if "favicon" not in e]

@@ -140,7 +140,7 @@ def test_chat_and_deploy_are_disabled_with_reasons_when_not_configured(studio):
     state = json.loads(request(studio, "GET", "/api/state", headers=API)[1])
     assert "LLM endpoint" in state["chat"] and "controller" in state["deploy"]
     assert len(state["critics"]) >= 5
-    assert request(studio, "POST", "/api/fix", {}, API)[0] == 409
+    assert request(studio, "POST", "/api/chat", {"text": "hello"}, API)[0] == 409
 
 
 def test_other_requests_are_answered_while_a_run_is_going(studio):
@@ -202,3 +202,145 @@ def test_a_connection_reset_mid_request_is_not_a_traceback(studio, capfd):
     status, _ = request(studio, "GET", "/")  # still serving
     assert status == 200
     assert "Traceback" not in capfd.readouterr().err
+
+
+# --- issue 22: bad requests are 400s with a JSON error, never a dropped connection or a traceback ----------------
+
+
+@pytest.mark.parametrize("path, body", [
+    ("/api/approve", {"id": "1", "ok": True}),
+    ("/api/approve", {"id": 1.5, "ok": True}),
+    ("/api/approve", {"id": True, "ok": True}),
+    ("/api/approve", {"id": 1, "ok": "yes"}),
+    ("/api/deploy", {"index": "1"}),
+    ("/api/deploy", {"index": None}),
+    ("/api/deploy", {"index": [1]}),
+    ("/api/run", {"program": "home()\n", "critics": [1, 2]}),
+    ("/api/run", {"program": "home()\n", "critics": ["no_such_critic"]}),
+    ("/api/run", {"program": "home()\n", "critics": "collision"}),
+    ("/api/fix", {"critics": [{"name": "collision"}]}),
+    ("/api/fix", {"index": "2"}),
+    ("/api/run", {"program": 12}),
+])
+def test_malformed_ids_and_critic_names_are_a_400_with_a_json_error(studio, capfd, path, body):
+    status, payload = request(studio, "POST", path, body, API)
+    assert status == 400, payload
+    assert json.loads(payload)["error"]
+    assert "Traceback" not in capfd.readouterr().err
+
+
+def test_a_deeply_nested_body_is_a_400_not_a_dropped_connection(studio, capfd):
+    deep = b'{"program": ' + b"[" * 200_000 + b"]" * 200_000 + b"}"
+    status, payload = request(studio, "POST", "/api/run", deep, API)
+    assert status == 400 and "nested" in json.loads(payload)["error"]
+    assert "Traceback" not in capfd.readouterr().err
+    assert request(studio, "GET", "/api/state", headers=API)[0] == 200
+
+
+def test_only_the_last_revisions_keep_their_run_the_rest_are_compact(studio):
+    """issue 22: a long session does not keep every revision's trajectory; old ones keep program and verdicts."""
+    from robocritics.viz.studio.revisions import FULL_REVISIONS
+
+    programs = [f"move_to(0.3, {0.01 * i:.2f}, 0.3)\nhome()\n" for i in range(FULL_REVISIONS + 3)]
+    for program in programs:
+        assert request(studio, "POST", "/api/run", {"program": program}, API)[0] == 200
+    kept = [r for r in studio.revisions if r.execution is not None]
+    assert len(kept) == FULL_REVISIONS and kept == studio.revisions[-FULL_REVISIONS:]
+    assert all(r.report is None and r.deploy_report is None for r in studio.revisions[:-FULL_REVISIONS])
+    old = studio.revisions[-FULL_REVISIONS - 1]
+    status, body = request(studio, "GET", f"/api/revision/{old.index}", headers=API)
+    shown = json.loads(body)
+    assert status == 200 and shown["compact"] and shown["replay"] is None and not shown["deployable"]
+    assert shown["program"] == programs[-FULL_REVISIONS - 1] and {v["critic"] for v in shown["verdicts"]} >= {
+        "collision", "joint_speed"}
+    status, body = request(studio, "POST", "/api/fix", {"index": old.index}, API)
+    assert status == 409 and "no longer kept" in json.loads(body)["error"]
+
+
+def test_an_approval_counts_as_rejected_at_its_deadline():
+    """#2: an approval has a deadline (injected clock); after it, the answer is False and says why."""
+    import threading
+
+    from robocritics.viz.studio.jobs import JobBoard
+
+    now = [0.0]
+    board = JobBoard(approval_timeout_s=30.0, clock=lambda: now[0])
+    job = board.begin("fix")
+    answers = []
+    thread = threading.Thread(target=lambda: answers.append(board.ask(job, "home()\n", "diff", "#2 from #1")))
+    thread.start()
+    while board.snapshot()["approval"] is None:
+        threading.Event().wait(0.01)
+    assert board.snapshot()["approval"]["seconds_left"] == 30.0
+    now[0] = 31.0
+    thread.join(5)
+    assert answers == [False] and "no answer within 30 s" in job.approval.reason
+    board.end(job)
+
+
+def test_a_run_while_an_approval_waits_cancels_the_turn_and_other_jobs_are_refused():
+    """#2, #3: one job at a time; Run cancels a turn waiting for approval; anything else is refused."""
+    import threading
+
+    from robocritics.viz.studio.jobs import Busy, Cancelled, JobBoard
+
+    board = JobBoard(approval_timeout_s=600.0)
+    job = board.begin("deploy", "revision 2")
+    with pytest.raises(Busy, match="deploy of revision 2 is running"):
+        board.begin("run")
+    board.end(job)
+    turn = board.begin("fix")
+    outcome = []
+
+    def wait():
+        try:
+            outcome.append(board.ask(turn, "home()\n", "diff", "#2"))
+        except Cancelled as exc:
+            outcome.append(str(exc))
+
+    thread = threading.Thread(target=wait)
+    thread.start()
+    with pytest.raises(Busy):
+        board.begin("chat")
+    while board.snapshot()["approval"] is None:
+        threading.Event().wait(0.01)
+    run = board.begin("run")  # not held by the approval
+    thread.join(5)
+    assert outcome == ["cancelled by a Run while it waited for your approval"]
+    assert board.job is run
+
+
+def test_state_sends_the_chat_only_when_something_was_said_since(studio):
+    """Every page polls the state: the chat log (up to CHAT_LOG_ENTRIES entries) is sent only when it changed."""
+    from robocritics.viz.studio.common import CHAT_LOG_ENTRIES
+
+    state = json.loads(request(studio, "GET", "/api/state", headers=API)[1])
+    version = state["chat_version"]
+    assert state["chat_log"] is not None
+    assert json.loads(request(studio, "GET", f"/api/state?chat={version}", headers=API)[1])["chat_log"] is None
+    for n in range(CHAT_LOG_ENTRIES + 5):
+        studio._say("note", f"note {n}")
+    state = json.loads(request(studio, "GET", f"/api/state?chat={version}", headers=API)[1])
+    assert state["chat_version"] == version + CHAT_LOG_ENTRIES + 5
+    assert len(state["chat_log"]) == CHAT_LOG_ENTRIES and state["chat_log"][-1]["text"] == f"note {CHAT_LOG_ENTRIES + 4}"
+    assert json.loads(request(studio, "GET", "/api/state?chat=x" + "9" * 50, headers=API)[1])["chat_log"] is not None
+
+
+def test_fix_all_of_a_program_that_does_not_run_asks_the_model_with_its_runtime_error():
+    """#5/#6 with an LLM: the runtime row is fixable; the model is told what did not run, and its revision runs."""
+    from llm_server import LLMServer
+    from robocritics.llm.client import OpenAICompatible
+
+    fixed = "move_above(green_apple)\nhome()\n"
+    with LLMServer() as llm:
+        llm.reply("Here it is.\n```python\n" + fixed + "```\n")
+        with Studio("sorting", "", model=OpenAICompatible(base_url=llm.url, model="t")) as s:
+            status, body = request(s, "POST", "/api/run", {"program": "home()\nmove_to(2.0, 0, 0.3)\n"}, API)
+            assert status == 200 and json.loads(body)["verdicts"][0]["critic"] == "runtime"
+            status, body = request(s, "POST", "/api/fix", {"automation": "auto",
+                                                           "selected": s.installed_critics()}, API)
+            events = [json.loads(line) for line in body.decode().splitlines()]
+            assert status == 200 and events[-1] == {"type": "done"}, events[-1]
+            assert "move_to(x=2" in llm.requests[-1].text and "0.601 m" in llm.requests[-1].text
+            revision = [e for e in events if e["type"] == "revision"][-1]["revision"]
+            assert revision["program"] == fixed and revision["error"] is None and revision["replay"] is not None

@@ -318,6 +318,7 @@ def critique(
         samples=len(trajectory),
         duration_s=trajectory.duration_s,
         params=used,
+        source=None if execution.source in ("program", "trajectory") else execution.source,
     )
 
 

@@ -49,6 +49,7 @@ class Report(BaseModel):
     samples: int = 0
     duration_s: float = 0.0
     params: dict[str, dict[str, Any]] = Field(default_factory=dict, description="the parameters each critic ran with")
+    source: str | None = Field(None, description="where the motion came from when not a simulated program (URScript, a recording)")
 
     # --- the numbers ---------------------------------------------------------------
 
@@ -172,7 +173,7 @@ class Report(BaseModel):
 
     def to_text(self, width: int = 100) -> str:
         """A plain-text rendering for terminals (no colour codes)."""
-        out = [self.summary()]
+        out = [self.summary()] + ([f"  motion from {self.source}"] if self.source else [])
         name_w = max([len(v.critic) for v in self.verdicts] + [10])
         indent = " " * (2 + 8 + 1 + name_w + 2)
         for v in self.verdicts:

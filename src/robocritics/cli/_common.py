@@ -36,9 +36,17 @@ def subcommand(name: str) -> Callable[[Builder], Builder]:
     return decorate
 
 
-def one_line(text: object) -> str:
-    """``text`` with every run of whitespace (newlines included) folded to one space."""
-    return " ".join(str(text).split())
+ONE_LINE_CHARS = 4000
+"""Longest message :func:`one_line` prints [characters]: an error quoting a 900,000-character frame name is cut."""
+
+
+def one_line(text: object, limit: int = ONE_LINE_CHARS) -> str:
+    """``text`` with every run of whitespace (newlines included) folded to one space, control characters and
+    escape sequences shown as escapes, and cut after ``limit`` characters with a note
+    (:func:`robocritics._text.safe_text`): messages quote names from files and replies."""
+    from .._text import safe_text  # only when there is something to say: `check` does not pay for it
+
+    return safe_text(" ".join(str(text).split()), limit)
 
 
 MAX_INPUT_BYTES = 1_000_000

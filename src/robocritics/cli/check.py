@@ -30,7 +30,13 @@ def _build_check(sub) -> None:
         "Exit status: 0 no Error verdict (from any critic), 1 at least one Error (or the program does not run), "
         "2 bad input.",
     )
-    p.add_argument("program", metavar="PROGRAM", help="robot program file (Python using the skill API)")
+    p.add_argument(
+        "program",
+        metavar="PROGRAM",
+        help="robot program file (Python using the skill API), or motion from another tool: URScript (.script, "
+        ".urscript), a ur_rtde or generic CSV recording, JointTrajectory JSON, MoveIt YAML, rosbag2 (.mcap, .db3) "
+        "(docs/formats.md)",
+    )
     p.add_argument(
         "--scene",
         metavar="NAME|PATH",
@@ -54,6 +60,9 @@ def _build_check(sub) -> None:
         help="trajectory sample rate, Hz, from 25 (sparser sampling hides fast motion from the critics) to 500 "
         "(the controller's rate); default 125",
     )
+    from ._motion import add_motion_options
+
+    add_motion_options(p)
     p.set_defaults(func=_cmd_check)
 
 
@@ -82,6 +91,12 @@ def _check(args: argparse.Namespace) -> int:
     from ..critic import check_program
     from ..goals import parse_goals
 
+    from ..formats import motion_kind
+
+    if motion_kind(args.program) is not None:
+        from ._motion import check_motion
+
+        return check_motion(args)
     source = read_text(args.program, "program")
     if args.html:  # checked before simulating, so a typo (or a link at the name) costs nothing
         check_output(args.html, "--html")

@@ -5,7 +5,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .._text import safe_text
 from ._common import host, one_line, port, read_text, scene_for, subcommand
+
+
+REPORT_CHARS = 20_000
+"""Most characters of the critics' report printed before deploying."""
 
 
 @subcommand("deploy")
@@ -46,7 +51,7 @@ def _cmd_deploy(args: argparse.Namespace) -> int:
             execution = simulate(plan, scene, start_q=start_q)
             report = critique(execution)  # every installed critic: all of them gate the deploy
             print(f"planned from the arm's joints [{', '.join(f'{v:.4f}' for v in start_q)}] rad")
-            print(report.to_text())
+            print(safe_text(report.to_text(), REPORT_CHARS, newlines=True))  # it quotes names from the scene file
             result = arm.deploy(execution, report, dry_run=args.dry_run)
     except DeployError as exc:
         print(f"robocritics: deploy stopped: {one_line(exc)}", file=sys.stderr)

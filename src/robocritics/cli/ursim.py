@@ -21,4 +21,7 @@ def _build_ursim(sub: "argparse._SubParsersAction") -> None:
 def ursim_command(argv: list[str]) -> int:
     from ..testing.ursim import main as ursim_main
 
-    return int(ursim_main(argv))
+    try:
+        return int(ursim_main(argv))
+    except SystemExit as exc:  # --help (0) or a bad option (2, its one line already printed)
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)

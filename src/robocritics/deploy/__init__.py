@@ -31,7 +31,7 @@ from robocritics.deploy.rtde import (
     SafetyMode,
     TextMessage,
 )
-from robocritics.deploy.stream import DeployFault, DeployResult, StreamPlan, resample
+from robocritics.deploy.stream import DeployFault, DeployProgress, DeployResult, StreamPlan, resample
 from robocritics.deploy.urscript import (
     INPUT_FIELDS,
     OUTPUT_FIELDS,
@@ -74,6 +74,7 @@ __all__ = [
     "DeployResult",
     "DeployRefused",
     "DeployFault",
+    "DeployProgress",
     "StreamPlan",
     "resample",
 ]

@@ -30,7 +30,7 @@ import math
 import random
 import socket
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -43,12 +43,22 @@ from robocritics.deploy.gate import (
     check_trajectory,
     trajectory_of,
 )
-from robocritics.deploy.rtde import RTDE_PORT, InputRecipe, RTDEClient, TextMessage
-from robocritics.deploy.stream import STATE_FIELDS, DeployResult, StreamPlan, _Run, _Stream, resample
+from robocritics._text import safe_text
+from robocritics.deploy.rtde import RTDE_PORT, InputRecipe, Recipe, RTDEClient, RTDEValueError, TextMessage
+from robocritics.deploy.stream import (
+    STATE_FIELDS,
+    DeployProgress,
+    DeployResult,
+    StreamPlan,
+    _Run,
+    _Stream,
+    resample,
+    rtde_type,
+)
 from robocritics.deploy.urscript import INPUT_FIELDS, SECONDARY_PORT, streaming_program
 from robocritics.errors import DeployError, RTDEError
 from robocritics.robot.arms import UR3E
-from robocritics.simulate import Execution
+from robocritics.execution import Execution
 from robocritics.trajectory import Trajectory
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -152,8 +162,10 @@ class URArm:
         rtde.connect()
         try:
             recipe = rtde.setup_outputs(list(STATE_FIELDS), self.frequency_hz)
+            _check_types(recipe, rtde.address)
             self._out_freq = recipe.frequency_hz
             self._inputs = rtde.setup_inputs(list(INPUT_FIELDS))
+            _check_types(self._inputs, rtde.address)
             rtde.start()
             rtde.wait_next(self.timeout_s)
         except BaseException:
@@ -253,6 +265,8 @@ class URArm:
         stop_timeout_s: float = 2.0,
         monitor_period_s: float = 0.1,
         spin_s: float = 2e-4,
+        stop: threading.Event | None = None,
+        progress: Callable[[DeployProgress], None] | None = None,
     ) -> DeployResult:
         """Check ``motion`` against ``report`` and the arm (the gate), then stream it.
 
@@ -266,21 +280,22 @@ class URArm:
         interface accepts connections, but sends no program and no setpoint.
         ``rate_hz`` must divide the 500 Hz control rate (500, 250, 125, …): each
         setpoint advances the sequence counter by ``500 / rate_hz`` control cycles.
+        ``stop``: an Event that stops the arm when set (fault ``stop_requested``, the same stop path as any
+        fault); ``progress``: called with a :class:`~robocritics.deploy.stream.DeployProgress` while streaming.
         The other parameters are the thresholds in :mod:`robocritics.deploy.stream`.
 
         Raises :class:`~robocritics.deploy.gate.DeployRefused` (the gate; nothing
         sent) or :class:`~robocritics.deploy.stream.DeployFault` (a fault stopped
         the arm). Returns a :class:`~robocritics.deploy.stream.DeployResult`.
         """
-        steps = CONTROL_RATE_HZ / float(rate_hz)
-        if not (rate_hz > 0 and abs(steps - round(steps)) < 1e-9 and round(steps) >= 1):
-            raise DeployError(f"rate_hz must divide {CONTROL_RATE_HZ:g} Hz (500, 250, 125, 100, …), got {rate_hz}")
-        if not (0 < start_tolerance_rad <= 0.5):
-            raise DeployError(f"start_tolerance_rad must be in (0, 0.5] rad, got {start_tolerance_rad}")
-        if not max_tracking_error_rad > 0:
-            raise DeployError(f"max_tracking_error_rad must be > 0 rad, got {max_tracking_error_rad}")
+        steps = _check_options(rate_hz=rate_hz, start_tolerance_rad=start_tolerance_rad,
+                               max_tracking_error_rad=max_tracking_error_rad, silence_timeout_s=silence_timeout_s,
+                               start_timeout_s=start_timeout_s, settle_tolerance_rad=settle_tolerance_rad,
+                               settle_timeout_s=settle_timeout_s, stop_timeout_s=stop_timeout_s,
+                               monitor_period_s=monitor_period_s, min_data_rate_fraction=min_data_rate_fraction,
+                               spin_s=spin_s)
         traj = trajectory_of(motion)
-        rtde = self.rtde
+        self.rtde  # noqa: B018  (not connected: say so before anything else)
         try:
             plan = resample(traj, rate_hz)
         except (DeployError, ValueError) as exc:
@@ -288,21 +303,7 @@ class URArm:
         reasons = check_report(traj, report, allow_errors=allow_errors) + check_trajectory(traj, plan)
         if reasons:
             raise DeployRefused(reasons)
-        state = rtde.wait_next(self.timeout_s)
-        with self._dash_lock:
-            try:
-                remote, dashboard_error = self._healthy_dashboard().is_in_remote_control(), ""
-            except RTDEError as exc:
-                remote, dashboard_error = None, str(exc)
-            try:  # joint angles mean a pose only on the arm they were planned for
-                model, model_error = self._healthy_dashboard().robot_model(), ""
-            except RTDEError as exc:
-                model, model_error = None, str(exc)
-        reasons = check_robot(state, plan.q[0], remote_control=remote, start_tolerance_rad=start_tolerance_rad,
-                              dashboard_error=dashboard_error)
-        reasons += check_model(traj, model, dashboard_error=model_error)
-        if reasons:
-            raise DeployRefused(reasons)
+        state = self._robot_gate(traj, plan, start_tolerance_rad)
         program = streaming_program(
             lookahead_time_s=lookahead_time_s,
             gain=gain,
@@ -320,6 +321,8 @@ class URArm:
             step=int(round(steps)),
             max_tracking_error_rad=float(max_tracking_error_rad),
             window=max(1, int(math.ceil(window_s * rate_hz))),
+            stop=stop,
+            progress=progress,
         )
         return _Stream(self).run(
             run,
@@ -336,6 +339,29 @@ class URArm:
             spin_s=spin_s,
         )
 
+    def _robot_gate(self, traj: Trajectory, plan: StreamPlan, start_tolerance_rad: float) -> dict[str, Any]:
+        """The robot rules of the gate on a fresh data package and the dashboard's answers; that package."""
+        rtde = self.rtde
+        try:
+            state = rtde.wait_next(self.timeout_s)
+        except RTDEValueError as exc:
+            raise DeployRefused([("non_finite", str(exc))]) from None
+        with self._dash_lock:
+            try:
+                remote, dashboard_error = self._healthy_dashboard().is_in_remote_control(), ""
+            except RTDEError as exc:
+                remote, dashboard_error = None, str(exc)
+            try:  # joint angles mean a pose only on the arm they were planned for
+                model, model_error = self._healthy_dashboard().robot_model(), ""
+            except RTDEError as exc:
+                model, model_error = None, str(exc)
+        reasons = check_robot(state, plan.q[0], remote_control=remote, start_tolerance_rad=start_tolerance_rad,
+                              dashboard_error=dashboard_error)
+        reasons += check_model(traj, model, dashboard_error=model_error)
+        if reasons:
+            raise DeployRefused(reasons)
+        return state
+
     def _probe_secondary(self) -> None:
         try:
             with socket.create_connection((self.host, self.secondary_port), timeout=self.timeout_s):
@@ -345,6 +371,33 @@ class URArm:
                 "secondary_interface",
                 f"cannot connect to the secondary interface at {self.host}:{self.secondary_port}: {exc}",
             )]) from None
+
+
+def _check_options(*, rate_hz: float, start_tolerance_rad: float, min_data_rate_fraction: float, spin_s: float,
+                   **limits: float) -> float:
+    """Refuse deploy options out of range (a NaN or inf threshold would switch its rule off); the number of
+    control cycles per setpoint."""
+    steps = CONTROL_RATE_HZ / rate_hz if isinstance(rate_hz, (int, float)) and 0 < rate_hz < math.inf else 0.0
+    if not (abs(steps - round(steps)) < 1e-9 and round(steps) >= 1):
+        raise DeployError(f"rate_hz must divide {CONTROL_RATE_HZ:g} Hz (500, 250, 125, 100, …), got {safe_text(rate_hz, 40)}")
+    if not (isinstance(start_tolerance_rad, (int, float)) and 0 < start_tolerance_rad <= 0.5):
+        raise DeployError(f"start_tolerance_rad must be in (0, 0.5] rad, got {safe_text(start_tolerance_rad, 40)}")
+    for name, value in limits.items():  # a NaN or inf threshold would switch its rule off
+        if not (isinstance(value, (int, float)) and 0 < value < math.inf):
+            raise DeployError(f"{name} must be a finite number > 0, got {safe_text(value, 40)}")
+    if not (isinstance(min_data_rate_fraction, (int, float)) and 0 < min_data_rate_fraction <= 1):
+        raise DeployError(f"min_data_rate_fraction must be in (0, 1], got {safe_text(min_data_rate_fraction, 40)}")
+    if not (isinstance(spin_s, (int, float)) and 0 <= spin_s < 0.01):
+        raise DeployError(f"spin_s must be in [0, 0.01) s, got {safe_text(spin_s, 40)}")
+    return steps
+
+
+def _check_types(recipe: Recipe, address: str) -> None:
+    """Refuse a controller that answers other types than the RTDE specification's for the fields deploy uses."""
+    wrong = [f"{n} is {safe_text(t, 20)}, not {rtde_type(n)}" for n, t in zip(recipe.names, recipe.types)
+             if t != rtde_type(n)]
+    if wrong:
+        raise RTDEError(f"RTDE controller at {address} answered unexpected field types: {'; '.join(wrong)}")
 
 
 def _dry_run_result(traj: Trajectory, plan: StreamPlan, state: dict[str, Any], trajectory_hash: str,

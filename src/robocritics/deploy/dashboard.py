@@ -18,6 +18,7 @@ from __future__ import annotations
 import socket
 import time
 
+from robocritics._text import safe_text
 from robocritics.deploy.rtde import RobotMode
 from robocritics.errors import RTDEError
 
@@ -25,6 +26,13 @@ __all__ = ["DASHBOARD_PORT", "GREETING", "DashboardClient"]
 
 DASHBOARD_PORT = 29999
 GREETING = "Connected: Universal Robots Dashboard Server"
+MAX_REPLY_BYTES = 4096
+"""Longest reply line accepted [bytes]; the controller's longest answers are a few hundred."""
+
+
+def _quoted(reply: str) -> str:
+    """A controller's reply for an error message: escaped and clipped (it is outside text)."""
+    return "'" + safe_text(reply, 200) + "'"
 
 
 class DashboardClient:
@@ -75,7 +83,7 @@ class DashboardClient:
             raise
         if not greeting.startswith(GREETING):
             self._drop()
-            raise RTDEError(f"{self.address} is not a UR dashboard server: greeting was {greeting!r}, expected {GREETING!r}")
+            raise RTDEError(f"{self.address} is not a UR dashboard server: greeting was {_quoted(greeting)}, expected {GREETING!r}")
         return greeting
 
     def close(self) -> None:
@@ -137,6 +145,10 @@ class DashboardClient:
                 self._drop()
                 raise RTDEError(f"dashboard server at {self.address} closed the connection while {doing}")
             self._buf += chunk
+            if b"\n" not in self._buf and len(self._buf) > MAX_REPLY_BYTES:
+                self._drop()
+                raise RTDEError(f"dashboard server at {self.address} sent more than {MAX_REPLY_BYTES} bytes without "
+                                f"a line end while {doing}")
         line, _, self._buf = self._buf.partition(b"\n")
         return line.decode("utf-8", "replace").rstrip("\r")
 
@@ -144,7 +156,7 @@ class DashboardClient:
         reply = self.command(text)
         if not any(reply.lower().startswith(a.lower()) for a in accepted):
             raise RTDEError(
-                f"dashboard {self.address}: {text!r} failed: controller replied {reply!r} "
+                f"dashboard {self.address}: {text!r} failed: controller replied {_quoted(reply)} "
                 f"(expected {' or '.join(repr(a) for a in accepted)})"
             )
         return reply
@@ -180,7 +192,7 @@ class DashboardClient:
             return True
         if reply.startswith("Failed to execute"):
             return False
-        raise RTDEError(f"dashboard {self.address}: 'stop' got unexpected reply {reply!r}")
+        raise RTDEError(f"dashboard {self.address}: 'stop' got unexpected reply {_quoted(reply)}")
 
     def robot_mode(self) -> str:
         """Robot mode, e.g. ``"RUNNING"``, ``"IDLE"``, ``"POWER_OFF"`` (a :class:`~robocritics.deploy.rtde.RobotMode` name)."""
@@ -212,14 +224,14 @@ class DashboardClient:
         """True if the pendant is in remote control (needed to run programs sent to port 30002)."""
         reply = self.command("is in remote control").strip().lower()
         if reply not in ("true", "false"):
-            raise RTDEError(f"dashboard {self.address}: 'is in remote control' got unexpected reply {reply!r}")
+            raise RTDEError(f"dashboard {self.address}: 'is in remote control' got unexpected reply {_quoted(reply)}")
         return reply == "true"
 
     def robot_model(self) -> str:
         """The arm's model as the dashboard names it (``get robot model`` → ``"UR3"``, ``"UR5"``, ``"UR10"``, ``"UR16"``)."""
         reply = self.command("get robot model").strip()
         if not reply or len(reply) > 32 or not reply.replace("-", "").replace("_", "").isalnum():
-            raise RTDEError(f"dashboard {self.address}: 'get robot model' got unexpected reply {reply!r}")
+            raise RTDEError(f"dashboard {self.address}: 'get robot model' got unexpected reply {_quoted(reply)}")
         return reply
 
     def polyscope_version(self) -> str:
@@ -229,11 +241,11 @@ class DashboardClient:
         """Poll ``robotmode`` until it equals ``mode`` [s]; raises with the last mode on timeout."""
         mode = mode.upper()
         if mode not in RobotMode.__members__:
-            raise RTDEError(f"unknown robot mode {mode!r}; one of {', '.join(RobotMode.__members__)}")
+            raise RTDEError(f"unknown robot mode {_quoted(mode)}; one of {', '.join(RobotMode.__members__)}")
         deadline = time.monotonic() + timeout_s
         current = self.robot_mode()
         while current != mode:
             if time.monotonic() >= deadline:
-                raise RTDEError(f"dashboard {self.address}: robot mode is {current}, not {mode}, after {timeout_s:g} s")
+                raise RTDEError(f"dashboard {self.address}: robot mode is {_quoted(current)}, not {mode}, after {timeout_s:g} s")
             time.sleep(poll_s)
             current = self.robot_mode()

@@ -27,6 +27,9 @@ cause                rule
 ``program_running``  ``runtime_state`` is not STOPPED (another program runs)
 ``start_mismatch``   the first sample is farther than ``start_tolerance_rad``
                      from ``actual_q`` on some joint
+``non_finite``       the robot reported NaN or ±inf in a field (the RTDE
+                     guard :func:`~robocritics.deploy.rtde.first_non_finite`);
+                     no other robot rule is judged on such a state
 ``arm_model``        the dashboard's ``get robot model`` is not the arm the
                      trajectory was planned for (``trajectory.robot_name``,
                      e.g. a UR10e plan on a UR5e), or cannot be asked
@@ -45,12 +48,13 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from robocritics.deploy.rtde import RobotMode, RuntimeState, SafetyMode, mode_name
+from robocritics._text import safe_text
+from robocritics.deploy.rtde import RobotMode, RuntimeState, SafetyMode, first_non_finite, mode_name
 from robocritics.deploy.stream import StreamPlan
 from robocritics.errors import DeployError
 from robocritics.robot.arms import ARMS
 from robocritics.report import Report
-from robocritics.simulate import Execution
+from robocritics.execution import Execution
 from robocritics.trajectory import Trajectory
 
 __all__ = [
@@ -143,11 +147,14 @@ def check_trajectory(trajectory: Trajectory, plan: StreamPlan) -> list[Reason]:
     if len(plan) < 2:
         return []
     vlim = np.asarray(trajectory.limits.velocity_rad_s, dtype=float)
+    if vlim.shape != (6,) or not np.all(np.isfinite(vlim) & (vlim > 0)):
+        return [("setpoint_speed", f"the trajectory's joint speed limits {safe_text(vlim.tolist(), 200)} rad/s are "
+                                   "not 6 finite positive numbers; no speed can be checked against them")]
     speed = np.abs(np.diff(plan.q, axis=0)) * plan.rate_hz
     ratio = speed / vlim
-    worst = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-    if ratio[worst] <= 1.0 + 1e-6:
+    if np.all(ratio <= 1.0 + 1e-6):  # written so that a NaN fails the rule
         return []
+    worst = np.unravel_index(int(np.argmax(np.where(np.isnan(ratio), np.inf, ratio))), ratio.shape)
     k, j = int(worst[0]) + 1, int(worst[1])
     return [(
         "setpoint_speed",
@@ -196,6 +203,12 @@ def check_robot(
     """The robot rules on one RTDE state package (``robot_mode``, ``safety_mode``,
     ``runtime_state``, ``actual_q``) and the dashboard's answer to ``is in remote control``
     (``remote_control``; None with ``dashboard_error`` when it could not be asked)."""
+    bad = first_non_finite(state)
+    if bad is not None:  # the robot says something that is not a number: judge nothing else on it
+        name, index, value = bad
+        where = name if index is None else f"{name}[{index}]"
+        return [("non_finite", f"the controller reported {where} = {safe_text(value, 40)}, not a finite number; "
+                               "nothing is sent on a state with a value that is not a number")]
     reasons: list[Reason] = []
     rm, sm, rs = state.get("robot_mode"), state.get("safety_mode"), state.get("runtime_state")
     if rm != RobotMode.RUNNING:
@@ -224,8 +237,8 @@ def check_robot(
         reasons.append(("start_mismatch", f"the controller reported actual_q {actual.tolist()}, not 6 joint positions"))
         return reasons
     dev = np.abs(np.asarray(first_q, dtype=float) - actual)
-    j = int(np.argmax(dev))
-    if dev[j] > start_tolerance_rad:
+    j = int(np.argmax(np.where(np.isnan(dev), np.inf, dev)))
+    if not dev[j] <= start_tolerance_rad:  # a NaN fails the rule too
         reasons.append((
             "start_mismatch",
             f"the trajectory starts {dev[j]:.4f} rad away from the arm on joint {j} (> start_tolerance_rad "

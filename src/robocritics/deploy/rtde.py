@@ -44,12 +44,38 @@ import socket
 import struct
 import threading
 import time
-from dataclasses import dataclass, field
-from enum import IntEnum
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
+from robocritics._text import RepeatLimiter, safe_text
+from robocritics.deploy.rtde_wire import (
+    _COMMAND_NAMES,
+    _HEADER,
+    DATA_TYPES,
+    LOGGED_MESSAGES_PER_KIND,
+    MAX_FREQUENCY_HZ,
+    MAX_UNEXPECTED_PACKAGES,
+    MESSAGE_CHARS,
+    RTDE_PORT,
+    V1_FREQUENCY_HZ,
+    Command,
+    InputRecipe,
+    MessageLevel,
+    OutputRecipe,
+    Recipe,
+    RobotMode,
+    RTDEFloodError,
+    RTDEValueError,
+    RuntimeState,
+    SafetyMode,
+    TextMessage,
+    _names_arg,
+    decode_text_message,
+    encode_text_message,
+    first_non_finite,
+    mode_name,
+    pack_package,
+)
 from robocritics.errors import RTDEError
-from robocritics.robot.arms import UR3E
 
 __all__ = [
     "RTDE_PORT",
@@ -65,304 +91,18 @@ __all__ = [
     "InputRecipe",
     "TextMessage",
     "RTDEClient",
+    "RTDEValueError",
+    "RTDEFloodError",
+    "first_non_finite",
     "pack_package",
     "encode_text_message",
     "decode_text_message",
+    "MAX_FREQUENCY_HZ",
+    "V1_FREQUENCY_HZ",
+    "MAX_UNEXPECTED_PACKAGES",
 ]
 
 log = logging.getLogger(__name__)
-
-RTDE_PORT = 30004
-"""Default RTDE TCP port of a UR controller."""
-
-MAX_FREQUENCY_HZ = UR3E.control_rate_hz
-"""Highest output frequency of an e-series controller [Hz]: one package per control cycle (CB3: 125 Hz)."""
-
-V1_FREQUENCY_HZ = 125.0
-"""Output frequency of protocol version 1, which cannot choose one [Hz]."""
-
-_HEADER = struct.Struct(">HB")
-
-class RobotMode(IntEnum):
-    """Values of the ``robot_mode`` output; the dashboard's ``robotmode`` answers with the names."""
-
-    NO_CONTROLLER = -1
-    DISCONNECTED = 0
-    CONFIRM_SAFETY = 1
-    BOOTING = 2
-    POWER_OFF = 3
-    POWER_ON = 4
-    IDLE = 5
-    BACKDRIVE = 6
-    RUNNING = 7
-    UPDATING_FIRMWARE = 8
-
-
-class SafetyMode(IntEnum):
-    """Values of the ``safety_mode`` output; the dashboard's ``safetystatus`` answers with the names."""
-
-    NORMAL = 1
-    REDUCED = 2
-    PROTECTIVE_STOP = 3
-    RECOVERY = 4
-    SAFEGUARD_STOP = 5
-    SYSTEM_EMERGENCY_STOP = 6
-    ROBOT_EMERGENCY_STOP = 7
-    VIOLATION = 8
-    FAULT = 9
-    VALIDATE_JOINT_ID = 10
-    UNDEFINED_SAFETY_MODE = 11
-    AUTOMATIC_MODE_SAFEGUARD_STOP = 12
-    SYSTEM_THREE_POSITION_ENABLING_STOP = 13
-
-
-class RuntimeState(IntEnum):
-    """Values of the ``runtime_state`` output (the dashboard's ``programState`` prints the names)."""
-
-    STOPPING = 0
-    STOPPED = 1
-    PLAYING = 2
-    PAUSING = 3
-    PAUSED = 4
-    RESUMING = 5
-
-
-def mode_name(kind: type[IntEnum], value: Any) -> str:
-    """``"RUNNING (7)"`` for ``mode_name(RobotMode, 7)``; ``"UNKNOWN (99)"``; ``"unknown"`` for None."""
-    if value is None:
-        return "unknown"
-    try:
-        return f"{kind(int(value)).name} ({int(value)})"
-    except ValueError:
-        return f"UNKNOWN ({int(value)})"
-
-
-class Command:
-    """RTDE package types (ASCII codes)."""
-
-    REQUEST_PROTOCOL_VERSION = 86  # 'V'
-    GET_URCONTROL_VERSION = 118  # 'v'
-    TEXT_MESSAGE = 77  # 'M'
-    DATA_PACKAGE = 85  # 'U'
-    CONTROL_PACKAGE_SETUP_OUTPUTS = 79  # 'O'
-    CONTROL_PACKAGE_SETUP_INPUTS = 73  # 'I'
-    CONTROL_PACKAGE_START = 83  # 'S'
-    CONTROL_PACKAGE_PAUSE = 80  # 'P'
-
-
-_COMMAND_NAMES = {
-    Command.REQUEST_PROTOCOL_VERSION: "'V' (request protocol version)",
-    Command.GET_URCONTROL_VERSION: "'v' (get controller version)",
-    Command.TEXT_MESSAGE: "'M' (text message)",
-    Command.DATA_PACKAGE: "'U' (data package)",
-    Command.CONTROL_PACKAGE_SETUP_OUTPUTS: "'O' (setup outputs)",
-    Command.CONTROL_PACKAGE_SETUP_INPUTS: "'I' (setup inputs)",
-    Command.CONTROL_PACKAGE_START: "'S' (start)",
-    Command.CONTROL_PACKAGE_PAUSE: "'P' (pause)",
-}
-
-
-class MessageLevel:
-    """Levels of an RTDE text message."""
-
-    EXCEPTION = 0
-    ERROR = 1
-    WARNING = 2
-    INFO = 3
-
-
-DATA_TYPES: dict[str, tuple[str, int]] = {
-    "BOOL": ("?", 1),
-    "UINT8": ("B", 1),
-    "UINT32": ("I", 1),
-    "INT32": ("i", 1),
-    "UINT64": ("Q", 1),
-    "DOUBLE": ("d", 1),
-    "VECTOR3D": ("d", 3),
-    "VECTOR6D": ("d", 6),
-    "VECTOR6INT32": ("i", 6),
-    "VECTOR6UINT32": ("I", 6),
-}
-"""RTDE type name -> (struct code of one element, number of elements), big-endian."""
-
-
-def pack_package(command: int, payload: bytes = b"") -> bytes:
-    """Frame ``payload`` as one RTDE package: ``>HB`` size (header included), type."""
-    size = _HEADER.size + len(payload)
-    if size > 0xFFFF:
-        raise RTDEError(f"RTDE package {_COMMAND_NAMES.get(command, command)} too large: {size} bytes > 65535")
-    return _HEADER.pack(size, command) + payload
-
-
-@dataclass(frozen=True)
-class TextMessage:
-    """An RTDE text message ('M'). ``level`` is a :class:`MessageLevel` value."""
-
-    message: str
-    source: str = ""
-    level: int = MessageLevel.INFO
-
-    @property
-    def level_name(self) -> str:
-        return {0: "EXCEPTION", 1: "ERROR", 2: "WARNING", 3: "INFO"}.get(self.level, str(self.level))
-
-
-def encode_text_message(msg: TextMessage, protocol: int = 2) -> bytes:
-    """Payload of an 'M' package (v2: ``>B%dsB%dsB`` message, source, level; v1: level + message)."""
-    text = msg.message.encode("utf-8")
-    if protocol == 1:
-        return struct.pack(">B", msg.level) + text
-    src = msg.source.encode("utf-8")[:255]
-    text = text[:255]
-    return struct.pack(f">B{len(text)}sB{len(src)}sB", len(text), text, len(src), src, msg.level)
-
-
-def decode_text_message(payload: bytes, protocol: int = 2) -> TextMessage:
-    """Parse the payload of an 'M' package; raises :class:`RTDEError` if it is truncated."""
-    try:
-        if protocol == 1:
-            (level,) = struct.unpack_from(">B", payload, 0)
-            return TextMessage(payload[1:].decode("utf-8", "replace"), "", level)
-        n = payload[0]
-        text = payload[1 : 1 + n]
-        m = payload[1 + n]
-        src = payload[2 + n : 2 + n + m]
-        level = payload[2 + n + m]
-        if len(text) != n or len(src) != m:
-            raise IndexError
-        return TextMessage(text.decode("utf-8", "replace"), src.decode("utf-8", "replace"), level)
-    except (IndexError, struct.error):
-        raise RTDEError(f"malformed RTDE text message ({len(payload)} bytes, protocol {protocol}): {payload[:40]!r}")
-
-
-@dataclass
-class Recipe:
-    """A configured RTDE recipe: the field names, their types and the packing layout.
-
-    ``recipe_id`` is the id the controller assigned (0 on protocol version 1 outputs,
-    which carry none). Values are ``bool`` (BOOL), ``int`` (UINT8/UINT32/INT32/UINT64),
-    ``float`` (DOUBLE) or a tuple of 3 or 6 numbers (VECTOR3D, VECTOR6D, VECTOR6INT32,
-    VECTOR6UINT32), in the controller's units (rad, m, s, rad/s, …).
-    """
-
-    recipe_id: int
-    names: tuple[str, ...]
-    types: tuple[str, ...]
-    _struct: struct.Struct = field(init=False, repr=False, compare=False)
-    _layout: tuple[tuple[str, int, int], ...] = field(init=False, repr=False, compare=False)
-
-    def __post_init__(self) -> None:
-        self.names = tuple(self.names)
-        self.types = tuple(self.types)
-        if len(self.names) != len(self.types):
-            raise RTDEError(
-                f"RTDE recipe has {len(self.names)} names but the controller returned {len(self.types)} types: "
-                f"{list(self.names)} / {list(self.types)}"
-            )
-        fmt = ">"
-        layout = []
-        pos = 0
-        for name, typ in zip(self.names, self.types):
-            if typ not in DATA_TYPES:
-                raise RTDEError(f"RTDE field {name!r} has unknown type {typ!r} (known: {', '.join(DATA_TYPES)})")
-            code, count = DATA_TYPES[typ]
-            fmt += code * count
-            layout.append((name, pos, count if count > 1 else 0))
-            pos += count
-        self._struct = struct.Struct(fmt)
-        self._layout = tuple(layout)
-
-    @property
-    def size(self) -> int:
-        """Size of the packed values in bytes (recipe id not included)."""
-        return self._struct.size
-
-    def unpack(self, data: bytes | memoryview, offset: int = 0) -> dict[str, Any]:
-        """Decode the packed values starting at ``offset`` into ``{name: value}``."""
-        if len(data) - offset != self._struct.size:
-            raise RTDEError(
-                f"RTDE data package for recipe {self.recipe_id} has {len(data) - offset} bytes of values, "
-                f"expected {self._struct.size} for {list(self.types)}"
-            )
-        flat = self._struct.unpack_from(data, offset)
-        out: dict[str, Any] = {}
-        for name, pos, count in self._layout:
-            out[name] = flat[pos : pos + count] if count else flat[pos]
-        return out
-
-    def pack_values(self, values: Sequence[Any]) -> bytes:
-        """Encode values given in recipe order (vectors as sequences); no name checks, for hot loops."""
-        flat: list[Any] = []
-        for (_name, _pos, count), v in zip(self._layout, values):
-            if count:
-                flat.extend(v)
-            else:
-                flat.append(v)
-        return self._struct.pack(*flat)
-
-    def pack(self, values: Mapping[str, Any]) -> bytes:
-        """Encode ``{name: value}`` (exactly this recipe's names) into packed values."""
-        missing = [n for n in self.names if n not in values]
-        extra = [n for n in values if n not in self.names]
-        if missing or extra:
-            parts = []
-            if missing:
-                parts.append(f"missing {missing}")
-            if extra:
-                parts.append(f"not in the recipe {extra}")
-            raise RTDEError(f"values for RTDE recipe {self.recipe_id} {list(self.names)} do not match: {'; '.join(parts)}")
-        flat: list[Any] = []
-        for (name, _pos, count), typ in zip(self._layout, self.types):
-            v = values[name]
-            if count:
-                try:
-                    seq = list(v)
-                except TypeError:
-                    raise RTDEError(f"RTDE field {name!r} ({typ}) needs {count} numbers, got {v!r}") from None
-                if len(seq) != count:
-                    raise RTDEError(f"RTDE field {name!r} ({typ}) needs {count} numbers, got {len(seq)}")
-                flat.extend(seq)
-            else:
-                flat.append(v)
-        try:
-            return self._struct.pack(*flat)
-        except struct.error as exc:
-            bad = _find_bad_value(self, values)
-            raise RTDEError(f"cannot encode RTDE values: {bad or exc}") from None
-
-
-def _find_bad_value(recipe: Recipe, values: Mapping[str, Any]) -> str:
-    for name, typ in zip(recipe.names, recipe.types):
-        code, count = DATA_TYPES[typ]
-        v = values[name]
-        try:
-            struct.pack(">" + code * count, *(list(v) if count > 1 else [v]))
-        except (struct.error, TypeError) as exc:
-            return f"field {name!r} ({typ}) value {v!r}: {exc}"
-    return ""
-
-
-class OutputRecipe(Recipe):
-    """An output recipe (controller → client) and its output frequency [Hz]."""
-
-    frequency_hz: float = 0.0
-
-
-class InputRecipe(Recipe):
-    """An input recipe (client → controller); pass values to :meth:`RTDEClient.send`."""
-
-
-def _names_arg(names: Iterable[str] | str) -> list[str]:
-    if isinstance(names, str):
-        names = names.split(",")
-    out = [n.strip() for n in names]
-    if not out or any(not n for n in out):
-        raise RTDEError(f"RTDE recipe needs non-empty field names, got {list(out)}")
-    dup = sorted({n for n in out if out.count(n) > 1})
-    if dup:
-        raise RTDEError(f"RTDE recipe lists field(s) {dup} more than once")
-    return out
-
 
 class RTDEClient:
     """A client for the RTDE interface of a UR controller (TCP port 30004).
@@ -420,6 +160,12 @@ class RTDEClient:
         self._dropped = 0
         self._last_rx = 0.0
         self._error: str | None = None
+        self._error_type: type[RTDEError] = RTDEError
+        self._data_fault: RTDEValueError | None = None
+        self._awaiting: int | None = None  # the reply type a request waits for; other packages are unexpected
+        self._unexpected = 0
+        self._log_once = RepeatLimiter(per_kind=1)
+        self._message_log = RepeatLimiter(per_kind=LOGGED_MESSAGES_PER_KIND, kinds=16)
         self._closing = False
         self._started = False
         self._activity = "idle"
@@ -469,6 +215,11 @@ class RTDEClient:
         self._sock = sock
         self._closing = False
         self._error = None
+        self._error_type = RTDEError
+        self._data_fault = None
+        self._unexpected = 0
+        self._log_once = RepeatLimiter(per_kind=1)
+        self._message_log = RepeatLimiter(per_kind=LOGGED_MESSAGES_PER_KIND, kinds=16)
         self._reader = threading.Thread(target=self._read_loop, name=f"rtde-reader-{self.address}", daemon=True)
         self._reader.start()
         try:
@@ -486,6 +237,8 @@ class RTDEClient:
             return
         if self._started and self._error is None:
             try:
+                with self._cond:  # its reply is expected, not a package nobody asked for
+                    self._awaiting = Command.CONTROL_PACKAGE_PAUSE
                 self._send_raw(pack_package(Command.CONTROL_PACKAGE_PAUSE), "pausing before close")
             except RTDEError:
                 pass
@@ -502,6 +255,10 @@ class RTDEClient:
         self._reader = None
         with self._cond:
             self._cond.notify_all()
+        held_back = sum(self._log_once.suppressed().values()) + sum(self._message_log.suppressed().values())
+        if held_back:
+            log.warning("RTDE %s: %d more log lines of kinds already logged were held back (%d unexpected packages)",
+                        self.address, held_back, self._unexpected)
 
     # ------------------------------------------------------------------ handshake
 
@@ -593,7 +350,7 @@ class RTDEClient:
         if len(types) != len(names):
             raise RTDEError(
                 f"RTDE controller at {self.address} answered {len(types)} types for {len(names)} {kind} fields: "
-                f"{types} for {names}"
+                f"{safe_text(types, 300)} for {names}"
             )
         not_found = [n for n, t in zip(names, types) if t == "NOT_FOUND"]
         in_use = [n for n, t in zip(names, types) if t == "IN_USE"]
@@ -619,7 +376,7 @@ class RTDEClient:
             raise RTDEError(f"RTDE {self.address}: call setup_outputs() before start()")
         reply = self._request(Command.CONTROL_PACKAGE_START, b"", "starting synchronisation")
         if reply[:1] != b"\x01":
-            raise RTDEError(f"RTDE controller at {self.address} refused to start synchronisation (reply {reply!r})")
+            raise RTDEError(f"RTDE controller at {self.address} refused to start synchronisation (reply {reply[:40]!r})")
         self._started = True
         self._activity = "streaming (synchronisation started)"
 
@@ -627,7 +384,7 @@ class RTDEClient:
         """Pause data synchronisation; recipes stay configured, :meth:`start` resumes."""
         reply = self._request(Command.CONTROL_PACKAGE_PAUSE, b"", "pausing synchronisation")
         if reply[:1] != b"\x01":
-            raise RTDEError(f"RTDE controller at {self.address} refused to pause (reply {reply!r})")
+            raise RTDEError(f"RTDE controller at {self.address} refused to pause (reply {reply[:40]!r})")
         self._started = False
         self._activity = "connected, paused"
 
@@ -665,12 +422,14 @@ class RTDEClient:
     def latest(self, allow_stale: bool = False) -> dict[str, Any]:
         """The newest value of every output field received so far (empty before the first package).
 
-        Never blocks. Raises :class:`RTDEError` once the connection has dropped,
-        unless ``allow_stale`` (then it returns the last values received, e.g. for
+        Never blocks. Raises :class:`RTDEError` once the connection has dropped, and
+        :class:`RTDEValueError` once a data package carried a non-finite number, unless
+        ``allow_stale`` (then it returns the last values received before either, e.g. for
         a post-mortem of where the robot was).
         """
         if not allow_stale:
             self._raise_if_failed("reading the latest data")
+            self._raise_if_untrusted()
         with self._cond:
             return dict(self._latest)
 
@@ -679,10 +438,11 @@ class RTDEClient:
 
         ``timeout_s`` defaults to the client's ``timeout_s`` [s]. Raises
         :class:`RTDEError` if nothing arrives in time (silent controller) or the
-        connection drops.
+        connection drops, :class:`RTDEValueError` once a package carried a non-finite number.
         """
         timeout = self.timeout_s if timeout_s is None else float(timeout_s)
         self._raise_if_failed("waiting for data")
+        self._raise_if_untrusted()
         if not self._started:
             raise RTDEError(f"RTDE {self.address}: call start() before waiting for data")
         deadline = time.monotonic() + timeout
@@ -699,6 +459,7 @@ class RTDEClient:
                     )
                 self._cond.wait(remaining)
             if self._error is None:
+                self._raise_if_untrusted()
                 return dict(self._latest)
         self._raise_if_failed("waiting for data")
         raise AssertionError("unreachable")
@@ -722,14 +483,20 @@ class RTDEClient:
         return state
 
     def drain(self) -> list[dict[str, Any]]:
-        """Remove and return every buffered data package (oldest first), one dict per package."""
+        """Remove and return every buffered data package (oldest first), one dict per package.
+
+        Raises :class:`RTDEValueError` once a data package carried a non-finite number."""
+        self._raise_if_untrusted()
         with self._cond:
             out = list(self._buffer)
             self._buffer.clear()
         return out
 
     def messages(self) -> list[TextMessage]:
-        """Remove and return the text messages the controller sent (oldest first)."""
+        """Remove and return the text messages the controller sent (oldest first; at most the newest 256).
+
+        Message and source are outside text, already made safe to print: escape sequences and control
+        characters shown as escapes, the message cut after :data:`MESSAGE_CHARS` characters with a note."""
         with self._cond:
             out = list(self._messages)
             self._messages.clear()
@@ -739,6 +506,12 @@ class RTDEClient:
     def packages_received(self) -> int:
         """Number of data packages received since :meth:`connect`."""
         return self._count
+
+    @property
+    def packages_unexpected(self) -> int:
+        """Packages nobody asked for (counted, never queued); past :data:`MAX_UNEXPECTED_PACKAGES` the
+        connection fails with :class:`RTDEFloodError`."""
+        return self._unexpected
 
     @property
     def packages_dropped(self) -> int:
@@ -763,9 +536,23 @@ class RTDEClient:
         age = self.age_s()
         return "never" if math.isinf(age) else f"{age:.3f} s ago"
 
+    @property
+    def data_fault(self) -> RTDEValueError | None:
+        """The error of the first data package with a non-finite number (None while every number was finite).
+
+        From then on :meth:`latest`, :meth:`wait_next` and :meth:`drain` raise it; :meth:`send` still works,
+        so the client can still tell the controller to stop."""
+        return self._data_fault
+
+    def _raise_if_untrusted(self) -> None:
+        fault = self._data_fault
+        if fault is not None:
+            raise RTDEValueError(str(fault), field=fault.field, index=fault.index, value=fault.value,
+                                 package=fault.package)
+
     def _raise_if_failed(self, doing: str) -> None:
         if self._error is not None:
-            raise RTDEError(self._error)
+            raise self._error_type(self._error)
         if self._sock is None:
             raise RTDEError(f"RTDE client for {self.address} is not connected (while {doing}); call connect() first")
 
@@ -794,37 +581,47 @@ class RTDEClient:
         with self._request_lock:
             with self._cond:
                 self._replies.clear()
-            previous = self._activity
-            self._activity = doing
-            self._send_raw(pack_package(command, payload), doing)
-            deadline = time.monotonic() + self.timeout_s
-            with self._cond:
-                while True:
-                    while self._replies:
-                        cmd, body = self._replies.popleft()
-                        if cmd == command:
-                            self._activity = previous
-                            return body
-                        log.warning("RTDE %s: unexpected reply %s while %s", self.address, _COMMAND_NAMES.get(cmd, cmd), doing)
-                    if self._error is not None:
-                        raise RTDEError(self._error)
-                    remaining = deadline - time.monotonic()
-                    if remaining <= 0:
-                        msg = (
-                            f"no reply to {_COMMAND_NAMES.get(command, command)} from RTDE {self.address} within "
-                            f"{self.timeout_s:g} s while {doing} (controller silent or overloaded)"
-                        )
-                        # a late reply would be taken for the answer to the next request: give up on this connection
-                        self._error = msg
-                        self._started = False
-                        self._cond.notify_all()
-                        raise RTDEError(msg)
-                    self._cond.wait(remaining)
+                self._awaiting = command
+            try:
+                return self._exchange(command, payload, doing)
+            finally:
+                with self._cond:
+                    self._awaiting = None
 
-    def _fail(self, message: str) -> None:
+    def _exchange(self, command: int, payload: bytes, doing: str) -> bytes:
+        """Send one request and wait for its reply (``_request`` holds the request lock)."""
+        previous = self._activity
+        self._activity = doing
+        self._send_raw(pack_package(command, payload), doing)
+        deadline = time.monotonic() + self.timeout_s
+        with self._cond:
+            while True:
+                while self._replies:
+                    cmd, body = self._replies.popleft()
+                    if cmd == command:
+                        self._activity = previous
+                        return body
+                    self._unexpected_package(f"unexpected reply {_COMMAND_NAMES.get(cmd, cmd)} while {doing}", cmd)
+                if self._error is not None:
+                    raise self._error_type(self._error)
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    msg = (
+                        f"no reply to {_COMMAND_NAMES.get(command, command)} from RTDE {self.address} within "
+                        f"{self.timeout_s:g} s while {doing} (controller silent or overloaded)"
+                    )
+                    # a late reply would be taken for the answer to the next request: give up on this connection
+                    self._error = msg
+                    self._started = False
+                    self._cond.notify_all()
+                    raise RTDEError(msg)
+                self._cond.wait(remaining)
+
+    def _fail(self, message: str, error_type: type[RTDEError] = RTDEError) -> None:
         with self._cond:
             if self._error is None:
                 self._error = message
+                self._error_type = error_type
             self._started = False
             self._cond.notify_all()
 
@@ -859,7 +656,7 @@ class RTDEClient:
                 if pos:
                     del buf[:pos]
         except RTDEError as exc:
-            self._fail(str(exc))
+            self._fail(str(exc), type(exc) if type(exc) is not RTDEValueError else RTDEError)
         except OSError as exc:
             if not self._closing:
                 self._fail(
@@ -871,46 +668,77 @@ class RTDEClient:
 
     def _dispatch(self, cmd: int, payload: bytes) -> None:
         if cmd == Command.DATA_PACKAGE:
-            if self.protocol_version >= 2:
-                if not payload:
-                    raise RTDEError(f"RTDE {self.address} sent an empty data package")
-                recipe = self._outputs.get(payload[0])
-                if recipe is None:
-                    log.warning("RTDE %s: data package for unknown recipe %d", self.address, payload[0])
-                    return
-                values = recipe.unpack(payload, 1)
-            else:
-                recipe = self._v1_output
-                if recipe is None:
-                    return
-                values = recipe.unpack(payload, 0)
-            now = time.monotonic()
-            with self._cond:
-                self._latest.update(values)
-                if len(self._buffer) == self._buffer.maxlen:
-                    self._dropped += 1
-                self._buffer.append(values)
-                self._count += 1
-                self._last_rx = now
-                self._cond.notify_all()
+            self._data_package(payload)
         elif cmd == Command.TEXT_MESSAGE:
             try:
                 msg = decode_text_message(payload, self.protocol_version or 2)
             except RTDEError as exc:
-                log.warning("RTDE %s: %s", self.address, exc)
+                self._unexpected_package(str(exc), "malformed text message")
                 return
-            log.log(
-                logging.ERROR if msg.level <= MessageLevel.ERROR else logging.WARNING if msg.level == 2 else logging.INFO,
-                "RTDE %s %s [%s]: %s",
-                self.address,
-                msg.level_name,
-                msg.source,
-                msg.message,
-            )
+            msg = TextMessage(safe_text(msg.message, MESSAGE_CHARS), safe_text(msg.source, 60), msg.level)
+            if self._message_log.admit((msg.level, msg.source)):
+                log.log(
+                    logging.ERROR if msg.level <= MessageLevel.ERROR else logging.WARNING if msg.level == 2 else logging.INFO,
+                    "RTDE %s %s [%s]: %s",
+                    self.address,
+                    msg.level_name,
+                    msg.source,
+                    msg.message,
+                )
             with self._cond:
                 self._messages.append(msg)
                 self._cond.notify_all()
         else:
             with self._cond:
-                self._replies.append((cmd, payload))
-                self._cond.notify_all()
+                if cmd == self._awaiting and not self._replies:
+                    self._replies.append((cmd, payload))
+                    self._cond.notify_all()
+                    return
+            self._unexpected_package(f"package of type {_COMMAND_NAMES.get(cmd, cmd)} nobody asked for "
+                                     f"({len(payload) + 3} bytes)", cmd)
+
+    def _data_package(self, payload: bytes) -> None:
+        if self.protocol_version >= 2:
+            if not payload:
+                raise RTDEError(f"RTDE {self.address} sent an empty data package")
+            recipe = self._outputs.get(payload[0])
+            if recipe is None:
+                self._unexpected_package(f"data package for unknown recipe {payload[0]}", "unknown recipe")
+                return
+            values = recipe.unpack(payload, 1)
+        else:
+            recipe = self._v1_output
+            if recipe is None:
+                return
+            values = recipe.unpack(payload, 0)
+        bad = first_non_finite(values)
+        now = time.monotonic()
+        with self._cond:
+            self._count += 1
+            self._last_rx = now
+            if bad is not None and self._data_fault is None:
+                name, index, value = bad
+                where = name if index is None else f"{name}[{index}]"
+                self._data_fault = RTDEValueError(
+                    f"RTDE {self.address} sent a non-finite number: {where} = {safe_text(value, 40)} in data package "
+                    f"{self._count} while {self._activity}; no value from this connection is trusted after it",
+                    field=name, index=index, value=value, package=self._count,
+                )
+                log.error("%s", self._data_fault)
+            if self._data_fault is None:  # after a non-finite value nothing more is kept: every reader raises
+                self._latest.update(values)
+                if len(self._buffer) == self._buffer.maxlen:
+                    self._dropped += 1
+                self._buffer.append(values)
+            self._cond.notify_all()
+
+    def _unexpected_package(self, what: str, kind: object) -> None:
+        """Count a package nobody asked for, log the first of its kind; past the bound the connection fails."""
+        self._unexpected += 1
+        if self._log_once.admit(kind):
+            log.warning("RTDE %s: %s (logged once per kind; more are counted)", self.address, what)
+        if self._unexpected > MAX_UNEXPECTED_PACKAGES:
+            raise RTDEFloodError(
+                f"RTDE {self.address} flooded the connection: {self._unexpected} packages nobody asked for "
+                f"(more than {MAX_UNEXPECTED_PACKAGES}; the last: {what}) while {self._activity}"
+            )

@@ -36,8 +36,16 @@ frequency per second of the controller's own ``timestamp``, over
 (``actual_q`` farther than ``max_tracking_error_rad`` from every setpoint sent
 in the last ``lookahead_time_s + 20 ms``), ``remote_control`` / ``dashboard``
 (a monitor thread polls the dashboard every ``monitor_period_s``),
-``program_did_not_finish``, ``interrupted`` (KeyboardInterrupt etc.; re-raised
-after the stop).
+``program_did_not_finish``, ``non_finite`` (a data package carried NaN or ±inf:
+the RTDE client's guard, :func:`~robocritics.deploy.rtde.first_non_finite`, names
+the field; nothing read after it is trusted, so the stop is confirmed over the
+dashboard), ``controller_flood`` (the controller sent more packages nobody asked
+for than :data:`~robocritics.deploy.rtde.MAX_UNEXPECTED_PACKAGES`),
+``interrupted`` (KeyboardInterrupt etc.; re-raised after the stop), ``stop_requested``
+(the caller's ``stop`` event was set, e.g. a Stop button: the same stop path as any fault).
+
+**Progress**: ``progress(DeployProgress)``, when given, is called from the streaming thread at most every
+:data:`PROGRESS_PERIOD_S` while streaming (and once at its end); it must return quickly.
 
 **Stopping**: the done command over RTDE (the program ``stopj``'s), confirmed by
 ``runtime_state``; if RTDE is gone or the program does not stop within
@@ -58,7 +66,16 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from robocritics.deploy.dashboard import DashboardClient
-from robocritics.deploy.rtde import MessageLevel, RobotMode, RuntimeState, SafetyMode, mode_name
+from robocritics._text import safe_text
+from robocritics.deploy.rtde import (
+    MessageLevel,
+    RobotMode,
+    RTDEFloodError,
+    RTDEValueError,
+    RuntimeState,
+    SafetyMode,
+    mode_name,
+)
 from robocritics.deploy.urscript import INPUT_FIELDS, OUTPUT_FIELDS, ProgramState, send_program, setpoint
 from robocritics.errors import DeployError, RTDEError
 from robocritics.robot.arms import UR3E
@@ -85,11 +102,48 @@ STATE_FIELDS: tuple[str, ...] = (
 )
 """The output recipe :class:`~robocritics.deploy.URArm` sets up (at 500 Hz)."""
 
+
+def rtde_type(name: str) -> str:
+    """The RTDE type of a field :class:`~robocritics.deploy.URArm` uses, as the RTDE specification gives it: a
+    controller answering another type for it is refused at connect (a mode field sent as DOUBLE could be NaN)."""
+    if name in ("actual_q", "actual_qd", "target_q"):
+        return "VECTOR6D"
+    if name == "timestamp" or "_double_register_" in name:
+        return "DOUBLE"
+    if name == "runtime_state":
+        return "UINT32"
+    return "INT32"  # robot_mode, safety_mode, the int registers
+
+MAX_KEPT_MESSAGES = 100
+"""Controller error/warning messages one deployment keeps (for :attr:`DeployFault.controller_messages`)."""
+
 STILL_RAD_S = 1e-3
 """Joint speeds below this count as standing still [rad/s]."""
 
 STREAM_RATE_WINDOW_S = 0.25
 """The data rate is checked over windows this long [s] (``controller_slow``)."""
+
+MAX_SETPOINTS = 500 * 3600 * 8
+"""Most setpoints one stream may have: 8 hours at 500 Hz (about 0.7 GB of setpoints)."""
+
+#: Seconds between two progress reports of a running stream.
+PROGRESS_PERIOD_S = 0.1
+
+
+@dataclass(frozen=True)
+class DeployProgress:
+    """Where a running stream is: ``phase`` (starting, streaming, settling, finishing), ``setpoints_sent`` of
+    ``setpoints_total`` (the resampled plan), ``time_s`` of ``duration_s`` along the trajectory [s], the latest
+    ``tracking_error_rad`` and the largest so far ``max_tracking_error_rad`` [rad]."""
+
+    phase: str
+    setpoints_sent: int
+    setpoints_total: int
+    time_s: float
+    duration_s: float
+    tracking_error_rad: float
+    max_tracking_error_rad: float
+
 
 RESYNC_AFTER_PERIODS = 5
 """A client this many periods late shifts its schedule instead of bursting the missed setpoints."""
@@ -227,6 +281,18 @@ def resample(trajectory: Trajectory, rate_hz: float = UR3E.control_rate_hz) -> S
     if not (rate_hz > 0 and math.isfinite(rate_hz)):
         raise DeployError(f"resample(): rate_hz must be a positive number of Hz, got {rate_hz}")
     q_src, t_src, g_src = trajectory.q, trajectory.time, trajectory.gripper_opening_m
+    if len(t_src) == 0:
+        raise DeployError("resample(): the trajectory has no samples")
+    for name, values in (("q", q_src), ("time", t_src), ("gripper_opening_m", g_src)):
+        bad = np.flatnonzero(~np.isfinite(np.asarray(values, dtype=float).reshape(len(values), -1)).all(axis=1))
+        if len(bad):
+            raise DeployError(f"resample(): trajectory {name} is not finite at sample {int(bad[0])}")
+    if np.any(np.diff(t_src) < 0):
+        raise DeployError("resample(): the trajectory's times are not in order")
+    if not float(t_src[-1] - t_src[0]) * rate_hz <= MAX_SETPOINTS:
+        raise DeployError(
+            f"resample(): {float(t_src[-1] - t_src[0]):.6g} s at {rate_hz:g} Hz is more than {MAX_SETPOINTS:,} setpoints"
+        )
     t = t_src - t_src[0]
     period = 1.0 / float(rate_hz)
     end = float(t[-1])
@@ -274,6 +340,15 @@ class _Fault(Exception):
         self.cause = cause
         self.detail = detail
         super().__init__(detail)
+
+
+def _rtde_fault(exc: Exception) -> _Fault:
+    """The fault for an RTDE error: ``non_finite``, ``controller_flood`` or ``connection_drop``."""
+    if isinstance(exc, RTDEValueError):
+        return _Fault("non_finite", str(exc))
+    if isinstance(exc, RTDEFloodError):
+        return _Fault("controller_flood", str(exc))
+    return _Fault("connection_drop", f"the RTDE connection failed: {exc}")
 
 
 def _safety_fault(safety_mode: Any, when: str = "") -> _Fault:
@@ -344,6 +419,12 @@ class _Run:
     """perf_counter of the last check [s] (0: none yet)."""
     awake_since: float = 0.0
     """perf_counter since which this process has been checking without a stall [s]."""
+    stop: threading.Event | None = None
+    """Set by the caller to stop the arm (fault ``stop_requested``)."""
+    progress: Any = None
+    """``progress(DeployProgress)`` or None."""
+    last_err: float = 0.0
+    last_progress: float = 0.0
 
     def sample(self) -> int:
         if not self.sent_any:
@@ -353,6 +434,18 @@ class _Run:
     def time_s(self) -> float:
         return float(self.plan.time[max(self.k, 0)]) if self.sent_any else 0.0
 
+
+
+def report_progress(run: _Run) -> None:
+    """Call ``run.progress`` with where the stream is (its exceptions are the caller's bug: not a fault)."""
+    try:
+        run.progress(DeployProgress(
+            phase=run.phase, setpoints_sent=run.k + 1, setpoints_total=len(run.plan), time_s=run.time_s(),
+            duration_s=float(run.plan.time[-1]), tracking_error_rad=run.last_err,
+            max_tracking_error_rad=run.max_err,
+        ))
+    except Exception:  # noqa: BLE001 - a progress display must never stop (or fail to stop) the arm
+        pass
 
 
 # ---------------------------------------------------------------------------- the stream
@@ -371,7 +464,7 @@ class _Stream:
         try:
             self.arm.rtde.send(setpoint(self.arm._seq, q, opening, done=done, session=run.session), self.arm._inputs)
         except RTDEError as exc:
-            raise _Fault("connection_drop", f"the RTDE connection failed: {exc}") from None
+            raise _rtde_fault(exc) from None
         run.sent_any = True
         run.last_q = q
         run.last_opening = opening
@@ -382,23 +475,24 @@ class _Stream:
             return
         for m in rtde.messages():
             self.arm._messages.append(m)
-            if m.level <= MessageLevel.WARNING:
-                run.messages.append(f"{m.level_name} [{m.source}] {m.message}")
+            if m.level <= MessageLevel.WARNING and len(run.messages) < MAX_KEPT_MESSAGES:
+                run.messages.append(safe_text(f"{m.level_name} [{m.source}] {m.message}", 600))
 
     def _check(self, run: _Run, monitor: _DashboardMonitor | None, now: float, silence_timeout_s: float,
                min_rate: float) -> None:
         """Raise _Fault if anything is wrong; process every data package received since the last check."""
         rtde = self.arm.rtde
+        if run.stop is not None and run.stop.is_set():
+            raise _Fault("stop_requested", "stopped on request (Stop)")
         if monitor is not None and monitor.fault is not None:
             raise monitor.fault
         if not rtde.connected:
             try:
                 rtde.latest()
             except RTDEError as exc:
-                raise _Fault("connection_drop", f"the RTDE connection failed: {exc}") from None
+                raise _rtde_fault(exc) from None
             raise _Fault("connection_drop", "the RTDE connection is closed")
-        packages = rtde.drain()
-        for st in packages:
+        for st in self._drain():
             run.packages += 1
             run.last_state = st
             if st["safety_mode"] != SafetyMode.NORMAL:
@@ -429,7 +523,8 @@ class _Stream:
                 err = float(np.min(np.max(np.abs(win - actual), axis=1)))
             if run.phase != "starting":
                 run.max_err = max(run.max_err, err)
-            if err > run.max_tracking_error_rad:
+                run.last_err = err
+            if not err <= run.max_tracking_error_rad:  # NaN fails the rule too
                 raise _Fault(
                     "tracking_error",
                     f"tracking error {err:.4f} rad > max_tracking_error_rad {run.max_tracking_error_rad:g}: actual_q is "
@@ -441,13 +536,25 @@ class _Stream:
             # controller; it gets silence_timeout_s from now
             run.awake_since = now
         run.last_check = now
+        if run.progress is not None and now - run.last_progress >= PROGRESS_PERIOD_S:
+            run.last_progress = now
+            report_progress(run)
         age = min(rtde.age_s(), now - run.awake_since)
         if age > silence_timeout_s:
             raise _Fault("controller_silent", f"no RTDE data package for {age:.3f} s (> silence_timeout_s {silence_timeout_s:g})")
 
+    def _drain(self) -> list[dict[str, Any]]:
+        """The data packages received since the last call; an RTDE error (non-finite value, flood, drop) is a fault."""
+        try:
+            return self.arm.rtde.drain()
+        except RTDEError as exc:
+            raise _rtde_fault(exc) from None
+
     def _count_rate(self, run: _Run, timestamp_s: float, min_rate: float) -> None:
         """``controller_slow``: packages per second of the controller's own time (its ``timestamp``), over
         windows of :data:`STREAM_RATE_WINDOW_S` — packages it dropped or throttled, not a client that was late."""
+        if not math.isfinite(timestamp_s):  # the client's guard drops such packages; never count one
+            raise _Fault("non_finite", f"the controller's timestamp is {timestamp_s}")
         if run.rate_ts0 is None or timestamp_s < run.rate_ts0:
             run.rate_ts0, run.rate_n = timestamp_s, 0
             return
@@ -456,7 +563,7 @@ class _Stream:
         if span < STREAM_RATE_WINDOW_S:
             return
         expected = self.arm._out_freq * span
-        if run.rate_n < min_rate * expected:
+        if not run.rate_n >= min_rate * expected:
             raise _Fault(
                 "controller_slow",
                 f"the controller sent {run.rate_n} data packages in {span:.3f} s of its own time "
@@ -485,7 +592,10 @@ class _Stream:
         plan = run.plan
         period = 1.0 / plan.rate_hz
         rate = plan.rate_hz
-        rtde.drain()
+        try:
+            rtde.drain()
+        except RTDEError:
+            pass  # the first check below reports it, with the stop path
         self._collect_messages(run)
         run.messages.clear()
         monitor = _DashboardMonitor(self.arm, monitor_period_s)
@@ -502,7 +612,12 @@ class _Stream:
         try:
             # ---- hold the first setpoint, send the program, wait until it streams with our session
             q0, g0 = plan.q[0], float(plan.gripper_opening_m[0])
-            state_before = rtde.latest().get(OUTPUT_FIELDS[1])
+            if rtde.data_fault is not None:  # nothing is sent after a value that is not a number
+                raise _rtde_fault(rtde.data_fault)
+            try:
+                state_before = rtde.latest().get(OUTPUT_FIELDS[1])
+            except RTDEError as exc:
+                raise _rtde_fault(exc) from None
             self._send(run, q0, g0)
             first_hold = self.arm._seq
             sender_error: list[BaseException] = []
@@ -588,6 +703,8 @@ class _Stream:
                 deadlines.append(deadline)
                 check(now)
             self._collect_messages(run)
+            if run.progress is not None:
+                report_progress(run)
 
             # ---- hold the final setpoint until the arm settles
             run.phase = "settling"
@@ -620,7 +737,7 @@ class _Stream:
                 now = time.perf_counter()
                 if not rtde.connected:
                     raise _Fault("connection_drop", "the RTDE connection failed while the program was finishing")
-                packages = rtde.drain()
+                packages = self._drain()
                 run.packages += len(packages)
                 for st in packages:
                     if st["safety_mode"] != SafetyMode.NORMAL:
@@ -641,6 +758,8 @@ class _Stream:
             self._collect_messages(run)
         except _Fault as fault:
             raise self._fail(run, fault, monitor, stop_timeout_s, silence_timeout_s) from None
+        except RTDEError as exc:  # a read outside the checks above: the same stop
+            raise self._fail(run, _rtde_fault(exc), monitor, stop_timeout_s, silence_timeout_s) from None
         except BaseException as exc:
             # KeyboardInterrupt, a bug: stop the arm before anything else happens
             self._fail(run, _Fault("interrupted", f"{type(exc).__name__}: {exc}"), monitor, stop_timeout_s, silence_timeout_s)
@@ -721,14 +840,16 @@ class _Stream:
         if rtde_ok and run.sent_any:
             q = run.last_q if run.last_q is not None else run.plan.q[0]
             try:
-                silent = rtde.age_s() > silence_timeout_s
-                # silent: send a burst of done commands (the program still reads its inputs) and go on
+                # no data to trust (silent, or a non-finite value seen): send a burst of done commands (the
+                # program still reads its inputs) and confirm over the dashboard
+                untrusted = rtde.data_fault is not None
+                silent = untrusted or rtde.age_s() > silence_timeout_s
                 t_end = min(deadline, time.monotonic() + (0.02 if silent else max(0.3, 3 * silence_timeout_s)))
                 confirmed = False
                 while time.monotonic() < t_end:
                     self._send(run, q, run.last_opening, done=True)
                     time.sleep(UR3E.control_period_s)
-                    if rtde.age_s() > silence_timeout_s:
+                    if untrusted or rtde.age_s() > silence_timeout_s:
                         continue
                     st = rtde.latest()
                     if st.get("runtime_state") != RuntimeState.PLAYING:
@@ -785,8 +906,12 @@ class _Stream:
         """True once runtime_state is not PLAYING (RTDE, else dashboard ``running``); None if unknown."""
         rtde = self.arm._rtde
         while time.monotonic() < deadline:
-            if rtde is not None and rtde.connected and rtde.age_s() <= silence_timeout_s:
-                if rtde.latest().get("runtime_state") != RuntimeState.PLAYING:
+            if rtde is not None and rtde.connected and rtde.data_fault is None and rtde.age_s() <= silence_timeout_s:
+                try:
+                    playing = rtde.latest().get("runtime_state") == RuntimeState.PLAYING
+                except RTDEError:  # dropped or untrusted meanwhile: ask the dashboard
+                    break
+                if not playing:
                     return True
                 time.sleep(0.005)
                 continue

@@ -1,3 +1,3 @@
-from .controller import main
+from .cli import main
 
 raise SystemExit(main())

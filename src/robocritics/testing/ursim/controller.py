@@ -1,75 +1,10 @@
-"""A loopback UR controller: real TCP servers on 127.0.0.1 speaking RTDE, Dashboard and the secondary interface.
-
-:class:`URSim` is what the tests and benchmarks deploy to. It is not a physics
-simulator and does not interpret URScript; it is a protocol-exact stand-in for
-an e-series controller that runs *our* streaming program. Every UR3e number it
-uses (control period, joint speed limits, DH table for ``actual_TCP_pose``) comes
-from :data:`robocritics.robot.arms.UR3E`, its forward kinematics from
-:func:`robocritics.robot.ik.dh_forward`, its mode numbers from the tables in
-:mod:`robocritics.deploy.rtde`; it starts at the robot model's home pose, in robot
-mode RUNNING.
-
-* **Time** is control cycles × 2 ms, and every rule below runs on it. With
-  ``clock="realtime"`` (the default; ``robocritics ursim``) a thread runs a cycle
-  every 2 ms of wall time. With ``clock="stepped"`` the time is simulated: one
-  cycle per RTDE input data package (a streaming client's setpoints clock the
-  controller) plus :meth:`URSim.step`, so tests are deterministic on a loaded host.
-
-* **RTDE** (default port 30004): protocol versions 2 and 1 byte for byte —
-  version negotiation, controller version, output recipes (v2 with a frequency
-  up to 500 Hz; v1 at 125 Hz without recipe ids), input recipes, start/pause,
-  data packages, text messages. It knows the real field names and types
-  (``timestamp``, ``actual_q``, ``actual_TCP_pose`` from UR3e forward kinematics,
-  ``robot_mode``, ``safety_mode``, ``runtime_state``, all registers, …), answers
-  ``NOT_FOUND`` for unknown fields and ``IN_USE`` for inputs another client holds
-  (or registers 0-23 when ``fieldbus_registers=True``). Output packages are
-  produced by the control cycles (a recipe at f Hz gets f of every 500
-  cycles). A client that does not read its data for ``slow_client_timeout_s``
-  is disconnected, as a real controller does.
-* **Dashboard** (default 29999): greeting, power on/off, brake release, load,
-  play, stop, pause, robotmode, safetystatus, unlock protective stop (refused for
-  ``unlock_delay_s`` of controller time after the stop, 5 s like the real controller),
-  is in remote control, programState, running, quit.
-* **Secondary interface** (default 30002): accepts program text. Programs made
-  by :func:`~robocritics.deploy.urscript.streaming_program` (recognised by their
-  marker line, parameters parsed from the text) are simulated; anything else is
-  rejected with an RTDE text message (level ERROR) and an event.
-
-The simulated streaming program follows :mod:`~robocritics.deploy.urscript`
-statement by statement, once per 2 ms control cycle:
-
-* ``servoj`` tracking: joint velocity = setpoint velocity (difference of the
-  last two setpoints over their sequence distance × 2 ms; applied in the cycle a
-  new setpoint arrives) + (target − q)/τ with τ = lookahead_time × 300 / gain
-  (at least 2 ms), clipped to the joint speed limits (``UR3E.velocity_rad_s``
-  unless ``speed_limits`` says otherwise). No acceleration limit, no dynamics.
-* RTDE watchdog: no update of ``input_int_register_24`` for longer than
-  ``1/min_hz`` s → the controller stops the program (``runtime_state`` STOPPED,
-  joints decelerate at 4 rad/s²) and sends a text message.
-* Stall check (the program's own): the counter's *value* unchanged for more than
-  ``stall_limit`` cycles → state STALLED, ``stopj``.
-* **Protective stop rule**: when a new setpoint arrives, the speed it asks for is
-  |Δq_j| / (Δseq × 2 ms) (each sequence step is 2 ms of trajectory). If that
-  exceeds ``jump_margin`` (default 1.5) × the joint's speed limit on any joint,
-  the controller protective-stops: ``safety_mode`` 3 (PROTECTIVE_STOP), the
-  program is stopped, the joints decelerate at 10 rad/s².
-* ``stopj(a)`` on the done command, then the program ends (STOPPED).
-
-Fault injection: :meth:`URSim.inject_drop`, :meth:`URSim.trigger_protective_stop`,
-:meth:`URSim.set_slow`, :meth:`URSim.set_silent`, :meth:`URSim.set_remote_control`,
-the constructor's ``fieldbus_registers`` — now, or at a known point of a
-deployment with :meth:`URSim.at_program_time`.
-
-Run it from a shell with ``python -m robocritics.testing.ursim`` (or the
-``robocritics ursim`` command); Ctrl-C stops it.
-"""
+"""The loopback controller, :class:`URSim`: its servers, control loop and fault injection. What it simulates
+and how is described in :mod:`robocritics.testing.ursim`."""
 
 from __future__ import annotations
 
-import argparse
 import logging
 import math
-import re
 import socket
 import struct
 import threading
@@ -78,6 +13,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
+from robocritics._text import safe_text
 from robocritics.deploy import urscript
 from robocritics.deploy.rtde import (
     DATA_TYPES,
@@ -95,15 +31,29 @@ from robocritics.deploy.rtde import (
     pack_package,
 )
 from robocritics.errors import DeployError
-from robocritics.robot.arms import ARMS, DH, UR3E
-from robocritics.robot.ik import dh_forward
+from robocritics.robot.arms import ARMS
+from robocritics.testing.ursim.servo import _HoldProgram, _StreamProgram
+from robocritics.testing.ursim.state import (
+    CONTROLLER_STOP_DECEL,
+    DT,
+    FIELDBUS_FIELDS,
+    KNOWN_INPUTS,
+    KNOWN_OUTPUTS,
+    PROTECTIVE_STOP_DECEL,
+    SimEvent,
+    SimSnapshot,
+    _apply_pending,
+    _extra_getter,
+    _Getter,
+    _Setter,
+    _State,
+    ur3e_fk,
+)
+from robocritics.testing.ursim.text_servers import serve_dashboard, serve_secondary
 
-__all__ = ["URSim", "SimSnapshot", "SimEvent", "KNOWN_OUTPUTS", "KNOWN_INPUTS", "main"]
+__all__ = ["URSim", "SimSnapshot", "SimEvent", "KNOWN_OUTPUTS", "KNOWN_INPUTS", "ur3e_fk", "DT"]
 
 log = logging.getLogger(__name__)
-
-DT = UR3E.control_period_s
-"""Control period [s]: one control cycle of the UR3e (``robocritics.robot.arms.UR3E``)."""
 
 DEFAULT_ROBOT_MODE = "RUNNING"
 """Robot mode a new controller starts in (``URSim()`` and ``robocritics ursim``): powered, brakes released."""
@@ -111,471 +61,6 @@ DEFAULT_ROBOT_MODE = "RUNNING"
 CLOCKS = ("realtime", "stepped")
 """How the controller's time advances (see :class:`URSim`)."""
 
-CONTROLLER_STOP_DECEL = 4.0
-"""Deceleration when the controller stops a program (watchdog, dashboard stop) [rad/s²]."""
-PROTECTIVE_STOP_DECEL = 10.0
-"""Deceleration of a protective stop [rad/s²]."""
-
-_JOINT_MODE = {RobotMode.POWER_OFF: 239, RobotMode.IDLE: 255, RobotMode.RUNNING: 253}
-_SAFETY_STATUS_BIT = {1: 0, 2: 1, 3: 2, 4: 3, 5: 4, 6: 5, 7: 6, 8: 8, 9: 9}
-"""safety_mode → its bit in ``safety_status_bits``."""
-
-LOCAL_CONTROL_REPLY = "Command is not allowed due to safety reasons: the robot is in local control"
-UNLOCK_TOO_EARLY_REPLY = (
-    "Cannot unlock protective stop until 5s after occurrence. Always inspect cause of protective stop before unlocking"
-)
-
-
-# ---------------------------------------------------------------------------- kinematics
-
-
-def _rotvec(r: list[list[float]]) -> tuple[float, float, float]:
-    tr = r[0][0] + r[1][1] + r[2][2]
-    cos = max(-1.0, min(1.0, (tr - 1.0) / 2.0))
-    angle = math.acos(cos)
-    if angle < 1e-9:
-        return (0.0, 0.0, 0.0)
-    if math.pi - angle < 1e-6:
-        # axis from the largest diagonal element of (R + I)/2
-        xx, yy, zz = (r[0][0] + 1) / 2, (r[1][1] + 1) / 2, (r[2][2] + 1) / 2
-        if xx >= yy and xx >= zz:
-            x = math.sqrt(max(xx, 0.0))
-            y, z = (r[0][1] + r[1][0]) / (4 * x), (r[0][2] + r[2][0]) / (4 * x)
-        elif yy >= zz:
-            y = math.sqrt(max(yy, 0.0))
-            x, z = (r[0][1] + r[1][0]) / (4 * y), (r[1][2] + r[2][1]) / (4 * y)
-        else:
-            z = math.sqrt(max(zz, 0.0))
-            x, y = (r[0][2] + r[2][0]) / (4 * z), (r[1][2] + r[2][1]) / (4 * z)
-        return (x * angle, y * angle, z * angle)
-    k = angle / (2 * math.sin(angle))
-    return ((r[2][1] - r[1][2]) * k, (r[0][2] - r[2][0]) * k, (r[1][0] - r[0][1]) * k)
-
-
-_ELBOW_DH = DH(d=(UR3E.dh.d[0],) + (0.0,) * 5, a=(0.0, UR3E.dh.a[1]) + (0.0,) * 4,
-               alpha=(UR3E.dh.alpha[0],) + (0.0,) * 5, name="ur3e shoulder and upper arm")
-"""The UR3e's first two DH links alone: its flange pose is the elbow frame ``T_02``."""
-
-
-def ur3e_fk(q: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, float, float]]:
-    """UR3e forward kinematics by :func:`robocritics.robot.ik.dh_forward` (flange, no tool):
-    ((x, y, z [m], rx, ry, rz [rad, rotation vector]), elbow xyz [m])."""
-    t = dh_forward(UR3E.dh, q)
-    elbow = dh_forward(_ELBOW_DH, (q[0], q[1], 0.0, 0.0, 0.0, 0.0))[:3, 3]
-    return (*(float(v) for v in t[:3, 3]), *_rotvec(t[:3, :3].tolist())), (float(elbow[0]), float(elbow[1]), float(elbow[2]))
-
-
-# ---------------------------------------------------------------------------- state
-
-
-class _State:
-    """Everything the controller knows; guarded by ``URSim._lock``."""
-
-    def __init__(self, q: Sequence[float], robot_mode: int) -> None:
-        self.tick = 0
-        self.q = [float(v) for v in q]
-        self.qd = [0.0] * 6
-        self.target_q = list(self.q)
-        self.target_qd = [0.0] * 6
-        self.target_qdd = [0.0] * 6
-        self.robot_mode = robot_mode
-        self.safety_mode = SafetyMode.NORMAL
-        self.runtime_state = RuntimeState.STOPPED
-        self.in_int = [0] * 48
-        self.in_double = [0.0] * 48
-        self.in_bits = 0  # 128 bits
-        self.out_int = [0] * 48
-        self.out_double = [0.0] * 48
-        self.out_bits = 0
-        self.digital_out = 0  # bits 0-7 standard, 8-15 configurable, 16-17 tool
-        self.analog_out = [0.0, 0.0]
-        self.speed_slider_fraction = 1.0
-        self.external_force_torque = (0.0,) * 6
-        self.gripper_opening_m = 0.0
-        self.extras: dict[str, Any] = {}
-        self.input_update_tick: dict[str, int] = {}
-        self.exec_time_ms = 0.0
-        self._fk_tick = -1
-        self._fk: tuple[tuple[float, ...], tuple[float, float, float]] = ((0.0,) * 6, (0.0, 0.0, 0.0))
-        self._tfk_tick = -1
-        self._tfk: tuple[float, ...] = (0.0,) * 6
-
-    def fk(self) -> tuple[tuple[float, ...], tuple[float, float, float]]:
-        if self._fk_tick != self.tick:
-            self._fk = ur3e_fk(self.q)
-            self._fk_tick = self.tick
-        return self._fk
-
-    def target_fk(self) -> tuple[float, ...]:
-        if self._tfk_tick != self.tick:
-            self._tfk = ur3e_fk(self.target_q)[0]
-            self._tfk_tick = self.tick
-        return self._tfk
-
-    @property
-    def powered(self) -> bool:
-        return self.robot_mode >= RobotMode.POWER_ON
-
-    def robot_status_bits(self) -> int:
-        return (1 if self.powered else 0) | (2 if self.runtime_state == RuntimeState.PLAYING else 0)
-
-    def safety_status_bits(self) -> int:
-        bits = 1 << _SAFETY_STATUS_BIT.get(self.safety_mode, 0)
-        if self.safety_mode in (SafetyMode.SYSTEM_EMERGENCY_STOP, SafetyMode.ROBOT_EMERGENCY_STOP):
-            bits |= 1 << 7
-        if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
-            bits |= 1 << 10
-        return bits
-
-
-_Z6 = (0.0,) * 6
-_Getter = Callable[[_State], Any]
-_Setter = Callable[[_State, Any, dict], None]
-
-
-def _build_outputs() -> dict[str, tuple[str, _Getter]]:
-    o: dict[str, tuple[str, _Getter]] = {
-        "timestamp": ("DOUBLE", lambda s: s.tick * DT),
-        "target_q": ("VECTOR6D", lambda s: s.target_q),
-        "target_qd": ("VECTOR6D", lambda s: s.target_qd),
-        "target_qdd": ("VECTOR6D", lambda s: s.target_qdd),
-        "target_current": ("VECTOR6D", lambda s: _Z6),
-        "target_moment": ("VECTOR6D", lambda s: _Z6),
-        "actual_q": ("VECTOR6D", lambda s: s.q),
-        "actual_qd": ("VECTOR6D", lambda s: s.qd),
-        "actual_current": ("VECTOR6D", lambda s: _Z6),
-        "actual_current_window": ("VECTOR6D", lambda s: _Z6),
-        "actual_current_as_torque": ("VECTOR6D", lambda s: _Z6),
-        "joint_control_output": ("VECTOR6D", lambda s: _Z6),
-        "actual_TCP_pose": ("VECTOR6D", lambda s: s.fk()[0]),
-        "actual_TCP_speed": ("VECTOR6D", lambda s: _Z6),
-        "actual_TCP_force": ("VECTOR6D", lambda s: _Z6),
-        "target_TCP_pose": ("VECTOR6D", lambda s: s.target_fk()),
-        "target_TCP_speed": ("VECTOR6D", lambda s: _Z6),
-        "actual_digital_input_bits": ("UINT64", lambda s: 0),
-        "joint_temperatures": ("VECTOR6D", lambda s: (25.0,) * 6),
-        "actual_execution_time": ("DOUBLE", lambda s: s.exec_time_ms),
-        "robot_mode": ("INT32", lambda s: s.robot_mode),
-        "joint_mode": ("VECTOR6INT32", lambda s: (_JOINT_MODE.get(s.robot_mode, 239),) * 6),
-        "safety_mode": ("INT32", lambda s: s.safety_mode),
-        "safety_status": ("INT32", lambda s: s.safety_mode),
-        "actual_tool_accelerometer": ("VECTOR3D", lambda s: (0.0, 0.0, 9.81)),
-        "speed_scaling": ("DOUBLE", lambda s: s.speed_slider_fraction),
-        "target_speed_fraction": ("DOUBLE", lambda s: s.speed_slider_fraction),
-        "actual_momentum": ("DOUBLE", lambda s: 0.0),
-        "actual_main_voltage": ("DOUBLE", lambda s: 48.0),
-        "actual_robot_voltage": ("DOUBLE", lambda s: 48.0 if s.powered else 0.0),
-        "actual_robot_current": ("DOUBLE", lambda s: 0.4 if s.powered else 0.0),
-        "actual_joint_voltage": ("VECTOR6D", lambda s: (48.0,) * 6 if s.powered else _Z6),
-        "actual_digital_output_bits": ("UINT64", lambda s: s.digital_out),
-        "runtime_state": ("UINT32", lambda s: s.runtime_state),
-        "elbow_position": ("VECTOR3D", lambda s: s.fk()[1]),
-        "elbow_velocity": ("VECTOR3D", lambda s: (0.0, 0.0, 0.0)),
-        "robot_status_bits": ("UINT32", lambda s: s.robot_status_bits()),
-        "safety_status_bits": ("UINT32", lambda s: s.safety_status_bits()),
-        "joint_position_deviation_ratio": ("DOUBLE", lambda s: 0.0),
-        "collision_detection_ratio": ("DOUBLE", lambda s: 0.0),
-        "time_scale_source": ("INT32", lambda s: 0),
-        "analog_io_types": ("UINT32", lambda s: 0),
-        "standard_analog_input0": ("DOUBLE", lambda s: 0.0),
-        "standard_analog_input1": ("DOUBLE", lambda s: 0.0),
-        "standard_analog_output0": ("DOUBLE", lambda s: s.analog_out[0]),
-        "standard_analog_output1": ("DOUBLE", lambda s: s.analog_out[1]),
-        "io_current": ("DOUBLE", lambda s: 0.0),
-        "euromap67_input_bits": ("UINT32", lambda s: 0),
-        "euromap67_output_bits": ("UINT32", lambda s: 0),
-        "euromap67_24V_voltage": ("DOUBLE", lambda s: 0.0),
-        "euromap67_24V_current": ("DOUBLE", lambda s: 0.0),
-        "tool_mode": ("UINT32", lambda s: 0),
-        "tool_analog_input_types": ("UINT32", lambda s: 0),
-        "tool_analog_input0": ("DOUBLE", lambda s: 0.0),
-        "tool_analog_input1": ("DOUBLE", lambda s: 0.0),
-        "tool_output_voltage": ("INT32", lambda s: 24 if s.powered else 0),
-        "tool_output_current": ("DOUBLE", lambda s: 0.0),
-        "tool_temperature": ("DOUBLE", lambda s: 30.0),
-        "tcp_force_scalar": ("DOUBLE", lambda s: 0.0),
-        "tool_output_mode": ("UINT8", lambda s: 0),
-        "tool_digital_output0_mode": ("UINT8", lambda s: 1),
-        "tool_digital_output1_mode": ("UINT8", lambda s: 1),
-        "ft_raw_wrench": ("VECTOR6D", lambda s: _Z6),
-        "payload": ("DOUBLE", lambda s: 0.0),
-        "payload_cog": ("VECTOR3D", lambda s: (0.0, 0.0, 0.0)),
-        "payload_inertia": ("VECTOR6D", lambda s: _Z6),
-        "script_control_line": ("UINT32", lambda s: 0),
-        "output_bit_registers0_to_31": ("UINT32", lambda s: s.out_bits & 0xFFFFFFFF),
-        "output_bit_registers32_to_63": ("UINT32", lambda s: (s.out_bits >> 32) & 0xFFFFFFFF),
-        "input_bit_registers0_to_31": ("UINT32", lambda s: s.in_bits & 0xFFFFFFFF),
-        "input_bit_registers32_to_63": ("UINT32", lambda s: (s.in_bits >> 32) & 0xFFFFFFFF),
-    }
-    for n in range(64, 128):
-        o[f"output_bit_register_{n}"] = ("BOOL", lambda s, n=n: bool((s.out_bits >> n) & 1))
-        o[f"input_bit_register_{n}"] = ("BOOL", lambda s, n=n: bool((s.in_bits >> n) & 1))
-    for n in range(48):
-        o[f"output_int_register_{n}"] = ("INT32", lambda s, n=n: s.out_int[n])
-        o[f"output_double_register_{n}"] = ("DOUBLE", lambda s, n=n: s.out_double[n])
-        o[f"input_int_register_{n}"] = ("INT32", lambda s, n=n: s.in_int[n])
-        o[f"input_double_register_{n}"] = ("DOUBLE", lambda s, n=n: s.in_double[n])
-    return o
-
-
-def _set_bits(s: _State, lo: int, width: int, value: int) -> None:
-    mask = ((1 << width) - 1) << lo
-    s.in_bits = (s.in_bits & ~mask) | ((int(value) << lo) & mask)
-
-
-def _build_inputs() -> dict[str, tuple[str, _Setter]]:
-    def pend(key: str) -> _Setter:
-        return lambda s, v, p: p.__setitem__(key, v)
-
-    i: dict[str, tuple[str, _Setter]] = {
-        "speed_slider_mask": ("UINT32", pend("slider_mask")),
-        "speed_slider_fraction": ("DOUBLE", pend("slider_fraction")),
-        "standard_digital_output_mask": ("UINT8", pend("std_mask")),
-        "standard_digital_output": ("UINT8", pend("std")),
-        "configurable_digital_output_mask": ("UINT8", pend("conf_mask")),
-        "configurable_digital_output": ("UINT8", pend("conf")),
-        "tool_digital_output_mask": ("UINT8", pend("tool_mask")),
-        "tool_digital_output": ("UINT8", pend("tool")),
-        "standard_analog_output_mask": ("UINT8", pend("ao_mask")),
-        "standard_analog_output_type": ("UINT8", pend("ao_type")),
-        "standard_analog_output_0": ("DOUBLE", pend("ao0")),
-        "standard_analog_output_1": ("DOUBLE", pend("ao1")),
-        "input_bit_registers0_to_31": ("UINT32", lambda s, v, p: _set_bits(s, 0, 32, v)),
-        "input_bit_registers32_to_63": ("UINT32", lambda s, v, p: _set_bits(s, 32, 32, v)),
-        "external_force_torque": ("VECTOR6D", lambda s, v, p: setattr(s, "external_force_torque", tuple(v))),
-    }
-    for n in range(64, 128):
-        i[f"input_bit_register_{n}"] = ("BOOL", lambda s, v, p, n=n: _set_bits(s, n, 1, 1 if v else 0))
-    for n in range(48):
-        i[f"input_int_register_{n}"] = ("INT32", lambda s, v, p, n=n: s.in_int.__setitem__(n, v))
-        i[f"input_double_register_{n}"] = ("DOUBLE", lambda s, v, p, n=n: s.in_double.__setitem__(n, v))
-    return i
-
-
-def _apply_pending(s: _State, p: dict) -> None:
-    if not p:
-        return
-    if "slider_mask" in p and p["slider_mask"] & 1 and "slider_fraction" in p:
-        s.speed_slider_fraction = min(1.0, max(0.0, float(p["slider_fraction"])))
-    for key, lo in (("std", 0), ("conf", 8), ("tool", 16)):
-        mask = p.get(key + "_mask", 0) & (0xFF if key != "tool" else 0x3)
-        if mask:
-            val = p.get(key, 0)
-            s.digital_out = (s.digital_out & ~(mask << lo)) | ((val & mask) << lo)
-    ao_mask = p.get("ao_mask", 0)
-    if ao_mask & 1 and "ao0" in p:
-        s.analog_out[0] = float(p["ao0"])
-    if ao_mask & 2 and "ao1" in p:
-        s.analog_out[1] = float(p["ao1"])
-
-
-KNOWN_OUTPUTS: dict[str, tuple[str, _Getter]] = _build_outputs()
-"""Output fields the loopback controller knows: name → (RTDE type, getter)."""
-KNOWN_INPUTS: dict[str, tuple[str, _Setter]] = _build_inputs()
-"""Input fields the loopback controller accepts: name → (RTDE type, setter)."""
-
-FIELDBUS_FIELDS = frozenset(
-    [f"input_int_register_{n}" for n in range(24)]
-    + [f"input_double_register_{n}" for n in range(24)]
-    + ["input_bit_registers0_to_31", "input_bit_registers32_to_63"]
-)
-"""Inputs a configured fieldbus (EtherNet/IP, PROFINET) owns: registers 0-23 and bit registers 0-63."""
-
-
-# ---------------------------------------------------------------------------- public records
-
-
-@dataclass(frozen=True)
-class SimEvent:
-    """Something that happened in the controller: ``time_s`` is controller time [s]."""
-
-    time_s: float
-    kind: str
-    message: str
-
-
-@dataclass(frozen=True)
-class SimSnapshot:
-    """A consistent copy of the controller state. Angles rad, speeds rad/s, time s."""
-
-    time_s: float
-    q: tuple[float, ...]
-    qd: tuple[float, ...]
-    target_q: tuple[float, ...]
-    robot_mode: int
-    safety_mode: int
-    runtime_state: int
-    program: str | None
-    """Name of the running program, None if none runs."""
-    program_state: int
-    """output_int_register_25 (the streaming program's state)."""
-    applied_seq: int
-    """output_int_register_24 (last sequence number the program applied)."""
-    gripper_opening_m: float
-    digital_out: int
-    program_time_s: float = 0.0
-    """Controller time the running program has run [s] (0 if none runs)."""
-
-    @property
-    def robot_mode_name(self) -> str:
-        return _enum_name(RobotMode, self.robot_mode)
-
-    @property
-    def safety_mode_name(self) -> str:
-        return _enum_name(SafetyMode, self.safety_mode)
-
-    @property
-    def runtime_state_name(self) -> str:
-        return _enum_name(RuntimeState, self.runtime_state)
-
-
-def _enum_name(kind: type, value: int) -> str:
-    """The name of ``value`` in the IntEnum ``kind`` (``"UNKNOWN"`` if it has none)."""
-    try:
-        return kind(value).name
-    except ValueError:
-        return "UNKNOWN"
-
-
-# ---------------------------------------------------------------------------- programs
-
-
-class _StreamProgram:
-    """Our streaming program, executed one statement group per control cycle (see module doc)."""
-
-    def __init__(self, sim: "URSim", params: urscript.StreamingProgramParams) -> None:
-        self.sim = sim
-        self.p = params
-        self.name = params.name
-        self.phase = "start"
-        self.last_seq = 0
-        self.stall = 0
-        self.applied = [0.0] * 6
-        self.v_ff = [0.0] * 6
-        self.fresh = False
-        self.last_opening = -1.0
-        self.tau = max(DT, params.lookahead_time_s * 300.0 / params.gain)
-        self.wd_limit_ticks = max(1, math.ceil(1.0 / (params.watchdog_min_hz * DT) - 1e-9))
-        self.wd_armed_tick = 0
-
-    def step(self, s: _State) -> None:
-        sim = self.sim
-        if self.phase == "start":
-            s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.STARTING
-            self.wd_armed_tick = s.tick
-            q_t = s.in_double[24:30]
-            worst = max(range(6), key=lambda j: abs(q_t[j] - s.q[j]))
-            if abs(q_t[worst] - s.q[worst]) > self.p.max_start_deviation_rad:
-                s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.START_REJECTED
-                sim._end_program(
-                    "start_rejected",
-                    f"{self.name}: first setpoint of joint {worst} is {q_t[worst]:.4f} rad but the joint is at "
-                    f"{s.q[worst]:.4f} rad (> {self.p.max_start_deviation_rad} rad); not starting",
-                    CONTROLLER_STOP_DECEL,
-                )
-                return
-            self.last_seq = s.in_int[urscript.SEQ_REGISTER]
-            self.applied = list(q_t)
-            s.out_int[urscript.APPLIED_SEQ_REGISTER] = self.last_seq
-            s.out_int[urscript.SESSION_ECHO_REGISTER] = s.in_int[urscript.SESSION_REGISTER]
-            s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.STREAMING
-            self.phase = "run"
-            self._gripper(s)
-            self._servo(s)
-            return
-        if self.phase == "stopping":
-            if sim._decelerate(s, self.p.stop_deceleration_rad_s2):
-                sim._end_program("program_ended", f"{self.name} ended", None)
-            return
-        # running: the controller's watchdog first
-        last_update = max(self.wd_armed_tick, s.input_update_tick.get(urscript.WATCHDOG_VARIABLE, -1))
-        if s.tick - last_update > self.wd_limit_ticks:
-            sim._end_program(
-                "watchdog",
-                f"RTDE watchdog: {urscript.WATCHDOG_VARIABLE} not updated for "
-                f"{(s.tick - last_update) * DT:.3f} s (> 1/{self.p.watchdog_min_hz:g} Hz); program {self.name} stopped",
-                CONTROLLER_STOP_DECEL,
-            )
-            return
-        if s.in_int[urscript.COMMAND_REGISTER] == urscript.Command.DONE:
-            s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.DONE
-            sim._event("done", f"{self.name}: done command received, stopj({self.p.stop_deceleration_rad_s2:g})")
-            self.phase = "stopping"
-            self.step(s)
-            return
-        seq = s.in_int[urscript.SEQ_REGISTER]
-        if seq != self.last_seq:
-            new = s.in_double[24:30]
-            dseq = (seq - self.last_seq) & 0xFFFFFFFF
-            if dseq == 0 or dseq > 0x7FFFFFFF:
-                dseq = 1  # counter reset or went backwards: treat as one step
-            span = dseq * DT
-            for j in range(6):
-                speed = abs(new[j] - self.applied[j]) / span
-                if speed > sim.jump_margin * sim.speed_limits[j]:
-                    sim._protective_stop(
-                        f"setpoint jump on joint {j}: {new[j] - self.applied[j]:+.4f} rad in {dseq} step(s) "
-                        f"({dseq * DT * 1000:.0f} ms) needs {speed:.2f} rad/s > {sim.jump_margin:g} x limit "
-                        f"{sim.speed_limits[j]:.3f} rad/s"
-                    )
-                    return
-            self.v_ff = [(new[j] - self.applied[j]) / span for j in range(6)]
-            self.applied = list(new)
-            self.fresh = True
-            self.last_seq = seq
-            self.stall = 0
-            s.out_int[urscript.APPLIED_SEQ_REGISTER] = seq
-        else:
-            self.fresh = False
-            self.stall += 1
-            if self.stall > self.p.stall_limit_cycles:
-                s.out_int[urscript.STATE_REGISTER] = urscript.ProgramState.STALLED
-                sim._event(
-                    "stalled",
-                    f"{self.name}: sequence counter stayed at {seq} for {self.stall} cycles; stopping",
-                )
-                sim._broadcast(TextMessage("robocritics: sequence counter stalled; stopping", self.name, MessageLevel.WARNING))
-                self.phase = "stopping"
-                self.step(s)
-                return
-        self._gripper(s)
-        self._servo(s)
-
-    def _gripper(self, s: _State) -> None:
-        opening = s.in_double[urscript.GRIPPER_REGISTER]
-        if opening != self.last_opening:
-            s.gripper_opening_m = opening
-            s.out_double[urscript.GRIPPER_APPLIED_REGISTER] = opening
-            if self.p.gripper_close_below_m is not None:
-                closed = opening < self.p.gripper_close_below_m
-                s.digital_out = (s.digital_out & ~(1 << 16)) | ((1 << 16) if closed else 0)
-            self.last_opening = opening
-
-    def _servo(self, s: _State) -> None:
-        limits = self.sim.speed_limits
-        for j in range(6):
-            ff = self.v_ff[j] if self.fresh else 0.0
-            v = ff + (self.applied[j] - s.q[j]) / self.tau
-            lim = limits[j]
-            if v > lim:
-                v = lim
-            elif v < -lim:
-                v = -lim
-            s.target_qdd[j] = (v - s.qd[j]) / DT
-            s.qd[j] = v
-            s.q[j] += v * DT
-        s.target_q = list(self.applied)
-        s.target_qd = list(self.v_ff) if self.fresh else [0.0] * 6
-
-
-class _HoldProgram:
-    """A program started with the dashboard (``load`` + ``play``): it keeps the arm still."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-
-    def step(self, s: _State) -> None:
-        pass
 
 
 # ---------------------------------------------------------------------------- connections
@@ -711,6 +196,11 @@ class URSim:
             raise DeployError(f"URSim clock must be one of {', '.join(CLOCKS)}, got {clock!r}")
         if idle_after_s is not None and (clock != "stepped" or not idle_after_s > 0):
             raise DeployError(f"URSim idle_after_s needs clock='stepped' and a positive number of s, got {idle_after_s!r}")
+        for attr, number in (("rtde_port", rtde_port), ("dashboard_port", dashboard_port), ("secondary_port", secondary_port)):
+            if not (isinstance(number, int) and 0 <= number <= 65535):
+                raise DeployError(f"URSim {attr} must be a TCP port from 0 (any free one) to 65535, got {safe_text(number, 20)}")
+        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in initial_q):
+            raise DeployError(f"URSim initial_q must be 6 finite joint positions [rad], got {safe_text(list(initial_q), 200)}")
         for fields_ in (extra_outputs or {}, extra_inputs or {}):
             for n, t in fields_.items():
                 if t not in DATA_TYPES:
@@ -758,6 +248,7 @@ class URSim:
         self._drop_after_packages: int | None = None
         self._drop_at_tick: int | None = None
         self._packages_total = 0
+        self._corrupt: dict[str, tuple[int | None, Any]] = {}
         self._last_input_wall = time.monotonic()
         self.loop_overruns = 0
         """Control cycles that started more than 2 ms late (the host was busy; ``clock="realtime"``)."""
@@ -779,17 +270,18 @@ class URSim:
         try:
             for attr, handler in (
                 ("rtde_port", self._serve_rtde),
-                ("dashboard_port", self._serve_dashboard),
-                ("secondary_port", self._serve_secondary),
+                ("dashboard_port", lambda sock, peer: serve_dashboard(self, sock, peer)),
+                ("secondary_port", lambda sock, peer: serve_secondary(self, sock, peer)),
             ):
                 ls = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
                 ls.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
                 try:
                     ls.bind((self.host, getattr(self, attr)))
-                except OSError as exc:
+                except (OSError, OverflowError, UnicodeError, TypeError, ValueError) as exc:  # a bad port, host label, NUL
                     ls.close()
                     raise DeployError(
-                        f"URSim cannot listen on {self.host}:{getattr(self, attr)} ({attr}): {exc.strerror or exc}"
+                        f"URSim cannot listen on {safe_text(self.host, 80)}:{safe_text(getattr(self, attr), 20)} "
+                        f"({attr}): {getattr(exc, 'strerror', None) or exc}"
                     ) from None
                 ls.listen(8)
                 ls.settimeout(0.1)
@@ -1032,6 +524,44 @@ class URSim:
         self._silent_rtde = bool(rtde)
         self._silent_dashboard = bool(dashboard)
 
+    def corrupt_output(self, name: str, value: Any = math.nan, index: int | None = None) -> None:
+        """From now on send ``value`` (default NaN; ``math.inf``, ``-math.inf``, …) as output field ``name``, or
+        as its element ``index`` for a vector field, in every data package; ``value=None`` ends it. A field sent
+        as INT32/UINT32 cannot carry NaN: declare it as DOUBLE with ``extra_outputs`` to send one."""
+        if name not in self._outputs:
+            raise DeployError(f"URSim has no output field {safe_text(name, 80)!r}")
+        if value is not None and DATA_TYPES[self._outputs[name][0]][0] != "d" and not isinstance(value, int):
+            raise DeployError(f"URSim output {name!r} is {self._outputs[name][0]} on the wire: it cannot carry {value!r}")
+        with self._lock:
+            if value is None:
+                self._corrupt.pop(name, None)
+            else:
+                self._corrupt[name] = (index, value)
+
+    def inject_packages(self, command: int, payload: bytes = b"", count: int = 1, raw: bytes | None = None) -> None:
+        """Send ``count`` packages of type ``command`` with ``payload`` to every RTDE client now (a flood, an
+        unknown type, a reply nobody asked for); ``raw`` sends those bytes as they are instead (a truncated or
+        malformed package)."""
+        data = raw if raw is not None else pack_package(command, payload)
+        with self._lock:
+            conns = list(self._conns)
+        for c in conns:
+            for _ in range(int(count)):
+                if c.closed:  # the client gave up on the flood
+                    break
+                self._queue(c, data)
+                if len(c.outbuf) > 1 << 20:
+                    self._flush_blocking(c)
+            self._flush_blocking(c)
+
+    def _flush_blocking(self, conn: _RTDEConn) -> None:
+        """Send everything queued for ``conn`` now, waiting for the client to read (bounded by its timeout)."""
+        deadline = time.monotonic() + self.slow_client_timeout_s
+        while conn.outbuf and not conn.closed and time.monotonic() < deadline:
+            self._flush(conn)
+            if conn.outbuf:
+                time.sleep(0.001)
+
     def set_remote_control(self, enabled: bool) -> None:
         """Switch between remote control (True) and local control (False)."""
         self.remote_control = bool(enabled)
@@ -1247,7 +777,7 @@ class URSim:
             except Exception as exc:
                 self._send_text(conn, TextMessage(f"malformed text message: {exc}", "RTDE", MessageLevel.ERROR))
                 return
-            self._event("client_message", f"{conn.peer} [{msg.source}] {msg.level_name}: {msg.message}")
+            self._event("client_message", safe_text(f"{conn.peer} [{msg.source}] {msg.level_name}: {msg.message}", 600))
         else:
             self._send_text(conn, TextMessage(f"unknown RTDE package type {cmd}", "RTDE", MessageLevel.ERROR))
 
@@ -1347,13 +877,29 @@ class URSim:
                 rec.acc -= 1.0
                 if rec.acc > 1.0:
                     rec.acc = 0.0
-                body = rec.recipe.pack_values([g(s) for g in rec.getters])
+                values = [g(s) for g in rec.getters]
+                if self._corrupt:
+                    values = self._corrupted(rec.recipe.names, values)
+                body = rec.recipe.pack_values(values)
                 if conn.protocol >= 2:
                     body = bytes((rid,)) + body
                 with conn.lock:
                     conn.outbuf += pack_package(Command.DATA_PACKAGE, body)
                 conn.packages_sent += 1
                 self._packages_total += 1
+
+    def _corrupted(self, names: Sequence[str], values: list[Any]) -> list[Any]:
+        out = list(values)
+        for i, name in enumerate(names):
+            if name in self._corrupt:
+                index, value = self._corrupt[name]
+                if index is None:
+                    out[i] = value
+                else:
+                    vec = list(out[i])
+                    vec[index] = value
+                    out[i] = vec
+        return out
 
     def _queue(self, conn: _RTDEConn, data: bytes) -> None:
         with conn.lock:
@@ -1410,170 +956,6 @@ class URSim:
             for c in conns:
                 self._close_conn(c, f"injected connection drop after {c.packages_sent} data packages")
 
-    # ------------------------------------------------------------------ dashboard server
-
-    def _serve_dashboard(self, sock: socket.socket, peer: str) -> None:
-        with self._aux_connection(sock):
-            sock.sendall(b"Connected: Universal Robots Dashboard Server\n")
-            f = sock.makefile("rb")
-            for raw in f:
-                line = raw.decode("utf-8", "replace").strip()
-                if not line:
-                    continue
-                reply, close = self._dashboard_command(line)
-                self._event("dashboard", f"{peer}: {line!r} -> {reply!r}")
-                if self._silent_dashboard:
-                    continue
-                if self._reply_delay_s:
-                    time.sleep(self._reply_delay_s)
-                sock.sendall(reply.encode("utf-8") + b"\n")
-                if close:
-                    break
-
-    def _dashboard_command(self, line: str) -> tuple[str, bool]:
-        low = re.sub(r"\s+", " ", line.strip()).lower()
-        with self._lock:
-            s = self._state
-            remote = self.remote_control
-            if low == "quit":
-                return "Disconnected", True
-            if low == "robotmode":
-                return f"Robotmode: {_enum_name(RobotMode, s.robot_mode)}", False
-            if low == "safetystatus":
-                return f"Safetystatus: {_enum_name(SafetyMode, s.safety_mode)}", False
-            if low == "safetymode":
-                return f"Safetymode: {_enum_name(SafetyMode, s.safety_mode)}", False
-            if low == "is in remote control":
-                return ("true" if remote else "false"), False
-            if low == "running":
-                return f"Program running: {'true' if s.runtime_state == RuntimeState.PLAYING else 'false'}", False
-            if low == "programstate":
-                state = _enum_name(RuntimeState, s.runtime_state)
-                name = self._program.name if self._program is not None else (self._loaded_program or "<unnamed>")
-                return f"{state} {name}", False
-            if low == "polyscopeversion":
-                return "URSoftware {}.{}.{}.{} (robocritics URSim)".format(*self.controller_version), False
-            if low == "get robot model":
-                return self.model.dashboard_model, False
-            if low == "get loaded program":
-                return (f"Loaded program: {self._loaded_program}" if self._loaded_program else "No program loaded"), False
-            if low == "close safety popup":
-                return "closing safety popup", False
-            if low == "close popup":
-                return "closing popup", False
-            if low in ("power on", "power off", "brake release", "play", "stop", "pause", "unlock protective stop") or low.startswith("load "):
-                if not remote:
-                    return LOCAL_CONTROL_REPLY, False
-            if low == "power on":
-                if s.robot_mode < RobotMode.IDLE:
-                    s.robot_mode = RobotMode.IDLE
-                return "Powering on", False
-            if low == "power off":
-                if self._program is not None:
-                    self._end_program("program_ended", f"{self._program.name} stopped: power off", None)
-                s.robot_mode = RobotMode.POWER_OFF
-                s.qd = [0.0] * 6
-                self._stopping_decel = None
-                return "Powering off", False
-            if low == "brake release":
-                s.robot_mode = RobotMode.RUNNING
-                return "Brake releasing", False
-            if low.startswith("load "):
-                prog = line.strip()[5:].strip()
-                if not prog.endswith(".urp"):
-                    return f"File not found: {prog}", False
-                self._loaded_program = prog
-                return f"Loading program: {prog}", False
-            if low == "play":
-                if self._loaded_program is None or s.robot_mode != RobotMode.RUNNING or s.safety_mode != SafetyMode.NORMAL:
-                    return "Failed to execute: play", False
-                if self._program is None:
-                    self._start_program(_HoldProgram(self._loaded_program))
-                elif s.runtime_state == RuntimeState.PAUSED:
-                    s.runtime_state = RuntimeState.PLAYING
-                return "Starting program", False
-            if low == "stop":
-                if self._program is None:
-                    return "Failed to execute: stop", False
-                self._end_program("program_ended", f"{self._program.name} stopped from the dashboard", CONTROLLER_STOP_DECEL)
-                return "Stopped", False
-            if low == "pause":
-                if self._program is None:
-                    return "Failed to execute: pause", False
-                s.runtime_state = RuntimeState.PAUSED
-                return "Pausing program", False
-            if low == "unlock protective stop":
-                if s.safety_mode == SafetyMode.PROTECTIVE_STOP:
-                    since = (s.tick - (self._protective_stop_tick or 0)) * DT
-                    if since < self.unlock_delay_s:
-                        return UNLOCK_TOO_EARLY_REPLY, False
-                    s.safety_mode = SafetyMode.NORMAL
-                    self._event("protective_stop_released", "protective stop released from the dashboard")
-                return "Protective stop releasing", False
-        return f"could not understand: '{line}'", False
-
-    # ------------------------------------------------------------------ secondary interface
-
-    def _serve_secondary(self, sock: socket.socket, peer: str) -> None:
-        text = ""
-        with self._aux_connection(sock):
-            while self._running.is_set():
-                chunk = sock.recv(65536)
-                if not chunk:
-                    break
-                text += chunk.decode("utf-8", "replace")
-                text = self._take_programs(text, peer, final=False)
-            self._take_programs(text, peer, final=True)
-
-    def _take_programs(self, text: str, peer: str, final: bool) -> str:
-        while True:
-            m = re.search(r"^end[ \t]*\r?$", text, flags=re.MULTILINE)
-            if m is None or not re.search(r"^def\s", text[: m.start()], flags=re.MULTILINE):
-                break
-            self._receive_script(text[: m.end()], peer)
-            text = text[m.end() :].lstrip("\r\n")
-        if final and text.strip():
-            self._receive_script(text, peer)
-            text = ""
-        return text
-
-    def _receive_script(self, script: str, peer: str) -> None:
-        with self._lock:
-            s = self._state
-            reason = None
-            params = None
-            if not self.remote_control:
-                reason = "the robot is in local control (enable remote control on the teach pendant)"
-            elif s.robot_mode != RobotMode.RUNNING:
-                reason = f"the robot is not running (robot mode {_enum_name(RobotMode, s.robot_mode)}); power on and release the brakes"
-            elif s.safety_mode != SafetyMode.NORMAL:
-                reason = f"safety mode is {_enum_name(SafetyMode, s.safety_mode)}; unlock the protective stop first"
-            else:
-                try:
-                    params = urscript.parse_streaming_program(script)
-                except DeployError as exc:
-                    reason = f"{exc} — this loopback controller only runs robocritics streaming programs"
-            if reason is not None or params is None:
-                msg = f"program from {peer} rejected: {reason}"
-                self._event("program_rejected", msg)
-                self._broadcast(TextMessage(msg, "Controller", MessageLevel.ERROR))
-                return
-            if self._program is not None:
-                self._event("program_ended", f"{self._program.name} replaced by a new program")
-            self._start_program(_StreamProgram(self, params))
-            # a client that sends a program is active: no idle cycle before its next setpoint is read
-            self._last_input_wall = time.monotonic()
-
-
-def _extra_getter(name: str, t: str) -> _Getter:
-    return lambda s: s.extras.get(name, _zero(t))
-
-
-def _zero(t: str) -> Any:
-    code, count = DATA_TYPES[t]
-    one: Any = False if code == "?" else 0.0 if code == "d" else 0
-    return (one,) * count if count > 1 else one
-
 
 def _field_names(text: bytes) -> list[str]:
     """The field names of a recipe setup request (comma-separated ASCII)."""
@@ -1589,61 +971,3 @@ def _shutdown(sock: socket.socket) -> None:
         sock.close()
     except OSError:
         pass
-
-
-# ---------------------------------------------------------------------------- CLI
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``robocritics ursim``: run the loopback controller until Ctrl-C."""
-    ap = argparse.ArgumentParser(prog="robocritics ursim", description="Loopback UR3e controller (RTDE, Dashboard, secondary interface) on 127.0.0.1.")
-    ap.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    ap.add_argument("--rtde-port", type=int, default=30004, help="RTDE port (0 = any free port; default 30004)")
-    ap.add_argument("--dashboard-port", type=int, default=29999, help="Dashboard port (default 29999)")
-    ap.add_argument("--secondary-port", type=int, default=30002, help="secondary interface port (default 30002)")
-    ap.add_argument("--initial-q", type=float, nargs=6, metavar="RAD",
-                    help="initial joint positions [rad] (default the robot model's home pose, where `simulate` starts)")
-    ap.add_argument("--robot-mode", default=DEFAULT_ROBOT_MODE, choices=["POWER_OFF", "IDLE", "RUNNING"],
-                    help=f"initial robot mode (default {DEFAULT_ROBOT_MODE})")
-    ap.add_argument("--local-control", action="store_true", help="start in local control (programs are refused)")
-    ap.add_argument("--fieldbus", action="store_true", help="a fieldbus holds input registers 0-23")
-    ap.add_argument("--protocol", type=int, choices=[1, 2], default=2, help="highest RTDE protocol version accepted")
-    ap.add_argument("--model", default="ur3e", choices=list(ARMS),
-                    help="which arm to be: home pose, speed limits, 'get robot model' answer (default ur3e)")
-    ap.add_argument("-v", "--verbose", action="store_true", help="log every event")
-    args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
-    sim = URSim(
-        host=args.host,
-        rtde_port=args.rtde_port,
-        dashboard_port=args.dashboard_port,
-        secondary_port=args.secondary_port,
-        initial_q=args.initial_q,
-        robot_mode=args.robot_mode,
-        remote_control=not args.local_control,
-        fieldbus_registers=args.fieldbus,
-        protocol_versions=tuple(range(1, args.protocol + 1)),
-        model=args.model,
-    )
-    try:
-        sim.start()
-    except DeployError as exc:
-        print(f"error: {exc}")
-        return 2
-    print(
-        f"URSim on {sim.host}: RTDE {sim.rtde_port}, dashboard {sim.dashboard_port}, "
-        f"secondary {sim.secondary_port} — Ctrl-C to stop",
-        flush=True,
-    )
-    try:
-        while True:
-            time.sleep(0.5)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sim.stop()
-    return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())

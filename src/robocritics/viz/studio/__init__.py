@@ -4,6 +4,7 @@
 resource-limited :class:`~robocritics.viz.studio.worker.Evaluator`. See docs/studio.md.
 """
 
-from .server import Studio, StudioError, is_loopback
+from .common import StudioBusy, StudioError, is_loopback
+from .server import Studio
 
-__all__ = ["Studio", "StudioError", "is_loopback"]
+__all__ = ["Studio", "StudioBusy", "StudioError", "is_loopback"]

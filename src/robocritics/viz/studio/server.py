@@ -1,134 +1,74 @@
-"""The studio's HTTP server: one inlined page and a small JSON API, on loopback by default.
+"""The studio: its state (revisions, chat, the one running job, the last deploy) and the work behind the API.
 
 Security model (docs/studio.md): the studio can move a robot, so
 
 * it binds 127.0.0.1 unless told otherwise, and :class:`Studio` refuses a non-loopback host without a token;
-* with a token, every request (page and API) must carry it (``?token=`` for the page, the ``X-Studio-Token``
-  header for API calls), compared with :func:`hmac.compare_digest`; otherwise 401;
+* with a token, every request (page and API) must carry it: ``?token=`` on the first visit (the page then gets
+  it as an HttpOnly, SameSite=Strict cookie and drops it from its address), the cookie, or the
+  ``X-Studio-Token`` header; compared with :func:`hmac.compare_digest`; otherwise 401;
 * even without a token, other web sites open in the same browser are kept out: API calls need
   ``Content-Type: application/json`` and the ``X-Studio`` header (a cross-origin page cannot send either without
   a CORS preflight, which is never answered), the ``Host`` header must name the bound port on a loopback name
   (DNS rebinding), and an ``Origin``, when present, must be the studio's own;
-* request bodies are capped at :data:`MAX_BODY_BYTES` and programs at :data:`MAX_PROGRAM_CHARS`.
+* request bodies are capped at :data:`MAX_BODY_BYTES` and programs at :data:`MAX_PROGRAM_CHARS`; a body that is
+  not what a route takes is a 400 with a JSON error (:mod:`.handler`).
 
-Simulation runs in the :class:`~robocritics.viz.studio.worker.Evaluator`'s resource-limited child process; the
-server is threaded, so other requests are answered while a run or an LLM call is going.
+Work is one job at a time (:mod:`.jobs`): a Run, a Fix or chat turn, a repair, a Deploy. Simulation runs in the
+:class:`~robocritics.viz.studio.worker.Evaluator`'s resource-limited child process; the server is threaded, so
+every page keeps polling ``GET /api/state`` (the job, its progress, a pending approval, the chat) while one runs.
 """
 
 from __future__ import annotations
 
-import hmac
-import logging
-import sys
-import ipaddress
-import json
 import threading
 import time
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Iterator
-from urllib.parse import parse_qs, urlsplit
 
 from ...errors import RoboCriticsError
+from .common import (APPROVAL_TIMEOUT_S, CANCELLED_TURN_WAIT_S, CHAT_ENTRY_CHARS, CHAT_LOG_ENTRIES, MAX_BODY_BYTES,
+                     MAX_CHAT_CHARS, MAX_PROGRAM_CHARS, StudioBusy, StudioError, is_loopback)
+from .jobs import Busy, Cancelled, Job, JobBoard
+from .imported import IMPORTED_DEPLOY, imported_motion, recording_summary
+from .revisions import FULL_REVISIONS, Revision
 
-__all__ = ["Studio", "StudioError", "is_loopback", "MAX_BODY_BYTES", "MAX_PROGRAM_CHARS", "APPROVAL_TIMEOUT_S"]
+__all__ = ["Studio", "StudioError", "StudioBusy", "is_loopback", "MAX_BODY_BYTES", "MAX_PROGRAM_CHARS",
+           "APPROVAL_TIMEOUT_S", "MAX_CHAT_CHARS"]
 
-#: Largest request body accepted, bytes.
-MAX_BODY_BYTES = 1_000_000
-#: Longest program accepted, characters.
-MAX_PROGRAM_CHARS = 200_000
-#: Seconds a revision waits for the page's approve/reject before it is rejected.
-APPROVAL_TIMEOUT_S = 600.0
-#: Longest chat message accepted, characters.
-MAX_CHAT_CHARS = 20_000
-
-
-class _QuietServer(ThreadingHTTPServer):
-    """A browser that closes a connection mid-request is normal, not a traceback on stderr; other errors are logged."""
-
-    def handle_error(self, request, client_address) -> None:
-        exc = sys.exc_info()[1]
-        if isinstance(exc, (ConnectionError, TimeoutError)):
-            return
-        logging.getLogger(__name__).exception("studio: request from %s failed", client_address[0])
-
-
-class StudioError(RoboCriticsError):
-    """The studio cannot start as configured (e.g. a non-loopback host without a token)."""
-
-
-def is_loopback(host: str) -> bool:
-    """True for ``localhost``, any 127.0.0.0/8 address and ::1."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
-    except ValueError:
-        return False
-
-
-#: Error types of a program that does not run (sandbox, planning, motion budget): reported by the runtime critic.
-RUNTIME_ERRORS = ("ProgramError", "PlanningError", "MotionBudgetError")
-
-
-class _Revision:
-    """One checked program: a user Run or an LLM attempt."""
-
-    def __init__(self, index: int, kind: str, program: str, execution=None, report=None, error: str | None = None,
-                 diff: str = "", duration_s: float = 0.0):
-        self.index = index
-        self.kind = kind
-        self.program = program
-        self.execution = execution
-        self.report = report
-        self.error = error
-        self.diff = diff
-        self.duration_s = duration_s
-
-    def summary(self) -> dict[str, Any]:
-        return {
-            "index": self.index,
-            "kind": self.kind,
-            "score": None if self.report is None else self.report.score,
-            "has_errors": self.report is None or self.report.has_errors,
-            "error": self.error,
-        }
-
-    def full(self) -> dict[str, Any]:
-        from .. import replay_data
-
-        verdicts = []
-        if self.report is not None:
-            for v in self.report.verdicts:
-                verdicts.append({
-                    "critic": v.critic, "flag": v.flag.value.lower(), "message": v.message, "hint": v.hint,
-                    "lines": list(v.evidence.lines),
-                })
-        return {
-            **self.summary(),
-            "program": self.program,
-            "diff": self.diff,
-            "verdicts": verdicts,
-            "feedback": self.error if self.report is None else self.report.feedback(),
-            "replay": None if self.execution is None else replay_data(self.execution, self.report),
-            "duration_s": self.duration_s,
-        }
+def _subset(report, selected: set[str]):
+    """``report`` with only the verdicts of the ``selected`` critics (their score)."""
+    return report.model_copy(update={"verdicts": [v for v in report.verdicts if v.critic in selected]})
 
 
 class Studio:
     """The studio web app for one scene.
 
     ``Studio(scene, program=None, *, host="127.0.0.1", port=0, token=None, model=None, deploy=None,
-    critics=None, evaluator=None)``: ``scene`` a :class:`~robocritics.scene.Scene` (or its name/path);
-    ``program`` the editor's first text; ``model`` a :class:`~robocritics.llm.client.ChatModel` for chat and Fix
-    (None: both disabled, the page says why); ``deploy`` ``{"host", "rtde_port", "dashboard_port",
+    critics=None, goals=None, timeout_s=60, run_program=False, approval_timeout_s=APPROVAL_TIMEOUT_S)``:
+    ``scene`` a :class:`~robocritics.scene.Scene` (or its name/path); ``program`` the editor's first text
+    (``run_program``: Run it as soon as the studio starts); ``model`` a
+    :class:`~robocritics.llm.client.ChatModel` for chat and Fix (None: chat disabled, the page says why; Fix
+    applies the critics' own repairs only); ``deploy`` ``{"host", "rtde_port", "dashboard_port",
     "secondary_port"}`` of a UR controller (None: Deploy disabled); ``critics`` the critics run (default: all
-    installed); ``timeout_s`` the wall-clock bound of one simulation, s.
+    installed); ``timeout_s`` the wall-clock bound of one simulation, s; ``approval_timeout_s`` how long a
+    revision waits for Approve/Reject before it counts as rejected, s.
+
+    ``motion``: the path of motion from another tool (:mod:`robocritics.formats`) to judge instead of a program:
+    a URScript file (its text is the editor's, Run checks the edited script; the critics name its lines) or a
+    recording (ur_rtde or generic CSV, JointTrajectory JSON, MoveIt YAML, rosbag2: the editor shows a read-only
+    summary whose findings name times). Both are read and run in the worker's limited child. Fix and chat are off
+    for them (the repairs and the model write the skill API, not URScript, and a recording has no program), and
+    so is Deploy (:data:`IMPORTED_DEPLOY`). ``motion_options``: the options of
+    :meth:`~.worker.Evaluator.evaluate_motion` (a script's installation: ``tcp``, ``payload_kg``, ``start_q``,
+    ``gripper_io``, ``passes``; a rosbag's ``topic``).
     """
 
     def __init__(self, scene, program: str | None = None, *, host: str = "127.0.0.1", port: int = 0,
                  token: str | None = None, model=None, deploy: dict[str, Any] | None = None, critics=None,
-                 goals=None, timeout_s: float = 60.0, no_model_reason: str = "no LLM endpoint is configured (start the studio "
-                 "with --base-url and --model)"):
+                 goals=None, timeout_s: float = 60.0, run_program: bool = False,
+                 approval_timeout_s: float = APPROVAL_TIMEOUT_S,
+                 no_model_reason: str = "no LLM endpoint is configured (start the studio with --base-url and --model)",
+                 motion=None, motion_options: dict[str, Any] | None = None):
+        from ...goals import parse_goals
         from ...scene import Scene
 
         if not is_loopback(host) and not token:
@@ -142,34 +82,54 @@ class Studio:
         self.no_model_reason = no_model_reason
         self.deploy_target = dict(deploy) if deploy else None
         self.critics = list(critics) if critics else None
-        from ...goals import parse_goals
-
         self.goals = parse_goals(goals, self.scene)  # a bad goal (GoalError) fails here, before serving
+        self.motion = imported_motion(motion, bool(self.goals)) if motion is not None else None
+        self.motion_options = dict(motion_options or {})
+        if self.motion is not None and self.motion["kind"] == "urscript" and not self.program:
+            self.program = self.motion.pop("text")
+        if self.motion is not None:
+            self.motion.pop("text", None)
         self.timeout_s = float(timeout_s)
-        self.revisions: list[_Revision] = []
+        self.run_program = bool(run_program)
+        self.revisions: list[Revision] = []
+        self.chat_log: list[dict[str, str]] = []
+        self.chat_version = 0  # entries ever said (the log keeps the last CHAT_LOG_ENTRIES)
+        self.jobs = JobBoard(approval_timeout_s)
+        self.last_deploy: dict[str, Any] | None = None
         self._lock = threading.Lock()
-        self._run_lock = threading.Lock()  # one simulation / LLM turn at a time
         self._evaluator = None
         self._evaluator_lock = threading.Lock()
         self._loop = None
-        self._approvals: dict[int, dict[str, Any]] = {}
-        self._approval_cond = threading.Condition(self._lock)
-        self._events: list[dict[str, Any]] = []  # the events of the LLM turn in progress
-        self._server: ThreadingHTTPServer | None = None
+        self._turn_thread: threading.Thread | None = None
+        self._turn_job: Job | None = None
+        self._attempt_revision: dict[int, int] = {}  # Loop attempt index -> revision number
+        self._selected: list[str] | None = None
+        from ...plugins import get_critics
+
+        self._installed: list[str] = list(get_critics())  # the critics ticked on the page of the running turn
+        self._server = None
         self._thread: threading.Thread | None = None
         self._requested_port = int(port)
 
     # --- lifecycle -------------------------------------------------------------------------------
 
     def start(self) -> "Studio":
-        handler = type("StudioHandler", (_Handler,), {"studio": self})
-        self._server = _QuietServer((self.host, self._requested_port), handler)
-        self._server.daemon_threads = True
+        from .handler import serve
+
+        self._server = serve(self, self.host, self._requested_port)
         self._thread = threading.Thread(target=self._server.serve_forever, name="robocritics-studio", daemon=True)
         self._thread.start()
-        # Warm the worker (imports, robot model) now, so the first Run does not pay for it.
-        threading.Thread(target=lambda: self.evaluator, name="robocritics-studio-warm", daemon=True).start()
+        # Warm the worker (imports, robot model) now, so the first Run does not pay for it; Run --program.
+        first = (self._initial_run if self.run_program and (self.program.strip() or self.motion)
+                 else (lambda: self.evaluator))
+        threading.Thread(target=first, name="robocritics-studio-warm", daemon=True).start()
         return self
+
+    def _initial_run(self) -> None:
+        try:
+            self.run(self.program)
+        except (StudioError, RoboCriticsError):
+            pass  # e.g. closed while starting: the page shows the editor's text
 
     @property
     def port(self) -> int:
@@ -182,15 +142,25 @@ class Studio:
         query = f"?token={self.token}" if self.token else ""
         return f"http://{host}:{self.port}/{query}"
 
+    def urls(self) -> list[str]:
+        """The URLs to open: :attr:`url`, or for a wildcard host (0.0.0.0, ::) one per address of this machine."""
+        from .addresses import local_addresses
+
+        if self.host not in ("0.0.0.0", "::", ""):
+            return [self.url]
+        query = f"?token={self.token}" if self.token else ""
+        return [f"http://{f'[{a}]' if ':' in a else a}:{self.port}/{query}"
+                for a in local_addresses(ipv6=self.host == "::")]
+
     def stop(self) -> None:
         if self._server is not None:
             self._server.shutdown()
             self._server.server_close()
             self._server = None
-        with self._lock:
-            for pending in self._approvals.values():
-                pending.setdefault("answer", False)
-            self._approval_cond.notify_all()
+        job = self.jobs.cancel("the studio is stopping")
+        deadline = time.monotonic() + 5.0
+        while job is not None and not job.done and time.monotonic() < deadline:  # a deploy stops the arm first
+            time.sleep(0.05)
         if self._evaluator is not None:
             self._evaluator.close()
             self._evaluator = None
@@ -212,7 +182,7 @@ class Studio:
         finally:
             self.stop()
 
-    # --- the work behind the API -------------------------------------------------------------------
+    # --- state -------------------------------------------------------------------------------------
 
     @property
     def evaluator(self):
@@ -226,64 +196,149 @@ class Studio:
             return self._evaluator
 
     def installed_critics(self) -> list[str]:
-        from ...plugins import get_critics
+        """The installed critics' names (read once, before serving: every page polls the state, and the plugin
+        registry is not meant to be read from many request threads at once)."""
+        return list(self._installed)
 
-        return list(get_critics())
-
-    def state(self) -> dict[str, Any]:
+    def state(self, chat_seen: int | None = None) -> dict[str, Any]:
+        """Everything every page shows. ``chat_seen``: the ``chat_version`` the page has; its ``chat_log`` is
+        None when nothing was said since (every page polls this)."""
+        with self._lock:
+            revisions = [r.summary() for r in self.revisions]
+            chat_log = None if chat_seen == self.chat_version else list(self.chat_log)
         return {
             "scene": self.scene.name,
             "program": self.program,
             "critics": self.installed_critics(),
             "selected": self.critics or self.installed_critics(),
             "goals": [str(g) for g in self.goals],
-            "chat": None if self.model is not None else self.no_model_reason,
-            "deploy": None if self.deploy_target else "no UR controller is configured (--deploy-host)",
-            "revisions": [r.summary() for r in self.revisions],
+            "chat": self.motion["why"] if self.motion else None if self.model is not None else self.no_model_reason,
+            "deploy": IMPORTED_DEPLOY if self.motion else None if self.deploy_target else
+            "no UR controller is configured (--deploy-host)",
+            "motion": None if self.motion is None else {k: self.motion[k] for k in ("kind", "name", "why")},
+            "revisions": revisions,
             "max_program_chars": MAX_PROGRAM_CHARS,
+            "full_revisions": FULL_REVISIONS,
+            "job": self.jobs.snapshot(),
+            "chat_log": chat_log,
+            "chat_version": self.chat_version,
+            "last_deploy": self.last_deploy,
         }
 
-    def _add(self, revision_kwargs: dict[str, Any]) -> _Revision:
+    def revision(self, index: int) -> Revision:
         with self._lock:
-            revision = _Revision(len(self.revisions) + 1, **revision_kwargs)
+            if not 0 < index <= len(self.revisions):
+                raise LookupError(f"there is no revision {index}")
+            return self.revisions[index - 1]
+
+    def _say(self, role: str, text: str) -> None:
+        """Add to the chat every page shows (``role``: user, assistant or note)."""
+        text = text if len(text) <= CHAT_ENTRY_CHARS else text[:CHAT_ENTRY_CHARS] + " …(cut)"
+        with self._lock:
+            self.chat_log.append({"role": role, "text": text})
+            self.chat_version += 1
+            del self.chat_log[:-CHAT_LOG_ENTRIES]
+
+    def _add(self, kind: str, program: str, execution, full_report, error: str | None, *, diff: str = "",
+             duration_s: float = 0.0, selected: list[str] | None = None) -> Revision:
+        """Record a revision (the next number); compact the ones older than the last FULL_REVISIONS."""
+        shown = full_report
+        if full_report is not None and selected is not None:
+            shown = _subset(full_report, set(selected) | {"runtime", "task_outcome"})
+        with self._lock:
+            revision = Revision(len(self.revisions) + 1, kind, program, execution=execution, report=shown,
+                                error=error, diff=diff, duration_s=duration_s, deploy_report=full_report)
             self.revisions.append(revision)
-            return revision
-
-    def run(self, program: str, critics: list[str] | None = None) -> _Revision:
-        """Simulate and critique ``program`` in the worker; record and return the revision."""
-        with self._run_lock:
-            evaluation = self.evaluator.evaluate(program, critics=critics or None)
-            error, report = None, evaluation.report
-            if evaluation.error is not None:
-                e = evaluation.error
-                where = f" (line {e['line']})" if e.get("line") else ""
-                error = f"{e['type']}{where}: {e['message']}"
-                if e["type"] in RUNTIME_ERRORS:  # the runtime critic's Error verdict: scored, listed, fixable
-                    from ...critic import runtime_report
-                    from .worker import _rebuild
-
-                    report = runtime_report(_rebuild(e))
-            revision = self._add(dict(kind="run", program=program, execution=evaluation.execution,
-                                      report=report, error=error, duration_s=evaluation.duration_s))
+            for old in self.revisions[:-FULL_REVISIONS]:
+                if not old.compact:
+                    old.compact_away()
             self.program = program
-            self._adopt(revision)
-            return revision
+        self._forget_old_attempts()
+        return revision
+
+    def _forget_old_attempts(self) -> None:
+        """The Loop keeps every attempt; drop the runs of all but the current and the last few (memory bound)."""
+        loop = self._loop
+        if loop is None:
+            return
+        for attempt in loop.attempts[:-FULL_REVISIONS]:
+            if attempt is not loop.current:
+                attempt.execution = None
+
+    # --- Run -------------------------------------------------------------------------------------------
+
+    def _begin(self, kind: str, detail: str = "") -> Job:
+        try:
+            return self.jobs.begin(kind, detail)
+        except Busy as exc:
+            raise StudioBusy(str(exc)) from None
+
+    def check(self, program: str) -> dict[str, Any]:
+        """Simulate and critique ``program`` with every critic in the worker: the keyword arguments of
+        :meth:`_add` (a program that does not run: the ``runtime`` critic's Error, its line when known)."""
+        from ...critic import runtime_report
+        from ...errors import ProgramError
+        from .worker import EvaluatorError, _rebuild
+
+        if self.motion is None:
+            evaluation = self.evaluator.evaluate(program)
+        elif self.motion["kind"] == "urscript":
+            evaluation = self.evaluator.evaluate_motion("urscript", program, self.motion["name"], **self.motion_options)
+        else:
+            evaluation = self.evaluator.evaluate_motion("recording", self.motion["path"], **self.motion_options)
+        if evaluation.error is None:
+            return dict(execution=evaluation.execution, full_report=evaluation.report, error=None,
+                        duration_s=evaluation.duration_s)
+        e = evaluation.error
+        where = f" (line {e['line']})" if e.get("line") else ""
+        error = _rebuild(e)
+        if isinstance(error, EvaluatorError):
+            error = ProgramError(f"the program could not be checked: {e['message']}", int(e.get("line") or 0))
+        elif not hasattr(error, "line"):  # e.g. the interpreter's budget: a program error at its line
+            error = ProgramError(e["message"], int(e.get("line") or 0))
+        return dict(execution=None, full_report=runtime_report(error), error=f"{e['type']}{where}: {e['message']}",
+                    duration_s=evaluation.duration_s)
+
+    def run(self, program: str, critics: list[str] | None = None) -> Revision:
+        """Simulate and critique ``program`` (every critic; ``critics`` are the ones scored and shown ticked);
+        record and return the revision. A Run while a turn waits for its approval cancels that turn."""
+        job = self._begin("run")
+        job.status = "simulating" if self.motion is None else f"reading {self.motion['name']}"
+        try:
+            result = self.check(program)
+            if self.motion is not None and self.motion["kind"] == "recording":  # the editor shows what was read
+                program = recording_summary(self.motion["name"], result["execution"], result["full_report"])
+            revision = self._add("run", program, selected=critics, **result)
+        finally:
+            self.jobs.end(job)
+        self._adopt(revision)
+        return revision
+
+    # --- Fix and chat: the Loop with the model, or the critics' repairs alone --------------------------
 
     def _loop_for(self, automation: str):
         from ...llm.loop import Loop
 
-        if self.model is None:
-            raise StudioError(self.no_model_reason)
         if self._loop is None:
             self._loop = Loop(self.model, self.scene, critics=self.critics, goals=self.goals, approve=self._approve,
-                              simulate=self.evaluator.loop_simulate, repairs=self.evaluator.loop_repair,
+                              simulate=self._loop_simulate, repairs=self._loop_repair,
                               on_attempt=self._on_attempt)
         self._loop.automation = automation
         return self._loop
 
-    def _adopt(self, revision: _Revision) -> None:
-        """Make a user Run the loop's current program, so Fix sends its feedback."""
-        if self._loop is None or revision.report is None:
+    def _loop_simulate(self, program: str):
+        if self._turn_job is not None:
+            self._turn_job.status = "simulating the revision"
+        return self.evaluator.loop_simulate(program)
+
+    def _loop_repair(self, program: str):
+        if self._turn_job is not None:
+            self._turn_job.status = "applying the critics' repairs"
+        return self.evaluator.loop_repair(program)
+
+    def _adopt(self, revision: Revision) -> None:
+        """Make ``revision`` the loop's current program, so Fix sends its feedback."""
+        if self._loop is None or revision.deploy_report is None:
             return
         from ...llm.loop import Attempt
 
@@ -291,284 +346,268 @@ class Studio:
         if loop.task is None:
             loop.task = "improve this robot program"
         attempt = Attempt(index=len(loop.attempts) + 1, kind="user", request=loop.task, prompt="", reply="",
-                          program=revision.program, execution=revision.execution, report=revision.report,
-                          score=revision.report.score)
+                          program=revision.program, execution=revision.execution, report=revision.deploy_report,
+                          error=None, score=revision.deploy_report.score)
+        if revision.execution is None:  # a program that did not run: the model is owed its runtime feedback
+            attempt.error = revision.error
         loop.attempts.append(attempt)
         loop.current = attempt
+        self._attempt_revision[attempt.index] = revision.index
 
-    def _on_attempt(self, attempt) -> None:
-        if attempt.approved is False or attempt.program is None:
-            return
-        revision = self._add(dict(kind=attempt.kind, program=attempt.program, execution=attempt.execution,
-                                  report=attempt.report, error=attempt.error, diff=attempt.diff))
-        self.program = attempt.program
-        self._events.append({"type": "revision", "revision": revision.full()})
+    def _title(self, diff: str) -> tuple[str, str]:
+        """The diff with the studio's revision numbers in its header (the Loop numbers its attempts)."""
+        lines = diff.split("\n")
+        nxt = len(self.revisions) + 1
+        repairs = "(critic repairs)" in "".join(lines[:2])
+        current = self._loop.current if self._loop is not None else None
+        base = self._attempt_revision.get(current.index) if current is not None else None
+        old = f"#{base}" if base else "current"
+        new = f"#{nxt}" + (" (critic repairs)" if repairs else "")
+        if len(lines) >= 2 and lines[0].startswith("--- ") and lines[1].startswith("+++ "):
+            lines[0], lines[1] = f"--- {old}", f"+++ {new}"
+        return "\n".join(lines), f"{new} from {old}"
 
     def _approve(self, program: str, diff: str) -> bool:
-        """Loop's approval callback: post the diff to the page and wait (bounded) for its answer.
-
-        In ``auto`` automation revisions are approved without asking (the page still shows each one)."""
+        """The Loop's approval: post the diff (every page shows it) and wait for the answer or the deadline."""
+        job = self._turn_job
+        assert job is not None
+        if job.cancel.is_set():
+            raise Cancelled(job.cancel_reason)
+        diff, title = self._title(diff)
         if self._loop is not None and self._loop.automation == "auto":
             return True
-        with self._lock:
-            ident = len(self._approvals) + 1
-            pending = {"program": program, "diff": diff}
-            self._approvals[ident] = pending
-        self._events.append({"type": "approval", "id": ident, "diff": diff, "program": program})
-        deadline = time.monotonic() + APPROVAL_TIMEOUT_S
-        with self._lock:
-            while "answer" not in pending and time.monotonic() < deadline:
-                self._approval_cond.wait(min(1.0, max(0.0, deadline - time.monotonic())))
-            return bool(pending.get("answer", False))
+        return self.jobs.ask(job, program, diff, title)
 
-    def answer(self, ident: int, ok: bool) -> None:
-        with self._lock:
-            pending = self._approvals.get(ident)
-            if pending is None:
-                raise StudioError(f"no revision waiting for approval has id {ident}")
-            pending["answer"] = bool(ok)
-            self._approval_cond.notify_all()
+    def _on_attempt(self, attempt) -> None:
+        job = self._turn_job
+        current = self._attempt_revision.get(self._loop.current.index) if self._loop.current else None
+        if attempt.source != "repair" and attempt.reply:
+            self._say("assistant", attempt.reply)
+        if attempt.approved is False:
+            reason = job.approval.reason if job is not None and job.approval is not None else "rejected"
+            what = "critic repairs" if attempt.source == "repair" else "model's revision"
+            self._say("note", f"✗ The {what} was not applied ({reason}); #{current} stays current.")
+            return
+        if attempt.program is None:
+            self._say("note", "The reply had no program: " + (attempt.error or "").split("\n")[0])
+            return
+        if not attempt.changed:
+            said = "says the program is complete and " if attempt.complete else ""
+            self._say("note", f"The model {said}sent back the program of #{current} unchanged: no new revision.")
+            return
+        revision = self._add(attempt.kind, attempt.program, attempt.execution, attempt.report, attempt.error,
+                             diff=self._title(attempt.diff)[0] if attempt.diff else "", selected=self._selected)
+        self._attempt_revision[attempt.index] = revision.index
+        if attempt.source == "repair":
+            done = "; ".join(f"line {c.line}: {c.what}" for c in attempt.changes)
+            self._say("note", f"#{revision.index}: {len(attempt.changes)} critic repair(s) — {done}")
+        if job is not None:
+            job.events.append({"type": "revision", "revision": revision.full()})
 
     def llm_turn(self, action: str, *, text: str = "", critics: list[str] | None = None,
-                 automation: str = "guided", index: int | None = None) -> Iterator[dict[str, Any]]:
-        """Start one chat or Fix turn in a thread; return its events (text so far, approvals, revisions,
-        done/error) as they come. Raises StudioError at once when no model is configured."""
-        loop = self._loop_for(automation)
-        # The revision on the page (the user may have gone back in the history) is the one to fix or refine.
-        shown = self.revisions[index - 1] if index and 0 < index <= len(self.revisions) else (
-            self.revisions[-1] if self.revisions else None)
-        if shown is not None and (loop.current is None or loop.current.program != shown.program):
-            self.program = shown.program
-            self._adopt(shown)
-        return self._turn_events(loop, action, text, critics)
+                 automation: str = "guided", index: int | None = None,
+                 selected: list[str] | None = None) -> Iterator[dict[str, Any]]:
+        """Start one chat or Fix turn in a thread; return its events (text so far, revisions, done/error) as they
+        come. Without a model, Fix applies the critics' own repairs (chat raises StudioError at once)."""
+        if self.motion is not None:
+            raise StudioError(self.motion["why"])
+        if self.model is None and action == "chat":
+            raise StudioError(self.no_model_reason)
+        kind = "chat" if action == "chat" else ("fix" if self.model is not None else "repair")
+        shown = self._shown(index)
+        if action != "chat" and shown is None:
+            raise StudioError("nothing to fix yet: Run the program first")
+        if action != "chat" and shown.compact:
+            raise StudioError(f"revision {shown.index}'s run is no longer kept (only the last {FULL_REVISIONS} "
+                              "are): Run it again to fix it")
+        previous = self._turn_thread
+        if previous is not None and previous.is_alive():  # a cancelled turn still ending: let it end
+            previous.join(CANCELLED_TURN_WAIT_S)
+            if previous.is_alive():
+                raise StudioBusy(f"{kind} refused: the cancelled turn has not ended yet; try again")
+        job = self._begin(kind, "" if action == "chat" else ", ".join(critics or []) or "all")
+        job.events = []
+        self._selected = selected
+        self._say("user", text if action == "chat" else "Fix " + (", ".join(critics) if critics else "all"))
+        if kind == "repair":
+            work = lambda: self._repair_turn(job, shown, automation)  # noqa: E731
+        else:
+            loop = self._loop_for(automation)
+            if shown is not None and (loop.current is None or
+                                      self._attempt_revision.get(loop.current.index) != shown.index):
+                self._adopt(shown)
+            work = lambda: self._model_turn(job, loop, action, text, critics)  # noqa: E731
+        thread = threading.Thread(target=self._turn, args=(job, work), name="robocritics-studio-turn", daemon=True)
+        self._turn_thread, self._turn_job = thread, job
+        thread.start()
+        return self._events(job, thread)
 
-    def _turn_events(self, loop, action: str, text: str, critics: list[str] | None) -> Iterator[dict[str, Any]]:
-        events: list[dict[str, Any]] = []
-        self._events = events
-        done = threading.Event()
-        outcome: dict[str, Any] = {}
+    def _shown(self, index: int | None) -> Revision | None:
+        with self._lock:
+            if index and 0 < index <= len(self.revisions):
+                return self.revisions[index - 1]
+            return self.revisions[-1] if self.revisions else None
+
+    def _turn(self, job: Job, work) -> None:
+        try:
+            work()
+        except Cancelled as exc:
+            self._say("note", f"✗ The {job.kind} turn was cancelled: {exc}")
+            job.events.append({"type": "error", "error": f"{job.kind} cancelled: {exc}"})
+        except Exception as exc:  # noqa: BLE001 - an LLM or loop error: shown in the chat and the terminal
+            self._say("note", f"{job.kind} failed: {type(exc).__name__}: {exc}")
+            job.events.append({"type": "error", "error": f"{type(exc).__name__}: {exc}"})
+        else:
+            job.events.append({"type": "done"})
+        finally:
+            self.jobs.end(job)
+
+    def _model_turn(self, job: Job, loop, action: str, text: str, critics: list[str] | None) -> None:
         previous = getattr(self.model, "on_progress", None)
 
         def progress(p) -> None:
-            events.append({"type": "text", "text": p.text})
+            if job.cancel.is_set():
+                raise Cancelled(job.cancel_reason)
+            job.status = "receiving the model's reply" if p.phase == "receiving" else "waiting for the model"
+            job.reply = (p.text, p.phase)  # the latest only: a long reply streamed is not kept once per token
 
-        def work() -> None:
-            try:
-                with self._run_lock:
-                    if hasattr(self.model, "on_progress"):
-                        self.model.on_progress = progress
-                    if action == "chat":
-                        loop.request(text) if loop.task is None else loop.refine(text)
-                    else:
-                        loop.fix(critics or None)
-            except Exception as exc:  # shown in the page's terminal: an LLM or loop error
-                outcome["error"] = f"{type(exc).__name__}: {exc}"
-            finally:
-                if hasattr(self.model, "on_progress"):
-                    self.model.on_progress = previous
-                done.set()
+        job.status = "waiting for the model" if action == "chat" else "checking what to fix"
+        if hasattr(self.model, "on_progress"):
+            self.model.on_progress = progress
+        try:
+            if action == "chat":
+                loop.request(text) if loop.task is None else loop.refine(text)
+            else:
+                loop.fix(self._fixable(loop, critics or self._selected))
+        finally:
+            if hasattr(self.model, "on_progress"):
+                self.model.on_progress = previous
 
-        threading.Thread(target=work, name="robocritics-studio-llm", daemon=True).start()
-        sent = 0
+    @staticmethod
+    def _fixable(loop, names: list[str] | None) -> list[str] | None:
+        """``names`` that gave a verdict on the current program (a critic that did not run, e.g. task_outcome
+        without goals, has nothing to fix); None for all."""
+        report = loop.current.report if loop.current is not None else None
+        if report is not None and report.critics == ["runtime"]:
+            return ["runtime"]  # a program that did not run: its runtime Error is what there is to fix
+        if not names or report is None:
+            return None
+        return [n for n in names if n in report.critics] or None
+
+    def _repair_turn(self, job: Job, shown: Revision, automation: str) -> None:
+        """Fix without a model: the critics' own repairs in the worker, approved like any revision."""
+        from ...llm.loop import unified_diff
+
+        job.status = "applying the critics' repairs"
+        result = self.evaluator.loop_repair(shown.program)
+        if job.cancel.is_set():
+            raise Cancelled(job.cancel_reason)
+        program = result.program if result.program.endswith("\n") else result.program + "\n"
+        if not result.changes or program.strip() == shown.program.strip():
+            self._say("note", f"The critics' repairs have nothing to change in #{shown.index} (they fix Errors "
+                              "they can place in the program); for the rest, connect an LLM (--base-url, --model) or "
+                              "edit the program.")
+            return
+        new = f"#{len(self.revisions) + 1} (critic repairs)"
+        diff = unified_diff(shown.program, program, f"#{shown.index}", new)
+        if automation != "auto" and not self.jobs.ask(job, program, diff, f"{new} from #{shown.index}"):
+            reason = job.approval.reason if job.approval is not None else "rejected"
+            self._say("note", f"✗ The critic repairs were not applied ({reason}); #{shown.index} stays current.")
+            return
+        job.status = "simulating the revision"
+        revision = self._add("repair", program, diff=diff, selected=self._selected, **self.check(program))
+        done = "; ".join(f"line {c.line}: {c.what}" for c in result.changes)
+        self._say("note", f"#{revision.index}: {len(result.changes)} critic repair(s) — {done}")
+        job.events.append({"type": "revision", "revision": revision.full()})
+
+    @staticmethod
+    def _events(job: Job, thread: threading.Thread) -> Iterator[dict[str, Any]]:
+        sent, reply = 0, None
         while True:
-            finished = done.wait(0.05)
-            while sent < len(events):
-                yield events[sent]
+            thread.join(0.05)
+            finished = not thread.is_alive()
+            if job.reply is not reply:
+                reply = job.reply
+                yield {"type": "text", "text": reply[0], "phase": reply[1]}
+            while sent < len(job.events):
+                yield job.events[sent]
                 sent += 1
             if finished:
-                break
-        yield {"type": "error", "error": outcome["error"]} if "error" in outcome else {"type": "done"}
+                return
 
-    def deploy(self, index: int) -> dict[str, Any]:
-        """Deploy revision ``index`` through the deploy gate: planned from the arm's joints, all critics."""
-        from ...critic import critique
-        from ...deploy import URArm
-        from ...errors import DeployError
-        from ...simulate import simulate
+    def answer(self, ident: int, ok: bool) -> None:
+        try:
+            self.jobs.answer(ident, ok)
+        except LookupError as exc:
+            raise StudioError(str(exc)) from None
 
+    def cancel(self) -> dict[str, Any]:
+        """Stop the running job: a deploy stops the arm (the same stop path as a fault), a turn is cancelled."""
+        job = self.jobs.cancel("stopped on request (Stop)")
+        if job is None:
+            return {"ok": False, "message": "nothing is running"}
+        return {"ok": True, "message": f"stopping the {job.kind}"}
+
+    # --- Deploy ----------------------------------------------------------------------------------------
+
+    def deploy(self, index: int, program: str | None = None) -> dict[str, Any]:
+        """Start deploying revision ``index``'s trajectory — exactly the motion shown — through the deploy gate.
+
+        Refused (StudioError) when no controller is configured, the editor's ``program`` differs from the
+        revision's, the revision's run is no longer kept, any critic (selected or not) gives an Error, or another
+        job runs. Progress and the result are in :meth:`state` (``job``, ``last_deploy``)."""
+        if self.motion is not None:
+            raise StudioError(IMPORTED_DEPLOY)
         if not self.deploy_target:
             raise StudioError("no UR controller is configured (start the studio with --deploy-host)")
-        revision = self.revisions[index - 1] if 0 < index <= len(self.revisions) else None
-        if revision is None:
-            raise StudioError(f"there is no revision {index}")
-        if revision.report is None or revision.report.has_errors:
-            raise StudioError(f"revision {index} has an Error; the deploy gate refuses it")
-        target = dict(self.deploy_target)
-        with self._run_lock:
-            try:
-                with URArm(target.pop("host"), **target) as arm:
-                    execution = simulate(revision.program, self.scene, start_q=arm.actual_q())
-                    report = critique(execution)
-                    result = arm.deploy(execution, report)
-            except DeployError as exc:
-                return {"ok": False, "message": f"deploy stopped: {exc}"}
-        return {"ok": True, "message": result.summary()}
-
-
-class _Handler(BaseHTTPRequestHandler):
-    studio: Studio
-    server_version = "robocritics-studio"
-    protocol_version = "HTTP/1.1"  # chunked NDJSON streams for chat and Fix
-
-    def log_message(self, format: str, *args) -> None:  # quiet: the CLI prints the URL, not every request
-        pass
-
-    # --- checks ------------------------------------------------------------------------------------
-
-    def _refuse(self, status: int, message: str) -> None:
-        body = json.dumps({"error": message}).encode()
-        self.send_response(status)
-        self.send_header("Content-Type", "application/json")
-        self.send_header("Content-Length", str(len(body)))
-        self.end_headers()
-        self.wfile.write(body)
-
-    def _host_ok(self) -> bool:
-        host = self.headers.get("Host", "")
-        port = str(self.studio.port)
-        allowed = {f"{self.studio.host}:{port}", f"localhost:{port}", f"127.0.0.1:{port}", f"[::1]:{port}"}
-        if ":" in self.studio.host:
-            allowed.add(f"[{self.studio.host}]:{port}")
-        return host in allowed or (not is_loopback(self.studio.host) and host.endswith(f":{port}"))
-
-    def _origin_ok(self) -> bool:
-        origin = self.headers.get("Origin")
-        return origin is None or origin == f"http://{self.headers.get('Host', '')}"
-
-    def _token_ok(self, query: dict[str, list[str]]) -> bool:
-        token = self.studio.token
-        if token is None:
-            return True
-        given = self.headers.get("X-Studio-Token") or (query.get("token") or [""])[0]
-        return hmac.compare_digest(given.encode(), token.encode())
-
-    def _checked(self, api: bool) -> dict[str, list[str]] | None:
-        parts = urlsplit(self.path)
-        query = parse_qs(parts.query)
-        if not self._host_ok():
-            self._refuse(403, "Host header is not this studio's (DNS rebinding?)")
-            return None
-        if not self._origin_ok():
-            self._refuse(403, "cross-origin request refused")
-            return None
-        if not self._token_ok(query):
-            self._refuse(401, "this studio needs its token (open the URL it printed)")
-            return None
-        if api and self.command == "POST":
-            if self.headers.get("Content-Type", "").split(";")[0].strip() != "application/json" or \
-                    self.headers.get("X-Studio") != "1":
-                self._refuse(403, "API calls need Content-Type: application/json and X-Studio: 1")
-                return None
-        return query
-
-    def _body(self) -> dict[str, Any] | None:
         try:
-            length = int(self.headers.get("Content-Length", "0"))
-        except ValueError:
-            length = -1
-        if length < 0 or length > MAX_BODY_BYTES:
-            self._refuse(413, f"request body must be at most {MAX_BODY_BYTES} bytes")
-            return None
+            revision = self.revision(index)
+        except LookupError as exc:
+            raise StudioError(str(exc)) from None
+        if program is not None and program != revision.program:
+            raise StudioError(f"the editor differs from revision {index}: Run it first (Deploy sends exactly the "
+                              "motion that was checked and shown)")
+        if revision.execution is None or revision.deploy_report is None:
+            raise StudioError(f"revision {index} has no motion to deploy" + (
+                f" any more (only the last {FULL_REVISIONS} runs are kept): Run it again" if revision.compact else ""))
+        if revision.blockers:
+            raise StudioError(f"revision {index} has an Error from {', '.join(revision.blockers)}: the deploy gate "
+                              "refuses it (every critic counts, ticked or not)")
+        job = self._begin("deploy", f"revision {index}")
+        job.status = "connecting to the controller"
+        self.last_deploy = None
+        threading.Thread(target=self._deploy_job, args=(job, revision), name="robocritics-studio-deploy",
+                         daemon=True).start()
+        return {"ok": True, "job": job.id, "message": f"deploying revision {index}"}
+
+    def _deploy_job(self, job: Job, revision: Revision) -> None:
+        from ...deploy import DeployFault, URArm
+        from ...errors import DeployError
+
+        target = dict(self.deploy_target or {})
+
+        def progress(p) -> None:
+            job.status = p.phase
+            job.progress = {"setpoints_sent": p.setpoints_sent, "setpoints_total": p.setpoints_total,
+                            "time_s": round(p.time_s, 3), "duration_s": round(p.duration_s, 3),
+                            "tracking_error_rad": p.tracking_error_rad,
+                            "max_tracking_error_rad": p.max_tracking_error_rad}
+
+        outcome: dict[str, Any] = {"revision": revision.index, "job": job.id,
+                                   "trajectory_hash": revision.trajectory_hash}
         try:
-            body = json.loads(self.rfile.read(length) or b"{}")
-        except ValueError:
-            self._refuse(400, "request body is not JSON")
-            return None
-        if not isinstance(body, dict):
-            self._refuse(400, "request body must be a JSON object")
-            return None
-        return body
-
-    def _json(self, value: Any, status: int = 200) -> None:
-        body = json.dumps(value, allow_nan=False).encode()
-        self.send_response(status)
-        self.send_header("Content-Type", "application/json")
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Cache-Control", "no-store")
-        self.end_headers()
-        self.wfile.write(body)
-
-    # --- routes ------------------------------------------------------------------------------------
-
-    def do_GET(self) -> None:
-        path = urlsplit(self.path).path
-        if self._checked(api=path.startswith("/api/")) is None:
-            return
-        if path == "/":
-            from .page import studio_page
-
-            body = studio_page().encode()
-            self.send_response(200)
-            self.send_header("Content-Type", "text/html; charset=utf-8")
-            self.send_header("Content-Length", str(len(body)))
-            self.send_header("Content-Security-Policy", "default-src 'self' 'unsafe-inline' blob: data:; "
-                             "connect-src 'self'")
-            self.end_headers()
-            self.wfile.write(body)
-        elif path == "/api/state":
-            self._json(self.studio.state())
-        elif path.startswith("/api/revision/"):
-            try:
-                index = int(path.rsplit("/", 1)[1])
-                revision = self.studio.revisions[index - 1]
-                assert index > 0
-            except (ValueError, IndexError, AssertionError):
-                self._refuse(404, f"no revision {path.rsplit('/', 1)[1]!r}")
-                return
-            self._json(revision.full())
-        else:
-            self._refuse(404, f"no page {path!r}")
-
-    def do_POST(self) -> None:
-        path = urlsplit(self.path).path
-        if self._checked(api=True) is None:
-            return
-        body = self._body()
-        if body is None:
-            return
-        try:
-            if path == "/api/run":
-                program = body.get("program")
-                if not isinstance(program, str) or len(program) > MAX_PROGRAM_CHARS:
-                    self._refuse(400, f"program must be a string of at most {MAX_PROGRAM_CHARS} characters")
-                    return
-                critics = body.get("critics")
-                self._json(self.studio.run(program, critics if isinstance(critics, list) else None).full())
-            elif path in ("/api/chat", "/api/fix"):
-                text = body.get("text", "")
-                if not isinstance(text, str) or len(text) > MAX_CHAT_CHARS:
-                    self._refuse(400, f"text must be a string of at most {MAX_CHAT_CHARS} characters")
-                    return
-                automation = body.get("automation", "guided")
-                if automation not in ("manual", "guided", "auto"):
-                    self._refuse(400, "automation must be manual, guided or auto")
-                    return
-                critics = body.get("critics")
-                events = self.studio.llm_turn("chat" if path == "/api/chat" else "fix", text=text,
-                                              critics=critics if isinstance(critics, list) else None,
-                                              automation=automation,
-                                              index=body.get("index") if isinstance(body.get("index"), int) else None)
-                self._stream(events)
-            elif path == "/api/approve":
-                self.studio.answer(int(body.get("id", 0)), bool(body.get("ok")))
-                self._json({"ok": True})
-            elif path == "/api/deploy":
-                self._json(self.studio.deploy(int(body.get("index", 0))))
-            else:
-                self._refuse(404, f"no API {path!r}")
-        except StudioError as exc:
-            self._refuse(409, str(exc))
-
-    def _stream(self, events: Iterator[dict[str, Any]]) -> None:
-        """Send ``events`` as NDJSON, one line per event, flushed as each arrives (chunked transfer)."""
-        self.send_response(200)
-        self.send_header("Content-Type", "application/x-ndjson")
-        self.send_header("Cache-Control", "no-store")
-        self.send_header("Transfer-Encoding", "chunked")
-        self.end_headers()
-        for event in events:
-            line = (json.dumps(event, allow_nan=False) + "\n").encode()
-            self.wfile.write(f"{len(line):x}\r\n".encode() + line + b"\r\n")
-            self.wfile.flush()
-        self.wfile.write(b"0\r\n\r\n")
-        self.wfile.flush()
+            with URArm(target.pop("host"), **target) as arm:
+                job.status = "checking the arm (deploy gate)"
+                result = arm.deploy(revision.execution, revision.deploy_report, stop=job.cancel, progress=progress)
+            outcome.update(ok=True, message=result.summary(), deployed_hash=result.trajectory_hash)
+        except DeployFault as exc:
+            outcome.update(ok=False, stopped=exc.stopped, cause=exc.cause, message=str(exc))
+            if exc.cause == "stop_requested" and job.stop_requested_at is not None:
+                outcome["stop_latency_s"] = round(self.jobs.clock() - job.stop_requested_at, 3)
+        except DeployError as exc:
+            outcome.update(ok=False, message=f"deploy refused: {exc}")
+        except Exception as exc:  # noqa: BLE001 - never leave the job running; the page shows what happened
+            outcome.update(ok=False, message=f"deploy failed: {type(exc).__name__}: {exc}")
+        finally:
+            self.last_deploy = outcome
+            self.jobs.end(job)
