@@ -374,14 +374,14 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
 def robot_for(args: argparse.Namespace, scene):
     """The robot of ``--robot``/``--tool``/``--tip``, else the bundled arm the scene names (``"robot"``), else None
     (the default UR3e). A URDF's errors are :class:`~robocritics.errors.RobotModelError` naming file and line."""
-    from ..robot.model import Robot
-
     name = getattr(args, "robot", None) or scene.robot or None
     tool, tip = getattr(args, "tool", None), getattr(args, "tip", None)
     if name is None:
         if tool or tip:
             raise UsageError("--tool and --tip need --robot PATH.urdf (the bundled arms carry their own gripper)")
-        return None
+        return None  # the default arm, loaded where the work is done (a batch parent never needs Pinocchio)
+    from ..robot.model import Robot
+
     if name in BUNDLED_ROBOTS and not name.endswith(".urdf"):
         if tool or tip:
             raise UsageError(f"--robot {name} carries its own gripper; --tool and --tip are for --robot PATH.urdf")
