@@ -80,7 +80,8 @@ def ref_space_usage(traj, scene, params) -> dict:
 
 
 def ref_collision(traj, params) -> dict:
-    """Every sample, every environment pair not intended at that sample: the closest distance."""
+    """Every sample, every environment pair not intended at that sample (an intended contact deeper than
+    ``contact_tolerance_m`` counts): the closest distance."""
     worst = math.inf
     for t in range(len(traj.time)):
         contacts = set(traj.steps[int(traj.step[t])].contacts) if traj.steps else set()
@@ -91,8 +92,9 @@ def ref_collision(traj, params) -> dict:
             if pair.group_a == "attached" and pair.a != held:
                 continue  # that object is not being carried now
             if pair.group_a in ("gripper", "attached") and pair.b_entity != "":
-                if pair.b_entity in contacts or (held != "" and pair.b_entity == held):
-                    continue  # intended contact
+                intended = pair.b_entity in contacts or (held != "" and pair.b_entity == held)
+                if intended and float(traj.proximity[t, k]) > -params.contact_tolerance_m:
+                    continue  # intended contact, touching within the tolerance
             worst = min(worst, float(traj.proximity[t, k]))
     if worst == math.inf:
         return {"flag": Flag.OK, "value": None}

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from robocritics import Robot, Scene, simulate
@@ -180,6 +181,9 @@ def test_vectorised_choice_is_the_branch_and_bound_choice(q, seed, lo, width):
     # the vectorised selection of one pose is _nearest_solution's, to the last bit or two
     from robocritics.robot import ik, ik_many
 
+    # At the stretched elbow (sin q3 = 0) the elbow angle is acos of a number at 1: the square root turns the two
+    # implementations' last-bit differences into 1e-8 rad, which a joint limit at exactly that angle tells apart.
+    assume(abs(math.sin(q[2])) > 1e-4)
     lo = np.asarray(lo)
     hi = lo + np.asarray(width)
     pose = ik.dh_forward(ROBOT.dh, np.asarray(q))

@@ -8,6 +8,7 @@ goal is still met.
 from __future__ import annotations
 
 import ast
+import re
 
 import numpy as np
 import pytest
@@ -105,7 +106,8 @@ def test_unreachable_hover_is_lowered_to_a_reachable_height():
     assert r.execution is not None and r.errors == []
     change = r.changes[0]
     assert change.critic == "runtime" and change.line == 1 and "lowered" in change.what and change.cost_s == 0.0
-    new_height = float(r.program.splitlines()[0].split("height=")[1].rstrip(")"))
+    hover = next(line for line in r.program.splitlines() if line.startswith("move_above(green_apple"))
+    new_height = float(hover.split("height=")[1].rstrip(")"))
     assert 0 < new_height < 0.42
     assert r.execution.object_inside("green_apple", "white_box")
     # the new hover point is reachable; the old one is not (the robot's own IK decides)
@@ -166,7 +168,10 @@ def test_spearing_repair_slows_only_the_plunge():
     assert change.line == 2 and change.cost_s > 0
     f = float(change.what.split("-> ")[1].split(" ")[0].rstrip(";"))
     assert f == pytest.approx(round(0.85 * spear.threshold / spear.value, 2))  # the smallest slowdown, not a blanket one
-    assert f"set_speed({f:g})\nmove_down(0.18)\nset_speed(1)\n" in r.program
+    # only the plunge is slowed (the Warning that follows may slow it further, within the same wrapper)
+    m = re.search(r"set_speed\(([0-9.]+)\)\nmove_down\(0.18\)\nset_speed\(1\)\n", r.program)
+    assert m and float(m.group(1)) <= f
+    assert r.program.count("move_down(0.18)") == 1 and r.program.count("set_speed(") % 2 == 0
     assert r.execution.object_inside("food_container", "trash_bin")
 
 

@@ -209,7 +209,7 @@ def variant(tmp_path: Path, edit, name: str = "variant.urdf", arm: str = "ur5e")
     return path
 
 
-def test_mesh_collisions_are_refused_naming_the_link_and_file(tmp_path):
+def test_a_missing_mesh_is_refused_naming_the_link_file_and_line(tmp_path):
     def meshed(text):
         return re.sub(
             r'<geometry><cylinder radius="0.057" length="[^"]+"/></geometry>',
@@ -219,7 +219,7 @@ def test_mesh_collisions_are_refused_naming_the_link_and_file(tmp_path):
 
     path = variant(tmp_path, meshed)
     assert "upperarm.stl" in path.read_text()
-    with pytest.raises(RobotModelError, match=r"link 'upper_arm_link' has a <mesh> filename='package://.*upperarm\.stl'.*capsules"):
+    with pytest.raises(RobotModelError, match=r"line \d+: <mesh filename='package://.*upperarm\.stl'> of link 'upper_arm_link': no such file"):
         Robot.from_urdf(path)
 
 

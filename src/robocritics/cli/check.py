@@ -7,11 +7,13 @@ import argparse
 from ._common import (
     UsageError,
     add_critic_options,
+    add_robot_options,
     add_goal_option,
     check_output,
     load_params,
     one_line,
     read_text,
+    robot_for,
     sample_rate,
     scene_for,
     subcommand,
@@ -45,6 +47,7 @@ def _build_check(sub) -> None:
     )
     add_critic_options(p)
     add_goal_option(p)
+    add_robot_options(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument(
         "--html",
@@ -104,7 +107,9 @@ def _check(args: argparse.Namespace) -> int:
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
     goals = parse_goals(args.goals, scene)  # GoalError naming a wrong id, before simulating
-    execution, report = check(source, scene, goals=goals, critics=critics, params=params, sample_rate_hz=args.rate)
+    robot = robot_for(args, scene)
+    execution, report = check(source, scene, goals=goals, critics=critics, params=params, robot=robot,
+                              sample_rate_hz=args.rate)  # fmt: skip
     print(report.to_json() if args.json else report.to_text())
     if execution is None:  # the program did not run: its error, as before, beside the report
         verdict = report.verdicts[0]

@@ -55,11 +55,13 @@ from ._common import (
     add_critic_options,
     add_goal_option,
     add_llm_options,
+    add_robot_options,
     llm_api_key,
     llm_client,
     load_params,
     one_line,
     positive_int,
+    robot_for,
     subcommand,
 )
 from ..errors import LLMError, RoboCriticsError
@@ -111,6 +113,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     )
     add_critic_options(p)
     add_goal_option(p)
+    add_robot_options(p)
     p.add_argument("--memory", metavar="FILE", help="interaction memory (SQLite file, created if missing)")
     p.add_argument(
         "--embedded-rules",
@@ -255,6 +258,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
         select_critics(critics, params)
         goals = parse_goals(getattr(args, "goals", None), scene)
+        robot = robot_for(args, scene)
     except RoboCriticsError as exc:
         return _error(str(exc), err)
     if goals:  # the model is asked to state them with expect(...), which the task_outcome critic checks
@@ -287,6 +291,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         loop = Loop(
             client,
             scene,
+            robot=robot,
             critics=critics,
             params=params,
             memory=memory,

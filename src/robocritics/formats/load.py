@@ -1,4 +1,4 @@
-"""One function from a motion file to the :class:`~robocritics.simulate.Execution` the critics read."""
+"""One function from a motion file to the :class:`~robocritics.execution.Execution` the critics read."""
 
 from __future__ import annotations
 

@@ -64,7 +64,7 @@ def _reported_pairs(robot, scene: Scene, carried: Sequence[str]) -> tuple[list[P
     self pairs, every capsule against every entity (not the fixed base against the table), every carried object
     against every other entity."""
     capsule_group = dict(zip(robot.capsule_names, robot.capsule_groups))
-    fixed_capsules = {c.name for c in robot.capsules if c.frame in robot.fixed_links}
+    fixed_capsules = {c.name for c in robot.capsules if c.frame in robot.fixed_links} | set(getattr(robot, "table_fixed_capsules", ()))
     entities = _entity_groups(scene)
     pairs: list[Pair] = []
     members: list[list[tuple[str, str]]] = []
@@ -174,5 +174,6 @@ def build_trajectory(
         steps=steps,
         limits=robot.limits,
         robot_name=robot.name,
+        kinematic_hash=robot.kinematic_hash,
         tcp_frame=robot.tcp_frame,
     )

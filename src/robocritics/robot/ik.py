@@ -98,6 +98,7 @@ __all__ = [
     "ur_reach",
 ]
 
+_UNIT_WEIGHTS = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
 _JOINT_NAMES = (
     "joint 1 (base)",
     "joint 2 (shoulder)",
@@ -186,6 +187,30 @@ class _Chain:
         """(position error m, rotation error rad) of the flange at ``q`` against the 12-float target ``t``."""
         return _pose_error(self.pose(q).homogeneous[:3].ravel().tolist(), t)
 
+    def reproduces(self, q: np.ndarray, t: Sequence[float], tol: float) -> bool:
+        """Whether the flange at ``q`` ((6,) float array, rad) is within ``tol`` m and ``tol`` rad of the 12-float
+        target ``t``: :meth:`error` within ``tol``, its sums written out (the same floats, half the time)."""
+        pin.forwardKinematics(self.model, self.data, q)
+        f = pin.updateFramePlacement(self.model, self.data, self.flange).homogeneous.ravel().tolist()
+        # ``** 2`` as in _pose_error: libm's pow may round x ** 2 differently from x * x
+        if not math.sqrt((f[3] - t[3]) ** 2 + (f[7] - t[7]) ** 2 + (f[11] - t[11]) ** 2) <= tol:
+            return False
+        e0, e1, e2, e4, e5, e6 = f[0] - t[0], f[1] - t[1], f[2] - t[2], f[4] - t[4], f[5] - t[5], f[6] - t[6]
+        e8, e9, e10 = f[8] - t[8], f[9] - t[9], f[10] - t[10]
+        sq = 0.0 + e0 * e0 + e1 * e1 + e2 * e2 + e4 * e4 + e5 * e5 + e6 * e6 + e8 * e8 + e9 * e9 + e10 * e10
+        return math.sqrt(0.5 * sq) <= tol
+
+
+def _chain(dh: DH) -> _Chain:
+    """This thread's :class:`_Chain` of ``dh``, built once (a solve looks it up instead of building one)."""
+    chains = getattr(_THREAD, "chains", None)
+    if chains is None:
+        chains = _THREAD.chains = {}
+    chain = chains.get(dh)
+    if chain is None:
+        chain = chains[dh] = _Chain(dh)
+    return chain
+
 
 def dh_forward(dh: DH, q: Any) -> np.ndarray:
     """Flange pose ``T_06(q) = A_1 ... A_6`` in the base frame (Pinocchio on :func:`dh_urdf`).
@@ -196,7 +221,7 @@ def dh_forward(dh: DH, q: Any) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (6,):
         raise RobotModelError(f"dh_forward: q must have 6 joint values in its last axis, got shape {q.shape}")
-    chain = _Chain(dh)
+    chain = _chain(dh)
     flat = q.reshape(-1, 6)
     out = np.empty((len(flat), 4, 4))
     for i, qi in enumerate(flat):
@@ -500,16 +525,27 @@ def ur_ik_all(dh: DH, flange_pose: Any, *, q6_singular: float = 0.0) -> np.ndarr
 
 def _solutions(dh: DH, t: Sequence[float], q6_singular: float) -> list[list[float]]:
     """:func:`ur_ik_all` for the 12-float target ``t``."""
-    chain = _Chain(dh)
+    chain = _chain(dh)
     sols: list[list[float]] = []
+    remainder = math.remainder
     for b in _branches(dh._ur, t, q6_singular):
-        w = [_wrap(x) for x in b]
-        if any(max(abs(_wrap(u - v)) for u, v in zip(w, s)) < _DUPLICATE_TOL for s in sols):
-            continue
-        dp, dr = chain.error(w, t)
-        if dp <= _VERIFY_TOL and dr <= _VERIFY_TOL:
+        w = [x + _TWO_PI if x <= -_PI else x for x in [remainder(x, _TWO_PI) for x in b]]  # _wrap
+        if not _is_duplicate(w, sols) and chain.reproduces(np.array(w), t, _VERIFY_TOL):
             sols.append(w)
     return sols
+
+
+def _is_duplicate(q: list[float], solutions: list[list[float]]) -> bool:
+    """Whether ``q`` is within ``_DUPLICATE_TOL`` rad of one of ``solutions`` in every joint (modulo ``2 pi``)."""
+    remainder = math.remainder
+    for s in solutions:
+        for u, v in zip(q, s):
+            # abs(_wrap(x)) < tol without the call: _wrap differs from remainder only at -pi, far from 0
+            if not abs(remainder(u - v, _TWO_PI)) < _DUPLICATE_TOL:
+                break
+        else:
+            return True
+    return False
 
 
 def _nearest_equivalent(x: float, seed: float, lo: float, hi: float) -> float | None:
@@ -526,48 +562,6 @@ def _nearest_equivalent(x: float, seed: float, lo: float, hi: float) -> float | 
     return hi if v > hi else (lo if v < lo else v)
 
 
-def _costed_shoulders(pans, s0: float, l0: float, h0: float, w0: float) -> list[tuple[float, float, float]]:
-    """``(cost, q1, v1)`` of each shoulder pan ``q1`` whose seed-nearest equivalent ``v1`` is within the limits,
-    cheapest first (the first step of :func:`_nearest_solution`)."""
-    shoulders = []
-    for q1 in pans:
-        v1 = q1 + round((s0 - q1) / _TWO_PI) * _TWO_PI
-        if not l0 <= v1 <= h0:
-            v1 = _nearest_equivalent(q1, s0, l0, h0)
-        if v1 is not None:
-            shoulders.append((w0 * (v1 - s0) * (v1 - s0), q1, v1))
-    if len(shoulders) == 2 and shoulders[1][0] < shoulders[0][0]:
-        shoulders.reverse()
-    return shoulders
-
-
-def _costed_wrists(pairs, cost1: float, q6_final: bool, sd, lo, hi, w) -> list[tuple]:
-    """``(cost, q5, q6, v5, v6)`` of each wrist solution ``(q5, q6)`` within the limits, cheapest first; ``v6`` is
-    None until the elbow step fixes ``q6`` (near the wrist singularity, ``q6_final`` False)."""
-    (s4, s5), (l4, l5), (h4, h5), (w4, w5) = sd, lo, hi, w
-    near = _nearest_equivalent
-    wrists = []
-    for q5, q6 in pairs:
-        v5 = q5 + round((s4 - q5) / _TWO_PI) * _TWO_PI
-        if not l4 <= v5 <= h4:
-            v5 = near(q5, s4, l4, h4)
-        if v5 is None:
-            continue
-        cost = cost1 + w4 * (v5 - s4) * (v5 - s4)
-        v6 = None
-        if q6_final:
-            v6 = q6 + round((s5 - q6) / _TWO_PI) * _TWO_PI
-            if not l5 <= v6 <= h5:
-                v6 = near(q6, s5, l5, h5)
-            if v6 is None:
-                continue
-            cost += w5 * (v6 - s5) * (v6 - s5)
-        wrists.append((cost, q5, q6, v5, v6))
-    if len(wrists) == 2 and wrists[1][0] < wrists[0][0]:
-        wrists.reverse()
-    return wrists
-
-
 def _nearest_solution(
     k: tuple[float, ...],
     t: Sequence[float],
@@ -580,79 +574,180 @@ def _nearest_solution(
     """The branch of the closed form with the smallest ``sum w_i (q_i - seed_i)²``
     within the limits (and, if ``verify`` is given, that passes it), or None.
 
-    The same steps as :func:`_branches`, searched branch-and-bound: each angle
-    is moved to its ``2 pi``-equivalent within the limits nearest to the seed
-    as soon as it is known, and a branch is abandoned as soon as its partial
-    cost reaches the best complete one, so the trigonometry of branches that
-    cannot win is never evaluated. At the wrist singularity ``q6`` keeps the seed's.
+    The steps of :func:`_branches` (the same expressions, so the same floats), searched branch-and-bound: each
+    angle is moved to its ``2 pi``-equivalent within the limits nearest to the seed as soon as it is known, and a
+    branch is abandoned as soon as its partial cost (shoulder pan, then wrists, then elbow, shoulder lift, wrist
+    1) reaches the best complete one, so the elbow of a branch that cannot win is never computed; shoulders and
+    wrists are tried cheapest first (a branch whose angle has no equivalent within the limits costs inf). At the
+    wrist singularity ``q6`` keeps the seed's. The steps are written out here rather than called, and
+    :func:`_nearest_equivalent`'s common case (the seed-nearest equivalent within the limits) at each use: a
+    call per step or joint was half the time of a solve.
     """
-    shoulder = _shoulder_pans(k, t)
-    if shoulder is None:
+    xx, yx, zx, px, xy, yy, zy, py = t[:8]
+    d6 = k[5]
+    # step 1 (_shoulder_pans)
+    p5x = px - d6 * zx
+    p5y = py - d6 * zy
+    r = math.sqrt(p5x * p5x + p5y * p5y)
+    if r == 0.0:
         return None
-    p5x, p5y, pans = shoulder
-    s0, s1_, s2, s3, s4, s5 = sd
-    l0, l1, l2, l3, l4, l5 = lo
-    h0, h1, h2, h3, h4, h5 = hi
-    w0, w1, w2, w3, w4, w5 = w
-    # _nearest_equivalent, its common case (the seed-nearest equivalent within the limits) written out at each
-    # use: the same expression, without a call per joint per branch (a third of a line walk's time otherwise)
-    near = _nearest_equivalent
-    shoulders = _costed_shoulders(pans, s0, l0, h0, w0)
+    ratio = k[3] / r
+    if not -1.0 - _CLIP_TOL <= ratio <= 1.0 + _CLIP_TOL:
+        return None
+    ratio = 1.0 if ratio > 1.0 else (-1.0 if ratio < -1.0 else ratio)
+    phi = math.atan2(p5y, p5x) + _HALF_PI
+    dphi = math.acos(ratio)
+    s0, s4, s5 = sd[0], sd[4], sd[5]
+    l0, l4, l5 = lo[0], lo[4], lo[5]
+    h0, h4, h5 = hi[0], hi[4], hi[5]
+    w0, w4, w5 = w[0], w[4], w[5]
+    inf, near, tau = math.inf, _nearest_equivalent, _TWO_PI
+    qa = phi + dphi
+    va = qa + round((s0 - qa) / tau) * tau
+    if not l0 <= va <= h0:
+        va = near(qa, s0, l0, h0)
+    ca = inf if va is None else w0 * (va - s0) * (va - s0)
+    qb = phi - dphi
+    vb = qb + round((s0 - qb) / tau) * tau
+    if not l0 <= vb <= h0:
+        vb = near(qb, s0, l0, h0)
+    cb = inf if vb is None else w0 * (vb - s0) * (vb - s0)
+    shoulders = ((cb, qb, vb), (ca, qa, va)) if cb < ca else ((ca, qa, va), (cb, qb, vb))
 
-    best = math.inf
+    best = inf
     best_q: list[float] | None = None
     for cost1, q1, v1 in shoulders:
         if cost1 >= best:
             break
+        # steps 2 and 3 (_wrists)
         c1, s1 = math.cos(q1), math.sin(q1)
-        s5abs, pairs = _wrists(t, c1, s1, s5)
+        xz1 = xx * s1 - xy * c1
+        yz1 = yx * s1 - yy * c1
+        zz1 = zx * s1 - zy * c1
+        s5abs = math.sqrt(xz1 * xz1 + yz1 * yz1)
+        if s5abs < _WRIST_SINGULAR:
+            pairs = ((math.atan2(s5abs, zz1), s5), (math.atan2(-s5abs, zz1), s5))
+        else:
+            pairs = ((math.atan2(s5abs, zz1), math.atan2(-yz1, xz1)), (math.atan2(-s5abs, zz1), math.atan2(yz1, -xz1)))
         q6_final = s5abs >= _WRIST_NEAR_SINGULAR  # else the elbow step may nudge q6
-        wrists = _costed_wrists(pairs, cost1, q6_final, (s4, s5), (l4, l5), (h4, h5), (w4, w5))
+        wrists = []
+        for q5, q6 in pairs:
+            v5 = q5 + round((s4 - q5) / tau) * tau
+            if not l4 <= v5 <= h4:
+                v5 = near(q5, s4, l4, h4)
+            if v5 is None:
+                wrists.append((inf, q5, q6, v5, None))
+                continue
+            cost = cost1 + w4 * (v5 - s4) * (v5 - s4)
+            v6 = None
+            if q6_final:
+                v6 = q6 + round((s5 - q6) / tau) * tau
+                if not l5 <= v6 <= h5:
+                    v6 = near(q6, s5, l5, h5)
+                cost = inf if v6 is None else cost + w5 * (v6 - s5) * (v6 - s5)
+            wrists.append((cost, q5, q6, v5, v6))
+        if wrists[1][0] < wrists[0][0]:
+            wrists.reverse()
         for cost56, q5, q6, v5, v6 in wrists:
             if cost56 >= best:
                 break
-            elbow = _elbow(k, t, c1, s1, p5x, p5y, s5abs, q5, q6)
-            if elbow is None:
-                continue
-            c3, base, q234, q6 = elbow
-            if v6 is None:
-                v6 = q6 + round((s5 - q6) / _TWO_PI) * _TWO_PI
-                if not l5 <= v6 <= h5:
-                    v6 = near(q6, s5, l5, h5)
-                if v6 is None:
-                    continue
-                cost56 += w5 * (v6 - s5) * (v6 - s5)
-            t3 = math.acos(c3)
-            for q3 in (t3, -t3):
-                v3 = q3 + round((s2 - q3) / _TWO_PI) * _TWO_PI
-                if not l2 <= v3 <= h2:
-                    v3 = near(q3, s2, l2, h2)
-                if v3 is None:
-                    continue
-                cost3 = cost56 + w2 * (v3 - s2) * (v3 - s2)
-                if cost3 >= best:
-                    continue
-                q2 = _shoulder_lift(k, base, q3, c3)
-                v2 = q2 + round((s1_ - q2) / _TWO_PI) * _TWO_PI
-                if not l1 <= v2 <= h1:
-                    v2 = near(q2, s1_, l1, h1)
-                if v2 is None:
-                    continue
-                cost2 = cost3 + w1 * (v2 - s1_) * (v2 - s1_)
-                if cost2 >= best:
-                    continue
-                q4 = q234 - q2 - q3
-                v4 = q4 + round((s3 - q4) / _TWO_PI) * _TWO_PI
-                if not l3 <= v4 <= h3:
-                    v4 = near(q4, s3, l3, h3)
-                if v4 is None:
-                    continue
-                cost = cost2 + w3 * (v4 - s3) * (v4 - s3)
-                if cost < best:
-                    q = [v1, v2, v3, v4, v5, v6]
-                    if verify is None or verify(q):
-                        best, best_q = cost, q
+            found = _nearest_elbow(k, t, c1, s1, p5x, p5y, s5abs, q5, q6, v1, v5, v6, cost56, best, sd, lo, hi, w, verify)
+            if found is not None:
+                best, best_q = found
     return best_q
+
+
+def _nearest_elbow(
+    k: tuple[float, ...], t: Sequence[float], c1: float, s1: float, p5x: float, p5y: float, s5abs: float,
+    q5: float, q6: float, v1: float, v5: float, v6: float | None, cost56: float, best: float,
+    sd: Sequence[float], lo: Sequence[float], hi: Sequence[float], w: Sequence[float],
+    verify: Callable[[list[float]], bool] | None,
+) -> tuple[float, list[float]] | None:
+    """Step 4 of :func:`_nearest_solution` for one (shoulder, wrist) branch whose shoulder pan and wrist angles
+    cost ``cost56``: ``(cost, q)`` of its elbow cheaper than ``best``, or None. ``v6`` None: ``q6`` may still be
+    nudged (near the wrist singularity), so its cost is not yet in ``cost56``."""
+    d1, a2, a3, _, d5, d6, a2a3_sq, two_a2a3 = k
+    xx, yx, zx, _, xy, yy, zy, _, xz, yz, zz, pz = t
+    # _elbow and _wrist1_planar
+    c6 = math.cos(q6)
+    s6 = math.sin(q6)
+    z4x = -(s6 * xx + c6 * yx)
+    z4y = -(s6 * xy + c6 * yy)
+    z4z = -(s6 * xz + c6 * yz)
+    X = (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1
+    Y = pz - d6 * zz - d5 * z4z - d1
+    c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
+    if not -1.0 <= c3 <= 1.0 and s5abs < _WRIST_NEAR_SINGULAR:
+        nudged = _singular_q6(k, t, c1, s1, p5x, p5y, q6, c3 > 1.0)
+        if nudged is not None:
+            q6 = nudged
+            c6 = math.cos(q6)
+            s6 = math.sin(q6)
+            X, Y = _wrist1_planar(k, t, c1, s1, p5x, p5y, q6)
+            c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
+    if not -1.0 <= c3 <= 1.0:
+        if not -1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL:
+            return None
+        c3 = 1.0 if c3 > 1.0 else -1.0
+    near = _nearest_equivalent
+    s5 = sd[5]
+    if v6 is None:
+        l5, h5 = lo[5], hi[5]
+        v6 = q6 + round((s5 - q6) / _TWO_PI) * _TWO_PI
+        if not l5 <= v6 <= h5:
+            v6 = near(q6, s5, l5, h5)
+        if v6 is None:
+            return None
+        cost56 += w[5] * (v6 - s5) * (v6 - s5)
+    c5 = math.cos(q5)
+    s5_ = math.sin(q5)
+    # x4 = c5 x5 - s5 z6 with x5 = c6 x6 - s6 y6
+    x4x = c5 * (c6 * xx - s6 * yx) - s5_ * zx
+    x4y = c5 * (c6 * xy - s6 * yy) - s5_ * zy
+    x4z = c5 * (c6 * xz - s6 * yz) - s5_ * zz
+    base = math.atan2(Y, X)
+    q234 = math.atan2(x4z, x4x * c1 + x4y * s1)
+    _, s1_, s2, s3, _, _ = sd
+    _, l1, l2, l3, _, _ = lo
+    _, h1, h2, h3, _, _ = hi
+    _, w1, w2, w3, _, _ = w
+    # the two elbows (q3 = +acos, -acos), the one nearer the seed in q3 first: the other then rarely gets further
+    t3 = math.acos(c3)
+    elbows = []
+    for q3 in (t3, -t3):
+        v3 = q3 + round((s2 - q3) / _TWO_PI) * _TWO_PI
+        if not l2 <= v3 <= h2:
+            v3 = near(q3, s2, l2, h2)
+        if v3 is not None:
+            elbows.append((cost56 + w2 * (v3 - s2) * (v3 - s2), q3, v3))
+    if len(elbows) == 2 and elbows[1][0] < elbows[0][0]:
+        elbows.reverse()
+    found = None
+    for cost3, q3, v3 in elbows:
+        if cost3 >= best:
+            break
+        q2 = base - math.atan2(a3 * math.sin(q3), a2 + a3 * c3)  # _shoulder_lift
+        v2 = q2 + round((s1_ - q2) / _TWO_PI) * _TWO_PI
+        if not l1 <= v2 <= h1:
+            v2 = near(q2, s1_, l1, h1)
+        if v2 is None:
+            continue
+        cost2 = cost3 + w1 * (v2 - s1_) * (v2 - s1_)
+        if cost2 >= best:
+            continue
+        q4 = q234 - q2 - q3
+        v4 = q4 + round((s3 - q4) / _TWO_PI) * _TWO_PI
+        if not l3 <= v4 <= h3:
+            v4 = near(q4, s3, l3, h3)
+        if v4 is None:
+            continue
+        cost = cost2 + w3 * (v4 - s3) * (v4 - s3)
+        if cost < best:
+            q = [v1, v2, v3, v4, v5, v6]
+            if verify is None or verify(q):
+                best = cost
+                found = (cost, q)
+    return found
 
 
 def ur_ik(
@@ -692,22 +787,20 @@ def ur_ik(
     if len(sd) != 6 or len(lo) != 6 or len(hi) != 6:
         raise PlanningError("ur_ik: seed, lower and upper must each have 6 values")
     if weights is None:
-        w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+        w = _UNIT_WEIGHTS
     else:
         w = weights.tolist() if isinstance(weights, np.ndarray) else [float(v) for v in weights]
-    chain = _Chain(dh)
-
-    def reproduces_pose(q: list[float]) -> bool:
-        dp, dr = chain.error(q, t)
-        return dp <= tol and dr <= tol
-
+    chain = _chain(dh)
     # The nearest branch nearly always reproduces the pose; only at the edge of the
     # workspace does it not, and then the search is repeated checking every candidate.
     best = _nearest_solution(k, t, sd, lo, hi, w)
-    if best is not None and not reproduces_pose(best):
-        best = _nearest_solution(k, t, sd, lo, hi, w, reproduces_pose)
     if best is not None:
-        return np.array(best)
+        q = np.array(best)
+        if chain.reproduces(q, t, tol):
+            return q
+        best = _nearest_solution(k, t, sd, lo, hi, w, lambda q: chain.reproduces(np.array(q), t, tol))
+        if best is not None:
+            return np.array(best)
     raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_why_no_solution(dh, t, sd, lo, hi, chain, tol)}")
 
 
@@ -734,7 +827,7 @@ def ur_ik_line(
         raise PlanningError("ur_ik_line: seed, lower and upper must each have 6 values")
     lo, hi = lo_arr.tolist(), hi_arr.tolist()
     w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
-    chain = _Chain(dh)
+    chain = _chain(dh)
     n = len(poses)
     targets12 = poses[:, :3].reshape(-1, 12)
     targets = targets12.tolist()
@@ -812,8 +905,7 @@ def _unverified_walk(
 
 def _reproduces(chain: _Chain, q: list[float], t: Sequence[float], tol: float) -> bool:
     """Whether the flange at ``q`` (rad) is within ``tol`` m and ``tol`` rad of the 12-float target ``t``."""
-    dp, dr = chain.error(q, t)
-    return dp <= tol and dr <= tol
+    return chain.reproduces(np.array(q), t, tol)
 
 def _flange_errors(dh: DH, q: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(position error m, rotation error rad) ``(n,)`` each of the flange at ``q (n, 6)`` rad against ``poses

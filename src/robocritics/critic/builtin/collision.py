@@ -14,6 +14,12 @@ contacts are the task itself and are excluded, per sample:
 * the gripper (or the carried object) against the object attached at ``t``
   (``attached[t]``).
 
+An intended contact is *touching*, never a penetration: it is excluded only
+while ``d_{t,k} > -contact_tolerance_m`` (3 mm). Deeper, it counts like any
+other pair, so a carried object pushed into what it is set down on (or into
+an object that merely lies where the move ends) is an Error wherever the
+move ends.
+
 A carried-object pair (``group_a == "attached"``, ``a`` = the object's id)
 only counts while that object is the one held (``attached[t] == a``): before
 the grasp and after the release the object rests in the scene, and its contact
@@ -52,6 +58,13 @@ class Params(CriticParams):
         0.0, le=0, description="error when a counted pair's signed distance is at or below this, m (0 = any contact)"
     )
     ignore_pairs: ParamNames = Field((), description="names of proximity pairs never to count (e.g. a mount plate)")
+    contact_tolerance_m: float = Field(
+        0.003,
+        ge=0,
+        description="an intended contact (grasp, set-down, stacking) is excused only while it overlaps by less than "
+        "this, m; deeper it is a collision (source: this project: the modelled spheres, cylinders and finger "
+        "boxes only approximate compliant objects and finger pads; the careful examples touch within 1e-15 m)",
+    )
 
     @model_validator(mode="after")
     def _order(self) -> "Params":
@@ -74,12 +87,13 @@ class Counted:
     ``columns (K,)`` selects the environment pairs (minus ignored ones);
     ``gcols`` are those whose a-side is the gripper or a carried object, and
     ``intended (T, len(gcols))`` marks, per sample, which of them do not count
-    there: intended contacts, and carried-object pairs of an object that is not
+    there: intended contacts while they overlap by less than ``contact_tolerance_m``
+    (m; deeper, they count), and carried-object pairs of an object that is not
     held at that sample (None when that never happens). Built from per-step and
     per-attachment tables indexed by sample: no loop over samples.
     """
 
-    def __init__(self, trajectory, ignore_pairs=()):
+    def __init__(self, trajectory, ignore_pairs=(), contact_tolerance_m: float = Params().contact_tolerance_m):
         pairs = trajectory.pairs
         self.columns = np.array([p.kind == "environment" and p.name not in ignore_pairs for p in pairs], dtype=bool)
         self.gcols = np.flatnonzero(
@@ -105,27 +119,25 @@ class Counted:
             if not table.any():
                 table = None
         # the object held at t: run-length code `attached` (it changes a few times per program), then per
-        # run: the gripper against the held object is intended, and a carried-object pair only exists
-        # while that object is the one held
+        # run: the gripper against the held object is an intended contact, and a carried-object pair only
+        # exists while that object is the one held
         run, held = _run_ids(trajectory.attached)
-        att_table = np.array(
-            [
-                [(h != "" and e == h) or (c is not None and c != h) for e, c in zip(entities, carriers)]
-                for h in held.tolist()
-            ],
-            dtype=bool,
-        )
-        if not att_table.any():
-            att_table = None
-        # per sample, the row of its (step, run): both tables combined into one small (S R, Kg) table first,
-        # so the (T, Kg) mask is one gather (two gathers and their `or` cost 2x)
-        if table is not None and att_table is not None:
-            both = (table[:, None, :] | att_table[None, :, :]).reshape(-1, len(entities))
-            excluded = both[trajectory.step * len(held) + run]
-        elif table is not None:
-            excluded = table[trajectory.step]
-        else:
-            excluded = None if att_table is None else att_table[run]
+        holding = np.array([[h != "" and e == h for e in entities] for h in held.tolist()], dtype=bool)
+        absent = np.array([[c is not None and c != h for c in carriers] for h in held.tolist()], dtype=bool)
+        # per sample, the row of its (step, run): both contact tables combined into one small (S R, Kg) table
+        # first, so the (T, Kg) mask is one gather (two gathers and their `or` cost 2x)
+        contact = None
+        if table is not None:
+            contact = (table[:, None, :] | holding[None, :, :]).reshape(-1, len(entities))
+            contact = contact[trajectory.step * len(held) + run]
+        elif holding.any():
+            contact = holding[run]
+        excluded = None
+        if contact is not None:
+            # an intended contact is touching, not a penetration: deeper than the tolerance it counts
+            excluded = contact & (trajectory.proximity[:, self.gcols] > -contact_tolerance_m)
+        if absent.any():
+            excluded = absent[run] if excluded is None else excluded | absent[run]
         self.intended = excluded
 
     def row_mask(self, rows) -> np.ndarray:
@@ -155,10 +167,11 @@ class Counted:
         return out
 
 
-def counted_distances(trajectory, ignore_pairs=()) -> np.ndarray:
+def counted_distances(trajectory, ignore_pairs=(), contact_tolerance_m: float = Params().contact_tolerance_m) -> np.ndarray:
     """``(T, K)`` proximity, m, with every pair that does not count (self pairs, ignored pairs,
-    intended contacts) set to +inf. For tests and plots; the critic avoids this copy."""
-    counted = Counted(trajectory, ignore_pairs)
+    intended contacts shallower than ``contact_tolerance_m``) set to +inf. For tests and plots; the critic
+    avoids this copy."""
+    counted = Counted(trajectory, ignore_pairs, contact_tolerance_m)
     return np.where(counted.row_mask(np.arange(len(trajectory))), trajectory.proximity, np.inf)
 
 
@@ -179,7 +192,7 @@ class CollisionCritic:
         trajectory, scene = execution.trajectory, execution.scene
         time = trajectory.time
         P = trajectory.proximity
-        counted = Counted(trajectory, params.ignore_pairs)
+        counted = Counted(trajectory, params.ignore_pairs, params.contact_tolerance_m)
         if not counted.columns.any():
             return threshold_verdict(
                 self.name,
