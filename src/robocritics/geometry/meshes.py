@@ -1,0 +1,106 @@
+"""Exact distances from the robot's capsules (and carried shapes) to a scene's mesh fixtures, with coal. Metres.
+
+A mesh fixture (:class:`~robocritics.scene.Shape` of kind ``mesh``) is a static triangle soup: coal's
+``BVHModelOBBRSS`` of its triangles, and ``coal.distance`` against a capsule (GJK per triangle pair the
+bounding-volume hierarchy cannot rule out) gives the distance to the surface, exact to coal's GJK tolerance
+when apart, and a negative value (the capsule's depth past the nearest touched triangle) when the capsule
+crosses the surface. A capsule wholly *inside* a closed mesh, touching no triangle, is reported at its
+positive distance to the surface: a triangle soup has no inside (a CAD export need not be watertight).
+
+Far samples never call coal: the distance of the capsule's segment to the mesh's bounding ball (centre the
+bounding box's, radius its farthest vertex) minus both radii is a lower bound, used where it is above the
+caller's cutoff (the contract of :meth:`robocritics.geometry.proximity.ProximityKernel.distances`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene import Shape
+from .pairs import capsule_pose
+
+__all__ = ["mesh_model", "mesh_ball", "capsule_mesh", "shape_mesh"]
+
+
+def mesh_model(shape: Shape):
+    """coal's bounding-volume hierarchy of a mesh shape's triangles (in the shape frame)."""
+    import coal
+
+    if shape.mesh is None:
+        raise ValueError(f"shape {shape.name!r} ({shape.kind}) has no triangles")
+    vertices, triangles = shape.mesh
+    model = coal.BVHModelOBBRSS()
+    model.beginModel(len(triangles), len(vertices))
+    model.addVertices(np.ascontiguousarray(vertices, dtype=float))
+    model.addTriangles(np.ascontiguousarray(triangles, dtype=np.int64))
+    model.endModel()
+    return model
+
+
+def mesh_ball(shape: Shape) -> tuple[np.ndarray, float]:
+    """Centre (m, base frame) and radius (m) of a ball holding every vertex of a mesh shape."""
+    vertices = shape.mesh[0]
+    middle = (vertices.max(axis=0) + vertices.min(axis=0)) / 2
+    radius = float(np.sqrt(((vertices - middle) ** 2).sum(axis=1).max()))
+    pose = np.asarray(shape.pose, dtype=float)
+    return pose[:3, :3] @ middle + pose[:3, 3], radius
+
+
+def _segment_point(p0: np.ndarray, p1: np.ndarray, c: np.ndarray) -> np.ndarray:
+    d = p1 - p0
+    dd = (d * d).sum(axis=1)
+    t = np.clip(((c - p0) * d).sum(axis=1) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    return np.linalg.norm(p0 + t[:, None] * d - c, axis=1)
+
+
+def _transform(pose: np.ndarray):
+    import coal
+
+    return coal.Transform3s(np.ascontiguousarray(pose[:3, :3]), np.ascontiguousarray(pose[:3, 3]))
+
+
+def capsule_mesh(p0, p1, radius_m: float, shape: Shape, model=None, cut=None) -> np.ndarray:
+    """Signed distances ``(T,)`` (m) of the capsules ``p0``-``p1`` ``(T, 3)`` of radius ``radius_m`` to the mesh
+    ``shape`` (see the module docstring). With ``cut`` (m, ``(T,)``), a sample whose bounding-ball bound is
+    above its cutoff gets that lower bound instead of coal's value; ``cut=None``: every value exact."""
+    import coal
+
+    p0, p1 = np.asarray(p0, dtype=float), np.asarray(p1, dtype=float)
+    centre, ball = mesh_ball(shape)
+    out = _segment_point(p0, p1, centre) - ball - radius_m
+    exact = np.ones(len(p0), dtype=bool) if cut is None else out <= np.asarray(cut)
+    model = mesh_model(shape) if model is None else model
+    where = _transform(np.asarray(shape.pose, dtype=float))
+    request, result = coal.DistanceRequest(), coal.DistanceResult()
+    last, value = None, 0.0
+    for t in np.flatnonzero(exact).tolist():
+        key = (p0[t].tobytes(), p1[t].tobytes())
+        if key != last:  # an arm standing still: one call
+            pose, length = capsule_pose(p0[t], p1[t])
+            result.clear()
+            value = coal.distance(coal.Capsule(radius_m, length), _transform(pose), model, where, request, result)
+            last = key
+        out[t] = value
+    return out
+
+
+def shape_mesh(a: Shape, b: Shape, Pa: np.ndarray, Pb: np.ndarray) -> np.ndarray:
+    """Signed distances ``(T,)`` (m) of a primitive ``a`` at poses ``Pa`` ``(1 or T, 4, 4)`` to a mesh ``b``
+    (static, ``Pb`` ``(1, 4, 4)``): coal, once per run of equal poses."""
+    import coal
+
+    from .pairs import coal_geometry
+
+    if a.kind == "mesh":
+        raise ValueError(f"shapes {a.name!r} and {b.name!r}: two meshes are not measured (a mesh is a fixture)")
+    geometry, model = coal_geometry(a.kind, a.size), mesh_model(b)
+    where = _transform(np.asarray(Pb[0], dtype=float))
+    request, result = coal.DistanceRequest(), coal.DistanceResult()
+    out = np.empty(len(Pa))
+    for t in range(len(Pa)):
+        if t and np.array_equal(Pa[t], Pa[t - 1]):
+            out[t] = out[t - 1]
+            continue
+        result.clear()
+        out[t] = coal.distance(geometry, _transform(Pa[t]), model, where, request, result)
+    return out
