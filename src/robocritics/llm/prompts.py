@@ -117,6 +117,8 @@ def _shape_text(obj: Any) -> str:
         return f"box {_m(size[0])} x {_m(size[1])} x {_m(size[2])} m (x, y, z)"
     if obj.shape == "cylinder":
         return f"upright cylinder, radius {_m(size[0])} m, height {_m(size[1])} m"
+    if obj.shape == "mesh":
+        return f"fixture (CAD mesh, not graspable), bounding box {_m(size[0])} x {_m(size[1])} x {_m(size[2])} m, top z {_m(obj.top)} m"
     return f"sphere, radius {_m(size[0])} m"
 
 
