@@ -428,12 +428,19 @@ class SceneObject(_Model):
         data = dict(data)
         if data.get("graspable", False) is not False:
             raise ValueError("graspable: a mesh object is a fixture; robocritics does not grasp meshes")
-        if "size" in data:
-            raise ValueError("size: a mesh object's size comes from its file; leave size out")
         data["graspable"] = False
         scale = _mesh_scale(data.get("scale", 1.0))
         data["scale"] = scale
-        data["size"] = tuple(float(v) for v in _mesh_extents(_mesh_of(data.get("file"), scale)))
+        size = tuple(float(v) for v in _mesh_extents(_mesh_of(data.get("file"), scale)))
+        if max(size) > MAX_LENGTH_M:
+            raise ValueError(f"file: the mesh spans {max(size):.3g} m at scale {scale}; the limit is {MAX_LENGTH_M} m (is scale right?)")
+        given = data.get("size")
+        # a dumped scene carries the derived size: the same numbers are accepted, others are a mistake
+        if given is not None and not (isinstance(given, (list, tuple)) and len(given) == 3 and all(
+            isinstance(v, numbers.Real) and not isinstance(v, bool) and abs(float(v) - w) <= 1e-9 * max(1.0, w) for v, w in zip(given, size)
+        )):  # fmt: skip
+            raise ValueError(f"size: a mesh object's size comes from its file ({list(size)} m); leave size out")
+        data["size"] = size
         return data
 
     @model_validator(mode="after")
@@ -695,7 +702,7 @@ class Scene(_Model):
         data = parse_json(text, shown)
         if not isinstance(data, dict):
             raise SceneError(f"{shown}: a scene is a JSON object, got {type(data).__name__}")
-        _resolve_mesh_files(data, Path(path).parent)
+        _resolve_mesh_files(data, Path(path).absolute().parent)
         try:
             return cls.model_validate(data)
         except SceneError as exc:
