@@ -17,24 +17,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene import Shape
-from .pairs import capsule_pose
+from .pairs import capsule_pose, coal_geometry
 
 __all__ = ["mesh_model", "mesh_ball", "capsule_mesh", "shape_mesh"]
 
 
 def mesh_model(shape: Shape):
     """coal's bounding-volume hierarchy of a mesh shape's triangles (in the shape frame)."""
-    import coal
-
     if shape.mesh is None:
         raise ValueError(f"shape {shape.name!r} ({shape.kind}) has no triangles")
-    vertices, triangles = shape.mesh
-    model = coal.BVHModelOBBRSS()
-    model.beginModel(len(triangles), len(vertices))
-    model.addVertices(np.ascontiguousarray(vertices, dtype=float))
-    model.addTriangles(np.ascontiguousarray(triangles, dtype=np.int64))
-    model.endModel()
-    return model
+    return coal_geometry("mesh", shape.mesh)
 
 
 def mesh_ball(shape: Shape) -> tuple[np.ndarray, float]:
@@ -88,8 +80,6 @@ def shape_mesh(a: Shape, b: Shape, Pa: np.ndarray, Pb: np.ndarray) -> np.ndarray
     """Signed distances ``(T,)`` (m) of a primitive ``a`` at poses ``Pa`` ``(1 or T, 4, 4)`` to a mesh ``b``
     (static, ``Pb`` ``(1, 4, 4)``): coal, once per run of equal poses."""
     import coal
-
-    from .pairs import coal_geometry
 
     if a.kind == "mesh":
         raise ValueError(f"shapes {a.name!r} and {b.name!r}: two meshes are not measured (a mesh is a fixture)")

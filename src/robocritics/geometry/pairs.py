@@ -24,8 +24,18 @@ from .kernels import _FLOAT, _point_box, _point_cyl, _pose_parts, sphere_shape
 
 
 def coal_geometry(kind: str, size: Sequence[float]):
-    """coal's primitive of a scene shape ``kind`` of ``size`` (as :class:`~robocritics.scene.Shape`), or a capsule."""
+    """coal's primitive of a scene shape ``kind`` of ``size`` (as :class:`~robocritics.scene.Shape`), or a capsule;
+    for ``mesh``, ``size`` is the shape's ``(vertices (V, 3), triangles (F, 3))`` and the result a BVH of them."""
     import coal
+
+    if kind == "mesh":
+        vertices, triangles = size
+        model = coal.BVHModelOBBRSS()
+        model.beginModel(len(triangles), len(vertices))
+        model.addVertices(np.ascontiguousarray(vertices, dtype=float))
+        model.addTriangles(np.ascontiguousarray(triangles, dtype=np.int64))
+        model.endModel()
+        return model
 
     if kind == "box":
         return coal.Box(float(size[0]), float(size[1]), float(size[2]))  # full extents
@@ -410,7 +420,8 @@ def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> 
     """Closest points (m, base frame) between two shapes and their distance [m], with coal.
 
     Kinds: ``"capsule"`` (size ``(radius, length)``, axis z of its pose), ``"box"``
-    (extents), ``"cylinder"`` (radius, height), ``"sphere"`` (radius). Poses are 4x4.
+    (extents), ``"cylinder"`` (radius, height), ``"sphere"`` (radius), ``"mesh"`` (size: its
+    ``(vertices, triangles)``, :func:`coal_geometry`). Poses are 4x4.
     The distance is negative on penetration (coal's signed distance); the points
     are then the witness points of the penetration.
     """

@@ -131,7 +131,7 @@ def _segment(execution: Run, pair_name: str, sample: int) -> list[list[float]] |
             return [("capsule", (robot.capsule_radii[i], length), pose)]
         moved = execution.object_poses.get(name)
         return [
-            (s.kind, s.size, s.pose if moved is None else moved[sample])
+            (s.kind, s.size if s.mesh is None else s.mesh, s.pose if moved is None else moved[sample])
             for s in execution.scene.shapes()
             if s.owner == name
         ]
