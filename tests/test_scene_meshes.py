@@ -356,3 +356,22 @@ def test_the_offline_file_draws_the_jig(cell, tmp_path):
         driver.get(bare.as_uri())
         wait_for(driver, ready, what="the first frame")
         assert canvas_pixels(driver, driver.find_element("css selector", ".rc-canvas")) != with_jig
+
+
+def test_a_carried_object_against_the_jig_matches_coal(cell):
+    """A box the gripper carries (its pose per sample) against the mesh: coal per run of equal poses."""
+    from robocritics.geometry.pairs import closest_points
+    from robocritics.scene import SceneObject
+
+    scene = Scene.load(cell)
+    jig = scene.shapes()[0]
+    box = SceneObject(id="part", shape="box", size=(0.04, 0.03, 0.05), position=(0.3, 0.1, 0.2)).shapes()[0]
+    T = 40
+    poses = np.broadcast_to(np.eye(4), (T, 4, 4)).copy()
+    poses[: T // 2, :3, 3] = np.linspace((0.35, 0.2, 0.25), (0.27, 0.0, 0.03), T // 2)
+    poses[T // 2 :] = poses[T // 2 - 1]  # resting: one run
+    kernel = ProximityKernel([], [box, jig], [("part", "jig"), ("jig", "part")], moving=["part"])
+    values = kernel.distances(np.zeros((T, 0, 3)), np.zeros((T, 0, 3)), poses={"part": poses})
+    expected = [closest_points("box", box.size, poses[t], "mesh", jig.mesh, jig.pose)[2] for t in range(T)]
+    assert np.allclose(values[:, 0], expected, atol=1e-12) and np.array_equal(values[:, 0], values[:, 1])
+    assert values[0, 0] > 0.05 and values[-1, 0] < 0  # from above the jig down into its plate
