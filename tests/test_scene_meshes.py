@@ -375,3 +375,19 @@ def test_a_carried_object_against_the_jig_matches_coal(cell):
     expected = [closest_points("box", box.size, poses[t], "mesh", jig.mesh, jig.pose)[2] for t in range(T)]
     assert np.allclose(values[:, 0], expected, atol=1e-12) and np.array_equal(values[:, 0], values[:, 1])
     assert values[0, 0] > 0.05 and values[-1, 0] < 0  # from above the jig down into its plate
+
+
+def test_programs_see_the_jig_centre_and_avoid_collision_routes_over_it(cell):
+    scene = Scene.load(cell)
+    (jig,) = scene.objects
+    corners = placed_triangles(jig.shapes()[0]).reshape(-1, 3)
+    assert jig.centre == pytest.approx(tuple((corners.max(0) + corners.min(0)) / 2))  # not the file's origin
+
+    def least(program):
+        tr = rc.simulate(program, scene).trajectory
+        return tr.proximity[:, [k for k, p in enumerate(tr.pairs) if (p.b_entity or p.b) == "jig"]].min()
+
+    across = "move_to(0.35, 0.12, 0.06)\nmove_to(0.17, -0.12, 0.06)\n"
+    assert least("avoid_collision(jig)\n" + across) > max(least(across), 0.03)
+    above = least("move_to(jig.x, jig.y, jig.top + 0.05)\n")  # the fingertips 5 cm over its highest point
+    assert 0.045 < above < 0.06

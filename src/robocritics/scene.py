@@ -503,10 +503,22 @@ class SceneObject(_Model):
 
     @property
     def width(self) -> float:
-        """Horizontal extent a gripper closes on, m (the smaller horizontal size)."""
+        """Horizontal extent a gripper closes on, m (the smaller horizontal size; a mesh: of its placed bounding box)."""
+        if self.shape == "mesh":
+            extent = np.ptp(self.placed_vertices()[:, :2], axis=0)
+            return float(extent.min())
         if self.shape == "box":
             return min(self.size[0], self.size[1])
         return 2 * self.size[0]
+
+    @property
+    def centre(self) -> tuple[float, float, float]:
+        """The centre of the object, m (base frame): its ``position``, or for a mesh the middle of its placed
+        axis-aligned bounding box (a mesh's ``position`` is its file's origin). Programs see this as x, y, z."""
+        if self.shape != "mesh":
+            return self.position
+        vertices = self.placed_vertices()
+        return tuple(float(v) for v in (vertices.max(axis=0) + vertices.min(axis=0)) / 2)
 
     def shapes(self) -> list[Shape]:
         mesh = _mesh_of(self.file, self.scale) if self.shape == "mesh" else None

@@ -149,7 +149,7 @@ def describe_scene(scene: "Scene") -> str:
     if not scene.objects:
         lines.append("- (none)")
     for o in scene.objects:
-        text = f"- {o.id}: {_shape_text(o)}; centre {_xyz(o.position)}; top z = {_m(o.top)}"
+        text = f"- {o.id}: {_shape_text(o)}; centre {_xyz(o.centre)}; top z = {_m(o.top)}"
         if any(abs(a) > 1e-9 for a in o.rpy):
             text += f"; rotated rpy {_xyz(o.rpy)} rad"
         text += "; graspable" if o.graspable else "; NOT graspable (fixed)"
