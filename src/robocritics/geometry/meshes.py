@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene import Shape
-from .pairs import capsule_pose, coal_geometry
+from .pairs import coal_geometry
 
 __all__ = ["mesh_model", "mesh_ball", "capsule_mesh", "shape_mesh"]
 
@@ -64,16 +64,37 @@ def capsule_mesh(p0, p1, radius_m: float, shape: Shape, model=None, cut=None) ->
     model = mesh_model(shape) if model is None else model
     where = _transform(np.asarray(shape.pose, dtype=float))
     request, result = coal.DistanceRequest(), coal.DistanceResult()
-    last, value = None, 0.0
-    for t in np.flatnonzero(exact).tolist():
-        key = (p0[t].tobytes(), p1[t].tobytes())
-        if key != last:  # an arm standing still: one call
-            pose, length = capsule_pose(p0[t], p1[t])
-            result.clear()
-            value = coal.distance(coal.Capsule(radius_m, length), _transform(pose), model, where, request, result)
-            last = key
-        out[t] = value
+    at = np.flatnonzero(exact)
+    if len(at) == 0:
+        return out
+    # an arm standing still: one call per run of equal segments
+    ends = np.concatenate([p0[at], p1[at]], axis=1)
+    new = np.ones(len(at), dtype=bool)
+    new[1:] = (ends[1:] != ends[:-1]).any(axis=1)
+    firsts = at[new]
+    rotations, centres, lengths = _capsule_frames(p0[firsts], p1[firsts])
+    values = np.empty(len(firsts))
+    transform = coal.Transform3s()
+    for n in range(len(firsts)):
+        transform.setRotation(rotations[n])
+        transform.setTranslation(centres[n])
+        result.clear()
+        values[n] = coal.distance(coal.Capsule(radius_m, float(lengths[n])), transform, model, where, request, result)
+    out[at] = values[np.cumsum(new) - 1]
     return out
+
+
+def _capsule_frames(p0: np.ndarray, p1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`~robocritics.geometry.pairs.capsule_pose` for ``N`` segments at once: rotations ``(N, 3, 3)`` whose
+    z runs along ``p0 -> p1``, the midpoints ``(N, 3)`` and the lengths ``(N,)``, m."""
+    axis = p1 - p0
+    lengths = np.linalg.norm(axis, axis=1)
+    z = np.where(lengths[:, None] > 1e-12, axis / np.where(lengths > 1e-12, lengths, 1.0)[:, None], [0.0, 0.0, 1.0])
+    helper = np.where((np.abs(z[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    rotations = np.ascontiguousarray(np.stack([x, np.cross(z, x), z], axis=2))
+    return rotations, np.ascontiguousarray((p0 + p1) / 2), lengths
 
 
 def shape_mesh(a: Shape, b: Shape, Pa: np.ndarray, Pb: np.ndarray) -> np.ndarray:
