@@ -467,6 +467,12 @@ class Evaluator:
             raise self._death("during the check") from None
         finally:
             evaluation.duration_s = time.monotonic() - started
+        if evaluation.duration_s > self.timeout_s:
+            # the answer came after the deadline, between two looks (this thread was not scheduled on a loaded
+            # host): a job is judged by when it ended, not by when it was last looked at
+            raise EvaluatorError(
+                f"the check took longer than its timeout of {self.timeout_s:g} s (timeout_s)", "timeout_s", self.timeout_s
+            )
         if answer[0] == "memory":
             evaluation.cpu_s = float(answer[1])
             raise EvaluatorError(
