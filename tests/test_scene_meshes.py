@@ -351,6 +351,7 @@ def test_the_offline_file_draws_the_jig(cell, tmp_path):
         driver.get(out.as_uri())
         wait_for(driver, ready, what="the first frame")
         assert severe_console_errors(driver) == []
+        assert driver.find_element("css selector", ".rc-replay").get_attribute("data-meshes") == "1"
         with_jig = canvas_pixels(driver, driver.find_element("css selector", ".rc-canvas"))
         save_screenshot(driver, "mesh_jig.png")
         driver.get(bare.as_uri())
@@ -391,3 +392,22 @@ def test_programs_see_the_jig_centre_and_avoid_collision_routes_over_it(cell):
     assert least("avoid_collision(jig)\n" + across) > max(least(across), 0.03)
     above = least("move_to(jig.x, jig.y, jig.top + 0.05)\n")  # the fingertips 5 cm over its highest point
     assert 0.045 < above < 0.06
+
+
+def test_the_studio_draws_the_jig_and_flags_the_plunge(cell):
+    from browser import chromium, save_screenshot, severe_console_errors, wait_for
+    from robocritics.viz.studio import Studio
+
+    program = "move_to(0.27, 0.0, 0.15)\nmove_to(0.27, 0.0, 0.07)\nmove_down(0.06)\nhome()\n"
+    with chromium() as driver, Studio(str(cell), program) as studio:
+        driver.get(studio.url)
+        wait_for(driver, "return document.body.dataset.ready === '1'", what="the studio page to start")
+        driver.execute_script("document.getElementById('run').click()")
+        wait_for(driver, "const r = document.querySelector('#critics .critic[data-critic=\"collision\"]'); "
+                         "return r && ['ok', 'warning', 'error'].includes(r.dataset.flag)", what="the collision flag")  # fmt: skip
+        flag = driver.execute_script("return document.querySelector('#critics .critic[data-critic=\"collision\"]').dataset.flag")
+        assert flag == "error"
+        wait_for(driver, "return document.getElementById('replay').dataset.ready === '1'", what="the replay")
+        assert driver.execute_script("return document.getElementById('replay').dataset.meshes") == "1"
+        save_screenshot(driver, "studio_mesh_jig.png")
+        assert not [e for e in severe_console_errors(driver) if "favicon" not in e]

@@ -301,6 +301,8 @@
       }
     }
     this.element.dataset.people = String((data.humans || []).length);
+    // mesh fixtures drawn from their triangles (a test reads it, as it reads the people)
+    this.element.dataset.meshes = String(data.objects.filter((o) => o.shape === "mesh" && o.triangles).length);
 
     this.capsuleMeshes = [];
     const first = this.ends;
