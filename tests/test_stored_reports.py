@@ -28,6 +28,13 @@ TASK_GOALS = {
 }
 CRITICS = ["joint_speed", "space_usage", "collision", "end_effector_pose", "pinch_point", "task_outcome"]
 
+#: Critics whose verdicts changed on purpose since c045a0b, and why; the rest of each report must still be
+#: identical. (Regenerate the stored reports when a change like this is meant to stay.)
+CHANGED_SINCE_C045A0B = {
+    "collision": "h26 (merged on main): a carried object's penetration is flagged, and a contact_tolerance_m "
+    "parameter (a fixed bug of the collision critic, not a refactoring)",
+}
+
 
 def differences(stored, now, where="report") -> list[str]:
     """Where ``now`` differs from ``stored`` (JSON values; numbers to 1e-9 relative or absolute)."""
@@ -71,5 +78,9 @@ def test_report_equals_the_stored_one(name):
     now["params"].pop("task_outcome")
     # the report's `source` (motion imported from another tool) came after c045a0b; a program's report has none
     assert now.pop("source", None) is None
+    for report in (stored, now):  # the score sums the verdicts compared below
+        report["verdicts"] = [v for v in report["verdicts"] if v["critic"] not in CHANGED_SINCE_C045A0B]
+        for critic in CHANGED_SINCE_C045A0B:
+            report["params"].pop(critic)
+        report.pop("score")
     assert differences(stored, now) == []
-    assert report.score == stored["score"]

@@ -765,7 +765,7 @@ def _turn_fingers(verdict, execution, program) -> list[Edit]:
     ``rotate_gripper(0)`` after the ``open_gripper`` that lets the object go, so the
     rest of the program keeps its orientation.
     """
-    from ..critics.collision import Params as CollisionParams
+    from ..critic.builtin.collision import Params as CollisionParams
 
     traj = execution.trajectory
     deep = traj.proximity.min(axis=0, initial=math.inf) < -CollisionParams().contact_tolerance_m  # not just touching
@@ -848,7 +848,7 @@ def _grasp_higher(verdict, execution, program) -> list[Edit]:
     overlap of the gripper with that object on that line plus :data:`GRASP_CLEARANCE_M`:
     its z argument (``move_to``/``move_linear``) or a shorter ``move_down``.
     """
-    from ..critics.collision import Params as CollisionParams
+    from ..critic.builtin.collision import Params as CollisionParams
 
     traj = execution.trajectory
     motion = [c for c in execution.plan.calls if c.skill not in _SETTINGS]

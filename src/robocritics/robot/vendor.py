@@ -308,7 +308,7 @@ def height_invariant_links(robot) -> tuple[str, ...]:
 
 def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links) -> None:
     """Set ``robot``'s fixed links, reach and home (each unless given), and its pinch pairs at the home pose."""
-    from .proximity import capsule_capsule
+    from ..geometry.kernels import capsule_capsule
 
     robot.fixed_links = tuple(fixed_links) if fixed_links is not None else height_invariant_links(robot)
     rng = np.random.default_rng(0)
