@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..scene import Shape
-__all__ = ["shape_shape", "closest_points", "capsule_pose"]
+__all__ = ["shape_shape", "closest_points", "capsule_pose", "coal_geometry"]
 
 from .kernels import _FLOAT, _point_box, _point_cyl, _pose_parts, sphere_shape
 
@@ -23,8 +23,19 @@ from .kernels import _FLOAT, _point_box, _point_cyl, _pose_parts, sphere_shape
 # ----------------------------------------------------------------------------------------------
 
 
-def _coal_geometry(kind: str, size: Sequence[float]):
+def coal_geometry(kind: str, size: Sequence[float]):
+    """coal's primitive of a scene shape ``kind`` of ``size`` (as :class:`~robocritics.scene.Shape`), or a capsule;
+    for ``mesh``, ``size`` is the shape's ``(vertices (V, 3), triangles (F, 3))`` and the result a BVH of them."""
     import coal
+
+    if kind == "mesh":
+        vertices, triangles = size
+        model = coal.BVHModelOBBRSS()
+        model.beginModel(len(triangles), len(vertices))
+        model.addVertices(np.ascontiguousarray(vertices, dtype=float))
+        model.addTriangles(np.ascontiguousarray(triangles, dtype=np.int64))
+        model.endModel()
+        return model
 
     if kind == "box":
         return coal.Box(float(size[0]), float(size[1]), float(size[2]))  # full extents
@@ -363,7 +374,7 @@ def _coal_values(a: Shape, b: Shape, Pa: np.ndarray, Pb: np.ndarray, at: np.ndar
     samples ``at`` of their poses ``(1 or T, 4, 4)``."""
     import coal
 
-    ga, gb = _coal_geometry(a.kind, a.size), _coal_geometry(b.kind, b.size)
+    ga, gb = coal_geometry(a.kind, a.size), coal_geometry(b.kind, b.size)
     solver = coal.ComputeDistance(ga, gb)  # keeps no reference: ga and gb must outlive it
     req = coal.DistanceRequest()
     req.gjk_tolerance = 1e-10
@@ -409,7 +420,8 @@ def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> 
     """Closest points (m, base frame) between two shapes and their distance [m], with coal.
 
     Kinds: ``"capsule"`` (size ``(radius, length)``, axis z of its pose), ``"box"``
-    (extents), ``"cylinder"`` (radius, height), ``"sphere"`` (radius). Poses are 4x4.
+    (extents), ``"cylinder"`` (radius, height), ``"sphere"`` (radius), ``"mesh"`` (size: its
+    ``(vertices, triangles)``, :func:`coal_geometry`). Poses are 4x4.
     The distance is negative on penetration (coal's signed distance); the points
     are then the witness points of the penetration.
     """
@@ -421,7 +433,7 @@ def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> 
 
     request, result = coal.DistanceRequest(), coal.DistanceResult()
     request.enable_signed_distance = True
-    distance = coal.distance(_coal_geometry(a_kind, a_size), transform(a_pose), _coal_geometry(b_kind, b_size), transform(b_pose),
+    distance = coal.distance(coal_geometry(a_kind, a_size), transform(a_pose), coal_geometry(b_kind, b_size), transform(b_pose),
                              request, result)  # fmt: skip
     return np.array(result.getNearestPoint1()), np.array(result.getNearestPoint2()), float(distance)
 

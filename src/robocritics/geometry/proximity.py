@@ -293,9 +293,12 @@ class ProximityKernel:
         if clash:
             raise ValueError(f"names used by both a capsule and a shape: {sorted(clash)}")
         for s in self.shapes:
-            if s.kind not in ("box", "cylinder", "sphere"):
-                raise ValueError(f"shape {s.name!r}: unknown kind {s.kind!r}; use box, cylinder or sphere")
+            if s.kind not in ("box", "cylinder", "sphere", "mesh"):
+                raise ValueError(f"shape {s.name!r}: unknown kind {s.kind!r}; use box, cylinder, sphere or mesh")
         moving = set(moving)
+        for s in self.shapes:
+            if s.kind == "mesh" and (s.name in moving or s.owner in moving):
+                raise ValueError(f"moving: {s.name!r} is a mesh, and a mesh is a fixture: it does not move")
         unknown = moving - set(shape_index) - {s.owner for s in self.shapes}
         if unknown:
             raise ValueError(f"moving: no shape or owner named {sorted(unknown)}")
@@ -316,7 +319,14 @@ class ProximityKernel:
         selfs: list[tuple[int, int, int]] = []
         shape_pairs: list[tuple[int, int, int]] = []
         rot_keys: dict[int, bytes] = {}  # shape index -> its rotation as a group key (b"": the identity)
+        self._meshes: list[tuple[int, int, int]] = []  # (column, capsule or shape index, mesh shape index)
         for k, (a, b) in enumerate(self.pairs):
+            if a in shape_index and self.shapes[shape_index[a]].kind == "mesh":
+                a, b = b, a  # a mesh is measured from the other side (the distance is symmetric)
+            if b in shape_index and self.shapes[shape_index[b]].kind == "mesh":
+                self._meshes.append((k, cap_index[a] if a in cap_index else -1 - shape_index[a], shape_index[b]))
+                owners.append(self.shapes[shape_index[b]].owner)
+                continue
             if a in shape_index and b in shape_index:
                 shape_pairs.append((k, shape_index[a], shape_index[b]))
                 owners.append(self.shapes[shape_index[b]].owner)
@@ -481,8 +491,27 @@ class ProximityKernel:
                         for rr in g.rows:
                             rr = rr[rr >= 0]
                             buf[rr] = buf1[rr]
-        self._run(groups, P0, D, poses, far_m, buf, tight)
+        cut = self._run(groups, P0, D, poses, far_m, buf, tight)
+        if self._meshes:
+            self._mesh_rows(p0, p1, poses, buf, cut)
         return buf.T
+
+    def _mesh_rows(self, p0: np.ndarray, p1: np.ndarray, poses: dict, buf: np.ndarray, cut: np.ndarray | None) -> None:
+        """The mesh columns (:mod:`robocritics.geometry.meshes`): coal where the bounding-ball bound is within ``cut``."""
+        from .meshes import capsule_mesh, mesh_model, shape_mesh
+
+        models = self.__dict__.setdefault("_mesh_models", {})
+        for k, i, j in self._meshes:
+            mesh = self.shapes[j]
+            if j not in models:
+                models[j] = mesh_model(mesh)
+            if i >= 0:
+                buf[k] = capsule_mesh(p0[:, i], p1[:, i], self.capsules[i].radius, mesh, models[j], cut)
+                continue
+            a = self.shapes[-1 - i]
+            key = self._pose_key.get(a.name, "")
+            Pa = poses[key] if key in poses else np.asarray(a.pose, dtype=_FLOAT)[None]
+            buf[k] = np.broadcast_to(shape_mesh(a, mesh, Pa, np.asarray(mesh.pose, dtype=_FLOAT)[None]), (buf.shape[1],))
 
     def _run(
         self,
@@ -493,13 +522,13 @@ class ProximityKernel:
         far_m: float | None,
         buf: np.ndarray,
         tight: np.ndarray | None = None,
-    ) -> None:
+    ) -> np.ndarray | None:
         """Evaluate ``groups`` for segments ``P0 + t D`` ``(3, C, T)`` into the rows of ``buf (K, T)``.
 
         With ``far_m``, a first pass writes every capsule/box and capsule/cylinder pair's lower bound into
         ``buf`` (:meth:`_bounds`) and sets the per-sample cutoff ``c_t = max(far_m, u_t)``, ``u_t`` the least
         upper bound over the rows ``tight`` (bool ``(K,)``); the second pass replaces the bounds that are
-        ``<= c_t`` by exact values, sample by sample.
+        ``<= c_t`` by exact values, sample by sample. Returns the cutoffs ``c_t`` (None without ``far_m``).
         """
         T = P0.shape[2]
         cut = None
@@ -570,6 +599,7 @@ class ProximityKernel:
             args = [np.concatenate([e[1][i] for e in entries]) for i in range(len(entries[0][1]))]
             r = np.concatenate([e[2] for e in entries])
             flat[where] = -_DEPTH[kind](*args) - r
+        return cut
 
     def _chunks(self, g: _Group, T: int, poses: dict, far: bool = False):
         """``(t0, t1, pose)`` chunks of a product group: about ``chunk`` pair-samples each, keeping temporaries in cache.

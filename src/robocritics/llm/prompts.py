@@ -117,6 +117,8 @@ def _shape_text(obj: Any) -> str:
         return f"box {_m(size[0])} x {_m(size[1])} x {_m(size[2])} m (x, y, z)"
     if obj.shape == "cylinder":
         return f"upright cylinder, radius {_m(size[0])} m, height {_m(size[1])} m"
+    if obj.shape == "mesh":
+        return f"fixture (CAD mesh, not graspable), bounding box {_m(size[0])} x {_m(size[1])} x {_m(size[2])} m, top z {_m(obj.top)} m"
     return f"sphere, radius {_m(size[0])} m"
 
 
@@ -147,7 +149,7 @@ def describe_scene(scene: "Scene") -> str:
     if not scene.objects:
         lines.append("- (none)")
     for o in scene.objects:
-        text = f"- {o.id}: {_shape_text(o)}; centre {_xyz(o.position)}; top z = {_m(o.top)}"
+        text = f"- {o.id}: {_shape_text(o)}; centre {_xyz(o.centre)}; top z = {_m(o.top)}"
         if any(abs(a) > 1e-9 for a in o.rpy):
             text += f"; rotated rpy {_xyz(o.rpy)} rad"
         text += "; graspable" if o.graspable else "; NOT graspable (fixed)"

@@ -401,7 +401,7 @@ class Planner:
     def entity_top(self, entity_id: str) -> tuple[np.ndarray, float]:
         if entity_id in self.world.objects:
             o = self.world.objects[entity_id]
-            return np.asarray(o.position, float), o.top
+            return np.asarray(o.centre, float), o.top
         c = self.scene.entity(entity_id)
         return np.asarray(c.position, float), c.top
 
@@ -409,8 +409,9 @@ class Planner:
         if "object" in call.args:
             oid = call.args["object"]
             if oid in self.world.objects:
-                return np.asarray(self.world.objects[oid].position, float)
-            return np.asarray(self.scene.entity(oid).position, float)
+                return np.asarray(self.world.objects[oid].centre, float)
+            entity = self.scene.entity(oid)
+            return np.asarray(entity.position if isinstance(entity, Container) else entity.centre, float)
         return np.asarray(call.args["target"], float)
 
     def count_ik(self, call: SkillCall, solves: int = 1) -> None:

@@ -123,7 +123,8 @@ class World:
         at that sample; lower objects settle first so that a stack keeps its order.
         """
         self.pending_lift = ""
-        others = [oid for oid in self.objects if oid not in (lifted, self.attached)]
+        # a mesh fixture is bolted down: it never falls
+        others = [oid for oid in self.objects if oid not in (lifted, self.attached) and self.objects[oid].shape != "mesh"]
         support = {}
         for oid in others:
             o = self.objects[oid]

@@ -75,7 +75,7 @@ class FittedCapsule:
     slack_m: float
 
 
-def load_mesh(path: Path, scale=(1.0, 1.0, 1.0)) -> Mesh:
+def load_mesh(path: Path, scale=(1.0, 1.0, 1.0), max_triangles: int = MAX_TRIANGLES) -> Mesh:
     """The triangles of the mesh file ``path`` (STL, DAE or OBJ), scaled by ``scale``; a
     :class:`RobotModelError` for another format, a file coal cannot read, no triangles or too many."""
     import coal
@@ -95,8 +95,8 @@ def load_mesh(path: Path, scale=(1.0, 1.0, 1.0)) -> Mesh:
     F = int(model.num_tris)
     if F == 0:
         raise RobotModelError(f"mesh {str(path)!r} has no triangles")
-    if F > MAX_TRIANGLES:
-        raise RobotModelError(f"mesh {str(path)!r} has {F:,} triangles; robocritics reads at most {MAX_TRIANGLES:,}")
+    if F > max_triangles:
+        raise RobotModelError(f"mesh {str(path)!r} has {F:,} triangles; robocritics reads at most {max_triangles:,}")
     vertices = np.array(model.vertices(), dtype=float).reshape(-1, 3)
     triangles = np.array([[t[0], t[1], t[2]] for t in (model.tri_indices(i) for i in range(F))], dtype=np.int64)
     if not np.isfinite(vertices).all() or triangles.min() < 0 or triangles.max() >= len(vertices):

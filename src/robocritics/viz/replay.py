@@ -13,7 +13,7 @@ notebook and an offline HTML file:
   collision capsule (fingers included, so the gripper opens and closes), and
   each capsule's radius [m];
 * the scene: table and container boxes (static), objects with their shape, size
-  [m] and colour, and per frame the pose of every object the program moved
+  [m] and colour (a mesh fixture with its triangles, at most :data:`MAX_SHOWN_TRIANGLES`), and per frame the pose of every object the program moved
   (carried objects move with the gripper); the people in the cell as the capsules
   of their ISO/TS 15066 body regions (static; :mod:`robocritics.humans`);
 * provenance: per frame the program step, and the steps' skills and source lines;
@@ -67,6 +67,33 @@ def _f32(array: np.ndarray) -> dict[str, Any]:
     return {"dtype": "float32", "shape": list(a.shape), "data": base64.b64encode(a.tobytes()).decode("ascii")}
 
 
+MAX_SHOWN_TRIANGLES = 20_000
+"""Most triangles of one mesh object sent to the browser (float32, 36 bytes each): larger meshes are decimated."""
+
+
+def shown_triangles(vertices: np.ndarray, triangles: np.ndarray, limit: int = MAX_SHOWN_TRIANGLES) -> np.ndarray:
+    """The corners ``(F', 3, 3)`` (m, the mesh's frame) of at most ``limit`` triangles showing the mesh: all of
+    them if few enough, else vertex clustering (vertices snapped to a grid whose cell doubles until the
+    triangles left, those with three distinct corners, are few enough: the outline stays, small detail goes)."""
+    corners = vertices[triangles]
+    extent = float(np.ptp(vertices, axis=0).max()) or 1.0
+    cell = extent / 512
+    while len(corners) > limit:
+        snapped = np.round(vertices / cell).astype(np.int64)
+        _, ids = np.unique(snapped, axis=0, return_inverse=True)
+        ids = ids.reshape(-1)
+        keys = ids[triangles]
+        keep = (keys[:, 0] != keys[:, 1]) & (keys[:, 1] != keys[:, 2]) & (keys[:, 0] != keys[:, 2])
+        centres = np.zeros((ids.max() + 1, 3))
+        np.add.at(centres, ids, vertices)
+        centres /= np.bincount(ids)[:, None]
+        # one triangle per distinct corner set (clustering folds neighbours onto each other)
+        unique_keys = np.unique(np.sort(keys[keep], axis=1), axis=0)
+        corners = centres[unique_keys]
+        cell *= 2
+    return corners
+
+
 def _colour(attributes: dict, index: int) -> str:
     name = str(attributes.get("colour", attributes.get("color", ""))).lower()
     return _NAMED_COLOURS.get(name, _PALETTE[index % len(_PALETTE)])
@@ -104,7 +131,7 @@ def _segment(execution: Run, pair_name: str, sample: int) -> list[list[float]] |
             return [("capsule", (robot.capsule_radii[i], length), pose)]
         moved = execution.object_poses.get(name)
         return [
-            (s.kind, s.size, s.pose if moved is None else moved[sample])
+            (s.kind, s.size if s.mesh is None else s.mesh, s.pose if moved is None else moved[sample])
             for s in execution.scene.shapes()
             if s.owner == name
         ]
@@ -220,6 +247,8 @@ def replay_data(execution: Run, report: Report | None = None, *, title: str | No
             "colour": _colour(o.attributes, i),
             "pose": _pose12(shape.pose),
         }
+        if shape.mesh is not None:
+            entry["triangles"] = _f32(shown_triangles(*shape.mesh).reshape(-1, 9))
         if o.id in execution.object_poses:
             entry["poses"] = _f32(execution.object_poses[o.id][frames][:, :3, :4].reshape(len(frames), 12))
         objects.append(entry)
