@@ -28,12 +28,17 @@ TASK_GOALS = {
 }
 CRITICS = ["joint_speed", "space_usage", "collision", "end_effector_pose", "pinch_point", "task_outcome"]
 
-#: Critics whose verdicts changed on purpose since c045a0b, and why; the rest of each report must still be
-#: identical. (Regenerate the stored reports when a change like this is meant to stay.)
+#: Verdicts that changed on purpose since c045a0b, the programs whose verdicts changed, and why; everything else
+#: in each report must still be identical. (Regenerate the stored reports when a change like this is meant to stay.)
 CHANGED_SINCE_C045A0B = {
-    "collision": "h26 (merged on main): a carried object's penetration is flagged, and a contact_tolerance_m "
-    "parameter (a fixed bug of the collision critic, not a refactoring)",
+    "collision": (
+        {"breakfast_naive", "recycling_naive", "sorting_naive"},
+        "issue 26: a carried object sunk deeper than contact_tolerance_m into the object it is set on is no longer "
+        "excused as an intended contact (a fixed bug of the collision critic, not a refactoring)",
+    ),
 }
+#: Parameters added since c045a0b (with defaults that keep the other reports as they were).
+ADDED_PARAMS = {"collision": ["contact_tolerance_m"]}
 
 
 def differences(stored, now, where="report") -> list[str]:
@@ -78,9 +83,12 @@ def test_report_equals_the_stored_one(name):
     now["params"].pop("task_outcome")
     # the report's `source` (motion imported from another tool) came after c045a0b; a program's report has none
     assert now.pop("source", None) is None
+    for critic, added in ADDED_PARAMS.items():
+        for param in added:
+            now["params"][critic].pop(param)
+    changed = [critic for critic, (programs, _why) in CHANGED_SINCE_C045A0B.items() if name in programs]
     for report in (stored, now):  # the score sums the verdicts compared below
-        report["verdicts"] = [v for v in report["verdicts"] if v["critic"] not in CHANGED_SINCE_C045A0B]
-        for critic in CHANGED_SINCE_C045A0B:
-            report["params"].pop(critic)
-        report.pop("score")
+        report["verdicts"] = [v for v in report["verdicts"] if v["critic"] not in changed]
+        if changed:
+            report.pop("score")
     assert differences(stored, now) == []
