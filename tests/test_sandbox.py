@@ -596,9 +596,10 @@ DOCS = Path(__file__).resolve().parent.parent / "docs" / "programs.md"
 
 
 def test_every_listed_builtin_exists_in_a_program_and_nothing_else():
-    from robocritics.program.sandbox import _FORBIDDEN_NAMES, _Interpreter
+    from robocritics.program.builtins import Builtins
+    from robocritics.program.sandbox import _FORBIDDEN_NAMES
 
-    implemented = {name[len("_b_") :] for name in dir(_Interpreter) if name.startswith("_b_")}
+    implemented = {name[len("b_") :] for name in dir(Builtins) if name.startswith("b_")}
     assert implemented == set(SAFE_BUILTINS)
     assert not set(SAFE_BUILTINS) & set(_FORBIDDEN_NAMES)
     shown = run("print(" + ", ".join(SAFE_BUILTINS) + ")\n").output[0]

@@ -3,8 +3,9 @@
 Every evaluated node and every step is paid to the run's
 :class:`~robocritics.program.meter.Meter` (which reads the clock every few hundred
 units, so the deadline is checked inside long expressions too); the work of
-operations on values is priced by the mixins (:mod:`.operations`,
-:mod:`.builtins`, :mod:`.methods`).
+operations on values is priced by the objects the interpreter is composed of, each
+given the one meter: :class:`~.operations.Operations`, :class:`~.methods.Methods`
+and :class:`~.builtins.Builtins`.
 
 The interpreter recurses in Python for nested calls and expressions but never
 changes the process's recursion limit: at every call it counts the Python
@@ -24,15 +25,15 @@ from typing import Any, Callable, Iterator
 from ..errors import ProgramError
 from ..scene import Scene
 from .budget import Budget, BudgetError
-from .builtins import _Builtins
+from .builtins import MATH_WRAPPED, Builtins
 from .check import MATH_ALL, MODULE_ALIASES, Source, quote
 from .keys import KeyGuard
 from .frames import released, stack_depth
-from .messages import ALLOWED_METHODS, attr_message, called_from, usage
+from .messages import ALLOWED_METHODS, Where, attr_message, called_from, usage
 from .language import EXPRESSION_TYPES, MATH_NAMES, SAFE_BUILTINS, STATEMENT_TYPES
 from .meter import MAKE_OPS, SLOT_BYTES, LimitReached, Meter
-from .methods import _Methods
-from .operations import TUPLE_ITERATORS, _Operations, produced_size
+from .methods import Methods
+from .operations import TUPLE_ITERATORS, Operations, produced_size
 from .plan import Plan
 from .render import bounded_repr, clip
 from .skills import SKILLS, Namespace, ObjectView, Recorder, _close_names, _CURRENT
@@ -72,16 +73,17 @@ _MAX_KEYS_SHOWN = 20
 _SUGGESTED_KEYS = 1_000
 """A mistyped dict key is compared with at most this many of the dict's string keys."""
 
-# math functions whose C versions would iterate without limits: the interpreter implements them (_m_<name>)
-_MATH_WRAPPED = ("fsum", "prod", "dist")
-
 
 
 _BIG_INT_ARG = 2**64
 """Integers from this size on cost a math function big-int work (paid like writing them in decimal)."""
 
 
-class _Interpreter(_Builtins, _Methods, _Operations):
+def _no_call(*args: Any) -> Any:
+    raise RuntimeError("the run has ended")
+
+
+class _Interpreter:
     def __init__(self, source: str, tree: ast.Module, scene: Scene, budget: Budget):
         self.tree = tree
         self.b = budget
@@ -89,7 +91,10 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         self.plan = Plan(source=source, calls=[], output=[])
         self.rec = Recorder(scene, self.plan, budget)
         self.meter = Meter(budget)
-        self.keys = KeyGuard(self.meter)
+        self.where = Where(self.src)
+        self.ops = Operations(self.meter, budget, KeyGuard(self.meter), self.where, self._call)
+        self.methods = Methods(self.meter, self.ops)
+        self.builtins = Builtins(self.meter, budget, self.ops)
         self.depth = 0
         self.call_lines: list[int] = []
         self.loops: list[Any] = []
@@ -99,7 +104,6 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         self.module_scope = _Scope({}, None, None, "<module>")
         self.closure_scopes: list[_Scope] = []
         """Scopes in which the program made a function: the function and the scope refer to each other."""
-        self._call_node: Any = None
         self._locals_cache: dict[int, frozenset] = {}
         self._exec_table = {t: getattr(self, "_exec_" + t.__name__) for t in STATEMENT_TYPES}
         self._eval_table = {t: getattr(self, "_eval_" + t.__name__) for t in EXPRESSION_TYPES}
@@ -110,13 +114,13 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         lib_members = {name: _Builtin(name, fn, "skill") for name, fn in SKILLS.items()}
         math_members: dict[str, Any] = {}
         for name in MATH_NAMES:
-            if name in _MATH_WRAPPED:
-                math_members[name] = _Builtin(name, getattr(self, "_m_" + name), "builtin")
+            if name in MATH_WRAPPED:
+                math_members[name] = _Builtin(name, self.builtins.math_function(name), "builtin")
                 continue
             value = getattr(math, name)
             math_members[name] = _Builtin(name, value, "math", bind=False) if callable(value) else value
         modules = {"lib": Namespace("lib", lib_members, "skill"), "math": Namespace("math", math_members, "member")}
-        base: dict[str, Any] = {name: _Builtin(name, getattr(self, "_b_" + name), "builtin") for name in SAFE_BUILTINS}
+        base: dict[str, Any] = {name: _Builtin(name, self.builtins.function(name), "builtin") for name in SAFE_BUILTINS}
         base.update(lib_members)
         base["lib"] = modules["lib"]
         base["math"] = modules["math"]
@@ -149,11 +153,13 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         return self.plan
 
     def _forget(self) -> None:
-        """Drop what ties the interpreter to itself and to the program's values (its builtins are its own bound
-        methods, a reference cycle), so everything the run made is freed when the run ends, not at the next
-        garbage collection. The plan and the meter stay."""
+        """Drop what ties the interpreter to itself and to the program's values (its tables are its own bound
+        methods and its operations call back into it: reference cycles), so everything the run made is freed
+        when the run ends, not at the next garbage collection. The plan and the meter stay."""
         self.base, self.modules, self._exec_table, self._eval_table = {}, {}, {}, {}
-        self.keys = KeyGuard(self.meter)
+        self.ops.keys = KeyGuard(self.meter)
+        self.ops.call = _no_call
+        self.builtins.call_node = None
         self.frame_marks = []
         for scope in (self.module_scope, *self.closure_scopes):
             scope.vars.clear()
@@ -161,18 +167,12 @@ class _Interpreter(_Builtins, _Methods, _Operations):
 
     # ---- errors -----------------------------------------------------------------------
 
-    def _pos(self, node: Any) -> tuple[int, int]:
-        line = getattr(node, "lineno", 0) or 0
-        return line, self.src.col(line, getattr(node, "col_offset", None))
-
     def _error(self, message: str, node: Any) -> ProgramError:
-        line, col = self._pos(node)
-        return ProgramError(clip(message), line, col)
+        return self.where.error(message, node)
 
     def _limit(self, message: str, node: Any, limit: str) -> BudgetError:
         """The error for passing the Budget field ``limit`` at ``node``."""
-        line, col = self._pos(node)
-        return BudgetError(clip(message), line, col, limit=limit)
+        return self.where.limit(message, node, limit)
 
     def _limit_error(self, hit: LimitReached, node: Any) -> BudgetError:
         return self._limit(hit.message, node, hit.limit)
@@ -259,13 +259,13 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         if isinstance(target, ast.Name):
             current = self._eval_Name(target, scope)
             value = self._eval(node.value, scope)
-            scope.vars[target.id] = self._binop(op, current, value, node, inplace=True)
+            scope.vars[target.id] = self.ops.binop(op, current, value, node, inplace=True)
         elif isinstance(target, ast.Subscript):
             obj = self._eval(target.value, scope)
             key = self._eval(target.slice, scope)
             current = self._getitem(obj, key, target)
             value = self._eval(node.value, scope)
-            self._setitem(obj, key, self._binop(op, current, value, node, inplace=True), target)
+            self._setitem(obj, key, self.ops.binop(op, current, value, node, inplace=True), target)
         else:  # pragma: no cover - rejected statically
             raise self._error("cannot assign to this target", target)
 
@@ -288,7 +288,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
     def _exec_For(self, node: ast.For, scope: _Scope) -> None:
         iterable = self._eval(node.iter, scope)
         try:
-            it = self._iter(iterable, node.iter)
+            it = self.ops.iterate(iterable, node.iter)
         except TypeError as exc:
             raise self._convert(exc, node.iter) from None
 
@@ -338,7 +338,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         if not self._eval(node.test, scope):
             message = "assertion failed"
             if node.msg is not None:
-                text = clip(self._to_str(self._eval(node.msg, scope), node.msg))
+                text = clip(self.ops.to_str(self._eval(node.msg, scope), node.msg))
                 # control characters escaped: the message is printed to terminals and sent to the LLM as is
                 message += ": " + "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
             raise self._error(message, node)
@@ -393,7 +393,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
                     if n > len(elts):
                         raise ValueError(f"too many values to unpack (expected {len(elts)})")
                     raise ValueError(f"not enough values to unpack (expected {len(elts)}, got {n})")
-            items = list(self._items(value, target, "the value to unpack"))
+            items = list(self.ops.items(value, target, "the value to unpack"))
         except (TypeError, ValueError, OverflowError) as exc:
             raise self._convert(exc, target) from None
         if not starred:
@@ -414,7 +414,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             )
         for elt, item in zip(elts[:i], items[:i]):
             self._assign(elt, item, scope)
-        rest = self._made(items[i : len(items) - after])
+        rest = self.ops.made(items[i : len(items) - after])
         self._assign(elts[i].value, rest, scope)
         for elt, item in zip(elts[i + 1 :], items[len(items) - after :]):
             self._assign(elt, item, scope)
@@ -424,7 +424,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
     def _getitem(self, obj: Any, key: Any, node: Any) -> Any:
         t = type(obj)
         if t is dict:
-            self.keys.lookup(key)
+            self.ops.keys.lookup(key)
             try:
                 return obj[key]
             except KeyError:
@@ -434,7 +434,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
                 result = obj[key]
                 if t is not range:
                     self.meter.spend_ops(len(result))
-                return self._made(result)
+                return self.ops.made(result)
             try:
                 return obj[key]
             except IndexError:
@@ -461,12 +461,12 @@ class _Interpreter(_Builtins, _Methods, _Operations):
     def _setitem(self, obj: Any, key: Any, value: Any, node: Any) -> None:
         t = type(obj)
         if t is dict:
-            self._dict_store(obj, key, value, node)
+            self.ops.dict_store(obj, key, value, node)
         elif t is list:
             if type(key) is slice:
-                items = list(self._items(value, node, "the assigned sequence"))
+                items = list(self.ops.items(value, node, "the assigned sequence"))
                 before = len(obj)
-                self._grow(before, len(items), node)
+                self.ops.grow(before, len(items), node)
                 self.meter.spend_ops(before + len(items))
                 obj[key] = items
                 self.meter.allocate(SLOT_BYTES * max(len(obj) - before, 0))
@@ -489,7 +489,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
     def _delitem(self, obj: Any, key: Any, node: Any) -> None:
         t = type(obj)
         if t is dict:
-            self.keys.lookup(key)
+            self.ops.keys.lookup(key)
         elif t is list:
             self.meter.spend_ops(len(obj))
         else:
@@ -626,17 +626,18 @@ class _Interpreter(_Builtins, _Methods, _Operations):
 
     def _call(self, func: Any, args: Any, kwargs: dict, node: Any) -> Any:
         t = type(func)
-        prev = self._call_node
-        self._call_node = node
+        builtins = self.builtins
+        prev = builtins.call_node
+        builtins.call_node = node
         try:
             if t is _SandboxFunction:
                 return self._invoke(func, args, kwargs, node)
             if t is _Builtin:
-                return self._call_builtin(func, args, kwargs)
+                return self._call_builtin(func, args, kwargs, node)
             if t is _Method:
-                return self._call_method(func.obj, func.name, args, kwargs)
+                return self.methods.call(func.obj, func.name, args, kwargs, node)
         finally:
-            self._call_node = prev
+            builtins.call_node = prev
         hint = ""
         if t is ObjectView:
             hint = f"; {func._id} is a scene object, not a function"
@@ -644,8 +645,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             hint = f"; call one of its functions, e.g. {func._name}.{next(iter(func._members))}(...)"
         raise TypeError(f"'{tname(func)}' object is not callable{hint}")
 
-    def _call_builtin(self, b: _Builtin, args: Any, kwargs: dict) -> Any:
-        node = self._call_node
+    def _call_builtin(self, b: _Builtin, args: Any, kwargs: dict, node: Any) -> Any:
         if b.sig is not None:
             try:
                 b.sig.bind(*args, **kwargs)
@@ -655,14 +655,14 @@ class _Interpreter(_Builtins, _Methods, _Operations):
                 hint = _close_names(unexpected[1].strip("'"), b.sig.parameters, 1) if len(unexpected) > 1 else ""
                 raise self._error(f"{b.name}(): {text}{hint}; usage: {usage(b)}", node) from None
         if b.kind == "skill" or b.name == "print":
-            line, col = self._pos(node)
+            line, col = self.where.pos(node)
             self.rec.where = (line, col, tuple(self.call_lines))
         if b.kind == "math":
             self.meter.spend_ops(len(args))
             for a in args:  # gcd, isqrt, log... of big integers do big-int division: quadratic in their length
                 if type(a) is int and not -_BIG_INT_ARG < a < _BIG_INT_ARG:
-                    self._charge_int_text(a)
-            return self._new_value(b.fn(*args, **kwargs), node)
+                    self.ops.charge_int_text(a)
+            return self.ops.new_value(b.fn(*args, **kwargs), node)
         return b.fn(*args, **kwargs)
 
     # ---- expressions ------------------------------------------------------------------
@@ -745,11 +745,11 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             except AttributeError as exc:
                 raise self._attr_error(str(exc), node) from None
             if type(value) in (dict, list):  # a fresh copy of scene data
-                self._made(value)
+                self.ops.made(value)
             return value
         allowed = ALLOWED_METHODS.get(t)
         if allowed is not None and name in allowed:
-            return self._made(_Method(obj, name))
+            return self.ops.made(_Method(obj, name))
         raise self._attr_error(attr_message(obj, name), node)
 
     def _eval_Subscript(self, node: ast.Subscript, scope: _Scope) -> Any:
@@ -786,7 +786,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             if type(a) is ast.Starred:
                 value = self._eval(a.value, scope)
                 try:
-                    args.extend(self._items(value, a, "the '*' argument"))
+                    args.extend(self.ops.items(value, a, "the '*' argument"))
                 except TypeError as exc:
                     raise self._convert(exc, a) from None
                 if len(args) > self.b.max_len:
@@ -799,10 +799,10 @@ class _Interpreter(_Builtins, _Methods, _Operations):
     def _eval_BinOp(self, node: ast.BinOp, scope: _Scope) -> Any:
         left = self._eval(node.left, scope)
         right = self._eval(node.right, scope)
-        return self._binop(type(node.op), left, right, node)
+        return self.ops.binop(type(node.op), left, right, node)
 
     def _eval_UnaryOp(self, node: ast.UnaryOp, scope: _Scope) -> Any:
-        return self._unaryop(type(node.op), self._eval(node.operand, scope), node)
+        return self.ops.unaryop(type(node.op), self._eval(node.operand, scope), node)
 
     def _eval_BoolOp(self, node: ast.BoolOp, scope: _Scope) -> Any:
         is_and = type(node.op) is ast.And
@@ -821,7 +821,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         result: Any = True
         for op, comp in zip(node.ops, node.comparators):
             right = self._eval(comp, scope)
-            result = self._compare(type(op), left, right, node)
+            result = self.ops.compare(type(op), left, right, node)
             if not result:
                 return result
             left = right
@@ -836,34 +836,34 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             if type(e) is ast.Starred:
                 value = self._eval(e.value, scope)
                 try:
-                    items = self._items(value, e, "the '*' expansion")
+                    items = self.ops.items(value, e, "the '*' expansion")
                 except TypeError as exc:
                     raise self._convert(exc, e) from None
-                self._grow(len(out), len(items), node)
+                self.ops.grow(len(out), len(items), node)
                 self.meter.spend_ops(len(items))
                 out.extend(items)
             else:
                 out.append(self._eval(e, scope))
-        self._check_len(len(out), node)
+        self.ops.check_len(len(out), node)
         return out
 
     def _eval_List(self, node: ast.List, scope: _Scope) -> Any:
-        return self._made(self._elements(node.elts, scope, node))
+        return self.ops.made(self._elements(node.elts, scope, node))
 
     def _eval_Tuple(self, node: ast.Tuple, scope: _Scope) -> Any:
-        return self._made(tuple(self._elements(node.elts, scope, node)))
+        return self.ops.made(tuple(self._elements(node.elts, scope, node)))
 
     def _eval_Set(self, node: ast.Set, scope: _Scope) -> Any:
-        return self._set_of(self._elements(node.elts, scope, node), node)
+        return self.ops.set_of(self._elements(node.elts, scope, node), node)
 
     def _eval_Dict(self, node: ast.Dict, scope: _Scope) -> Any:
         out: dict[Any, Any] = {}
         for k, v in zip(node.keys, node.values):
             key = self._eval(k, scope)
-            self.keys.admit(key)
+            self.ops.keys.admit(key)
             out[key] = self._eval(v, scope)
-        self._check_len(len(out), node, "a dict")
-        return self._made(out)
+        self.ops.check_len(len(out), node, "a dict")
+        return self.ops.made(out)
 
     def _comprehension(self, node: Any, scope: _Scope, emit: Callable[[_Scope], None]) -> None:
         local_names = self._locals_cache.get(id(node))
@@ -888,7 +888,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             g = gens[i]
             iterable = self._eval(g.iter, scope if i == 0 else inner)
             try:
-                it = self._iter(iterable, g.iter)
+                it = self.ops.iterate(iterable, g.iter)
             except TypeError as exc:
                 raise self._convert(exc, g.iter) from None
             makes_tuples = type(it) in TUPLE_ITERATORS
@@ -922,11 +922,11 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         def emit(inner: _Scope) -> None:
             out.append(self._eval(node.elt, inner))
             if len(out) > limit:
-                self._check_len(len(out), node)
+                self.ops.check_len(len(out), node)
             self.meter.allocate(SLOT_BYTES)
 
         self._comprehension(node, scope, emit)
-        return self._made(out)
+        return self.ops.made(out)
 
     _eval_GeneratorExp = _eval_ListComp  # evaluated eagerly (bounded like a list)
 
@@ -934,20 +934,20 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         out: set[Any] = set()
 
         def emit(inner: _Scope) -> None:
-            self._set_store(out, self._eval(node.elt, inner), node)
+            self.ops.set_store(out, self._eval(node.elt, inner), node)
 
         self._comprehension(node, scope, emit)
-        return self._made(out)
+        return self.ops.made(out)
 
     def _eval_DictComp(self, node: ast.DictComp, scope: _Scope) -> Any:
         out: dict[Any, Any] = {}
 
         def emit(inner: _Scope) -> None:
             key = self._eval(node.key, inner)
-            self._dict_store(out, key, self._eval(node.value, inner), node)
+            self.ops.dict_store(out, key, self._eval(node.value, inner), node)
 
         self._comprehension(node, scope, emit)
-        return self._made(out)
+        return self.ops.made(out)
 
     def _eval_Lambda(self, node: ast.Lambda, scope: _Scope) -> Any:
         return self._make_function("<lambda>", node.args, node.body, True, node, scope)
@@ -958,24 +958,24 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         for v in node.values:
             text = v.value if type(v) is ast.Constant else self._eval(v, scope)
             total += len(text)
-            self._check_str(total, node)
+            self.ops.check_str(total, node)
             parts.append(text)
         self.meter.spend_chars(total)
-        return self._made("".join(parts))
+        return self.ops.made("".join(parts))
 
     def _eval_FormattedValue(self, node: ast.FormattedValue, scope: _Scope) -> Any:
         value = self._eval(node.value, scope)
         spec = "" if node.format_spec is None else self._eval(node.format_spec, scope)
         if node.conversion == ord("r"):
-            value = self._to_str(value, node, use_repr=True)
+            value = self.ops.to_str(value, node, use_repr=True)
         elif node.conversion == ord("a"):
-            value = self._to_str(value, node, use_repr=True).encode("ascii", "backslashreplace").decode("ascii")
-            self._check_str(len(value), node)
+            value = self.ops.to_str(value, node, use_repr=True).encode("ascii", "backslashreplace").decode("ascii")
+            self.ops.check_str(len(value), node)
         elif node.conversion == ord("s"):
-            value = self._to_str(value, node)
+            value = self.ops.to_str(value, node)
         if not spec:
-            return self._to_str(value, node)
-        return self._format(value, spec, node)
+            return self.ops.to_str(value, node)
+        return self.ops.format_field(value, spec, node)
 
     def _eval_Starred(self, node: ast.Starred, scope: _Scope) -> Any:  # pragma: no cover - rejected statically
         raise self._error("'*' is not allowed here", node)
@@ -984,6 +984,3 @@ class _Interpreter(_Builtins, _Methods, _Operations):
 # Compute every signature at import time so that running a program never imports anything.
 for _fn in SKILLS.values():
     signature(_fn)
-for _name in dir(_Interpreter):
-    if _name.startswith(("_b_", "_m_")):
-        signature(getattr(_Interpreter, _name), method=True)

@@ -8,16 +8,39 @@ from typing import Any
 
 from . import skills as _skills
 from .budget import BudgetError
-from .check import quote
+from .check import Source, quote
 from .language import SAFE_METHODS
 from .skills import _close_names
+from .render import clip
 from .values import _Builtin, _Method, _SandboxFunction, tname
 from ..errors import ProgramError
 
-__all__ = ["ALLOWED_METHODS", "attr_message", "called_from", "usage"]
+__all__ = ["ALLOWED_METHODS", "Where", "attr_message", "called_from", "usage"]
 
 #: The methods a program may call, by the type of its value.
 ALLOWED_METHODS: dict[type, frozenset[str]] = {t: frozenset(names) for t, names in SAFE_METHODS.items()}
+
+
+class Where:
+    """Errors at a node of the program: its line and column (in characters, 1-based) in the program's source."""
+
+    __slots__ = ("src",)
+
+    def __init__(self, src: Source):
+        self.src = src
+
+    def pos(self, node: Any) -> tuple[int, int]:
+        line = getattr(node, "lineno", 0) or 0
+        return line, self.src.col(line, getattr(node, "col_offset", None))
+
+    def error(self, message: str, node: Any) -> ProgramError:
+        line, col = self.pos(node)
+        return ProgramError(clip(message), line, col)
+
+    def limit(self, message: str, node: Any, limit: str) -> BudgetError:
+        """The error for passing the Budget field ``limit`` at ``node``."""
+        line, col = self.pos(node)
+        return BudgetError(clip(message), line, col, limit=limit)
 
 
 def attr_message(obj: Any, name: str) -> str:

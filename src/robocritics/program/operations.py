@@ -1,21 +1,21 @@
 """What the program's operators, comparisons and containers do to its values, each priced before it runs.
 
-Mixed into the interpreter (:class:`~robocritics.program.interpreter._Interpreter`),
-which provides ``meter`` (:class:`~robocritics.program.meter.Meter`), ``keys``
-(:class:`~robocritics.program.keys.KeyGuard`), ``b`` (the Budget) and
-``_error``. The rules, one per kind of work C would do:
+:class:`Operations` is given what it needs by the interpreter that owns it: the run's
+``meter`` (:class:`~robocritics.program.meter.Meter`), the Budget, the ``keys``
+(:class:`~robocritics.program.keys.KeyGuard`), ``where`` (errors at a node) and
+``call`` (the interpreter's call of a program function, for sort keys). The rules, one per kind of work C would do:
 
 * sizes are checked *before* anything is built (``[0] * 10**9``, ``'a' * 10**10``,
   ``2 ** 10 ** 10``, ``1 << 10**9``, huge joins and replaces);
-* every new value is charged its bytes (:meth:`_made`, :meth:`_new_value`);
+* every new value is charged its bytes (:meth:`Operations.made`, :meth:`Operations.new_value`);
 * a comparison walks both values in step, so it costs at most the lighter one
-  (:meth:`_charge_compare`), and every set or dict it meets on the way costs at
+  (:meth:`Operations.charge_compare`), and every set or dict it meets on the way costs at
   most :data:`~robocritics.program.keys.MAX_KEYS_PER_HASH` comparisons per element;
 * every key entering a dict or set goes through ``keys.admit`` and every lookup
   through ``keys.lookup``; operands of set operations that are not sets become
-  sets through :meth:`_set_of` first, so no C code ever hashes an unchecked key;
+  sets through :meth:`Operations.set_of` first, so no C code ever hashes an unchecked key;
 * a sort of ``n`` values does at most ``n log2 n + n`` comparisons, each costing
-  at most the second heaviest value (:meth:`_charge_sort`); key functions are
+  at most the second heaviest value (:meth:`Operations.charge_sort`); key functions are
   called by the interpreter, one metered call per element, never from C.
 """
 
@@ -29,13 +29,15 @@ from itertools import islice
 from operator import itemgetter
 from typing import Any, Callable
 
-from .keys import MAX_KEYS_PER_HASH
-from .meter import MAKE_OPS, SLOT_BYTES, scalar_weight
+from .budget import Budget
+from .keys import MAX_KEYS_PER_HASH, KeyGuard
+from .messages import Where
+from .meter import MAKE_OPS, SLOT_BYTES, Meter, scalar_weight
 from .render import TooDeep, bounded_repr, render
 from .skills import ObjectView
 from .values import NOVALUE, check_callable, tname
 
-__all__: list[str] = []
+__all__ = ["Operations"]
 
 SET_SLOT_BYTES = 40
 """Bytes one more set element takes (a 16-byte entry at a fill of at most 60 %, rounded up)."""
@@ -149,17 +151,28 @@ def search_chars(haystack: str, needle: str) -> int:
     return len(haystack) * min(max(len(needle), 1), _SEARCH_WINDOW_CHARS)
 
 
-class _Operations:
+class Operations:
     """Operators, comparisons, containers and text of program values (see the module docstring)."""
+
+    __slots__ = ("meter", "b", "keys", "where", "call")
+
+    def __init__(self, meter: Meter, budget: Budget, keys: KeyGuard, where: Where, call: Callable[..., Any]):
+        self.meter = meter
+        self.b = budget
+        self.keys = keys
+        """Every key entering a dict or set of the run (replaced by the interpreter when the run ends)."""
+        self.where = where
+        self.call = call
+        """``call(function, args, kwargs, node)``: the interpreter calls a key function of a sort."""
 
     # ---- sizes and memory ------------------------------------------------------------------------
 
-    def _made(self, value: Any) -> Any:
+    def made(self, value: Any) -> Any:
         """Charge the bytes of a value the program just created; return it."""
         self.meter.allocate(sys.getsizeof(value))
         return value
 
-    def _new_value(self, value: Any, node: Any) -> Any:
+    def new_value(self, value: Any, node: Any) -> Any:
         """Check a new value against the size limits, charge its bytes and return it."""
         t = type(value)
         if t is float or (t is int and -_SMALL_INT < value < _SMALL_INT):  # the common case, without calls
@@ -170,32 +183,32 @@ class _Operations:
             return value
         if t is int:
             if value.bit_length() > self.b.max_int_bits:
-                raise self._int_error(node)
+                raise self.int_error(node)
         elif t is str:
             if len(value) > self.b.max_str_len:
-                self._check_str(len(value), node)
+                self.check_str(len(value), node)
         elif t is list or t is tuple or t is set or t is dict:
             if len(value) > self.b.max_len:
-                self._check_len(len(value), node)
+                self.check_len(len(value), node)
         self.meter.allocate(sys.getsizeof(value))
         return value
 
-    def _check_len(self, n: int, node: Any, what: str = "a list") -> None:
-        self._grow(0, n, node, what)
+    def check_len(self, n: int, node: Any, what: str = "a list") -> None:
+        self.grow(0, n, node, what)
 
-    def _grow(self, current: int, add: int, node: Any, what: str = "a list") -> None:
+    def grow(self, current: int, add: int, node: Any, what: str = "a list") -> None:
         """Refuse to grow a container of ``current`` elements by ``add`` past ``max_len``."""
         if current + add > self.b.max_len:
-            raise self._limit(f"{what} would have {current + add} elements; the limit is {self.b.max_len}", node, "max_len")
+            raise self.where.limit(f"{what} would have {current + add} elements; the limit is {self.b.max_len}", node, "max_len")
 
-    def _check_str(self, n: int, node: Any) -> None:
+    def check_str(self, n: int, node: Any) -> None:
         if n > self.b.max_str_len:
-            raise self._limit(
+            raise self.where.limit(
                 f"a string would have {n} characters; the limit is {self.b.max_str_len}", node, "max_str_len"
             )
 
-    def _int_error(self, node: Any) -> Exception:
-        return self._limit(
+    def int_error(self, node: Any) -> Exception:
+        return self.where.limit(
             f"integer too large (more than {self.b.max_int_bits} bits); robot programs need small numbers",
             node,
             "max_int_bits",
@@ -203,7 +216,7 @@ class _Operations:
 
     # ---- iteration ---------------------------------------------------------------------------------
 
-    def _items(self, value: Any, node: Any, what: str = "the sequence") -> Any:
+    def items(self, value: Any, node: Any, what: str = "the sequence") -> Any:
         """``value`` as a sized iterable of at most ``max_len`` elements (refusing huge ranges and endless
         iterators); iterators are run into a list, which is charged."""
         t = type(value)
@@ -211,19 +224,19 @@ class _Operations:
             try:
                 n = len(value)
             except OverflowError:
-                raise self._limit(f"{what} is far too long (more than {self.b.max_len} elements)", node, "max_len") from None
+                raise self.where.limit(f"{what} is far too long (more than {self.b.max_len} elements)", node, "max_len") from None
             if n > self.b.max_len:
-                raise self._limit(f"{what} would have {n} elements; the limit is {self.b.max_len}", node, "max_len")
+                raise self.where.limit(f"{what} would have {n} elements; the limit is {self.b.max_len}", node, "max_len")
             if t is ITEMS_VIEW:
                 self.meter.allocate(_PAIR_BYTES * n)  # the (key, value) tuples the consumer will make
             elif t is range:
                 self.meter.allocate(_MADE_ELEMENT_BYTES * n)  # the ints the consumer will make
             return value
         if t in ITERATORS:
-            return self._run_iterator(value, node, what)
+            return self.run_iterator(value, node, what)
         raise not_iterable(value)
 
-    def _run_iterator(self, iterator: Any, node: Any, what: str) -> list:
+    def run_iterator(self, iterator: Any, node: Any, what: str) -> list:
         """The elements of an iterator as a new list of at most ``max_len``; the tuples zip(), enumerate() and
         items() make are counted one by one, so together they hold at most ``max_nodes`` elements."""
         limit = self.b.max_len
@@ -242,19 +255,19 @@ class _Operations:
             if made > max_nodes and len(out) <= limit:
                 raise self.meter.too_large()
         if len(out) > limit:
-            raise self._limit(f"{what} has more than {limit} elements; the limit is {limit}", node, "max_len")
+            raise self.where.limit(f"{what} has more than {limit} elements; the limit is {limit}", node, "max_len")
         self.meter.spend_ops(MAKE_OPS * made)
         self.meter.allocate(_MADE_ELEMENT_BYTES * made)
-        return self._made(out)
+        return self.made(out)
 
-    def _iter(self, value: Any, node: Any) -> Any:
+    def iterate(self, value: Any, node: Any) -> Any:
         if type(value) in ITERABLE:
             return iter(value)
         raise not_iterable(value)
 
     # ---- comparisons -------------------------------------------------------------------------------
 
-    def _charge_compare(self, a: Any, b: Any) -> None:
+    def charge_compare(self, a: Any, b: Any) -> None:
         """Pay for comparing two containers: C walks them in step, so at most the lighter one is walked."""
         if type(a) not in CONTAINERS or type(b) not in CONTAINERS:
             return  # a container and a scalar compare in one step
@@ -266,27 +279,27 @@ class _Operations:
             raise self.meter.too_large()
         self.meter.spend_ops((1 + MAX_KEYS_PER_HASH) * weight)
 
-    def _compare(self, op: type, a: Any, b: Any, node: Any) -> Any:
+    def compare(self, op: type, a: Any, b: Any, node: Any) -> Any:
         if op is ast.Is:
             return a is b
         if op is ast.IsNot:
             return a is not b
         if op is ast.In:
-            return self._contains(b, a, node)
+            return self.contains(b, a, node)
         if op is ast.NotIn:
-            return not self._contains(b, a, node)
+            return not self.contains(b, a, node)
         if type(a) is str and type(b) is str:
             self.meter.spend_chars(min(len(a), len(b)))
         else:
-            self._charge_compare(a, b)
+            self.charge_compare(a, b)
         return _CMPOPS[op](a, b)
 
-    def _contains(self, container: Any, x: Any, node: Any) -> bool:
+    def contains(self, container: Any, x: Any, node: Any) -> bool:
         """``x in container``, priced by what C will walk."""
         t = type(container)
         if t is range:
             if type(x) not in _INTS:  # Python scans the range element by element
-                n = len(self._items(container, node, "a range searched for a non-integer"))
+                n = len(self.items(container, node, "a range searched for a non-integer"))
                 self.meter.spend_ops(n)
         elif t is str:
             if type(x) is str:
@@ -299,15 +312,15 @@ class _Operations:
                 value_weight = min(self.meter.weigh(x[1]), self.b.max_nodes)
                 self.meter.spend_ops((1 + MAX_KEYS_PER_HASH) * value_weight)
         elif t is list or t is tuple or t is VALUES_VIEW:
-            self._charge_contains(container, x)
+            self.charge_contains(container, x)
         elif t in ITERATORS:
-            container = self._items(container, node, "the searched sequence")
-            self._charge_contains(container, x)
+            container = self.items(container, node, "the searched sequence")
+            self.charge_contains(container, x)
         else:
             raise TypeError(f"argument of type '{tname(container)}' is not a container")
         return x in container
 
-    def _charge_contains(self, seq: Any, x: Any) -> None:
+    def charge_contains(self, seq: Any, x: Any) -> None:
         """Pay for comparing ``x`` with every element of ``seq``: each comparison costs at most the lighter side,
         so at most ``len(seq)`` times ``x``'s weight and at most the weight of ``seq``."""
         n = len(seq)
@@ -322,9 +335,9 @@ class _Operations:
             ops = min(ops, weight_seq)
         self.meter.spend_ops((1 + MAX_KEYS_PER_HASH) * ops + n)
 
-    def _index_of(self, seq: Any, x: Any, start: Any, stop: Any, what: str) -> int:
+    def index_of(self, seq: Any, x: Any, start: Any, stop: Any, what: str) -> int:
         """``seq.index(x, start, stop)`` without the C message that quotes ``x`` in full."""
-        self._charge_contains(seq, x)
+        self.charge_contains(seq, x)
         for i in range(*slice(start, stop).indices(len(seq))):
             element = seq[i]
             if element is x or element == x:
@@ -333,39 +346,39 @@ class _Operations:
 
     # ---- keys: dicts and sets ------------------------------------------------------------------------
 
-    def _set_of(self, items: Any, node: Any) -> set:
+    def set_of(self, items: Any, node: Any) -> set:
         """A new set of ``items`` (a sized iterable from :meth:`_items`), every element admitted."""
         self.keys.admit_all(items)
-        return self._made(set(items))
+        return self.made(set(items))
 
-    def _dict_of(self, pairs: Any, node: Any) -> dict:
+    def dict_of(self, pairs: Any, node: Any) -> dict:
         """A new dict of ``(key, value)`` pairs (a list or a dict's items), every key admitted."""
         self.keys.admit_all(list(map(itemgetter(0), pairs)))
         out = dict(pairs)
-        self._check_len(len(out), node, "a dict")
-        return self._made(out)
+        self.check_len(len(out), node, "a dict")
+        return self.made(out)
 
-    def _set_store(self, s: set, x: Any, node: Any) -> None:
+    def set_store(self, s: set, x: Any, node: Any) -> None:
         """``s.add(x)``: admitted, within ``max_len``, its slot charged."""
         self.keys.admit(x)
         if x not in s:
-            self._grow(len(s), 1, node, "a set")
+            self.grow(len(s), 1, node, "a set")
             self.meter.allocate(SET_SLOT_BYTES)
             s.add(x)
 
-    def _dict_store(self, d: dict, key: Any, value: Any, node: Any) -> None:
+    def dict_store(self, d: dict, key: Any, value: Any, node: Any) -> None:
         """``d[key] = value``: the key admitted, within ``max_len``, its slot charged."""
         self.keys.admit(key)
         if key not in d:
-            self._grow(len(d), 1, node, "a dict")
+            self.grow(len(d), 1, node, "a dict")
             self.meter.allocate(_DICT_SLOT_BYTES)
         d[key] = value
 
-    def _pairs(self, value: Any, node: Any) -> Any:
+    def pairs(self, value: Any, node: Any) -> Any:
         """The ``(key, value)`` pairs of a dict or of an iterable of pairs (keys not yet admitted)."""
         if type(value) is dict:
             return value.items()
-        items = self._items(value, node, "the key/value pairs")
+        items = self.items(value, node, "the key/value pairs")
         out = []
         for i, pair in enumerate(items):
             if type(pair) not in (tuple, list, str) or len(pair) != 2:
@@ -376,20 +389,20 @@ class _Operations:
         self.meter.spend_ops(len(out))
         return out
 
-    def _as_set(self, value: Any, node: Any) -> Any:
+    def as_set(self, value: Any, node: Any) -> Any:
         """A set or dict view as is (their elements were admitted), an items view or any other iterable as a
         new set of admitted elements."""
         t = type(value)
         if t is set or t is KEYS_VIEW:
             return value
-        return self._set_of(self._items(value, node, "the other operand"), node)
+        return self.set_of(self.items(value, node, "the other operand"), node)
 
-    def _charge_set_operation(self, *operands: Any) -> None:
+    def charge_set_operation(self, *operands: Any) -> None:
         """Pay for a set operation between sets of admitted elements: every element is hashed or probed once,
         comparing with at most MAX_KEYS_PER_HASH stored keys."""
-        self.meter.spend_ops((1 + MAX_KEYS_PER_HASH) * self._total_weight(operands))
+        self.meter.spend_ops((1 + MAX_KEYS_PER_HASH) * self.total_weight(operands))
 
-    def _total_weight(self, values: Any) -> int:
+    def total_weight(self, values: Any) -> int:
         """The summed weight of ``values``; refused past ``max_nodes`` (the walk stops there)."""
         max_nodes = self.b.max_nodes
         total = 0
@@ -399,97 +412,97 @@ class _Operations:
                 raise self.meter.too_large()
         return total
 
-    def _set_binop(self, op: type, a: Any, b: Any, node: Any, inplace: bool) -> Any:
+    def set_binop(self, op: type, a: Any, b: Any, node: Any, inplace: bool) -> Any:
         """``a | b``, ``a & b``, ``a - b``, ``a ^ b`` of sets and dict views, and ``|`` of dicts.
 
         As in Python, a dict view combines with any iterable and the result is a
         new set; a set combines only with sets and views.
         """
         if type(a) is dict:
-            return self._dict_merge(a, b, node, inplace) if op is ast.BitOr else _BINOPS[op](a, b)
+            return self.dict_merge(a, b, node, inplace) if op is ast.BitOr else _BINOPS[op](a, b)
         if type(a) in _VIEWS or type(b) in _VIEWS:
-            left, right = self._as_set(a, node), self._as_set(b, node)
+            left, right = self.as_set(a, node), self.as_set(b, node)
             inplace = False
         elif type(a) is set and type(b) is set:
             left, right = a, b
         else:
             return _BINOPS[op](a, b)  # a TypeError, as in Python
-        self._charge_set_operation(left, right)
+        self.charge_set_operation(left, right)
         if not inplace:
-            return self._new_value(_BINOPS[op](left, right), node)
+            return self.new_value(_BINOPS[op](left, right), node)
         before = len(a)
         _IBINOPS[op](a, right)
         if len(a) > self.b.max_len:
-            self._check_len(len(a), node, "a set")
+            self.check_len(len(a), node, "a set")
         self.meter.allocate(SET_SLOT_BYTES * max(len(a) - before, 0))
         return a
 
-    def _dict_merge(self, a: dict, b: Any, node: Any, inplace: bool) -> dict:
+    def dict_merge(self, a: dict, b: Any, node: Any, inplace: bool) -> dict:
         """``a | b`` of two dicts; ``a |= b`` takes any pairs, like ``a.update(b)``."""
         if inplace:
-            self._dict_update(a, b, {}, node)
+            self.dict_update(a, b, {}, node)
             return a
         if type(b) is not dict:
             return a | b  # a TypeError, as in Python
-        self._charge_set_operation(a, b)
-        return self._new_value(a | b, node)
+        self.charge_set_operation(a, b)
+        return self.new_value(a | b, node)
 
-    def _dict_update(self, d: dict, other: Any, kwargs: dict, node: Any) -> None:
+    def dict_update(self, d: dict, other: Any, kwargs: dict, node: Any) -> None:
         """``d.update(other, **kwargs)`` (and ``d |= other``), every new key admitted and charged."""
-        for k, v in (*self._pairs(other, node), *kwargs.items()):
-            self._dict_store(d, k, v, node)
+        for k, v in (*self.pairs(other, node), *kwargs.items()):
+            self.dict_store(d, k, v, node)
 
     # ---- operators -----------------------------------------------------------------------------------
 
-    def _binop(self, op: type, a: Any, b: Any, node: Any, inplace: bool = False) -> Any:
+    def binop(self, op: type, a: Any, b: Any, node: Any, inplace: bool = False) -> Any:
         ta, tb = type(a), type(b)
         if ta in _INTS and tb in _INTS:
             if op is ast.Pow or op is ast.LShift or not (-_SMALL_INT < a < _SMALL_INT and -_SMALL_INT < b < _SMALL_INT):
-                self._charge_int_operation(op, a, b, node)
+                self.charge_int_operation(op, a, b, node)
         elif op in _SET_OPS and (ta in _SET_LIKE or tb in _SET_LIKE or ta is dict):
-            return self._set_binop(op, a, b, node, inplace)
+            return self.set_binop(op, a, b, node, inplace)
         elif op is ast.Add:
             if ta in _SEQS and ta is tb:
                 if ta is str:
-                    self._check_str(len(a) + len(b), node)
+                    self.check_str(len(a) + len(b), node)
                     self.meter.spend_chars(len(a) + len(b))
                 else:
-                    self._grow(len(a), len(b), node)
+                    self.grow(len(a), len(b), node)
                     self.meter.spend_ops(len(a) + len(b))
             elif inplace and ta is list:
-                b = self._items(b, node, "the extension")
-                self._grow(len(a), len(b), node)
+                b = self.items(b, node, "the extension")
+                self.grow(len(a), len(b), node)
                 self.meter.spend_ops(len(b))
         elif op is ast.Mult:
             if (ta in _SEQS and tb in _INTS) or (tb in _SEQS and ta in _INTS):
                 seq, n = (a, b) if ta in _SEQS else (b, a)
                 total = len(seq) * max(int(n), 0)
                 if type(seq) is str:
-                    self._check_str(total, node)
+                    self.check_str(total, node)
                     self.meter.spend_chars(total)
                 else:
-                    self._check_len(total, node)
+                    self.check_len(total, node)
                     self.meter.spend_ops(total)
         elif op is ast.Mod and ta is str:
-            raise self._error("'%' string formatting is not available; use an f-string such as f\"{x:.2f}\"", node)
+            raise self.where.error("'%' string formatting is not available; use an f-string such as f\"{x:.2f}\"", node)
         if inplace and ta is list:
             before = len(a)
             result = _IBINOPS[op](a, b)
             self.meter.allocate(SLOT_BYTES * (len(a) - before))
             return result
         fn = _IBINOPS[op] if inplace else _BINOPS[op]
-        return self._new_value(fn(a, b), node)
+        return self.new_value(fn(a, b), node)
 
-    def _charge_int_operation(self, op: type, a: int, b: int, node: Any) -> None:
+    def charge_int_operation(self, op: type, a: int, b: int, node: Any) -> None:
         """Refuse integer results wider than ``max_int_bits`` before computing them; pay for big-int work."""
         max_bits = self.b.max_int_bits
         bits_a, bits_b = a.bit_length(), b.bit_length()
         if op is ast.Mult:
             if bits_a + bits_b > max_bits + 1:
-                raise self._int_error(node)
+                raise self.int_error(node)
         elif op is ast.Pow:
             if b > 0 and abs(a) > 1 and (abs(a).bit_length() - 1) * b >= max_bits:
-                raise self._limit(
+                raise self.where.limit(
                     f"integer too large: {bounded_repr(a)} ** {bounded_repr(b)} has more than {max_bits} bits; "
                     "robot programs need small numbers",
                     node,
@@ -498,40 +511,40 @@ class _Operations:
             bits_b = max_bits if b > 0 else 0
         elif op is ast.LShift:
             if a != 0 and b > 0 and bits_a + b > max_bits:
-                raise self._int_error(node)
+                raise self.int_error(node)
             bits_b = 0
         elif op is ast.RShift:
             bits_b = 0
         self.meter.spend_ops((1 + bits_a // _INT_OP_BITS) * (1 + bits_b // _INT_OP_BITS))
 
-    def _unaryop(self, op: type, value: Any, node: Any) -> Any:
+    def unaryop(self, op: type, value: Any, node: Any) -> Any:
         result = _UNARY[op](value)
         if type(result) is int:
-            return self._new_value(result, node)
+            return self.new_value(result, node)
         return result
 
     # ---- text ------------------------------------------------------------------------------------------
 
-    def _to_str(self, value: Any, node: Any, use_repr: bool = False) -> str:
+    def to_str(self, value: Any, node: Any, use_repr: bool = False) -> str:
         """``str(value)`` (``repr`` with ``use_repr``), refused past ``max_str_len`` and paid per character."""
         t = type(value)
         if t is str and not use_repr:
             return value
         if t in CONTAINERS:
-            text = self._render(value, node)
+            text = self.render_container(value, node)
         else:
             if t is int:
-                self._charge_int_text(value)
+                self.charge_int_text(value)
             text = repr(value) if use_repr or t is not str else value
-            self._check_str(len(text), node)
+            self.check_str(len(text), node)
         self.meter.spend_chars(len(text))
-        return self._made(text)
+        return self.made(text)
 
-    def _charge_int_text(self, value: int) -> None:
+    def charge_int_text(self, value: int) -> None:
         """Pay for writing an integer in decimal: Python's conversion is quadratic in its length."""
         self.meter.spend_ops((1 + value.bit_length() // _INT_TEXT_BITS) ** 2)
 
-    def _render(self, value: Any, node: Any) -> str:
+    def render_container(self, value: Any, node: Any) -> str:
         """``repr`` of a container, written by a walk that can do no more work than the budget has left."""
         max_chars = self.b.max_str_len
         affordable = self.meter.max_work - self.meter.work  # every piece written costs a unit
@@ -543,14 +556,14 @@ class _Operations:
         if not complete:
             if affordable < max_chars:  # cut short by the work budget, not by the length limit
                 raise self.meter.out_of_work()
-            raise self._limit(
+            raise self.where.limit(
                 f"printing this value would produce more than {max_chars} characters; the limit is {max_chars}",
                 node,
                 "max_str_len",
             )
         return text
 
-    def _format(self, value: Any, spec: str, node: Any) -> str:
+    def format_field(self, value: Any, spec: str, node: Any) -> str:
         """``format(value, spec)`` of an f-string field, with widths and precisions bounded."""
         self.meter.spend_chars(len(spec))
         number = ""
@@ -558,7 +571,7 @@ class _Operations:
             if ch.isdigit():
                 number += ch
                 if len(number) > len(str(_MAX_FORMAT_WIDTH)) or int(number) > _MAX_FORMAT_WIDTH:
-                    raise self._error(
+                    raise self.where.error(
                         f"format spec {bounded_repr(spec)} asks for a width or precision above {_MAX_FORMAT_WIDTH}",
                         node,
                     )
@@ -569,22 +582,22 @@ class _Operations:
         if type(value) is str:
             self.meter.spend_chars(len(value))
         elif type(value) is int:
-            self._charge_int_text(value)
+            self.charge_int_text(value)
         text = format(value, spec)
         if type(value) is float or type(value) is complex:  # exact decimal digits: ~1 us per 30 digits written
             self.meter.spend_chars(_FLOAT_DIGIT_CHARS * len(text))
-        return self._made(text)
+        return self.made(text)
 
     # ---- sorting -------------------------------------------------------------------------------------------
 
-    def _sort_keys(self, items: Any, key: Any, node: Any) -> list:
+    def sort_keys(self, items: Any, key: Any, node: Any) -> list:
         """The sort keys of ``items``: the items, or ``key(item)`` called by the interpreter for each."""
         if key is None:
             return list(items)
         check_callable(key, "key")
-        return [self._call(key, [x], {}, node) for x in items]
+        return [self.call(key, [x], {}, node) for x in items]
 
-    def _charge_sort(self, keys: list, comparisons: int) -> None:
+    def charge_sort(self, keys: list, comparisons: int) -> None:
         """Pay for ``comparisons`` comparisons among ``keys``: each costs at most the second heaviest key
         (the lighter of the two compared)."""
         kinds = set(map(type, keys))
@@ -593,10 +606,10 @@ class _Operations:
         elif kinds == {str}:
             per_comparison = 2 + (sorted(map(len, keys))[-2] if len(keys) > 1 else 0) // 64
         else:  # containers: their comparisons may meet sets or dicts, each element a lookup
-            per_comparison = 1 + (1 + MAX_KEYS_PER_HASH) * self._second_weight(keys)
+            per_comparison = 1 + (1 + MAX_KEYS_PER_HASH) * self.second_weight(keys)
         self.meter.spend_ops(comparisons * per_comparison)
 
-    def _second_weight(self, values: list) -> int:
+    def second_weight(self, values: list) -> int:
         """The second largest weight of ``values``; refused when they weigh more than ``max_nodes`` together."""
         max_nodes = self.b.max_nodes
         weights = []
@@ -609,21 +622,21 @@ class _Operations:
             weights.append(w)
         return sorted(weights)[-2] if len(weights) > 1 else 0
 
-    def _sorted(self, items: Any, key: Any, reverse: Any, node: Any) -> list:
+    def sorted_list(self, items: Any, key: Any, reverse: Any, node: Any) -> list:
         """``sorted(items, key=key, reverse=reverse)``; key calls metered, comparisons paid before sorting."""
         items = list(items)
         n = len(items)
-        keys = self._sort_keys(items, key, node)
-        self._charge_sort(keys, n * max(math.ceil(math.log2(n)), 1) + n if n else 0)
+        keys = self.sort_keys(items, key, node)
+        self.charge_sort(keys, n * max(math.ceil(math.log2(n)), 1) + n if n else 0)
         if key is None:
-            return self._made(sorted(items, reverse=bool(reverse)))
+            return self.made(sorted(items, reverse=bool(reverse)))
         order = sorted(range(n), key=keys.__getitem__, reverse=bool(reverse))
-        return self._made([items[i] for i in order])
+        return self.made([items[i] for i in order])
 
-    def _extreme(self, fn: Callable, items: Any, key: Any, default: Any, node: Any) -> Any:
+    def extreme(self, fn: Callable, items: Any, key: Any, default: Any, node: Any) -> Any:
         """``min`` or ``max`` of a sized sequence (``default`` if empty and given), comparisons paid first."""
-        keys = self._sort_keys(items, key, node)
-        self._charge_sort(keys, len(keys))
+        keys = self.sort_keys(items, key, node)
+        self.charge_sort(keys, len(keys))
         kw = {} if default is NOVALUE else {"default": default}
         if not keys:
             return fn((), **kw)
