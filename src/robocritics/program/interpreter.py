@@ -84,13 +84,14 @@ def _no_call(*args: Any) -> Any:
 
 
 class _Interpreter:
-    def __init__(self, source: str, tree: ast.Module, scene: Scene, budget: Budget):
+    def __init__(self, source: str, tree: ast.Module, scene: Scene, budget: Budget, meter: Meter | None = None):
+        """``meter`` (default: a new one of ``budget``) is the one every part of the run pays to."""
         self.tree = tree
         self.b = budget
         self.src = Source(source)
         self.plan = Plan(source=source, calls=[], output=[])
         self.rec = Recorder(scene, self.plan, budget)
-        self.meter = Meter(budget)
+        self.meter = Meter(budget) if meter is None else meter
         self.where = Where(self.src)
         self.ops = Operations(self.meter, budget, KeyGuard(self.meter), self.where, self._call)
         self.methods = Methods(self.meter, self.ops)
