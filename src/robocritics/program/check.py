@@ -17,7 +17,7 @@ from ..errors import ProgramError
 from .budget import Budget, BudgetError
 from .language import MATH_NAMES
 from .render import bounded_repr, clip
-from .skills import SKILLS, _close_names
+from .skills import SKILLS, close_names
 
 __all__ = ["parse_program", "Source", "quote"]
 
@@ -276,7 +276,7 @@ class _Checker:
                 if alias.name == "*":
                     add(node, where, f"'from {module} import *' is not allowed; import the names you need")
                 elif alias.name not in members:
-                    hint = _close_names(alias.name, members)
+                    hint = close_names(alias.name, members)
                     add(
                         alias,
                         where,

@@ -36,7 +36,7 @@ from .methods import Methods
 from .operations import TUPLE_ITERATORS, Operations, produced_size
 from .plan import Plan
 from .render import bounded_repr, clip
-from .skills import SKILLS, Namespace, ObjectView, Recorder, _close_names, _CURRENT
+from .skills import SKILLS, Namespace, ObjectView, Recorder, close_names, CURRENT_RECORDER
 from .values import (
     MISSING,
     _Break,
@@ -133,7 +133,7 @@ class _Interpreter:
     # ---- running ----------------------------------------------------------------------
 
     def run(self) -> Plan:
-        token = _CURRENT.set(self.rec)
+        token = CURRENT_RECORDER.set(self.rec)
         error: ProgramError | None = None
         try:
             self.frame_room = min(_MAX_INTERPRETER_FRAMES, sys.getrecursionlimit() - stack_depth() - _RESERVED_FRAMES)
@@ -147,7 +147,7 @@ class _Interpreter:
         except MemoryError:
             error = BudgetError("the program ran out of memory; keep lists and strings small", limit="max_alloc_bytes")
         finally:
-            _CURRENT.reset(token)
+            CURRENT_RECORDER.reset(token)
             self._forget()
         if error is not None:
             raise released(error)
@@ -452,7 +452,7 @@ class _Interpreter:
         raise TypeError(f"'{tname(obj)}' object is not subscriptable{hint}")
 
     def _key_error(self, d: dict, key: Any, node: Any) -> ProgramError:
-        hint = _close_names(key, islice((k for k in d if type(k) is str), _SUGGESTED_KEYS)) if type(key) is str else ""
+        hint = close_names(key, islice((k for k in d if type(k) is str), _SUGGESTED_KEYS)) if type(key) is str else ""
         shown = ", ".join(bounded_repr(k) for k in islice(d, _MAX_KEYS_SHOWN))
         more = f" and {len(d) - _MAX_KEYS_SHOWN} more" if len(d) > _MAX_KEYS_SHOWN else ""
         return self._error(
@@ -559,7 +559,7 @@ class _Interpreter:
             if key not in params and key not in fn.kwonly:
                 raise TypeError(
                     f"{name}() got an unexpected keyword argument {quote(key)}"
-                    f"{_close_names(key, (*params, *fn.kwonly), 1)}"
+                    f"{close_names(key, (*params, *fn.kwonly), 1)}"
                 )
             values[key] = value
         for p in (*params, *fn.kwonly):
@@ -653,7 +653,7 @@ class _Interpreter:
             except TypeError as exc:
                 text = str(exc)
                 unexpected = text.split("unexpected keyword argument ", 1)
-                hint = _close_names(unexpected[1].strip("'"), b.sig.parameters, 1) if len(unexpected) > 1 else ""
+                hint = close_names(unexpected[1].strip("'"), b.sig.parameters, 1) if len(unexpected) > 1 else ""
                 raise self._error(f"{b.name}(): {text}{hint}; usage: {usage(b)}", node) from None
         if b.kind == "skill" or b.name == "print":
             line, col = self.where.pos(node)
@@ -728,7 +728,7 @@ class _Interpreter:
             if s.locals:
                 candidates.update(s.locals)
             s = s.parent
-        text = f"name {quote(name)} is not defined{_close_names(name, sorted(candidates))}"
+        text = f"name {quote(name)} is not defined{close_names(name, sorted(candidates))}"
         if not text.endswith("?"):
             ids = list(self.rec.views)
             text += f". Skills: {', '.join(SKILLS)}; scene objects: {', '.join(ids) or '(none)'}"

@@ -10,7 +10,7 @@ from . import skills as _skills
 from .budget import BudgetError
 from .check import Source, quote
 from .language import SAFE_METHODS
-from .skills import _close_names
+from .skills import close_names
 from .render import clip
 from .values import _Builtin, _Method, _SandboxFunction, tname
 from ..errors import ProgramError
@@ -51,7 +51,7 @@ def attr_message(obj: Any, name: str) -> str:
         return f"{tname(obj)} {quote(getattr(obj, 'name', ''))} has no attribute {quote(name)}; functions have no fields"
     allowed = ALLOWED_METHODS.get(t)
     if allowed is not None:
-        hint = _close_names(name, allowed, 1)
+        hint = close_names(name, allowed, 1)
         return (
             f"'{t.__name__}' method {quote(name)} is not available{hint or '.'} "
             f"{t.__name__} methods you can use: {', '.join(sorted(allowed))}"

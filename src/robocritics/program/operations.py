@@ -199,7 +199,8 @@ class Operations:
     def grow(self, current: int, add: int, node: Any, what: str = "a list") -> None:
         """Refuse to grow a container of ``current`` elements by ``add`` past ``max_len``."""
         if current + add > self.b.max_len:
-            raise self.where.limit(f"{what} would have {current + add} elements; the limit is {self.b.max_len}", node, "max_len")
+            limit = self.b.max_len
+            raise self.where.limit(f"{what} would have {current + add} elements; the limit is {limit}", node, "max_len")
 
     def check_str(self, n: int, node: Any) -> None:
         if n > self.b.max_str_len:
@@ -224,9 +225,11 @@ class Operations:
             try:
                 n = len(value)
             except OverflowError:
-                raise self.where.limit(f"{what} is far too long (more than {self.b.max_len} elements)", node, "max_len") from None
+                message = f"{what} is far too long (more than {self.b.max_len} elements)"
+                raise self.where.limit(message, node, "max_len") from None
             if n > self.b.max_len:
-                raise self.where.limit(f"{what} would have {n} elements; the limit is {self.b.max_len}", node, "max_len")
+                message = f"{what} would have {n} elements; the limit is {self.b.max_len}"
+                raise self.where.limit(message, node, "max_len")
             if t is ITEMS_VIEW:
                 self.meter.allocate(_PAIR_BYTES * n)  # the (key, value) tuples the consumer will make
             elif t is range:

@@ -81,7 +81,7 @@ _MAX_SUGGESTION_CANDIDATES = 300
 """A did-you-mean compares a name with at most this many candidates (those closest to it in length)."""
 
 
-def _close_names(name: Any, candidates: Any, n: int = 3) -> str:
+def close_names(name: Any, candidates: Any, n: int = 3) -> str:
     """:func:`_suggest` bounded for untrusted names: names longer than ``VALUE_CHARS`` get no suggestion (nobody
     mistypes them and comparing them is slow), and at most ``_MAX_SUGGESTION_CANDIDATES`` candidates of a
     similar length are compared."""
@@ -184,7 +184,7 @@ class ObjectView:
         if name in self._attrs and not name.startswith("_"):
             return _plain(self._attrs[name])
         names = self._names()
-        hint = _close_names(name, names, 1)
+        hint = close_names(name, names, 1)
         raise AttributeError(
             f"{self._fields['kind']} {self._id!r} has no attribute {bounded_repr(name)}{hint or '.'} "
             f"It has: {', '.join(names)}"
@@ -229,7 +229,7 @@ class Namespace:
     def _lookup(self, name: str) -> Any:
         if name in self._members and not name.startswith("_"):
             return self._members[name]
-        hint = _close_names(name, self._members, 3)
+        hint = close_names(name, self._members, 3)
         raise AttributeError(
             f"{self._name} has no {self._what} {bounded_repr(name)}{hint or '.'} "
             f"{self._name} provides: {', '.join(sorted(self._members))}"
@@ -310,7 +310,7 @@ class Recorder:
         if isinstance(value, str):
             if value in self.views:
                 return value
-            hint = _close_names(value, self.views)
+            hint = close_names(value, self.views)
             raise self.error(
                 f"{skill}: unknown object {bounded_repr(value)}{hint or '.'} "
                 f"Objects and containers: {', '.join(self.views) or '(none)'}"
@@ -321,7 +321,7 @@ class Recorder:
         return next(iter(self.views), "green_apple")
 
 
-_CURRENT: contextvars.ContextVar[Recorder | None] = contextvars.ContextVar("robocritics_recorder", default=None)
+CURRENT_RECORDER: contextvars.ContextVar[Recorder | None] = contextvars.ContextVar("robocritics_recorder", default=None)
 
 
 @contextmanager
@@ -331,15 +331,15 @@ def recording(scene: Scene, plan: Plan | None = None, budget: Budget | None = No
     ``budget`` limits skill calls and printed characters as in a sandboxed run.
     """
     plan = plan if plan is not None else Plan()
-    token = _CURRENT.set(Recorder(scene, plan, budget or Budget(), direct=True))
+    token = CURRENT_RECORDER.set(Recorder(scene, plan, budget or Budget(), direct=True))
     try:
         yield plan
     finally:
-        _CURRENT.reset(token)
+        CURRENT_RECORDER.reset(token)
 
 
 def _rec() -> Recorder:
-    rec = _CURRENT.get()
+    rec = CURRENT_RECORDER.get()
     if rec is None:
         raise ProgramError(
             "skills only record into a plan: run the program with robocritics.program.run_program(source, scene) "
