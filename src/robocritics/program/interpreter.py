@@ -19,7 +19,6 @@ from __future__ import annotations
 import ast
 import math
 import sys
-from itertools import islice
 from typing import Any, Callable, Iterator
 
 from ..errors import ProgramError
@@ -68,10 +67,6 @@ _CALL_SCOPE_BYTES = 200
 """Memory of one call's scope (a dict of its variables and the scope record)."""
 _FUNCTION_BYTES = 200
 """Memory of one function object the program defines (``def`` or ``lambda``)."""
-_MAX_KEYS_SHOWN = 20
-"""Keys listed in a KeyError message."""
-_SUGGESTED_KEYS = 1_000
-"""A mistyped dict key is compared with at most this many of the dict's string keys."""
 
 
 
@@ -264,9 +259,9 @@ class _Interpreter:
         elif isinstance(target, ast.Subscript):
             obj = self._eval(target.value, scope)
             key = self._eval(target.slice, scope)
-            current = self._getitem(obj, key, target)
+            current = self.ops.getitem(obj, key, target)
             value = self._eval(node.value, scope)
-            self._setitem(obj, key, self.ops.binop(op, current, value, node, inplace=True), target)
+            self.ops.setitem(obj, key, self.ops.binop(op, current, value, node, inplace=True), target)
         else:  # pragma: no cover - rejected statically
             raise self._error("cannot assign to this target", target)
 
@@ -358,7 +353,7 @@ class _Interpreter:
             obj = self._eval(target.value, scope)
             key = self._eval(target.slice, scope)
             try:
-                self._delitem(obj, key, target)
+                self.ops.delitem(obj, key, target)
             except (ProgramError, LimitReached):
                 raise
             except Exception as exc:
@@ -380,7 +375,7 @@ class _Interpreter:
         elif t is ast.Subscript:
             obj = self._eval(target.value, scope)
             key = self._eval(target.slice, scope)
-            self._setitem(obj, key, value, target)
+            self.ops.setitem(obj, key, value, target)
         else:
             raise self._error("cannot assign to this expression", target)
 
@@ -419,83 +414,6 @@ class _Interpreter:
         self._assign(elts[i].value, rest, scope)
         for elt, item in zip(elts[i + 1 :], items[len(items) - after :]):
             self._assign(elt, item, scope)
-
-    # ---- items ----------------------------------------------------------------------------
-
-    def _getitem(self, obj: Any, key: Any, node: Any) -> Any:
-        t = type(obj)
-        if t is dict:
-            self.ops.keys.lookup(key)
-            try:
-                return obj[key]
-            except KeyError:
-                raise self._key_error(obj, key, node) from None
-        if t is list or t is tuple or t is str or t is range:
-            if type(key) is slice:
-                result = obj[key]
-                if t is not range:
-                    self.meter.spend_ops(len(result))
-                return self.ops.made(result)
-            try:
-                return obj[key]
-            except IndexError:
-                if type(key) is int:
-                    raise self._error(
-                        f"IndexError: index {bounded_repr(key)} is out of range for a {t.__name__} of length "
-                        f"{len(obj)}",
-                        node,
-                    ) from None
-                raise
-        hint = ""
-        if t is ObjectView:
-            hint = f"; use fields such as {obj._id}.position or {obj._id}.attributes['colour']"
-        raise TypeError(f"'{tname(obj)}' object is not subscriptable{hint}")
-
-    def _key_error(self, d: dict, key: Any, node: Any) -> ProgramError:
-        hint = close_names(key, islice((k for k in d if type(k) is str), _SUGGESTED_KEYS)) if type(key) is str else ""
-        shown = ", ".join(bounded_repr(k) for k in islice(d, _MAX_KEYS_SHOWN))
-        more = f" and {len(d) - _MAX_KEYS_SHOWN} more" if len(d) > _MAX_KEYS_SHOWN else ""
-        return self._error(
-            f"KeyError: key {bounded_repr(key)} is not in the dict{hint or '.'} Keys: {shown or '(none)'}{more}", node
-        )
-
-    def _setitem(self, obj: Any, key: Any, value: Any, node: Any) -> None:
-        t = type(obj)
-        if t is dict:
-            self.ops.dict_store(obj, key, value, node)
-        elif t is list:
-            if type(key) is slice:
-                items = list(self.ops.items(value, node, "the assigned sequence"))
-                before = len(obj)
-                self.ops.grow(before, len(items), node)
-                self.meter.spend_ops(before + len(items))
-                obj[key] = items
-                self.meter.allocate(SLOT_BYTES * max(len(obj) - before, 0))
-            else:
-                try:
-                    obj[key] = value
-                except IndexError:
-                    if type(key) is int:
-                        raise self._error(
-                            f"IndexError: index {bounded_repr(key)} is out of range for a list of length {len(obj)}",
-                            node,
-                        ) from None
-                    raise
-        else:
-            hint = "; scene objects are read-only" if t is ObjectView else ""
-            if t is tuple or t is str:
-                hint = f"; a {t.__name__} cannot be changed, build a new one or use a list"
-            raise TypeError(f"'{tname(obj)}' object does not support item assignment{hint}")
-
-    def _delitem(self, obj: Any, key: Any, node: Any) -> None:
-        t = type(obj)
-        if t is dict:
-            self.ops.keys.lookup(key)
-        elif t is list:
-            self.meter.spend_ops(len(obj))
-        else:
-            raise TypeError(f"'{tname(obj)}' object does not support item deletion")
-        del obj[key]
 
     # ---- functions --------------------------------------------------------------------
 
@@ -756,7 +674,7 @@ class _Interpreter:
     def _eval_Subscript(self, node: ast.Subscript, scope: _Scope) -> Any:
         obj = self._eval(node.value, scope)
         key = self._eval(node.slice, scope)
-        return self._getitem(obj, key, node)
+        return self.ops.getitem(obj, key, node)
 
     def _eval_Slice(self, node: ast.Slice, scope: _Scope) -> Any:
         parts = []

@@ -29,12 +29,13 @@ from itertools import islice
 from operator import itemgetter
 from typing import Any, Callable
 
+from ..errors import ProgramError
 from .budget import Budget
 from .keys import MAX_KEYS_PER_HASH, KeyGuard
 from .messages import Where
 from .meter import MAKE_OPS, SLOT_BYTES, Meter, scalar_weight
 from .render import TooDeep, bounded_repr, render
-from .skills import ObjectView
+from .skills import ObjectView, close_names
 from .values import NOVALUE, check_callable, tname
 
 __all__ = ["Operations"]
@@ -62,6 +63,10 @@ _INT_TEXT_BITS = 128
 _FLOAT_DIGIT_CHARS = 16
 """A float formatted with a spec is paid this many characters per character written: exact decimal expansion
 (``f"{1e-300:.1000e}"``) takes ~40 us for 1000 digits, far more than copying them."""
+_MAX_KEYS_SHOWN = 20
+"""Keys listed in a KeyError message."""
+_SUGGESTED_KEYS = 1_000
+"""A mistyped dict key is compared with at most this many of the dict's string keys."""
 _MAX_FORMAT_WIDTH = 1_000
 """Largest width or precision in an f-string format spec: a wider field is only padding, built in C uncounted."""
 
@@ -346,6 +351,83 @@ class Operations:
             if element is x or element == x:
                 return i
         raise ValueError(f"{bounded_repr(x)} is not in {what}")
+
+    # ---- items: subscripts ----------------------------------------------------------------------------
+
+    def getitem(self, obj: Any, key: Any, node: Any) -> Any:
+        t = type(obj)
+        if t is dict:
+            self.keys.lookup(key)
+            try:
+                return obj[key]
+            except KeyError:
+                raise self.key_error(obj, key, node) from None
+        if t is list or t is tuple or t is str or t is range:
+            if type(key) is slice:
+                result = obj[key]
+                if t is not range:
+                    self.meter.spend_ops(len(result))
+                return self.made(result)
+            try:
+                return obj[key]
+            except IndexError:
+                if type(key) is int:
+                    raise self.where.error(
+                        f"IndexError: index {bounded_repr(key)} is out of range for a {t.__name__} of length "
+                        f"{len(obj)}",
+                        node,
+                    ) from None
+                raise
+        hint = ""
+        if t is ObjectView:
+            hint = f"; use fields such as {obj._id}.position or {obj._id}.attributes['colour']"
+        raise TypeError(f"'{tname(obj)}' object is not subscriptable{hint}")
+
+    def key_error(self, d: dict, key: Any, node: Any) -> ProgramError:
+        hint = close_names(key, islice((k for k in d if type(k) is str), _SUGGESTED_KEYS)) if type(key) is str else ""
+        shown = ", ".join(bounded_repr(k) for k in islice(d, _MAX_KEYS_SHOWN))
+        more = f" and {len(d) - _MAX_KEYS_SHOWN} more" if len(d) > _MAX_KEYS_SHOWN else ""
+        return self.where.error(
+            f"KeyError: key {bounded_repr(key)} is not in the dict{hint or '.'} Keys: {shown or '(none)'}{more}", node
+        )
+
+    def setitem(self, obj: Any, key: Any, value: Any, node: Any) -> None:
+        t = type(obj)
+        if t is dict:
+            self.dict_store(obj, key, value, node)
+        elif t is list:
+            if type(key) is slice:
+                items = list(self.items(value, node, "the assigned sequence"))
+                before = len(obj)
+                self.grow(before, len(items), node)
+                self.meter.spend_ops(before + len(items))
+                obj[key] = items
+                self.meter.allocate(SLOT_BYTES * max(len(obj) - before, 0))
+            else:
+                try:
+                    obj[key] = value
+                except IndexError:
+                    if type(key) is int:
+                        raise self.where.error(
+                            f"IndexError: index {bounded_repr(key)} is out of range for a list of length {len(obj)}",
+                            node,
+                        ) from None
+                    raise
+        else:
+            hint = "; scene objects are read-only" if t is ObjectView else ""
+            if t is tuple or t is str:
+                hint = f"; a {t.__name__} cannot be changed, build a new one or use a list"
+            raise TypeError(f"'{tname(obj)}' object does not support item assignment{hint}")
+
+    def delitem(self, obj: Any, key: Any, node: Any) -> None:
+        t = type(obj)
+        if t is dict:
+            self.keys.lookup(key)
+        elif t is list:
+            self.meter.spend_ops(len(obj))
+        else:
+            raise TypeError(f"'{tname(obj)}' object does not support item deletion")
+        del obj[key]
 
     # ---- keys: dicts and sets ------------------------------------------------------------------------
 
