@@ -35,17 +35,17 @@ from .methods import Methods
 from .operations import TUPLE_ITERATORS, Operations, produced_size
 from .plan import Plan
 from .render import bounded_repr, clip
-from .skills import SKILLS, Namespace, ObjectView, Recorder, close_names, CURRENT_RECORDER
+from .skills import CURRENT_RECORDER, SKILLS, Namespace, ObjectView, Recorder, close_names
 from .values import (
     MISSING,
-    _Break,
+    Break,
+    Continue,
+    Return,
+    Scope,
+    Signal,
     _Builtin,
-    _Continue,
     _Method,
-    _Return,
     _SandboxFunction,
-    _Scope,
-    _Signal,
     clean,
     signature,
     tname,
@@ -97,8 +97,8 @@ class _Interpreter:
         self.frame_marks: list[tuple[Any, int]] = []
         """(frame of a running call, interpreter frames in use up to it), innermost last."""
         self.frame_room = 0
-        self.module_scope = _Scope({}, None, None, "<module>")
-        self.closure_scopes: list[_Scope] = []
+        self.module_scope = Scope({}, None, None, "<module>")
+        self.closure_scopes: list[Scope] = []
         """Scopes in which the program made a function: the function and the scope refer to each other."""
         self._locals_cache: dict[int, frozenset] = {}
         self._exec_table = {t: getattr(self, "_exec_" + t.__name__) for t in STATEMENT_TYPES}
@@ -212,44 +212,44 @@ class _Interpreter:
 
     # ---- statements -------------------------------------------------------------------
 
-    def _exec_block(self, body: list, scope: _Scope) -> None:
+    def _exec_block(self, body: list, scope: Scope) -> None:
         table = self._exec_table
         for stmt in body:
             try:
                 self._tick(stmt)
                 table[type(stmt)](stmt, scope)
-            except (ProgramError, _Signal):
+            except (ProgramError, Signal):
                 raise
             except LimitReached as hit:
                 raise self._limit_error(hit, stmt) from None
             except Exception as exc:
                 raise self._convert(exc, stmt) from None
 
-    def _exec_Expr(self, node: ast.Expr, scope: _Scope) -> None:
+    def _exec_Expr(self, node: ast.Expr, scope: Scope) -> None:
         self._eval(node.value, scope)
 
-    def _exec_Pass(self, node: ast.Pass, scope: _Scope) -> None:
+    def _exec_Pass(self, node: ast.Pass, scope: Scope) -> None:
         pass
 
-    def _exec_Break(self, node: ast.Break, scope: _Scope) -> None:
-        raise _Break()
+    def _exec_Break(self, node: ast.Break, scope: Scope) -> None:
+        raise Break()
 
-    def _exec_Continue(self, node: ast.Continue, scope: _Scope) -> None:
-        raise _Continue()
+    def _exec_Continue(self, node: ast.Continue, scope: Scope) -> None:
+        raise Continue()
 
-    def _exec_Return(self, node: ast.Return, scope: _Scope) -> None:
-        raise _Return(None if node.value is None else self._eval(node.value, scope))
+    def _exec_Return(self, node: ast.Return, scope: Scope) -> None:
+        raise Return(None if node.value is None else self._eval(node.value, scope))
 
-    def _exec_Assign(self, node: ast.Assign, scope: _Scope) -> None:
+    def _exec_Assign(self, node: ast.Assign, scope: Scope) -> None:
         value = self._eval(node.value, scope)
         for target in node.targets:
             self._assign(target, value, scope)
 
-    def _exec_AnnAssign(self, node: ast.AnnAssign, scope: _Scope) -> None:
+    def _exec_AnnAssign(self, node: ast.AnnAssign, scope: Scope) -> None:
         if node.value is not None:
             self._assign(node.target, self._eval(node.value, scope), scope)
 
-    def _exec_AugAssign(self, node: ast.AugAssign, scope: _Scope) -> None:
+    def _exec_AugAssign(self, node: ast.AugAssign, scope: Scope) -> None:
         target = node.target
         op = type(node.op)
         if isinstance(target, ast.Name):
@@ -265,13 +265,13 @@ class _Interpreter:
         else:  # pragma: no cover - rejected statically
             raise self._error("cannot assign to this target", target)
 
-    def _exec_If(self, node: ast.If, scope: _Scope) -> None:
+    def _exec_If(self, node: ast.If, scope: Scope) -> None:
         if self._eval(node.test, scope):
             self._exec_block(node.body, scope)
         elif node.orelse:
             self._exec_block(node.orelse, scope)
 
-    def _exec_While(self, node: ast.While, scope: _Scope) -> None:
+    def _exec_While(self, node: ast.While, scope: Scope) -> None:
         def iterations() -> Iterator[None]:
             while True:
                 self._tick(node)
@@ -281,7 +281,7 @@ class _Interpreter:
 
         self._loop(node, scope, iterations())
 
-    def _exec_For(self, node: ast.For, scope: _Scope) -> None:
+    def _exec_For(self, node: ast.For, scope: Scope) -> None:
         iterable = self._eval(node.iter, scope)
         try:
             it = self.ops.iterate(iterable, node.iter)
@@ -300,7 +300,7 @@ class _Interpreter:
 
         self._loop(node, scope, iterations())
 
-    def _loop(self, node: ast.While | ast.For, scope: _Scope, iterations: Iterator[None]) -> None:
+    def _loop(self, node: ast.While | ast.For, scope: Scope, iterations: Iterator[None]) -> None:
         """Run ``node.body`` once per step of ``iterations`` (which ticks, tests or binds the target),
         then ``node.orelse`` unless the body broke out."""
         self.loops.append(node)
@@ -308,29 +308,29 @@ class _Interpreter:
             for _ in iterations:
                 try:
                     self._exec_block(node.body, scope)
-                except _Break:
+                except Break:
                     return
-                except _Continue:
+                except Continue:
                     pass
         finally:
             self.loops.pop()
         if node.orelse:
             self._exec_block(node.orelse, scope)
 
-    def _exec_FunctionDef(self, node: ast.FunctionDef, scope: _Scope) -> None:
+    def _exec_FunctionDef(self, node: ast.FunctionDef, scope: Scope) -> None:
         scope.vars[node.name] = self._make_function(node.name, node.args, node.body, False, node, scope)
 
-    def _exec_Import(self, node: ast.Import, scope: _Scope) -> None:
+    def _exec_Import(self, node: ast.Import, scope: Scope) -> None:
         for alias in node.names:
             module = self.modules[MODULE_ALIASES[alias.name]]
             scope.vars[alias.asname or alias.name] = module
 
-    def _exec_ImportFrom(self, node: ast.ImportFrom, scope: _Scope) -> None:
+    def _exec_ImportFrom(self, node: ast.ImportFrom, scope: Scope) -> None:
         module = self.modules[MODULE_ALIASES[node.module or ""]]
         for alias in node.names:
             scope.vars[alias.asname or alias.name] = module._lookup(alias.name)
 
-    def _exec_Assert(self, node: ast.Assert, scope: _Scope) -> None:
+    def _exec_Assert(self, node: ast.Assert, scope: Scope) -> None:
         if not self._eval(node.test, scope):
             message = "assertion failed"
             if node.msg is not None:
@@ -339,11 +339,11 @@ class _Interpreter:
                 message += ": " + "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
             raise self._error(message, node)
 
-    def _exec_Delete(self, node: ast.Delete, scope: _Scope) -> None:
+    def _exec_Delete(self, node: ast.Delete, scope: Scope) -> None:
         for target in node.targets:
             self._delete(target, scope)
 
-    def _delete(self, target: Any, scope: _Scope) -> None:
+    def _delete(self, target: Any, scope: Scope) -> None:
         if isinstance(target, ast.Name):
             if target.id in scope.vars:
                 del scope.vars[target.id]
@@ -366,7 +366,7 @@ class _Interpreter:
 
     # ---- assignment ---------------------------------------------------------------------
 
-    def _assign(self, target: Any, value: Any, scope: _Scope) -> None:
+    def _assign(self, target: Any, value: Any, scope: Scope) -> None:
         t = type(target)
         if t is ast.Name:
             scope.vars[target.id] = value
@@ -379,7 +379,7 @@ class _Interpreter:
         else:
             raise self._error("cannot assign to this expression", target)
 
-    def _unpack(self, target: Any, value: Any, scope: _Scope) -> None:
+    def _unpack(self, target: Any, value: Any, scope: Scope) -> None:
         elts = target.elts
         starred = [i for i, e in enumerate(elts) if isinstance(e, ast.Starred)]
         try:
@@ -417,7 +417,7 @@ class _Interpreter:
 
     # ---- functions --------------------------------------------------------------------
 
-    def _make_function(self, name: str, args: ast.arguments, body: Any, is_lambda: bool, node: Any, scope: _Scope):
+    def _make_function(self, name: str, args: ast.arguments, body: Any, is_lambda: bool, node: Any, scope: Scope):
         params = tuple(a.arg for a in args.args)
         kwonly = tuple(a.arg for a in args.kwonlyargs)
         defaults: dict[str, Any] = {}
@@ -524,7 +524,7 @@ class _Interpreter:
         except TypeError as exc:
             raise self._convert(exc, node) from None
         self._enter_call(node)
-        scope = _Scope(values, fn.locals, fn.closure, fn.name)
+        scope = Scope(values, fn.locals, fn.closure, fn.name)
         line = getattr(node, "lineno", 0) or 0
         self.depth += 1
         self.call_lines.append(line)
@@ -533,7 +533,7 @@ class _Interpreter:
                 return self._eval(fn.body, scope)
             try:
                 self._exec_block(fn.body, scope)
-            except _Return as ret:
+            except Return as ret:
                 return ret.value
             return None
         except ProgramError as exc:
@@ -586,26 +586,26 @@ class _Interpreter:
 
     # ---- expressions ------------------------------------------------------------------
 
-    def _eval(self, node: Any, scope: _Scope) -> Any:
+    def _eval(self, node: Any, scope: Scope) -> Any:
         meter = self.meter
         meter.work += 1
         try:
             if meter.work >= meter.alarm:
                 meter.check()
             return self._eval_table[type(node)](node, scope)
-        except (ProgramError, _Signal):
+        except (ProgramError, Signal):
             raise
         except LimitReached as hit:
             raise self._limit_error(hit, node) from None
         except Exception as exc:
             raise self._convert(exc, node) from None
 
-    def _eval_Constant(self, node: ast.Constant, scope: _Scope) -> Any:
+    def _eval_Constant(self, node: ast.Constant, scope: Scope) -> Any:
         return node.value
 
-    def _eval_Name(self, node: ast.Name, scope: _Scope) -> Any:
+    def _eval_Name(self, node: ast.Name, scope: Scope) -> Any:
         name = node.id
-        s: _Scope | None = scope
+        s: Scope | None = scope
         while s is not None:
             value = s.vars.get(name, MISSING)
             if value is not MISSING:
@@ -628,7 +628,7 @@ class _Interpreter:
             return value
         raise self._error(self._name_message(name, scope), node)
 
-    def _defined_outside(self, name: str, scope: _Scope) -> bool:
+    def _defined_outside(self, name: str, scope: Scope) -> bool:
         s = scope.parent
         while s is not None:
             if name in s.vars:
@@ -636,11 +636,11 @@ class _Interpreter:
             s = s.parent
         return name in self.base
 
-    def _name_message(self, name: str, scope: _Scope) -> str:
+    def _name_message(self, name: str, scope: Scope) -> str:
         if name in MATH_ALL:
             return f"name {name!r} is not defined; did you mean math.{name}? (or write 'from math import {name}')"
         candidates: set[str] = set(self.base)
-        s: _Scope | None = scope
+        s: Scope | None = scope
         while s is not None:
             candidates.update(s.vars)
             if s.locals:
@@ -652,7 +652,7 @@ class _Interpreter:
             text += f". Skills: {', '.join(SKILLS)}; scene objects: {', '.join(ids) or '(none)'}"
         return text
 
-    def _eval_Attribute(self, node: ast.Attribute, scope: _Scope) -> Any:
+    def _eval_Attribute(self, node: ast.Attribute, scope: Scope) -> Any:
         return self._attribute(self._eval(node.value, scope), node)
 
     def _attribute(self, obj: Any, node: ast.Attribute) -> Any:
@@ -671,12 +671,12 @@ class _Interpreter:
             return self.ops.made(_Method(obj, name))
         raise self._attr_error(attr_message(obj, name), node)
 
-    def _eval_Subscript(self, node: ast.Subscript, scope: _Scope) -> Any:
+    def _eval_Subscript(self, node: ast.Subscript, scope: Scope) -> Any:
         obj = self._eval(node.value, scope)
         key = self._eval(node.slice, scope)
         return self.ops.getitem(obj, key, node)
 
-    def _eval_Slice(self, node: ast.Slice, scope: _Scope) -> Any:
+    def _eval_Slice(self, node: ast.Slice, scope: Scope) -> Any:
         parts = []
         for part in (node.lower, node.upper, node.step):
             value = None if part is None else self._eval(part, scope)
@@ -685,7 +685,7 @@ class _Interpreter:
             parts.append(value)
         return slice(*parts)
 
-    def _eval_Call(self, node: ast.Call, scope: _Scope) -> Any:
+    def _eval_Call(self, node: ast.Call, scope: Scope) -> Any:
         func_node = node.func
         if type(func_node) is ast.Attribute:  # obj.method(...) calls the method without making it a value
             obj = self._eval(func_node.value, scope)
@@ -699,7 +699,7 @@ class _Interpreter:
         args, kwargs = self._arguments(node, scope)
         return self._call(func, args, kwargs, node)
 
-    def _arguments(self, node: ast.Call, scope: _Scope) -> tuple[list, dict]:
+    def _arguments(self, node: ast.Call, scope: Scope) -> tuple[list, dict]:
         args: list[Any] = []
         for a in node.args:
             if type(a) is ast.Starred:
@@ -715,15 +715,15 @@ class _Interpreter:
         kwargs = {kw.arg: self._eval(kw.value, scope) for kw in node.keywords}
         return args, kwargs
 
-    def _eval_BinOp(self, node: ast.BinOp, scope: _Scope) -> Any:
+    def _eval_BinOp(self, node: ast.BinOp, scope: Scope) -> Any:
         left = self._eval(node.left, scope)
         right = self._eval(node.right, scope)
         return self.ops.binop(type(node.op), left, right, node)
 
-    def _eval_UnaryOp(self, node: ast.UnaryOp, scope: _Scope) -> Any:
+    def _eval_UnaryOp(self, node: ast.UnaryOp, scope: Scope) -> Any:
         return self.ops.unaryop(type(node.op), self._eval(node.operand, scope), node)
 
-    def _eval_BoolOp(self, node: ast.BoolOp, scope: _Scope) -> Any:
+    def _eval_BoolOp(self, node: ast.BoolOp, scope: Scope) -> Any:
         is_and = type(node.op) is ast.And
         value = None
         for v in node.values:
@@ -735,7 +735,7 @@ class _Interpreter:
                 return value
         return value
 
-    def _eval_Compare(self, node: ast.Compare, scope: _Scope) -> Any:
+    def _eval_Compare(self, node: ast.Compare, scope: Scope) -> Any:
         left = self._eval(node.left, scope)
         result: Any = True
         for op, comp in zip(node.ops, node.comparators):
@@ -746,10 +746,10 @@ class _Interpreter:
             left = right
         return result
 
-    def _eval_IfExp(self, node: ast.IfExp, scope: _Scope) -> Any:
+    def _eval_IfExp(self, node: ast.IfExp, scope: Scope) -> Any:
         return self._eval(node.body if self._eval(node.test, scope) else node.orelse, scope)
 
-    def _elements(self, elts: list, scope: _Scope, node: Any) -> list:
+    def _elements(self, elts: list, scope: Scope, node: Any) -> list:
         out: list[Any] = []
         for e in elts:
             if type(e) is ast.Starred:
@@ -766,16 +766,16 @@ class _Interpreter:
         self.ops.check_len(len(out), node)
         return out
 
-    def _eval_List(self, node: ast.List, scope: _Scope) -> Any:
+    def _eval_List(self, node: ast.List, scope: Scope) -> Any:
         return self.ops.made(self._elements(node.elts, scope, node))
 
-    def _eval_Tuple(self, node: ast.Tuple, scope: _Scope) -> Any:
+    def _eval_Tuple(self, node: ast.Tuple, scope: Scope) -> Any:
         return self.ops.made(tuple(self._elements(node.elts, scope, node)))
 
-    def _eval_Set(self, node: ast.Set, scope: _Scope) -> Any:
+    def _eval_Set(self, node: ast.Set, scope: Scope) -> Any:
         return self.ops.set_of(self._elements(node.elts, scope, node), node)
 
-    def _eval_Dict(self, node: ast.Dict, scope: _Scope) -> Any:
+    def _eval_Dict(self, node: ast.Dict, scope: Scope) -> Any:
         out: dict[Any, Any] = {}
         for k, v in zip(node.keys, node.values):
             key = self._eval(k, scope)
@@ -784,7 +784,7 @@ class _Interpreter:
         self.ops.check_len(len(out), node, "a dict")
         return self.ops.made(out)
 
-    def _comprehension(self, node: Any, scope: _Scope, emit: Callable[[_Scope], None]) -> None:
+    def _comprehension(self, node: Any, scope: Scope, emit: Callable[[Scope], None]) -> None:
         local_names = self._locals_cache.get(id(node))
         if local_names is None:
             names = set()
@@ -799,7 +799,7 @@ class _Interpreter:
                     stack.append(n.value)
             local_names = frozenset(names)
             self._locals_cache[id(node)] = local_names
-        inner = _Scope({}, local_names, scope, scope.fname)
+        inner = Scope({}, local_names, scope, scope.fname)
         gens = node.generators
         last = len(gens) - 1
 
@@ -834,11 +834,11 @@ class _Interpreter:
             self.loops.pop()
             loop = None  # noqa: F841 - the function refers to itself through this variable: break the cycle
 
-    def _eval_ListComp(self, node: ast.ListComp, scope: _Scope) -> Any:
+    def _eval_ListComp(self, node: ast.ListComp, scope: Scope) -> Any:
         out: list[Any] = []
         limit = self.b.max_len
 
-        def emit(inner: _Scope) -> None:
+        def emit(inner: Scope) -> None:
             out.append(self._eval(node.elt, inner))
             if len(out) > limit:
                 self.ops.check_len(len(out), node)
@@ -849,29 +849,29 @@ class _Interpreter:
 
     _eval_GeneratorExp = _eval_ListComp  # evaluated eagerly (bounded like a list)
 
-    def _eval_SetComp(self, node: ast.SetComp, scope: _Scope) -> Any:
+    def _eval_SetComp(self, node: ast.SetComp, scope: Scope) -> Any:
         out: set[Any] = set()
 
-        def emit(inner: _Scope) -> None:
+        def emit(inner: Scope) -> None:
             self.ops.set_store(out, self._eval(node.elt, inner), node)
 
         self._comprehension(node, scope, emit)
         return self.ops.made(out)
 
-    def _eval_DictComp(self, node: ast.DictComp, scope: _Scope) -> Any:
+    def _eval_DictComp(self, node: ast.DictComp, scope: Scope) -> Any:
         out: dict[Any, Any] = {}
 
-        def emit(inner: _Scope) -> None:
+        def emit(inner: Scope) -> None:
             key = self._eval(node.key, inner)
             self.ops.dict_store(out, key, self._eval(node.value, inner), node)
 
         self._comprehension(node, scope, emit)
         return self.ops.made(out)
 
-    def _eval_Lambda(self, node: ast.Lambda, scope: _Scope) -> Any:
+    def _eval_Lambda(self, node: ast.Lambda, scope: Scope) -> Any:
         return self._make_function("<lambda>", node.args, node.body, True, node, scope)
 
-    def _eval_JoinedStr(self, node: ast.JoinedStr, scope: _Scope) -> Any:
+    def _eval_JoinedStr(self, node: ast.JoinedStr, scope: Scope) -> Any:
         parts = []
         total = 0
         for v in node.values:
@@ -882,7 +882,7 @@ class _Interpreter:
         self.meter.spend_chars(total)
         return self.ops.made("".join(parts))
 
-    def _eval_FormattedValue(self, node: ast.FormattedValue, scope: _Scope) -> Any:
+    def _eval_FormattedValue(self, node: ast.FormattedValue, scope: Scope) -> Any:
         value = self._eval(node.value, scope)
         spec = "" if node.format_spec is None else self._eval(node.format_spec, scope)
         if node.conversion == ord("r"):
@@ -896,7 +896,7 @@ class _Interpreter:
             return self.ops.to_str(value, node)
         return self.ops.format_field(value, spec, node)
 
-    def _eval_Starred(self, node: ast.Starred, scope: _Scope) -> Any:  # pragma: no cover - rejected statically
+    def _eval_Starred(self, node: ast.Starred, scope: Scope) -> Any:  # pragma: no cover - rejected statically
         raise self._error("'*' is not allowed here", node)
 
 

@@ -17,29 +17,29 @@ from .skills import Namespace, ObjectView
 __all__: list[str] = []
 
 
-class _Signal(BaseException):
+class Signal(BaseException):
     """Control flow (break/continue/return); never caught by error conversion."""
 
 
-class _Break(_Signal):
+class Break(Signal):
     pass
 
 
-class _Continue(_Signal):
+class Continue(Signal):
     pass
 
 
-class _Return(_Signal):
+class Return(Signal):
     def __init__(self, value: Any):
         self.value = value
 
 
-class _Scope:
+class Scope:
     """The variables of the module, of one function call or of one comprehension."""
 
     __slots__ = ("vars", "locals", "parent", "fname")
 
-    def __init__(self, vars: dict, locals: frozenset | None, parent: "_Scope | None", fname: str):
+    def __init__(self, vars: dict, locals: frozenset | None, parent: "Scope | None", fname: str):
         self.vars = vars
         self.locals = locals  # None for the module scope (everything assigned there is global)
         self.parent = parent
