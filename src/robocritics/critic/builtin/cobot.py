@@ -224,3 +224,18 @@ def slow_flagged_moves(verdict, execution, ratio: float) -> list:
             edits.append(Edit(verdict.critic, lines[0], "; ".join(said) + " (restored after the move)",
                               f"{verdict.message.split(':')[0]}", ops))
     return edits
+
+
+def nothing_to_judge(name: str, execution: "Execution", needs: str):
+    """The OK verdict of a collaborative-operation critic that has nothing to judge (no people in the scene, or
+    no robot model, whose ``needs`` — e.g. "shapes and masses" — the critic reads), else None."""
+    from .. import Flag, Verdict
+
+    if not getattr(execution.scene, "humans", ()):
+        return Verdict(critic=name, flag=Flag.OK, message="no people in the scene: nothing to check",
+                       hint="add people to the scene's 'humans' to judge collaborative operation")
+    if execution.robot is None:
+        return Verdict(critic=name, flag=Flag.OK, message=f"no robot model: nothing to check (its parts' {needs} "
+                       "are needed)", hint="judge the motion with its robot")
+    return None
+

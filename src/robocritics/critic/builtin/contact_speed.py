@@ -31,7 +31,7 @@ from pydantic import Field
 from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
 from ...humans import BODY_REGIONS, LIMITS_SOURCE, scene_bodies, transient_speed_limit
-from .cobot import carried_mass, part_body_distances, part_speeds, robot_masses, robot_parts, slow_flagged_moves
+from .cobot import nothing_to_judge, carried_mass, part_body_distances, part_speeds, robot_masses, robot_parts, slow_flagged_moves
 
 __all__ = ["ContactSpeedCritic", "register_critics", "contact_speeds"]
 
@@ -94,12 +94,9 @@ class ContactSpeedCritic:
 
     def check(self, execution, params: Params) -> Verdict:
         trajectory = execution.trajectory
-        if not requested(execution):
-            return Verdict(critic=NAME, flag=Flag.OK, message="no people in the scene: nothing to check",
-                           hint="add people to the scene's 'humans' to judge collaborative operation")
-        if execution.robot is None:
-            return Verdict(critic=NAME, flag=Flag.OK, message="no robot model: nothing to check (its parts' "
-                           "shapes and masses are needed)", hint="judge the motion with its robot")
+        nothing = nothing_to_judge(NAME, execution, "shapes and masses")
+        if nothing is not None:
+            return nothing
         T = len(trajectory)
         worst = (0.0, 0, 0, 0, None)  # ratio, sample, part, capsule, per-person result
         ratio_series = np.zeros(T)

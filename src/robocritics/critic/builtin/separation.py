@@ -35,7 +35,7 @@ from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 from ...humans import scene_bodies
 from ...robot.arms import ARMS, UR3E
-from .cobot import part_body_nearest, part_speeds, robot_parts, slow_flagged_moves
+from .cobot import nothing_to_judge, part_body_nearest, part_speeds, robot_parts, slow_flagged_moves
 from .contact_speed import requested
 
 __all__ = ["SeparationCritic", "register_critics", "protective_separation"]
@@ -97,12 +97,9 @@ class SeparationCritic:
 
     def check(self, execution, params: Params) -> Verdict:
         trajectory = execution.trajectory
-        if not requested(execution):
-            return Verdict(critic=NAME, flag=Flag.OK, message="no people in the scene: nothing to check",
-                           hint="add people to the scene's 'humans' to judge collaborative operation")
-        if execution.robot is None:
-            return Verdict(critic=NAME, flag=Flag.OK, message="no robot model: nothing to check (its parts' "
-                           "shapes are needed)", hint="judge the motion with its robot")
+        nothing = nothing_to_judge(NAME, execution, "shapes")
+        if nothing is not None:
+            return nothing
         t_s, z_r, stopping_data = _arm_facts(execution.robot)
         time = trajectory.time
         parts = robot_parts(execution)
