@@ -49,6 +49,20 @@ def one_line(text: object, limit: int = ONE_LINE_CHARS) -> str:
     return safe_text(" ".join(str(text).split()), limit)
 
 
+PRINTED_CHARS = 200_000
+"""Most characters :func:`terminal_text` prints (a report, a diff, an LLM's reply are a few thousand)."""
+
+
+def terminal_text(text: object, limit: int = PRINTED_CHARS) -> str:
+    """Lines for stdout that may quote outside text (a report quoting a scene or a program, the diff of a program,
+    an LLM's reply): newlines and tabs kept, every other control character and escape sequence shown as an escape
+    (:func:`robocritics._text.safe_text`), so what is printed can neither clear the screen, set the window title
+    nor forge a line of ours; cut after ``limit`` characters with a note."""
+    from .._text import safe_text
+
+    return safe_text(text, limit, newlines=True)
+
+
 MAX_INPUT_BYTES = 1_000_000
 """Largest program or params file [bytes]: ten times the sandbox's longest program (100,000 characters), so an
 over-long program still gets the sandbox's own error, and a mistaken path (a log, an image) a short one."""

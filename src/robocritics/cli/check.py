@@ -15,6 +15,7 @@ from ._common import (
     sample_rate,
     scene_for,
     subcommand,
+    terminal_text,
 )
 
 
@@ -90,7 +91,7 @@ def _check(args: argparse.Namespace) -> int:
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
     goals = parse_goals(args.goals, scene)  # GoalError naming a wrong id, before simulating
     execution, report = check_program(source, scene, goals=goals, critics=critics, params=params, sample_rate_hz=args.rate)
-    print(report.to_json() if args.json else report.to_text())
+    print(report.to_json() if args.json else terminal_text(report.to_text()))  # it quotes the program
     if execution is None:  # the program did not run: its error, as before, beside the report
         verdict = report.verdicts[0]
         print(f"robocritics: error: {verdict.details['error']}: {one_line(verdict.details['text'])}", file=sys.stderr)

@@ -10,9 +10,11 @@ from ._common import (
     add_goal_option,
     check_output,
     load_params,
+    one_line,
     read_text,
     scene_for,
     subcommand,
+    terminal_text,
 )
 
 
@@ -48,10 +50,10 @@ def _cmd_fix(args: argparse.Namespace) -> int:
     scene = scene_for(args.program, args.scene)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
     result = repair(source, scene, goal=args.goals or None, critics=critics, params=load_params(args.params))
-    print(result.diff or "(no change)")
+    print(terminal_text(result.diff) or "(no change)")  # the diff quotes the program's lines
     for change in result.changes:
-        print(f"changed: {change}")
-    print(result.report.to_text())
+        print(f"changed: {one_line(change)}")
+    print(terminal_text(result.report.to_text()))
     if args.output:
         try:
             write_file_atomically(args.output, result.program, "-o")

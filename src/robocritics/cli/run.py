@@ -61,6 +61,7 @@ from ._common import (
     one_line,
     positive_int,
     subcommand,
+    terminal_text,
 )
 from ..errors import LLMError, RoboCriticsError
 
@@ -184,10 +185,12 @@ def _temperature(text: str) -> float:
 
 
 def _say(out: TextIO, text: object = "", *, flush: bool = False) -> None:
-    """Print ``text`` cleaned of lone surrogates, and still print it on a stream that cannot encode all of it."""
+    """Print ``text`` cleaned of lone surrogates and with the escape sequences of the model's reply (or of any
+    outside text) shown as escapes (:func:`terminal_text`), and still print it on a stream that cannot encode all
+    of it."""
     from ..llm.limits import clean_text
 
-    line = clean_text(str(text))
+    line = terminal_text(clean_text(str(text)))
     try:
         print(line, file=out, flush=flush)
     except UnicodeEncodeError:
