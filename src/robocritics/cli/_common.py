@@ -120,8 +120,19 @@ _MAX_CRITIC_NAME_CHARS = 100
 """Longest critic name ``--critics`` accepts (so an unknown one is quoted briefly in the error)."""
 
 
+def file_name(text: str) -> str:
+    """A file argument (``--html``, ``-o``, ``--params``, ``--memory``): not empty. An empty value was read as
+    "not given": ``--html=`` wrote nothing and exited 0, ``--params=`` ran with the defaults."""
+    if not text:
+        raise argparse.ArgumentTypeError("the file name is empty")
+    return text
+
+
 def critic_names(text: str) -> str:
-    """A ``--critics`` value: comma-separated names, each at most :data:`_MAX_CRITIC_NAME_CHARS` characters."""
+    """A ``--critics`` value: comma-separated names, each at most :data:`_MAX_CRITIC_NAME_CHARS` characters, at
+    least one (an empty value ran every critic as if the option were not given)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("no critic named; give names separated by commas, e.g. joint_speed,collision")
     for name in text.split(","):
         if len(name.strip()) > _MAX_CRITIC_NAME_CHARS:
             raise argparse.ArgumentTypeError(
@@ -254,6 +265,7 @@ def add_critic_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--params",
         metavar="FILE",
+        type=file_name,
         help='JSON file of threshold overrides, e.g. {"joint_speed": {"warn_speed_m_s": 0.8}}',
     )
 

@@ -9,6 +9,7 @@ from ._common import (
     add_critic_options,
     add_goal_option,
     check_output,
+    file_name,
     load_params,
     one_line,
     read_text,
@@ -44,6 +45,7 @@ def _build_check(sub) -> None:
     p.add_argument(
         "--html",
         metavar="OUT.html",
+        type=file_name,
         help="also write the 3-D replay with its critic timeline and the report to one self-contained HTML file "
         "(no external URLs: it opens from file:// with no server)",
     )

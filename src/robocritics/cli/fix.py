@@ -9,6 +9,7 @@ from ._common import (
     add_critic_options,
     add_goal_option,
     check_output,
+    file_name,
     load_params,
     one_line,
     read_text,
@@ -36,7 +37,7 @@ def _build_fix(sub) -> None:
     )
     add_critic_options(p)
     add_goal_option(p)
-    p.add_argument("-o", "--output", metavar="OUT.py", help="write the repaired program here")
+    p.add_argument("-o", "--output", metavar="OUT.py", type=file_name, help="write the repaired program here")
     p.set_defaults(func=_cmd_fix)
 
 

@@ -55,6 +55,7 @@ from ._common import (
     add_critic_options,
     add_goal_option,
     add_llm_options,
+    file_name,
     llm_api_key,
     llm_client,
     load_params,
@@ -112,7 +113,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     )
     add_critic_options(p)
     add_goal_option(p)
-    p.add_argument("--memory", metavar="FILE", help="interaction memory (SQLite file, created if missing)")
+    p.add_argument("--memory", metavar="FILE", type=file_name, help="interaction memory (SQLite file, created if missing)")
     p.add_argument(
         "--embedded-rules",
         action="store_true",

@@ -22,6 +22,7 @@ from ._common import (
     UsageError,
     add_goal_option,
     add_llm_options,
+    file_name,
     host,
     llm_api_key,
     llm_client,
@@ -45,7 +46,7 @@ def _build_studio(sub) -> None:
         "needs --token. Exit status: 0 after Ctrl-C, 2 bad input.",
     )
     p.add_argument("--scene", metavar="NAME|PATH", help="scene name or JSON file (default as for `check`)")
-    p.add_argument("--program", metavar="FILE", help="program file to open in the editor")
+    p.add_argument("--program", metavar="FILE", type=file_name, help="program file to open in the editor")
     add_goal_option(p)
     p.add_argument("--host", type=host, default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8765, help="port to bind (default 8765; 0: any free port)")
