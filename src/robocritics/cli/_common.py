@@ -174,7 +174,7 @@ def host(text: str) -> str:
     problem = ""
     if not name:
         problem = "is empty"
-    elif len(name) > 253 or any(c.isspace() or c in "\x00/" for c in name):
+    elif len(name) > 253 or any(c.isspace() or not c.isprintable() or c == "/" for c in name):
         problem = "is not a host name"
     else:
         try:
