@@ -99,7 +99,7 @@ except ImportError:  # run from a checkout without installing
 
 from robocritics._files import OutputFileError, check_output_path, open_regular, write_file_atomically  # noqa: E402
 from robocritics.errors import LLMError, RoboCriticsError  # noqa: E402
-from robocritics.llm.client import OpenAICompatible  # noqa: E402
+from robocritics.llm.providers.openai_compatible import OpenAICompatible  # noqa: E402
 from robocritics.llm.limits import DEFAULT_MAX_TOKENS  # noqa: E402
 from robocritics.llm.loop import Attempt, Loop, NothingToFixError  # noqa: E402
 from robocritics.llm.prompts import REVIEW_INSTRUCTION  # noqa: E402
@@ -499,7 +499,7 @@ def run_repairs_one(model: Any, task: str, mode: str, *, max_attempts: int, mode
 def careful_reference(task: str) -> RepairsResult:
     """The careful example program simulated and critiqued with the task's goals (no model, no repairs)."""
     from robocritics.critic import critique
-    from robocritics.simulate import simulate
+    from robocritics.pipeline import simulate
 
     scene = Scene.builtin(task)
     started = time.process_time()

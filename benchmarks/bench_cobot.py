@@ -19,10 +19,10 @@ import time
 from pathlib import Path
 
 from robocritics.critic import get_critics
-from robocritics.critics.cobot import part_body_distances, part_body_nearest, robot_parts
+from robocritics.critic.builtin.cobot import part_body_distances, part_body_nearest, robot_parts
 from robocritics.humans import scene_bodies
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 CRITICS = ("joint_speed", "space_usage", "collision", "end_effector_pose", "pinch_point", "contact_speed",

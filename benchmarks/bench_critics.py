@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT / "tests"))  # synth.py and critic_reference.py live
 from critic_reference import REFERENCES  # noqa: E402
 from synth import realistic_trajectory  # noqa: E402
 
-from robocritics.critic import BUILTIN_CRITICS, critique, get_critics  # noqa: E402
+from robocritics.critic import BUILTIN_CRITICS, as_execution, critique, get_critics  # noqa: E402
 from robocritics.scene import Scene  # noqa: E402
 
 TARGET_MS = 50.0
@@ -70,14 +70,15 @@ def main(argv: list[str] | None = None) -> int:
     print("-" * len(header))
     total_vec = total_ref = 0.0
     agree = True
+    execution = as_execution(traj, scene)  # the run a critic reads: this trajectory in this scene, no plan
     for name in BUILTIN_CRITICS:
         c = critics[name]
         p = c.Params()
-        verdict = c.check(traj, scene, p)
+        verdict = c.check(execution, p)
         ref = REFERENCES[name](traj, scene, p)
         if verdict.flag is not ref["flag"]:
             agree = False
-        wall, cpu = timed(lambda: c.check(traj, scene, p), args.repeats)
+        wall, cpu = timed(lambda: c.check(execution, p), args.repeats)
         ref_wall, _ = timed(lambda: REFERENCES[name](traj, scene, p), args.ref_repeats)
         total_vec += wall
         total_ref += ref_wall

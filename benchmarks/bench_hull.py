@@ -1,4 +1,4 @@
-"""CPU time of the hull (robot/hull.py): coal's Qhull path, the numpy quickhull, scipy's Qhull, on point sets the
+"""CPU time of the hull (geometry/hull.py): coal's Qhull path, the numpy quickhull, scipy's Qhull, on point sets the
 space_usage critic meets (a sphere's worth of vertices, a fan coal refuses, a simulated base sweep's exact hull).
 
 Each time is the best of ``--repeat`` runs of ``time.process_time``.
@@ -33,8 +33,8 @@ def main(argv: list[str] | None = None) -> None:
     from scipy.spatial import ConvexHull
 
     from robocritics import Scene, simulate
-    from robocritics.critics.space_usage import hull_points
-    from robocritics.robot.hull import convex_hull, quickhull
+    from robocritics.critic.builtin.space_usage import hull_points
+    from robocritics.geometry.hull import convex_hull, quickhull
 
     rng = np.random.default_rng(0)
     sphere = rng.normal(size=(16000, 3))

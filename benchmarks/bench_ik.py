@@ -5,6 +5,7 @@ Reproduce with::
     .venv/bin/python benchmarks/bench_ik.py            # 200 targets, seed 7
     .venv/bin/python benchmarks/bench_ik.py --n 1000 --seed 1
     .venv/bin/python benchmarks/bench_ik.py --lines       # also ur_ik_line along straight lines
+    .venv/bin/python benchmarks/bench_ik.py --before-src /tmp/c045a0b   # CPU per solve against another tree
 
 What is measured
 ----------------
@@ -27,7 +28,7 @@ What is measured
     branch nearest to the seed within the limits, FK-verified (the function
     the planner calls).
   - ``robocritics ur_ik_all``: all (up to 8) branches, each FK-verified.
-  - ``Pinocchio DLS``: ``robocritics.robot.ik.numeric_ik`` on a Pinocchio model
+  - ``Pinocchio DLS``: ``robocritics.robot.ik_numeric.numeric_ik`` on a Pinocchio model
     built from a URDF generated from the same DH table (tol 1e-10).
   - ``lively-tk``: the optimisation IK of the paper authors' prototype
     (``lively.Solver`` with a PositionMatch (weight 50) and an
@@ -36,6 +37,10 @@ What is measured
     is one ``solve`` (how the prototype used it); "converged" repeats
     ``solve`` until the joints move less than 1e-6 rad between calls (at
     most 50 calls) and times all calls.
+* ``--before-src DIR``: ``ur_ik`` and ``ur_ik_all`` of this tree against the tree extracted in ``DIR`` (e.g.
+  ``mkdir /tmp/c045a0b && git archive c045a0b | tar -x -C /tmp/c045a0b``), CPU time (``time.process_time``) per
+  solve over the same targets, the least of 9 passes, each tree in its own fresh interpreter, the trees
+  alternating over 5 rounds (least per tree): on this shared machine only numbers measured side by side compare.
 * ``--lines``: ``ur_ik_line`` (the planner's dense IK of a straight line, each pose seeded by the previous
   solution) on fingers-down lines of 30 to 1000 poses across the UR3e's workspace, against ``ur_ik`` pose by
   pose: CPU time (``time.process_time``) per pose, the minimum of 7 repeats (the lines of the bundled
@@ -57,7 +62,8 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pinocchio as pin
 
-from robocritics.robot.ik import UR3E_DH, dh_forward, dh_urdf, numeric_ik, ur_ik, ur_ik_all, ur_ik_line
+from robocritics.robot.ik import UR3E_DH, dh_forward, dh_urdf, ur_ik, ur_ik_all, ur_ik_line
+from robocritics.robot.ik_numeric import numeric_ik
 
 REPRO = ".venv/bin/python benchmarks/bench_ik.py"
 LOWER = np.full(6, -2.0 * math.pi)
@@ -259,6 +265,47 @@ def bench_lines(sizes: tuple[int, ...] = (30, 120, 300, 1000), repeats: int = 7)
     return "\n".join(lines)
 
 
+def cpu_per_solve(n: int, seed: int, passes: int = 9) -> dict[str, float]:
+    """Least CPU us per solve over ``passes`` passes through the targets: ur_ik (seeded) and ur_ik_all."""
+    _, poses, seeds = make_targets(n, seed)
+    solvers = {
+        "ur_ik CPU us": lambda i: ur_ik(UR3E_DH, poses[i], seeds[i], LOWER, UPPER),
+        "ur_ik_all CPU us": lambda i: ur_ik_all(UR3E_DH, poses[i]),
+    }
+    out = {}
+    for name, solve in solvers.items():
+        best = math.inf
+        for _ in range(passes + 1):  # the first pass warms caches (the chain's model)
+            t0 = time.process_time()
+            for i in range(n):
+                solve(i)
+            best = min(best, time.process_time() - t0)
+        out[name] = best / n * 1e6
+    return out
+
+
+def compare(before_src: str, n: int, seed: int, rounds: int = 5) -> str:
+    """:func:`cpu_per_solve` of the tree in ``before_src`` and of this one, alternating fresh interpreters."""
+    import json
+    import subprocess
+
+    runs: dict[str, list[dict[str, float]]] = {"before": [], "now": []}
+    for _ in range(rounds):
+        for which, src in (("before", os.path.join(before_src, "src")), ("now", None)):
+            env = dict(os.environ)
+            if src is not None:
+                env["PYTHONPATH"] = src
+            cmd = [sys.executable, __file__, "--cpu-child", "--n", str(n), "--seed", str(seed)]
+            done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
+            runs[which].append(json.loads(done.stdout.strip().splitlines()[-1]))
+    lines = [f"{'':<18} {'before':>8} {'now':>8} {'before/now':>10}"]
+    for key in runs["now"][0]:
+        b, a = (min(r[key] for r in runs[w]) for w in ("before", "now"))
+        lines.append(f"{key:<18} {b:>8.2f} {a:>8.2f} {b / a:>10.2f}")
+    lines.append(f"before: the tree in {before_src}; least over {rounds} alternating rounds")
+    return "\n".join(lines)
+
+
 def table(results: list[Result], reference: Result | None) -> str:
     head = (f"{'solver':<38} {'median us':>10} {'p90 us':>10} {'max pos err m':>14} "
             f"{'max rot err rad':>16} {'ok 1e-6':>8} {'speed-up vs lively':>19}")
@@ -280,7 +327,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=7, help="random seed (default 7)")
     ap.add_argument("--no-lively", action="store_true", help="skip lively-tk")
     ap.add_argument("--lines", action="store_true", help="also time ur_ik_line along straight lines")
+    ap.add_argument("--before-src", metavar="DIR", help="compare ur_ik / ur_ik_all CPU with the tree in DIR")
+    ap.add_argument("--cpu-child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.cpu_child:
+        import json
+
+        print(json.dumps(cpu_per_solve(args.n, args.seed)))
+        return 0
+    if args.before_src:
+        print(f"UR3e closed-form IK, CPU per solve: {args.n} targets (seed {args.seed}), seed = truth + N(0, 0.2 rad)")
+        print(compare(args.before_src, args.n, args.seed))
+        print(f"reproduce: {REPRO} --before-src {args.before_src}")
+        return 0
 
     q_true, poses, seeds = make_targets(args.n, args.seed)
     results = bench_ours(poses, seeds)

@@ -21,7 +21,7 @@ import numpy as np
 import pinocchio as pin
 
 from robocritics import Robot, Scene
-from robocritics.robot.motion import Limits, time_joint_move
+from robocritics.planning.timing import Limits, time_joint_move
 
 SAMPLES = 10_000
 

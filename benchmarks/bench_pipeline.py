@@ -1,24 +1,25 @@
 """CPU per program of the check pipeline: warm simulate()+critique() per bundled program, and a cold CLI check.
 
 Warm: one process started with the tree's worker environment (``robocritics.child.WORKER_ENV``, as a batch
-worker and the studio's evaluator start: one BLAS thread, glibc malloc tunables; at 063c8da,
-``robocritics.batch.local.WORKER_ENV``: one BLAS thread), the UR3e loaded once, each of the six bundled programs
-simulated and critiqued in its own scene (default critics, 125 Hz) once to warm caches, then REPEATS times; the table shows the least CPU
-(``time.process_time``: user + system of the process, all threads) per program and the mean over programs.
-Programs/s per core is ``1000 / mean CPU ms``. Cold: ``robocritics check examples/programs/sorting_careful.py
---scene sorting`` run as a child RUNS times, its user + system CPU from ``resource.getrusage(RUSAGE_CHILDREN)``,
-the least; with a bytecode cache (as an installed package has) and without (every module compiled from source:
-``PYTHONDONTWRITEBYTECODE=1``, as this machine's environment sets). FK: ``Robot.forward`` of 20,000 random
-samples (least of 7), the case where one batched BLAS pass lets OpenBLAS go multi-threaded.
+worker and the studio's evaluator start: one BLAS thread, glibc malloc tunables), the UR3e loaded once, each
+bundled program simulated and critiqued in its own scene (default critics, 125 Hz) once to warm caches, then
+REPEATS times; the table shows the least CPU (``time.process_time``: user + system of the process, all
+threads) per program and the mean over the programs both trees have the scene of (c045a0b lacks ``workbench``:
+its programs are shown, not averaged). Programs/s per core is ``1000 / mean CPU ms``. Cold:
+``robocritics check examples/programs/sorting_careful.py --scene sorting`` run as a child RUNS times, its user +
+system CPU from ``resource.getrusage(RUSAGE_CHILDREN)``, the least; with a bytecode cache (as an installed package
+has) and without (every module compiled from source: ``PYTHONDONTWRITEBYTECODE=1``, as this machine's environment
+sets). FK: ``Robot.forward`` of 20,000 random samples (least of 7), the case where one batched BLAS pass lets
+OpenBLAS go multi-threaded.
 
 Every measurement runs in a fresh child interpreter, three rounds alternating the two trees, and the table shows
-each number's least over the rounds. "Before" is the source tree of commit 063c8da (before issue 15 item 3),
+each number's least over the rounds. "Before" is the source tree of commit c045a0b (the baseline of issue 28),
 extracted with ``git archive`` into a temporary directory and measured beside the current tree in the same
-conditions (the speed of this shared machine changes by 2x from day to day: compare ratios measured in one run);
-``--before-src DIR`` takes an extracted tree instead, ``--fixed-before`` prints :data:`BEFORE` (one day's numbers).
+conditions: the speed of this shared machine changes by 2x from day to day, so only ratios measured in one run
+compare. ``--before-src DIR`` measures an extracted tree (``DIR/src``) instead.
 
 Run:
-    .venv/bin/python benchmarks/bench_pipeline.py [REPEATS] [RUNS] [--before-src DIR | --fixed-before]
+    .venv/bin/python benchmarks/bench_pipeline.py [REPEATS] [RUNS] [--before-src DIR]
 """
 
 from __future__ import annotations
@@ -35,30 +36,24 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PROGRAMS = ROOT / "examples" / "programs"
 
-#: Measured at commit 063c8da with this script (``--before-src``, 7 repeats, 5 runs, least of 3 rounds) on this
-#: 2-core machine at load ~2 (other sessions' tests running), 2026-12-02 06:14 UTC; see the module docstring.
-BEFORE_COMMIT = "063c8da"
-BEFORE: dict[str, float] = {
-    "breakfast_careful CPU ms": 129.963,
-    "breakfast_naive CPU ms": 31.093,
-    "recycling_careful CPU ms": 102.553,
-    "recycling_naive CPU ms": 38.967,
-    "sorting_careful CPU ms": 91.825,
-    "sorting_naive CPU ms": 31.987,
-    "FK 20k samples CPU ms": 147.477,
-    "check, cold CPU s (bytecode cached)": 0.883,
-    "check, cold CPU s (no bytecode)": 0.963,
-}
+#: The baseline of issue 28, measured beside the current tree in every run (see the module docstring).
+BEFORE_COMMIT = "c045a0b"
 
 
 def warm(repeats: int) -> dict[str, float]:
-    """Least CPU ms of simulate()+critique() per bundled program in one warm process."""
+    """Least CPU ms of simulate()+critique() per bundled program in one warm process (the programs of this
+    checkout whose scene the tree under test has built in: an older tree lacks the newer scenes)."""
     from robocritics import Robot, Scene, critique, simulate
+    from robocritics.errors import SceneError
 
     robot = Robot.ur3e()
     out = {}
     for path in sorted(PROGRAMS.glob("*.py")):
-        source, scene = path.read_text(), Scene.builtin(path.stem.split("_")[0])
+        try:
+            scene = Scene.builtin(path.stem.split("_")[0])
+        except SceneError:
+            continue
+        source = path.read_text()
         critique(simulate(source, scene, robot))  # warm-up: collision models, caches
         times = []
         for _ in range(repeats):
@@ -70,15 +65,11 @@ def warm(repeats: int) -> dict[str, float]:
 
 
 def worker_env(src: Path | None) -> dict[str, str]:
-    """The variables the worker environment of tree ``src`` adds to this one: ``robocritics.child.WORKER_ENV``, or
-    in older trees (063c8da) ``robocritics.batch.local.WORKER_ENV`` (one BLAS thread)."""
+    """The variables the worker environment of tree ``src`` (``robocritics.child.WORKER_ENV``) adds to this one."""
     env = dict(os.environ)
     if src is not None:
         env["PYTHONPATH"] = str(Path(src) / "src")
-    code = (
-        "import json\ntry:\n from robocritics.child import WORKER_ENV\nexcept ImportError:\n"
-        " from robocritics.batch.local import WORKER_ENV\nprint(json.dumps(dict(WORKER_ENV)))"
-    )
+    code = "import json\nfrom robocritics.child import WORKER_ENV\nprint(json.dumps(dict(WORKER_ENV)))"
     done = subprocess.run([sys.executable, "-c", code], env=env, cwd=ROOT, capture_output=True, text=True, check=True)
     return {k: v for k, v in json.loads(done.stdout).items() if k not in os.environ}
 
@@ -156,19 +147,17 @@ def main() -> None:
         return
     import tempfile
 
-    before_src = None
     scratch = tempfile.TemporaryDirectory()
-    given_src = args[args.index("--before-src") + 1] if "--before-src" in args else None
-    if "--fixed-before" in args:
-        args.remove("--fixed-before")
-    elif "--before-src" in args:
+    if "--before-src" in args:
         i = args.index("--before-src")
         before_src = Path(args[i + 1])
         del args[i : i + 2]
+        before_name = f"the tree in {before_src}"
     else:
         archive = subprocess.run(["git", "archive", BEFORE_COMMIT], cwd=ROOT, capture_output=True, check=True).stdout
         subprocess.run(["tar", "-x", "-C", scratch.name], input=archive, check=True)
         before_src = Path(scratch.name)
+        before_name = f"commit {BEFORE_COMMIT}"
     repeats = int(args[0]) if args else 15
     runs = int(args[1]) if len(args) > 1 else 7
     # rounds alternate the trees, and each number is the least over rounds: other load on the machine only
@@ -176,16 +165,15 @@ def main() -> None:
     rounds = 3
     befores, nows = [], []
     for _ in range(rounds):
-        if before_src:
-            befores.append(measure(before_src, repeats, runs))
+        befores.append(measure(before_src, repeats, runs))
         nows.append(measure(None, repeats, runs))
-    before = {k: min(b[k] for b in befores) for k in befores[0]} if befores else dict(BEFORE)
+    before = {k: min(b[k] for b in befores) for k in befores[0]}
     now = {k: min(n[k] for n in nows) for k in nows[0]}
+    # the mean over the programs both trees ran (a program of a scene the older tree lacks is listed, not averaged)
+    both = [k for k in now if k in before and k.endswith(" CPU ms") and not k.startswith("FK")]
     for d in (before, now):
-        ms = [v for k, v in d.items() if k.endswith(" CPU ms") and not k.startswith("FK")]
-        if ms:
-            d["mean CPU per program ms"] = statistics.fmean(ms)
-            d["programs/s per core"] = 1000 / d["mean CPU per program ms"]
+        d["mean CPU per program ms"] = statistics.fmean(d[k] for k in both)
+        d["programs/s per core"] = 1000 / d["mean CPU per program ms"]
     order = [k for k in now if k.endswith(" CPU ms") and not k.startswith("FK")]
     order += ["mean CPU per program ms", "programs/s per core", "FK 20k samples CPU ms"]
     order += ["check, cold CPU s (bytecode cached)", "check, cold CPU s (no bytecode)"]
@@ -201,10 +189,7 @@ def main() -> None:
         ratio = (n / b if k.startswith("programs/s") else b / n) if b else None
         bs = f"{b:9.3f}" if b is not None else f"{'-':>9}"
         print(f"{k:<{w}}  {bs}  {n:9.3f}  {ratio:10.2f}" if ratio else f"{k:<{w}}  {bs}  {n:9.3f}")
-    if given_src:
-        print(f"before: the tree in {given_src}, measured in this run")
-    else:
-        print(f"before: commit {BEFORE_COMMIT}" + (" measured in this run" if before_src else " (fixed numbers of another day, see docstring)"))
+    print(f"before: {before_name}, measured in this run")
     print(f"reproduce: .venv/bin/python benchmarks/bench_pipeline.py {' '.join(sys.argv[1:])}")
 
 

@@ -1,4 +1,4 @@
-"""Timing of the exact capsule distance kernels (robocritics.robot.proximity) on trajectory-sized arrays.
+"""Timing of the exact capsule distance kernels (robocritics.geometry.proximity) on trajectory-sized arrays.
 
 Run: ``python benchmarks/bench_proximity.py`` (single thread is what counts; set
 OMP_NUM_THREADS=1 to be sure numpy's linear algebra does not spread).
@@ -18,7 +18,8 @@ import time
 
 import numpy as np
 
-from robocritics.robot.proximity import ProximityKernel, _seg_box_sq, _seg_cyl_sq, _seg_seg_sq, _point_seg_sq
+from robocritics.geometry.kernels import _point_seg_sq, _seg_box_sq, _seg_cyl_sq, _seg_seg_sq
+from robocritics.geometry.proximity import ProximityKernel
 from robocritics.scene import Scene
 
 
@@ -160,7 +161,7 @@ def bench_ur3e(T: int, repeat: int) -> None:
 def bench_carried(T: int, repeat: int) -> None:
     """A box and a cylinder carried low over each built-in scene (a new pose every sample, upright, turning
     slowly), against every box and cylinder of the scene: the time, and how many samples still went to coal."""
-    from robocritics.robot import proximity as prox
+    from robocritics.geometry import pairs as shape_pairs
     from robocritics.scene import Shape, rpy_matrix
 
     s = np.linspace(0.0, 1.0, T)
@@ -169,7 +170,7 @@ def bench_carried(T: int, repeat: int) -> None:
     for t in range(T):
         poses[t, :3, :3] = rpy_matrix((0.0, 0.0, 3.0 * s[t]))
     asked = [0]
-    coal_values = prox._coal_values
+    coal_values = shape_pairs._coal_values
 
     def counting(a, b, Pa, Pb, at):
         asked[0] += len(at)
@@ -183,7 +184,7 @@ def bench_carried(T: int, repeat: int) -> None:
             z = np.zeros((T, 1, 3))
             t_exact = timeit(lambda: kern.distances(z, z, poses={"held": poses}), repeat)
             t_far = timeit(lambda: kern.distances(z, z, poses={"held": poses}, far_m=0.1), repeat)
-            prox._coal_values = counting
+            shape_pairs._coal_values = counting
             try:
                 asked[0] = 0
                 kern.distances(z, z, poses={"held": poses})
@@ -192,7 +193,7 @@ def bench_carried(T: int, repeat: int) -> None:
                 kern.distances(z, z, poses={"held": poses}, far_m=0.1)
                 n_far = asked[0]
             finally:
-                prox._coal_values = coal_values
+                shape_pairs._coal_values = coal_values
             n = T * len(shapes)
             print(
                 f"carried {kind:8s} over {name:9s} T={T}: {len(shapes)} pairs; exact {t_exact*1e3:6.1f} ms "

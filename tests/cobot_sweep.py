@@ -58,7 +58,7 @@ def execution(speed_m_s: float, *, clearance_m: float | None = 0.02, distance_m:
 
 def _distance_for_clearance(clearance_m: float) -> float:
     """Feet distance from the base at which the robot's closest approach to the abdomen is ``clearance_m``."""
-    from robocritics.robot.proximity import capsule_capsule
+    from robocritics.geometry.kernels import capsule_capsule
 
     q, _ = sweep(1.0)
     mid = q[len(q) // 2][None]

@@ -14,11 +14,17 @@ def critic(name: str):
 
 
 def run(name: str, traj, scene=None, **overrides):
-    from robocritics.scene import Scene
-
     c = critic(name)
     params = c.Params(**overrides)
-    return c.check(traj, scene or Scene(), params)
+    return c.check(execution_of(traj, scene), params)
+
+
+def execution_of(traj, scene=None):
+    """The run a critic judges: ``traj`` in ``scene`` (default an empty scene), no plan, no robot."""
+    from robocritics.critic import as_execution
+    from robocritics.scene import Scene
+
+    return as_execution(traj, scene or Scene())
 
 
 def assert_matches_reference(verdict, ref, rel: float = 1e-9) -> None:

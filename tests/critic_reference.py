@@ -13,6 +13,7 @@ import math
 from scipy.spatial import ConvexHull, QhullError
 
 from robocritics.critic import Flag
+from robocritics.robot.model import default_workspace
 
 
 def ref_joint_speed(traj, params) -> dict:
@@ -55,7 +56,7 @@ def ref_space_usage(traj, scene, params) -> dict:
     """Every link point: outside the workspace sphere is an error; exact hull volume vs 50 % of W."""
     frames = traj.frames
     sel = [traj.frame_names.index(n) for n in params.frames] if params.frames else range(len(traj.frame_names))
-    ws = scene.workspace
+    ws = scene.workspace or default_workspace()  # a scene without one: the default arm's reach
     cx, cy, cz = ws.center
     points = set()
     worst_out = -math.inf
@@ -79,7 +80,8 @@ def ref_space_usage(traj, scene, params) -> dict:
 
 
 def ref_collision(traj, params) -> dict:
-    """Every sample, every environment pair not intended at that sample: the closest distance."""
+    """Every sample, every environment pair not intended at that sample (an intended contact deeper than
+    ``contact_tolerance_m`` counts): the closest distance."""
     worst = math.inf
     for t in range(len(traj.time)):
         contacts = set(traj.steps[int(traj.step[t])].contacts) if traj.steps else set()
@@ -90,8 +92,9 @@ def ref_collision(traj, params) -> dict:
             if pair.group_a == "attached" and pair.a != held:
                 continue  # that object is not being carried now
             if pair.group_a in ("gripper", "attached") and pair.b_entity != "":
-                if pair.b_entity in contacts or (held != "" and pair.b_entity == held):
-                    continue  # intended contact
+                intended = pair.b_entity in contacts or (held != "" and pair.b_entity == held)
+                if intended and float(traj.proximity[t, k]) > -params.contact_tolerance_m:
+                    continue  # intended contact, touching within the tolerance
             worst = min(worst, float(traj.proximity[t, k]))
     if worst == math.inf:
         return {"flag": Flag.OK, "value": None}

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 import pytest
 from llm_server import LLMServer
 
-from robocritics.llm.client import OpenAICompatible
+from robocritics.llm.providers.openai_compatible import OpenAICompatible
 
 TEST_MODEL = "test-chat"
 TEST_EMBEDDING_MODEL = "test-embed"

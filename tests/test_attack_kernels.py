@@ -23,7 +23,7 @@ from fk_reference import capsule_reference, pinocchio_frames
 
 from robocritics import Robot
 from robocritics import _arrays as A
-from robocritics.robot import proximity as P
+from robocritics.geometry import proximity as P
 from robocritics.scene import Shape, rpy_matrix
 from robocritics.trajectory import TrajectoryError, _array
 

@@ -25,7 +25,7 @@ from robocritics.batch.rows import OUTPUT_KEYS
 from robocritics.cli.batch import Progress, finished_jsonl
 from robocritics.critic import critique
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 
 PROGRAMS = Path(__file__).resolve().parent.parent / "examples" / "programs"
 NAIVE = (PROGRAMS / "sorting_naive.py").read_text()

@@ -1,6 +1,7 @@
 """Small inputs, bounded work; tracebacks turned into answers (issue 22, classes 4 and 7, batch and params parts).
 
-Peak memory is measured in a child process (its own ``ru_maxrss``) and bounded, never wall-clock time.
+Peak memory is measured in a child process (its own VmHWM: ``ru_maxrss`` survives fork and exec, so a child
+of a large pytest process would report the parent's size) and bounded, never wall-clock time.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from robocritics.cli.main import main
 from robocritics.critic import MAX_PARAM_NAME_CHARS, MAX_PARAM_NAMES, critique, select_critics
 from robocritics.errors import CriticError
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 
 CLI = [sys.executable, "-m", "robocritics.cli"]
 PROGRAMS = Path(__file__).resolve().parents[1] / "examples" / "programs"
@@ -35,7 +36,7 @@ GIB = 1024**3
 
 def _child_peak_rss_mib(code: str, *args: str) -> tuple[str, float]:
     """Run ``code`` in a fresh interpreter; (its stdout without the last line, its peak RSS in MiB)."""
-    wrapped = code + "\nimport resource\nprint(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+    wrapped = code + "\nprint(int(next(l for l in open(\'/proc/self/status\') if l.startswith(\'VmHWM:\')).split()[1]))\n"
     done = subprocess.run([sys.executable, "-c", wrapped, *args], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     *out, rss_kib = done.stdout.splitlines()
@@ -180,7 +181,7 @@ def test_resume_holds_the_ids_not_the_rows(tmp_path):
         import resource, sys
         from pathlib import Path
         from robocritics.cli.batch import finished_jsonl
-        start = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        start = int(next(l for l in open('/proc/self/status') if l.startswith('VmHWM:')).split()[1])
         finished = finished_jsonl(Path(sys.argv[1]))
         print(len(finished.keys), len(finished.reported), start)
     """)

@@ -208,7 +208,7 @@ def test_the_repairs_table_compares_the_modes_on_the_same_scripted_replies(ablat
 
 def test_repairs_never_cost_model_calls_even_with_a_model_that_never_improves(ablation, llm_server):
     llm_server.responder = ablation.stubborn_responder  # the naive program, whatever it is told
-    from robocritics.llm.client import OpenAICompatible
+    from robocritics.llm.providers.openai_compatible import OpenAICompatible
 
     with OpenAICompatible(base_url=llm_server.url, model="stubborn", timeout_s=30) as client:
         runs = {mode: ablation.run_repairs_one(client, "sorting", mode, max_attempts=3)

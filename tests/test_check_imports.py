@@ -26,6 +26,6 @@ def test_cli_check_does_not_import_numpy_ma(name):
     done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     modules = set(json.loads(done.stderr.strip().splitlines()[-1]))
-    assert "robocritics.critics.space_usage" in modules and "robocritics.robot.hull" in modules  # it really ran
+    assert "robocritics.critic.builtin.space_usage" in modules and "robocritics.geometry.hull" in modules  # it really ran
     assert json.loads(done.stdout)["verdicts"]  # and judged the program
     assert "numpy.ma" not in modules

@@ -71,3 +71,14 @@ def test_fix_of_a_program_the_sandbox_rejects_prints_the_runtime_error_and_exits
     assert main(["fix", str(src), "--scene", "sorting"]) == 1
     text = capsys.readouterr().out
     assert "(no change)" in text and "runtime" in text and "syntax error" in text
+
+
+def test_fix_writes_the_best_program_found_and_says_what_is_left(tmp_path, capsys):
+    # the wrong box: the goal cannot be met, yet the repaired program (faster faults fixed) is written
+    out = tmp_path / "best.py"
+    code = main(["fix", str(PROGRAMS / "sorting_naive.py"), "--goal", "green_apple in brown_box", "-o", str(out)])
+    text = capsys.readouterr().out
+    assert code == 1
+    assert out.read_text() != (PROGRAMS / "sorting_naive.py").read_text()
+    assert re.search(r"^left: task_outcome ERROR: .*green_apple", text, re.M), text
+    assert re.search(r"^repair: \d+ change\(s\), score \d+/10 -> \d+/10, cycle [\d.]+ s -> [\d.]+ s; 1 Error\(s\)", text, re.M)

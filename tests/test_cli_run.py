@@ -76,7 +76,7 @@ def test_auto_run_end_to_end(llm_server, capsys, tmp_path, monkeypatch):
         assert len(stored) == 2
 
 
-def test_auto_run_repairs_first_then_asks_the_model_with_what_is_left(llm_server, capsys):
+def test_auto_run_repairs_first_and_asks_the_model_only_when_something_is_left(llm_server, capsys):
     from robocritics import Scene
     from robocritics.repair import repair
 
@@ -88,12 +88,10 @@ def test_auto_run_repairs_first_then_asks_the_model_with_what_is_left(llm_server
     assert repaired.changes  # the naive program spears: the end-effector critic slows its approaches
     assert "=== attempt 2 [repair] ===" in out and "--- critic repairs ---" in out
     assert all(str(change) in out for change in repaired.changes)
-    # the repair lifts the Error; Warnings are left, and only they go to the model
-    assert not repaired.errors and {v.flag.value for v in repaired.report.verdicts} == {"WARNING"}
-    requests = llm_server.chat_requests()
-    assert len(requests) == 2 and "=== attempt 3 [fix] ===" in out
-    assert "Automatic repairs were applied" in requests[1].text
-    assert code == 0 and "final: attempt 3 of 3, score 10/10, no Error" in out
+    # the repairs lift the Error and the Warnings alike: nothing is left, so the model is not asked again
+    assert not repaired.errors and {v.flag.value for v in repaired.report.verdicts} == {"OK"}
+    assert len(llm_server.chat_requests()) == 1 and "[fix]" not in out
+    assert code == 0 and "final: attempt 2 of 2, score 10/10, no Error" in out
 
 
 def test_single_request_with_an_error_exits_1(llm_server, capsys):
@@ -174,7 +172,7 @@ def test_a_bad_params_file_exits_2_before_any_request(llm_server, capsys, tmp_pa
 
 
 def test_defaults_match_the_library():
-    from robocritics.llm.loop import DEFAULT_MAX_ATTEMPTS
+    from robocritics.llm.options import DEFAULT_MAX_ATTEMPTS
 
     args = parse(TASK, "--scene", "sorting")
     assert args.max_attempts == DEFAULT_MAX_ATTEMPTS

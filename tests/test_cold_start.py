@@ -9,7 +9,7 @@ from robocritics import Robot
 from robocritics.robot.arms import ARMS, UR3E
 from robocritics.robot.ik import ur_reach
 from robocritics.robot.model import _SAME_HOUSING_GAP_M
-from robocritics.robot.proximity import capsule_capsule
+from robocritics.geometry.kernels import capsule_capsule
 
 BUNDLED = [*ARMS, "panda"]
 

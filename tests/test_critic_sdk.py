@@ -17,10 +17,11 @@ from robocritics.critic import (
     get_critics,
     select_critics,
 )
-from robocritics.critics.joint_speed import Params as JointSpeedParams
+from robocritics.critic.builtin.joint_speed import Params as JointSpeedParams
 from robocritics.errors import CriticError
 from robocritics.scene import Scene, Workspace
-from robocritics.simulate import Execution
+from robocritics.execution import Execution
+from robocritics.robot.model import default_workspace
 from synth import line_motion, make_trajectory, realistic_trajectory
 
 
@@ -168,7 +169,7 @@ def test_an_ad_hoc_critic_is_validated_like_a_registered_one(traj, critic, match
 def test_critique_takes_an_execution_and_its_scene():
     traj = make_trajectory(*line_motion(0.1))  # 0.1 m, about 0.3 m from the shoulder
     inside = Scene()
-    tiny = Scene(workspace=Workspace(radius_m=0.05))  # the motion is outside it
+    tiny = Scene(workspace=default_workspace().model_copy(update={"radius_m": 0.05}))  # the motion is outside it
     execution = Execution(trajectory=traj, plan=None, events=[], final_scene=tiny, scene=tiny, robot=None)
     r = critique(execution, critics=["space_usage"])
     assert r.flag_of("space_usage") is Flag.ERROR  # judged in the execution's scene

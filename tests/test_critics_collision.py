@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
+from critic_asserts import assert_matches_reference, assert_well_formed, critic, run, execution_of
 from critic_reference import ref_collision
 from robocritics.critic import Flag
-from robocritics.critics.collision import counted_distances
+from robocritics.critic.builtin.collision import counted_distances
 from robocritics.trajectory import Step
 from strategies import trajectories
 from synth import env_pair, make_trajectory, self_pair
@@ -124,7 +124,11 @@ def test_counted_distances_masks_what_does_not_count():
 
 @st.composite
 def params(draw):
-    return {"d_warn_m": draw(st.sampled_from([0.01, 0.05, 0.1])), "penetration_m": draw(st.sampled_from([0.0, -0.01]))}
+    return {
+        "d_warn_m": draw(st.sampled_from([0.01, 0.05, 0.1])),
+        "penetration_m": draw(st.sampled_from([0.0, -0.01])),
+        "contact_tolerance_m": draw(st.sampled_from([0.0, 0.003, 0.02])),
+    }
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -132,7 +136,7 @@ def params(draw):
 def test_agrees_with_the_per_sample_reference(traj, overrides):
     c = critic("collision")
     p = c.Params(**overrides)
-    v = c.check(traj, None, p)
+    v = c.check(execution_of(traj), p)
     assert_matches_reference(v, ref_collision(traj, p))
     assert_well_formed(v, "collision")
 
@@ -140,7 +144,7 @@ def test_agrees_with_the_per_sample_reference(traj, overrides):
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(traj=trajectories())
 def test_closest_is_the_row_minimum_of_the_counted_distances(traj):
-    from robocritics.critics.collision import Counted
+    from robocritics.critic.builtin.collision import Counted
 
     want = counted_distances(traj).min(axis=1) if traj.proximity.shape[1] else np.full(len(traj), np.inf)
     got = Counted(traj).closest(traj.proximity)
@@ -151,10 +155,89 @@ def test_closest_with_intended_contacts_and_nothing_always_counted():
     pairs = [env_pair("left_finger", "apple.body", entity="apple"), env_pair("right_finger", "table.top", entity="table")]
     steps = [Step(skill="move_to", line=1), Step(skill="close_gripper", line=2, contacts=("apple",))]
     step = (np.arange(T) >= 25).astype(int)
-    trajectory = traj_with(pairs, {0: dip(-0.01, slice(20, 40)), 1: 0.3}, steps=steps, step=step)
-    from robocritics.critics.collision import Counted
+    trajectory = traj_with(pairs, {0: dip(-0.002, slice(20, 40)), 1: 0.3}, steps=steps, step=step)
+    from robocritics.critic.builtin.collision import Counted
 
     got = Counted(trajectory).closest(trajectory.proximity)
-    want = np.where(np.arange(T) >= 25, 0.3, dip(-0.01, slice(20, 40)))  # the apple counts until the grasp step
+    want = np.where(np.arange(T) >= 25, 0.3, dip(-0.002, slice(20, 40)))  # the apple counts until the grasp step
     want = np.minimum(want, 0.3)
     np.testing.assert_array_equal(got, want)
+
+
+# --- intended contacts are touching, never a penetration (issue 26) --------------------------------------------
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    depth=st.floats(0.0, 0.08),
+    end=st.integers(1, T),
+    start=st.integers(0, T - 1),
+    placed_on=st.booleans(),
+)
+def test_a_carried_object_sunk_into_an_object_is_an_error_wherever_the_move_ends(depth, end, start, placed_on):
+    """The carried apple dips ``depth`` m into the pear during samples start..end (possibly the last one, where
+    the move ends). Whether or not the pear is listed as the step's contact (the apple set down on it), any
+    overlap deeper than the tolerance is an Error; within it, only the intended contact is excused."""
+    start = min(start, end - 1)
+    tolerance = critic("collision").Params().contact_tolerance_m
+    pairs = [env_pair("apple", "pear", group_a="attached", entity="pear")]
+    steps = [Step(skill="move_linear", line=6, contacts=("pear", "table") if placed_on else ("table",))]
+    d = np.full(T, 0.2)
+    d[start:end] = -depth
+    v = run("collision", traj_with(pairs, {0: d}, steps=steps, attached=["apple"] * T))
+    if depth >= tolerance or not placed_on:
+        assert v.flag is Flag.ERROR and v.value == pytest.approx(-depth), (depth, v.message)
+        assert "carried apple" in v.message and "pear" in v.message
+    else:
+        assert v.flag is Flag.OK, v.message
+
+
+def test_stacking_touch_within_the_tolerance_is_ok_and_deeper_is_an_error():
+    pairs = [env_pair("apple", "plate", group_a="attached", entity="plate")]
+    steps = [Step(skill="open_gripper", line=9, contacts=("plate",))]
+    tolerance = critic("collision").Params().contact_tolerance_m
+    assert run("collision", traj_with(pairs, {0: dip(-0.5 * tolerance)}, steps=steps, attached=["apple"] * T)).flag is Flag.OK
+    v = run("collision", traj_with(pairs, {0: dip(-2 * tolerance)}, steps=steps, attached=["apple"] * T))
+    assert v.flag is Flag.ERROR and v.threshold == 0.0
+    # the tolerance is a Param: 0 makes any overlap of an intended contact an Error
+    v = run("collision", traj_with(pairs, {0: dip(-0.5 * tolerance)}, steps=steps, attached=["apple"] * T), contact_tolerance_m=0.0)
+    assert v.flag is Flag.ERROR
+
+
+CARRY_GREEN_APPLE = """move_to(green_apple.x, green_apple.y, green_apple.z + 0.1)
+move_down(0.1)
+close_gripper()
+move_up(0.1)
+move_to(red_apple_1.x + {dx}, red_apple_1.y + {dy}, 0.15)
+move_linear(red_apple_1.x + {dx}, red_apple_1.y + {dy}, {z})
+"""
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    dx=st.sampled_from([0.0, 0.02, -0.03]),
+    dy=st.sampled_from([0.0, 0.025]),
+    z=st.sampled_from([0.045, 0.07, 0.09, 0.11]),
+    continues=st.booleans(),
+)
+@example(dx=0.0, dy=0.0, z=0.045, continues=False)  # the issue's case
+@example(dx=0.0, dy=0.0, z=0.045, continues=True)
+def test_simulated_carried_apple_driven_into_another_is_an_error_where_the_move_ends(dx, dy, z, continues):
+    """The sorting scene (issue 26): the green apple carried down onto red_apple_1; the move ends there or goes
+    on up. Wherever the trajectory's own proximity has the carried apple deeper than the tolerance in an object it
+    is not released on, the collision verdict is an Error naming the carried apple."""
+    from robocritics import Scene, critique, simulate
+
+    program = CARRY_GREEN_APPLE.format(dx=dx, dy=dy, z=z) + ("move_up(0.1)\n" if continues else "")
+    execution = simulate(program, Scene.builtin("sorting"))
+    traj = execution.trajectory
+    tolerance = critic("collision").Params().contact_tolerance_m
+    carried = [k for k, p in enumerate(traj.pairs) if p.group_a == "attached" and p.a == "green_apple" and p.b_entity not in ("table", "")]
+    held = traj.attached == "green_apple"
+    deepest = min(float(traj.proximity[held, k].min()) for k in carried)
+    verdict = critique(execution, critics=["collision"]).verdicts[0]
+    if deepest < -tolerance:
+        assert verdict.flag is Flag.ERROR and verdict.value <= deepest + 1e-12, (program, verdict.message)
+    if z == 0.045 and dx == 0.0 and dy == 0.0:  # the issue's case: 6 cm deep into red_apple_1
+        assert deepest == pytest.approx(-0.06, abs=1e-3)
+        assert "green_apple" in verdict.message and "red_apple_1" in verdict.message

@@ -9,9 +9,9 @@ import pytest
 from cobot_sweep import execution
 
 from robocritics.critic import Flag, critique
-from robocritics.critics.contact_speed import ContactSpeedCritic, Params, contact_speeds
+from robocritics.critic.builtin.contact_speed import ContactSpeedCritic, Params, contact_speeds
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 
 PAPER = ["joint_speed", "space_usage", "collision", "end_effector_pose", "pinch_point"]
 EXAMPLES = Path(__file__).parent.parent / "examples" / "programs"
@@ -62,7 +62,7 @@ def test_closing_in_on_the_head_is_an_error_at_any_speed(fast):
 
 
 def test_a_reference_loop_over_samples_gives_the_same_worst_contact(fast):
-    from robocritics.critics.cobot import part_body_distances, part_speeds, robot_parts
+    from robocritics.critic.builtin.cobot import part_body_distances, part_speeds, robot_parts
     from robocritics.humans import scene_bodies
 
     (body, speed, _, _), = contact_speeds(fast, Params())

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
+from critic_asserts import assert_matches_reference, assert_well_formed, critic, run, execution_of
 from critic_reference import ref_end_effector_pose
 from robocritics.critic import CriticError, Flag, critique
 from robocritics.scene import Scene
@@ -93,6 +93,6 @@ def params(draw):
 def test_agrees_with_the_per_sample_reference(traj, overrides):
     c = critic("end_effector_pose")
     p = c.Params(**overrides)
-    v = c.check(traj, None, p)
+    v = c.check(execution_of(traj), p)
     assert_matches_reference(v, ref_end_effector_pose(traj, p), rel=1e-7)
     assert_well_formed(v, "end_effector_pose")

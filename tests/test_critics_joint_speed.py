@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
+from critic_asserts import assert_matches_reference, assert_well_formed, critic, run, execution_of
 from critic_reference import ref_joint_speed
 from robocritics.critic import Flag
 from robocritics.trajectory import Step
@@ -125,7 +125,7 @@ def params(draw):
 def test_agrees_with_the_per_sample_reference(traj, overrides):
     c = critic("joint_speed")
     p = c.Params(**overrides)
-    v = c.check(traj, None, p)
+    v = c.check(execution_of(traj), p)
     assert_matches_reference(v, ref_joint_speed(traj, p))
     assert_well_formed(v, "joint_speed")
 
@@ -133,7 +133,7 @@ def test_agrees_with_the_per_sample_reference(traj, overrides):
 @settings(max_examples=100, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 2**32 - 1), T=st.integers(2, 200), L=st.integers(1, 13))
 def test_link_speeds_are_the_per_sample_distance_over_time(seed, T, L):
-    from robocritics.critics.joint_speed import link_speeds
+    from robocritics.critic.builtin.joint_speed import link_speeds
 
     rng = np.random.default_rng(seed)
     X = rng.normal(scale=rng.choice([1e-4, 0.3, 5.0]), size=(T, L, 3))

@@ -7,11 +7,11 @@ import pinocchio as pin
 import pytest
 
 from robocritics.critic import Flag, critique
-from robocritics.critics.payload import allowed_payload_kg, joint_torques
+from robocritics.critic.builtin.payload import allowed_payload_kg, joint_torques
 from robocritics.errors import CriticError, SceneError
 from robocritics.robot.arms import UR3E
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 
 PROGRAM = """
 lib.set_speed(0.3)

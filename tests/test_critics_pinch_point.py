@@ -7,7 +7,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
+from critic_asserts import assert_matches_reference, assert_well_formed, critic, run, execution_of
 from critic_reference import ref_pinch_point
 from robocritics.critic import Flag
 from robocritics.trajectory import Step
@@ -71,6 +71,6 @@ def params(draw):
 def test_agrees_with_the_per_sample_reference(traj, overrides):
     c = critic("pinch_point")
     p = c.Params(**overrides)
-    v = c.check(traj, None, p)
+    v = c.check(execution_of(traj), p)
     assert_matches_reference(v, ref_pinch_point(traj, p))
     assert_well_formed(v, "pinch_point")

@@ -6,7 +6,7 @@ import pytest
 from cobot_sweep import execution
 
 from robocritics.critic import Flag, critique
-from robocritics.critics.separation import Params, protective_separation
+from robocritics.critic.builtin.separation import Params, protective_separation
 from robocritics.robot.arms import UR3E
 
 
@@ -54,7 +54,7 @@ def test_pruned_distances_equal_the_full_computation(speed, distance):
     """The bounding-sphere pruning of contact_speed and separation against every pair computed exactly."""
     import numpy as np
 
-    from robocritics.critics.cobot import part_body_distances, part_body_nearest, robot_parts
+    from robocritics.critic.builtin.cobot import part_body_distances, part_body_nearest, robot_parts
     from robocritics.humans import scene_bodies
 
     run = execution(speed, distance_m=distance)

@@ -10,11 +10,12 @@ from scipy.spatial import ConvexHull
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from critic_asserts import assert_matches_reference, assert_well_formed, critic, run
+from critic_asserts import assert_matches_reference, assert_well_formed, critic, run, execution_of
 from critic_reference import ref_space_usage
 from robocritics.critic import Flag
-from robocritics.critics.space_usage import hull_points, hull_volume, volume_error_bound
+from robocritics.critic.builtin.space_usage import hull_points, hull_volume, volume_error_bound
 from robocritics.scene import Scene, Workspace
+from robocritics.robot.model import default_workspace
 from strategies import trajectories
 from synth import make_trajectory, realistic_trajectory
 
@@ -58,7 +59,7 @@ def test_large_sweep_warns_small_one_is_ok():
     v = run("space_usage", big, scene)
     assert v.flag is Flag.WARNING, v.message
     assert v.value == pytest.approx(math.pi * 0.44**2 * 0.44, rel=0.01)
-    assert v.threshold == pytest.approx(0.5 * scene.workspace.volume_m3)
+    assert v.threshold == pytest.approx(0.5 * (scene.workspace or default_workspace()).volume_m3)
     assert "%" in v.message and v.unit == "m³"
     assert_well_formed(v, "space_usage")
     small = circle(0.2, frames=2)
@@ -113,7 +114,7 @@ def test_critic_uses_a_custom_workspace_method():
         def outside_distance(self, points):
             return np.asarray(points)[..., 0] - 0.1  # everything beyond x = 0.1 is outside
 
-    scene = Scene().model_copy(update={"workspace": Box()})
+    scene = Scene().model_copy(update={"workspace": Box(**default_workspace().model_dump())})
     v = run("space_usage", circle(0.3), scene)
     assert v.flag is Flag.ERROR and v.value == pytest.approx(0.2)
 
@@ -130,10 +131,10 @@ def params(draw):
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(traj=trajectories(max_samples=80), overrides=params(), radius=st.sampled_from([0.3, 0.5, 0.8]))
 def test_agrees_with_the_per_sample_reference(traj, overrides, radius):
-    scene = Scene(workspace=Workspace(radius_m=radius))
+    scene = Scene(workspace=default_workspace().model_copy(update={"radius_m": radius}))
     c = critic("space_usage")
     p = c.Params(**overrides)
-    v = c.check(traj, scene, p)
+    v = c.check(execution_of(traj, scene), p)
     ref = ref_space_usage(traj, scene, p)
     assert_well_formed(v, "space_usage")
     if ref["flag"] is Flag.ERROR:
@@ -142,7 +143,7 @@ def test_agrees_with_the_per_sample_reference(traj, overrides, radius):
     # the volume may be under-estimated by at most the decimation bound
     bound = v.details["volume_error_bound_m3"] + 1e-12 * max(1.0, ref["volume"])
     assert ref["volume"] - bound <= v.value <= ref["volume"] + 1e-9 * max(1.0, ref["volume"])
-    limit = p.warn_fraction * scene.workspace.volume_m3
+    limit = p.warn_fraction * (scene.workspace or default_workspace()).volume_m3
     if abs(ref["volume"] - limit) > bound:
         assert v.flag is ref["flag"]
 
@@ -152,7 +153,7 @@ def hull_points_reference(X, tol):
     block gives the stride s (the largest power of two <= 64 with M s^2 / 8 <= tol) and every s-th sample of
     the block is kept, frame after frame; then each frame's last sample, where its last block's stride skipped
     it, closes its last chord; last, a point equal to the one before it in that order goes."""
-    from robocritics.critics.space_usage import BLOCK
+    from robocritics.critic.builtin.space_usage import BLOCK
 
     T, L, _ = X.shape
     kept, closing = [], []

@@ -7,12 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from robocritics.critic import Flag, check_program, critique, get_critics
-from robocritics.critics.task_outcome import GoalOutcome, TaskOutcomeCritic
+from robocritics.critic import Flag, critique, get_critics
+from robocritics.pipeline import check
+from robocritics.critic.builtin.task_outcome import GoalOutcome, TaskOutcomeCritic
 from robocritics.errors import CriticError, GoalError
 from robocritics.goals import Goal
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "programs"
 
@@ -59,7 +60,7 @@ def test_a_program_that_puts_the_object_in_the_wrong_place_fails_through_its_own
         'box = brown_box if apple.ripeness == "ripe" else white_box', "box = brown_box"
     ).replace('"brown_box": [(-0.05, -0.05), (0.05, 0.05)]', '"brown_box": [(-0.05, -0.05), (0.05, 0.05), (0.0, 0.0)]')
     source += "\nexpect(green_apple, inside=white_box)\n"
-    execution, report = check_program(source, scene)
+    execution, report = check(source, scene)
     verdict = next(v for v in report.verdicts if v.critic == "task_outcome")
     assert verdict.flag is Flag.ERROR
     assert "green_apple ended in brown_box" in verdict.message and "m from white_box" in verdict.message
@@ -101,12 +102,12 @@ def test_the_critic_alone_reads_the_goals_of_the_run(careful):
 
 
 def test_registered_like_the_others_when_its_entry_point_is_installed():
-    # pyproject's entry point (task_outcome = "robocritics.critics.task_outcome") makes it installed; without it
+    # pyproject's entry point (task_outcome = "robocritics.critic.builtin.task_outcome") makes it installed; without it
     # critique() still brings it whenever there are goals
     installed = get_critics()
     if "task_outcome" in installed:
         assert isinstance(installed["task_outcome"], TaskOutcomeCritic)
-    from robocritics.critics import task_outcome
+    from robocritics.critic.builtin import task_outcome
 
     seen = []
     task_outcome.register_critics(seen.append)

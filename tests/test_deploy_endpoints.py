@@ -21,3 +21,15 @@ def test_a_host_name_that_cannot_be_encoded_is_an_rtde_error(connect, where):
         connect()
     assert str(info.value).startswith(f"{where} {TOO_LONG_LABEL}:")
     assert "label too long" in str(info.value)
+
+
+def test_the_ur_arm_is_a_deploy_backend_and_a_stand_in_without_deploy_is_not():
+    from robocritics.deploy import Backend, URArm
+
+    assert isinstance(URArm("127.0.0.1"), Backend)  # not connected: the protocol is about what it offers
+
+    class ReadOnly:
+        def actual_q(self):
+            return [0.0] * 6
+
+    assert not isinstance(ReadOnly(), Backend)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 
 # lift the apple from under the cupcake (inside the brown box) and set it down on the table
 LIFT_APPLE = """

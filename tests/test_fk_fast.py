@@ -15,8 +15,8 @@ from fk_reference import capsule_reference, pinocchio_frames
 
 from robocritics import Robot, Scene
 from robocritics.robot import model as model_module
-from robocritics.robot import proximity as prox
-from robocritics.robot.trace import EXACT_WITHIN_M, _carried_ids, build_trajectory
+from robocritics.geometry import proximity as prox
+from robocritics.planning.trace import EXACT_WITHIN_M, _carried_ids, build_trajectory
 
 
 @pytest.fixture(scope="module", params=["ur3e", "panda"])

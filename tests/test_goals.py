@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from robocritics.errors import GoalError, RoboCriticsError
 from robocritics.goals import Goal, check_outcomes, parse_goals, program_goals
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 
 
 @pytest.fixture(scope="module")

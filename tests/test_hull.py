@@ -1,4 +1,4 @@
-"""robot.hull: coal's hull and the numpy quickhull against scipy's Qhull (the slow reference, tests only)."""
+"""geometry.hull: coal's hull and the numpy quickhull against scipy's Qhull (the slow reference, tests only)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
-from robocritics.robot.hull import convex_hull, quickhull
+from robocritics.geometry.hull import convex_hull, quickhull
 
 IMPLEMENTATIONS = [convex_hull, quickhull]
 
@@ -91,7 +91,7 @@ def test_thin_sets_are_measured(thickness):
 
 
 def _normalised_reference(P):
-    """The normalisation written plainly with np.ldexp (robot/hull.py before its reductions were reordered)."""
+    """The normalisation written plainly with np.ldexp (geometry/hull.py, once robot/hull.py, before its reductions were reordered)."""
     if len(P) < 4 or not np.isfinite(P).all():
         return None
     a = int(np.frexp(np.abs(P).max())[1])
@@ -114,7 +114,7 @@ def _normalised_reference(P):
     repeats=st.booleans(),
 )
 def test_normalised_is_bit_identical_to_the_ldexp_formula(seed, n, exponent, offset, repeats):
-    from robocritics.robot.hull import _normalised
+    from robocritics.geometry.hull import _normalised
 
     rng = np.random.default_rng(seed)
     with np.errstate(over="ignore"):  # near overflow some points are infinite: both give None
@@ -131,7 +131,7 @@ def test_normalised_is_bit_identical_to_the_ldexp_formula(seed, n, exponent, off
 
 @pytest.mark.parametrize("k", [-1200, -1075, -1074, -1023, -1022, -600, 0, 600, 1023, 1024, 1100])
 def test_times_pow2_is_ldexp(k):
-    from robocritics.robot.hull import _times_pow2
+    from robocritics.geometry.hull import _times_pow2
 
     x = np.array([0.0, -0.0, 1.0, -1.5, 3.0 * 2.0**-1074, 2.0**-1022, 0.7 * 2.0**-1000, 1.9 * 2.0**1000, 1e300])
     x = np.r_[x, -x / 3]

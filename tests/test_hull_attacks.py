@@ -21,13 +21,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull, QhullError
 
-from robocritics.robot.hull import _EPS, convex_hull, quickhull
+from robocritics.geometry.hull import _EPS, convex_hull, quickhull
 
 #: The child: for each line "path" on stdin, the hull of np.load(path) by both implementations, as one JSON line.
 WORKER = r"""
 import json, sys
 import numpy as np
-from robocritics.robot.hull import convex_hull, quickhull
+from robocritics.geometry.hull import convex_hull, quickhull
 print("ready", flush=True)
 for line in sys.stdin:
     P = np.load(line.strip())
@@ -270,7 +270,7 @@ def test_point_sets_of_real_motions(child, name):
     robot (default decimation and the exact hull) and the TCP alone (a straight path is thin: it was rounded to
     0; the exact sweep has vertices with hundreds of neighbours, which coal refuses)."""
     from robocritics import Scene, simulate
-    from robocritics.critics.space_usage import hull_points
+    from robocritics.critic.builtin.space_usage import hull_points
 
     X = simulate(PROGRAMS[name], Scene.builtin("sorting")).trajectory.positions
     for frames in (slice(None), slice(-1, None)):

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from robocritics.critics.cobot import robot_masses
+from robocritics.critic.builtin.cobot import robot_masses
 from robocritics.errors import SceneError
 from robocritics.humans import BODY_REGIONS, body_model, reduced_mass_kg, transient_speed_limit
 from robocritics.robot.model import Robot

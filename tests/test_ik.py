@@ -18,11 +18,11 @@ from robocritics.robot.ik import (
     UR3E_DH,
     dh_forward,
     dh_urdf,
-    numeric_ik,
     ur_ik,
     ur_ik_all,
     ur_reach,
 )
+from robocritics.robot.ik_numeric import numeric_ik
 
 TWO_PI = 2.0 * math.pi
 LIMIT_SLACK_RAD = 1e-10  # ur_ik's documented clamp of a solution onto a limit it overshoots by rounding
@@ -553,3 +553,27 @@ def test_numeric_ik_agrees_with_the_closed_form_on_a_ur3e_model():
         assert dp < 1e-9 and dr < 1e-9
         # the numeric answer is one of the closed-form branches
         assert np.abs(wrapped_diff(ur_ik_all(UR3E_DH, T, q6_singular=sol[5]), sol)).max(axis=1).min() < 1e-6
+
+
+def test_seven_joint_ik_returns_a_solution_near_its_seed_deterministically():
+    """The Panda's numeric IK slides along the self-motion towards the seed and looks near the seed before
+    anywhere else: targets made from a posture 0.3 rad (per joint, s.d.) off the seed (both 0.05 rad inside the
+    limits) are solved within 1.5 rad of it on every joint, nearer the seed than the posture that made the
+    target in at least 97 of 100 cases (plain damped least squares from the seed: 89), and the same call gives
+    the same answer."""
+    from robocritics import Robot
+
+    panda = Robot.panda()
+    rng = np.random.default_rng(11)
+    nearer = 0
+    inner_lo, inner_hi = panda.lower + 0.05, panda.upper - 0.05
+    for _ in range(100):
+        seed = np.clip(panda.home_q + rng.normal(0, 0.5, panda.n), inner_lo, inner_hi)
+        made = np.clip(seed + rng.normal(0, 0.3, panda.n), inner_lo, inner_hi)
+        target = panda.tcp_pose(made)
+        q = panda.ik(target[:3, 3], target[:3, :3], seed=seed)
+        np.testing.assert_allclose(panda.tcp_pose(q), target, atol=1e-8)
+        assert np.abs(q - seed).max() < 1.5
+        nearer += np.linalg.norm(q - seed) <= np.linalg.norm(made - seed) + 1e-9
+        np.testing.assert_array_equal(q, panda.ik(target[:3, 3], target[:3, :3], seed=seed))
+    assert nearer >= 97

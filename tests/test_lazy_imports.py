@@ -40,7 +40,7 @@ def test_cli_check_loads_only_the_check_subcommand_and_no_heavy_extras():
         "from robocritics.cli import main\n"
         f"main(['check', {str(PROGRAM)!r}, '--scene', 'sorting', '--json'])"
     )
-    assert "robocritics.robot.proximity" in mods and "robocritics.critics.space_usage" in mods  # it really ran
+    assert "robocritics.geometry.proximity" in mods and "robocritics.critic.builtin.space_usage" in mods  # it really ran
     assert offenders(mods) == []
     other_commands = {f"robocritics.cli.{c}" for c in ("batch", "critics", "deploy", "fix", "run", "studio", "ursim")}
     assert sorted(mods & other_commands) == []
@@ -51,7 +51,7 @@ def test_simulate_and_critique_do_not_load_scipy():
         "from pathlib import Path\nfrom robocritics import Scene, critique, simulate\n"
         f"critique(simulate(Path({str(PROGRAM)!r}).read_text(), Scene.builtin('sorting')))"
     )
-    assert "robocritics.robot.hull" in mods
+    assert "robocritics.geometry.hull" in mods
     assert offenders(mods) == []
 
 

@@ -22,15 +22,9 @@ from llm_fixtures import TEST_EMBEDDING_MODEL, TEST_MODEL, clean_llm_env, llm_se
 from llm_server import Delay, Drop, Fail, Garbage, LLMServer, RawJSON, Reply, hashed_embedding
 
 from robocritics.errors import LLMError, RoboCriticsError
-from robocritics.llm.client import (
-    ChatModel,
-    ChatReply,
-    EmbeddingModel,
-    OpenAICompatible,
-    _redact_secret,
-    _retry_after_seconds,
-    embedding_space_name,
-)
+from robocritics.llm.protocol import ChatModel, ChatReply, EmbeddingModel, embedding_space_name
+from robocritics.llm.providers.openai_compatible import OpenAICompatible
+from robocritics.llm.providers.wire import _redact_secret, _retry_after_seconds
 
 pytestmark = pytest.mark.usefixtures("clean_llm_env")
 
@@ -283,7 +277,7 @@ def test_an_embedding_timeout_is_retried(llm_server, make_client):
 
 
 def test_a_chat_that_times_out_generating_is_not_retried(llm_server, make_client):
-    from robocritics.llm.client import GenerationTimeoutError
+    from robocritics.llm.protocol import GenerationTimeoutError
 
     llm_server.script(Delay(STALL_S), Reply("never asked for"))
     client = make_client(timeout_s=0.5)

@@ -11,7 +11,8 @@ import pytest
 from llm_fixtures import clean_llm_env, llm_server, make_client
 from llm_server import count_tokens
 
-from robocritics.llm.loop import CONTEXT_MARGIN_TOKENS, Loop
+from robocritics.llm.fitting import CONTEXT_MARGIN_TOKENS
+from robocritics.llm.loop import Loop
 from robocritics.llm.memory import InteractionMemory
 from robocritics.llm.prompts import (
     PromptError,

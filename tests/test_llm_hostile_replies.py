@@ -23,7 +23,7 @@ from llm_fixtures import clean_llm_env, llm_server, make_client  # noqa: F401
 from llm_server import Delay, Fail, Garbage, RawJSON, Reply, SlowHeaders, Stream, chat_body, drip, gzip_bomb
 
 from robocritics.errors import LLMError
-from robocritics.llm.client import LLMArgumentError
+from robocritics.llm.protocol import LLMArgumentError
 from robocritics.llm.limits import MAX_JSON_DEPTH, MAX_REPLY_CHARS, MAX_RESPONSE_BYTES, clean_text
 
 pytestmark = pytest.mark.usefixtures("clean_llm_env")

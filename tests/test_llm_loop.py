@@ -457,7 +457,7 @@ def test_ablation_selftest_runs_offline(capsys):
 
 def test_simulate_hook_checks_every_program_and_its_errors_are_fed_back(llm_server, make_client, sorting):
     from robocritics.critic import critique
-    from robocritics.simulate import simulate
+    from robocritics.pipeline import simulate
 
     unreachable = "move_above(green_apple)\nmove_to(0.95, 0.0, 0.2)\nhome()\n"
     llm_server.reply(SHORT, fenced(unreachable))
@@ -477,3 +477,17 @@ def test_simulate_hook_checks_every_program_and_its_errors_are_fed_back(llm_serv
     assert "line 2" in second.error and ">> 2 | move_to(0.95, 0.0, 0.2)" in second.error
     with pytest.raises(TypeError, match="simulate"):
         Loop(make_client(), sorting, simulate="not callable")
+
+
+def test_the_loop_takes_its_options_grouped_or_one_by_one(make_client, sorting):
+    from robocritics.llm.options import LoopOptions
+
+    grouped = Loop(make_client(), sorting, critics=["joint_speed"], options=LoopOptions(max_attempts=2, memory_k=0))
+    by_keyword = Loop(make_client(), sorting, critics=["joint_speed"], max_attempts=2, memory_k=0)
+    assert grouped.options == by_keyword.options and grouped.max_attempts == by_keyword.max_attempts == 2
+    # keywords override the grouped options; a misspelt one names the options
+    assert Loop(make_client(), sorting, options=LoopOptions(max_attempts=2), max_attempts=4).max_attempts == 4
+    with pytest.raises(TypeError, match="max_attempt .*options: automation"):
+        Loop(make_client(), sorting, max_attempt=3)
+    with pytest.raises(ValueError, match="max_attempts must be at least 1"):
+        LoopOptions(max_attempts=0)

@@ -7,7 +7,7 @@ import pytest
 from robocritics.errors import ProgramError
 from robocritics.llm.prompts import runtime_feedback
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 
 
 @pytest.mark.parametrize(

@@ -25,7 +25,7 @@ from robocritics.llm.prompts import (
 )
 from robocritics.program.language import SAFE_BUILTINS
 from robocritics.program.sandbox import run_program
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 from robocritics.program.skills import SKILLS, api_reference
 from robocritics.scene import Scene
 

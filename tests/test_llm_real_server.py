@@ -13,7 +13,8 @@ import urllib.parse
 import httpx
 import pytest
 
-from robocritics.llm.client import EmbeddingsUnavailableError, OpenAICompatible
+from robocritics.llm.protocol import EmbeddingsUnavailableError
+from robocritics.llm.providers.openai_compatible import OpenAICompatible
 from robocritics.llm.loop import Loop
 from robocritics.scene import Scene
 

@@ -18,12 +18,7 @@ from llm_fixtures import clean_llm_env, llm_server, make_client
 from llm_server import Delay, Reply, Stream, hashed_embedding, tokens
 
 from robocritics.errors import LLMError
-from robocritics.llm.client import (
-    ChatProgress,
-    ContextLengthError,
-    EmbeddingsUnavailableError,
-    GenerationTimeoutError,
-)
+from robocritics.llm.protocol import ChatProgress, ContextLengthError, EmbeddingsUnavailableError, GenerationTimeoutError
 from robocritics.llm.limits import DEFAULT_MAX_TOKENS
 
 pytestmark = pytest.mark.usefixtures("clean_llm_env")

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from robocritics import PlanningError, Robot, Scene, simulate
-from robocritics.robot.motion import Limits, time_joint_move
+from robocritics.planning.timing import Limits, time_joint_move
 
 LIMITS = Limits(
     velocity=np.array([np.pi] * 3 + [2 * np.pi] * 3),
@@ -99,7 +99,7 @@ def test_robot_from_urdf_uses_numeric_ik(tmp_path):
 
 def test_ruckig_edge_case_is_timed():
     # this exact input makes ruckig's profile search fail; the planner must still time it
-    from robocritics.robot.motion import time_path_1d
+    from robocritics.planning.timing import time_path_1d
 
     s, times, duration = time_path_1d(0.08000000000000007, 0.6755520111743515, 4.0, 40.0, 125.0)
     assert duration == pytest.approx(0.4, rel=1e-5)
@@ -111,7 +111,7 @@ def test_ruckig_edge_case_is_timed():
 def test_sampled_positions_are_ruckigs_at_time(start, goal, fraction, nudge):
     """Profile.position (every phase of every DOF evaluated at once) against ruckig's own at_time per sample,
     at the 125 Hz instants, phase boundaries and the end; nearly-equal start and goal give tiny profiles."""
-    from robocritics.robot.motion import profile_joint_move, profile_path_1d
+    from robocritics.planning.timing import profile_joint_move, profile_path_1d
 
     if nudge:
         goal = start + 1e-4 * np.sign(goal - start + 0.5)
@@ -135,7 +135,7 @@ _EDGE = [0.0, -0.0, 1.0, -1.0, 1e-12, 2e-12, 1 + 1e-5, 1 + 2e-5, 1e300, math.inf
 )
 def test_allclose_is_numpy_s(start, offsets):
     # the planner's "no motion" test: the same answer as np.allclose(start, goal, atol=1e-12), NaN and inf too
-    from robocritics.robot.motion import _allclose
+    from robocritics.planning.timing import _allclose
 
     start = np.array(start)
     goal = start + np.array(offsets[: len(start)])

@@ -19,16 +19,16 @@ from robocritics import PlanningError, ProgramError, Robot, Scene, simulate
 from robocritics.program import Budget, run_program
 from robocritics.critic import BUILTIN_CRITICS, critique
 from robocritics.program.plan import Plan, SkillCall
-from robocritics.robot import planner as planner_module
+from robocritics.planning import planner as planner_module
 from robocritics.robot.arms import UR3E
-from robocritics.robot.motion import (
+from robocritics.planning.timing import (
     MAX_SAMPLE_RATE_HZ,
     MIN_SAMPLE_RATE_HZ,
     MIN_SPEED_FRACTION,
     check_sample_rate,
     sample_times,
 )
-from robocritics.robot.planner import (
+from robocritics.planning.planner import (
     MotionBudgetError,
     Planner,
     PlannerSettings,
@@ -174,12 +174,12 @@ def test_the_fastest_rate_and_the_longest_motion_meet_the_memory_limit_first():
 @pytest.mark.parametrize("exact_everywhere", [False, True])
 def test_the_memory_estimate_is_above_the_measured_peak(monkeypatch, exact_everywhere):
     # the planner refuses on the estimate, so the estimate must not be below what simulate really takes. The
-    # worst case is every pair measured exactly (far pairs otherwise get cheap lower bounds, robot.trace): there
+    # worst case is every pair measured exactly (far pairs otherwise get cheap lower bounds, planning.trace): there
     # the estimate must also be tight; with the far-pair bounds the peak is only lower
     if exact_everywhere:
         import math
 
-        import robocritics.robot.trace as trace
+        import robocritics.planning.trace as trace
 
         monkeypatch.setattr(trace, "EXACT_WITHIN_M", math.inf)
     robot = Robot.ur3e()

@@ -35,7 +35,7 @@ def test_notebook_cells_run(notebook):
     report, fixed, strict, timed = (namespace[k] for k in ("report", "fixed", "strict", "timed"))
     # the naive program: the critics' errors and warnings, printed as the feedback the model gets
     assert report.score < 10 and report.has_errors
-    assert {v.critic for v in report.scored_verdicts if v.flag is Flag.ERROR} == {"space_usage", "end_effector_pose"}
+    assert {v.critic for v in report.scored_verdicts if v.flag is Flag.ERROR} == {"space_usage", "collision", "end_effector_pose"}
     assert report.feedback() in printed
     assert report.feedback().startswith("Error: The robot leaves the allowed workspace")
     # the replay cell: an inline iframe holding the whole replay page, with the naive run's verdicts on its timeline

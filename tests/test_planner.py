@@ -93,7 +93,7 @@ def test_speed_events_and_step_speed_fractions():
 
 def _planner(scene=SCENE):
     from robocritics import Robot
-    from robocritics.robot.planner import Planner, PlannerSettings
+    from robocritics.planning.planner import Planner, PlannerSettings
 
     robot = Robot.ur3e()
     return Planner(robot.scene_for(scene), robot, 125.0, PlannerSettings())
@@ -114,8 +114,8 @@ def _grasp_reference(planner, tcp):
     """grasp_candidate by the general 4x4 inverse and numpy (the slow obvious rule)."""
     best, best_d = None, math.inf
     inv = np.linalg.inv(tcp)
-    for oid, o in planner.objects.items():
-        if oid == planner.attached or not o.graspable:
+    for oid, o in planner.world.objects.items():
+        if oid == planner.world.attached or not o.graspable:
             continue
         local = (inv @ np.append(np.asarray(o.position, float), 1.0))[:3]
         s = planner.settings
@@ -135,13 +135,13 @@ def test_grasp_candidate_is_the_rigid_inverse_rule_at_every_object(scene_name):
     planner = _planner(Scene.builtin(scene_name))
     rng = np.random.default_rng(3)
     found = 0
-    for o in list(planner.objects.values()):
+    for o in list(planner.world.objects.values()):
         for _ in range(20):  # around each object's centre, at any yaw: inside and just outside the grasp region
             tcp = np.eye(4)
             tcp[:3, :3] = fingers_down(rng.uniform(-math.pi, math.pi))
             tcp[:3, 3] = np.asarray(o.position) + rng.normal(0.0, 0.03, 3)
             expected = _grasp_reference(planner, tcp)
-            assert planner.grasp_candidate(tcp) == expected
+            assert planner.world.grasp_candidate(tcp) == expected
             found += expected is not None
     assert found > 0  # some poses do grasp
 
@@ -151,6 +151,6 @@ def test_support_below_is_the_highest_surface_under_the_object():
     planner = _planner(Scene.builtin("sorting"))
     for c in planner.scene.containers:
         above_floor = np.array([c.position[0], c.position[1], c.floor_top + 0.05])
-        assert planner.support_below("x", above_floor, 0.05, 0.02) == (c.id, c.floor_top)
+        assert planner.world.support_below("x", above_floor, 0.05, 0.02) == (c.id, c.floor_top)
         below_floor = np.array([c.position[0], c.position[1], c.floor_top - 0.01])
-        assert planner.support_below("x", below_floor, 0.0, 0.02)[0] != c.id
+        assert planner.world.support_below("x", below_floor, 0.0, 0.02)[0] != c.id

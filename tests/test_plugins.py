@@ -21,10 +21,11 @@ from pathlib import Path
 import pytest
 
 import robocritics.critic
-from robocritics import hookimpl, plugins
+from robocritics import hookimpl
+from robocritics.critic import plugins
 from robocritics.critic import BUILTIN_CRITICS, CriticParams, Flag, Verdict, critique, get_critics
 from robocritics.errors import CriticError
-from robocritics.plugins import PluginWarning, critic_sources, pm
+from robocritics.critic.plugins import PluginWarning, critic_sources, pm
 from robocritics.scene import Scene
 from synth import line_motion, make_trajectory
 
@@ -221,7 +222,7 @@ def test_a_plugin_whose_hook_fails_is_skipped_with_a_warning(registered, caplog)
     assert set(BUILTIN_CRITICS) <= set(critics)
     assert any(e.name == "exploding_plugin" for e in plugins.plugin_errors)
     # and it is logged, on the plugins' logger
-    logged = [r for r in caplog.records if r.name == "robocritics.plugins" and r.levelname == "WARNING"]
+    logged = [r for r in caplog.records if r.name == "robocritics.critic.plugins" and r.levelname == "WARNING"]
     assert any("exploding_plugin" in r.getMessage() and "cannot start" in r.getMessage() for r in logged)
 
 
@@ -246,7 +247,7 @@ def test_bad_and_duplicate_critics_are_rejected_by_name(registered):
     assert "no_params" in text and "Params" in text
     assert "'joint_speed' is already provided by robocritics" in text
     assert "fine_one" in critics and "no_params" not in critics
-    assert critics["joint_speed"].__class__.__module__ == "robocritics.critics.joint_speed"
+    assert critics["joint_speed"].__class__.__module__ == "robocritics.critic.builtin.joint_speed"
 
 
 # --- registering a critic in a notebook ---------------------------------------------------
@@ -309,7 +310,7 @@ def test_register_validates_at_once_and_refuses_an_installed_name(notebook_criti
     impostor.name = "joint_speed"
     with pytest.raises(CriticError, match="'joint_speed' is already provided by robocritics"):
         notebook_critics(impostor)
-    assert get_critics()["joint_speed"].__class__.__module__ == "robocritics.critics.joint_speed"
+    assert get_critics()["joint_speed"].__class__.__module__ == "robocritics.critic.builtin.joint_speed"
     assert "slow_motion" not in get_critics()
 
 

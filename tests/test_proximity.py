@@ -1,4 +1,4 @@
-"""Exact capsule distances (robocritics.robot.proximity) against coal and brute-force references.
+"""Exact capsule distances (robocritics.geometry.proximity) against coal and brute-force references.
 
 coal's GJK (separated shapes, run with a 1e-12 tolerance) and its EPA for boxes
 and capsules agree with the closed forms to ~1e-15 m. coal's EPA for cylinders
@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
 
-from robocritics.robot import proximity as P
+from robocritics.geometry import kernels as PK, pairs as PS, proximity as P
 from robocritics.scene import Scene, Shape, rpy_matrix
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
@@ -255,7 +255,7 @@ def segment_pairs(draw):
 @given(segment_pairs(), radius, radius)
 def test_capsule_capsule_matches_coal_and_reference(seg, ra, rb):
     a0, a1, b0, b1 = seg
-    mine = P.capsule_capsule(a0, a1, ra, b0, b1, rb)
+    mine = PK.capsule_capsule(a0, a1, ra, b0, b1, rb)
     assert mine.shape == ()
     ref = _ref_seg_seg(a0, a1, b0, b1) - ra - rb
     assert mine == pytest.approx(ref, abs=1e-9)
@@ -268,16 +268,16 @@ def test_capsule_capsule_vectorised_and_degenerate():
     T = 50
     rng = np.random.default_rng(0)
     a0, a1, b0, b1 = (rng.uniform(-0.3, 0.3, (T, 3)) for _ in range(4))
-    d = P.capsule_capsule(a0, a1, 0.01, b0, b1, 0.02)
+    d = PK.capsule_capsule(a0, a1, 0.01, b0, b1, 0.02)
     assert d.shape == (T,)
     assert np.allclose(d, [_ref_seg_seg(*x) - 0.03 for x in zip(a0, a1, b0, b1)], atol=1e-12)
     # crossing segments: depth ra + rb exactly; identical points
-    assert P.capsule_capsule((-1, 0, 0), (1, 0, 0), 0.1, (0, -1, 0), (0, 1, 0), 0.2) == pytest.approx(-0.3)
-    assert P.capsule_capsule((0, 0, 0), (0, 0, 0), 0.1, (0, 0, 0), (0, 0, 0), 0.1) == pytest.approx(-0.2)
+    assert PK.capsule_capsule((-1, 0, 0), (1, 0, 0), 0.1, (0, -1, 0), (0, 1, 0), 0.2) == pytest.approx(-0.3)
+    assert PK.capsule_capsule((0, 0, 0), (0, 0, 0), 0.1, (0, 0, 0), (0, 0, 0), 0.1) == pytest.approx(-0.2)
     # parallel, overlapping in projection, 0.5 apart
-    assert P.capsule_capsule((0, 0, 0), (1, 0, 0), 0, (0.5, 0.5, 0), (2, 0.5, 0), 0) == pytest.approx(0.5)
+    assert PK.capsule_capsule((0, 0, 0), (1, 0, 0), 0, (0.5, 0.5, 0), (2, 0.5, 0), 0) == pytest.approx(0.5)
     # broadcast one static segment against a trajectory
-    assert P.capsule_capsule(a0, a1, 0.0, (0, 0, 0), (0, 0, 1), 0.0).shape == (T,)
+    assert PK.capsule_capsule(a0, a1, 0.0, (0, 0, 0), (0, 0, 1), 0.0).shape == (T,)
 
 
 # ------------------------------------------------------------------------------------------
@@ -290,7 +290,7 @@ def test_capsule_capsule_vectorised_and_degenerate():
 def test_capsule_sphere_matches_coal(p0, p1, r, c, R, zero):
     if zero:
         p1 = p0.copy()
-    mine = P.capsule_sphere(p0, p1, r, c, R)
+    mine = PK.capsule_sphere(p0, p1, r, c, R)
     g, t = _coal_capsule(p0, p1, r)
     s, ts = _coal_shape("sphere", (R,), pose_of((0, 0, 0), c))
     assert mine == pytest.approx(coal_distance(g, t, s, ts), abs=1e-9)
@@ -301,7 +301,7 @@ def test_capsule_sphere_matches_coal(p0, p1, r, c, R, zero):
 def test_sphere_shape_matches_coal(kind, centre, rpy, t, size, R):
     size = {"box": size, "cylinder": size[:2], "sphere": size[:1]}[kind]
     shape = Shape("s", "s", kind, tuple(size), pose_of(rpy, t))
-    mine = P.sphere_shape(centre, R, shape)
+    mine = PK.sphere_shape(centre, R, shape)
     g, tg = _coal_shape(kind, size, shape.pose)
     s, ts = _coal_shape("sphere", (R,), pose_of((0, 0, 0), centre))
     ref = coal_distance(s, ts, g, tg)
@@ -315,11 +315,11 @@ def test_sphere_shape_matches_coal(kind, centre, rpy, t, size, R):
 
 def test_point_shape_inside_is_depth():
     box = Shape("b", "b", "box", (0.2, 0.4, 0.6), np.eye(4))
-    assert P.point_shape([0.05, 0, 0], box) == pytest.approx(-0.05)
-    assert P.point_shape([0.3, 0.4, 0.5], box) == pytest.approx(math.sqrt(0.2**2 + 0.2**2 + 0.2**2))
+    assert PK.point_shape([0.05, 0, 0], box) == pytest.approx(-0.05)
+    assert PK.point_shape([0.3, 0.4, 0.5], box) == pytest.approx(math.sqrt(0.2**2 + 0.2**2 + 0.2**2))
     cyl = Shape("c", "c", "cylinder", (0.1, 0.4), np.eye(4))
-    assert P.point_shape([0.0, 0.0, 0.15], cyl) == pytest.approx(-0.05)
-    assert P.point_shape([[0.2, 0.0, 0.3]], cyl) == pytest.approx([math.hypot(0.1, 0.1)])
+    assert PK.point_shape([0.0, 0.0, 0.15], cyl) == pytest.approx(-0.05)
+    assert PK.point_shape([[0.2, 0.0, 0.3]], cyl) == pytest.approx([math.hypot(0.1, 0.1)])
 
 
 # ------------------------------------------------------------------------------------------
@@ -340,7 +340,7 @@ def box_case(draw):
 @given(box_case())
 def test_capsule_box_matches_coal(case):
     size, pose, p0, p1, r = case
-    mine = P.capsule_box(p0, p1, r, size, pose)
+    mine = PK.capsule_box(p0, p1, r, size, pose)
     g, t = _coal_capsule(p0, p1, r)
     b, tb = _coal_shape("box", size, pose)
     assert_signed_close("box", size, pose, p0, p1, r, mine, coal_distance(g, t, b, tb))
@@ -349,19 +349,19 @@ def test_capsule_box_matches_coal(case):
 def test_capsule_box_cases():
     size, pose = (0.2, 0.4, 0.6), np.eye(4)
     # touching the +z face from above, lying in it, endpoint inside, through the middle
-    assert P.capsule_box((-1, 0, 0.35), (1, 0, 0.35), 0.05, size, pose) == pytest.approx(0.0, abs=1e-15)
-    assert P.capsule_box((-1, 0, 0.3), (1, 0, 0.3), 0.05, size, pose) == pytest.approx(-0.05)
-    assert P.capsule_box((0.05, 0, 0), (1, 0, 0), 0.01, size, pose) == pytest.approx(-0.05 - 0.01)  # pushed along +x
-    assert P.capsule_box((-1, 0, 0), (1, 0, 0), 0.0, size, pose) == pytest.approx(-0.2)  # out along y: 0.2
+    assert PK.capsule_box((-1, 0, 0.35), (1, 0, 0.35), 0.05, size, pose) == pytest.approx(0.0, abs=1e-15)
+    assert PK.capsule_box((-1, 0, 0.3), (1, 0, 0.3), 0.05, size, pose) == pytest.approx(-0.05)
+    assert PK.capsule_box((0.05, 0, 0), (1, 0, 0), 0.01, size, pose) == pytest.approx(-0.05 - 0.01)  # pushed along +x
+    assert PK.capsule_box((-1, 0, 0), (1, 0, 0), 0.0, size, pose) == pytest.approx(-0.2)  # out along y: 0.2
     # far corner: vertex distance
-    assert P.capsule_box((0.2, 0.3, 0.4), (0.2, 0.3, 0.4), 0.0, size, pose) == pytest.approx(math.sqrt(3 * 0.1**2))
+    assert PK.capsule_box((0.2, 0.3, 0.4), (0.2, 0.3, 0.4), 0.0, size, pose) == pytest.approx(math.sqrt(3 * 0.1**2))
     # a segment parallel to an edge, offset diagonally
-    assert P.capsule_box((0.2, 0.3, -1), (0.2, 0.3, 1), 0.0, size, pose) == pytest.approx(math.hypot(0.1, 0.1))
+    assert PK.capsule_box((0.2, 0.3, -1), (0.2, 0.3, 1), 0.0, size, pose) == pytest.approx(math.hypot(0.1, 0.1))
     # per-sample pose: a box moving along x under a static capsule
     T = 5
     poses = np.tile(np.eye(4), (T, 1, 1))
     poses[:, 0, 3] = np.linspace(0, 1, T)
-    d = P.capsule_box(np.array([0.0, 0, 1]), np.array([0.0, 0, 2]), 0.0, (0.1, 0.1, 0.1), poses)
+    d = PK.capsule_box(np.array([0.0, 0, 1]), np.array([0.0, 0, 2]), 0.0, (0.1, 0.1, 0.1), poses)
     assert d.shape == (T,)
     expect = [np.hypot(max(abs(x) - 0.05, 0), 0.95) for x in np.linspace(0, 1, T)]
     assert np.allclose(d, expect)
@@ -373,7 +373,7 @@ def test_box_depth_matches_brute_force():
         h = rng.uniform(0.004, 0.3, 3)
         a = rng.uniform(-1, 1, 3) * h
         b = a + rng.normal(size=3) * rng.uniform(0, 0.3)
-        mine = -P.capsule_box(a, b, 0.0, 2 * h, np.eye(4))
+        mine = -PK.capsule_box(a, b, 0.0, 2 * h, np.eye(4))
         assert mine >= 0
         assert mine == pytest.approx(brute_depth(lambda n: _h_box(n, h), a, b), abs=1e-9)
 
@@ -403,7 +403,7 @@ def cylinder_case(draw):
 @given(cylinder_case())
 def test_capsule_cylinder_matches_coal(case):
     R, height, pose, p0, p1, l0, l1, r = case
-    mine = P.capsule_cylinder(p0, p1, r, R, height, pose)
+    mine = PK.capsule_cylinder(p0, p1, r, R, height, pose)
     g, t = _coal_capsule(p0, p1, r)
     c, tc = _coal_shape("cylinder", (R, height), pose)
     assert_signed_close("cylinder", (R, height), pose, p0, p1, r, mine, coal_distance(g, t, c, tc))
@@ -416,7 +416,7 @@ def test_capsule_cylinder_depth_matches_brute_force():
         R, H = rng.uniform(0.01, 0.2), rng.uniform(0.01, 0.2)
         a = rng.uniform(-1, 1, 3) * (R / 1.5, R / 1.5, H)
         b = a + rng.normal(size=3) * rng.uniform(0, 0.3)
-        mine = -P.capsule_cylinder(a, b, 0.0, R, 2 * H, np.eye(4))
+        mine = -PK.capsule_cylinder(a, b, 0.0, R, 2 * H, np.eye(4))
         assert mine >= 0
         assert mine == pytest.approx(brute_depth(lambda n: _h_cyl(n, R, H), a, b), abs=1e-9)
         n += 1
@@ -425,17 +425,17 @@ def test_capsule_cylinder_depth_matches_brute_force():
 def test_capsule_cylinder_cases():
     pose = np.eye(4)
     # parallel to the axis, outside: radial gap; inside: depth to the side
-    assert P.capsule_cylinder((0.3, 0, -1), (0.3, 0, 1), 0.01, 0.1, 0.4, pose) == pytest.approx(0.19)
-    assert P.capsule_cylinder((0.07, 0, -0.1), (0.07, 0, 0.1), 0.0, 0.1, 0.4, pose) == pytest.approx(-0.03)
+    assert PK.capsule_cylinder((0.3, 0, -1), (0.3, 0, 1), 0.01, 0.1, 0.4, pose) == pytest.approx(0.19)
+    assert PK.capsule_cylinder((0.07, 0, -0.1), (0.07, 0, 0.1), 0.0, 0.1, 0.4, pose) == pytest.approx(-0.03)
     # through the whole cylinder along the axis: pushed out sideways by R
-    assert P.capsule_cylinder((0, 0, -1), (0, 0, 1), 0.0, 0.1, 0.4, pose) == pytest.approx(-0.1)
+    assert PK.capsule_cylinder((0, 0, -1), (0, 0, 1), 0.0, 0.1, 0.4, pose) == pytest.approx(-0.1)
     # across, through the centre: pushed out through a cap by H, or sideways by R
-    assert P.capsule_cylinder((-1, 0, 0), (1, 0, 0), 0.0, 0.1, 0.4, pose) == pytest.approx(-0.1)
-    assert P.capsule_cylinder((-1, 0, 0), (1, 0, 0), 0.0, 0.3, 0.1, pose) == pytest.approx(-0.05)
+    assert PK.capsule_cylinder((-1, 0, 0), (1, 0, 0), 0.0, 0.1, 0.4, pose) == pytest.approx(-0.1)
+    assert PK.capsule_cylinder((-1, 0, 0), (1, 0, 0), 0.0, 0.3, 0.1, pose) == pytest.approx(-0.05)
     # above the rim, diagonal: distance to the rim circle
-    assert P.capsule_cylinder((0.2, 0, 0.3), (0.2, 0, 0.3), 0.0, 0.1, 0.4, pose) == pytest.approx(math.hypot(0.1, 0.1))
+    assert PK.capsule_cylinder((0.2, 0, 0.3), (0.2, 0, 0.3), 0.0, 0.1, 0.4, pose) == pytest.approx(math.hypot(0.1, 0.1))
     # a horizontal segment over the top face
-    assert P.capsule_cylinder((-1, 0, 0.5), (1, 0, 0.5), 0.02, 0.1, 0.4, pose) == pytest.approx(0.28)
+    assert PK.capsule_cylinder((-1, 0, 0.5), (1, 0, 0.5), 0.02, 0.1, 0.4, pose) == pytest.approx(0.28)
 
 
 # ------------------------------------------------------------------------------------------
@@ -486,9 +486,9 @@ def test_kernel_matches_per_pair_functions():
         ia = int(a[4:])
         if b in radius:
             ib = int(b[4:])
-            ref = P.capsule_capsule(p0[:, ia], p1[:, ia], radius[a], p0[:, ib], p1[:, ib], radius[b])
+            ref = PK.capsule_capsule(p0[:, ia], p1[:, ia], radius[a], p0[:, ib], p1[:, ib], radius[b])
         else:
-            ref = P.capsule_shape(p0[:, ia], p1[:, ia], radius[a], by_name[b])
+            ref = PK.capsule_shape(p0[:, ia], p1[:, ia], radius[a], by_name[b])
         np.testing.assert_allclose(D[:, k], ref, atol=1e-12, err_msg=f"{a}|{b}")
     assert (D < 0).any() and (D > 0).any()
     # capsule-major order: the in-place path gives the same values
@@ -513,9 +513,9 @@ def test_kernel_static_capsules_are_evaluated_once_and_exactly():
         ia = int(a[1:])
         if b in dict(caps):
             ib = int(b[1:])
-            ref = P.capsule_capsule(p0[:, ia], p1[:, ia], 0.03, p0[:, ib], p1[:, ib], 0.03)
+            ref = PK.capsule_capsule(p0[:, ia], p1[:, ia], 0.03, p0[:, ib], p1[:, ib], 0.03)
         else:
-            ref = P.capsule_shape(p0[:, ia], p1[:, ia], 0.03, by_name[b])
+            ref = PK.capsule_shape(p0[:, ia], p1[:, ia], 0.03, by_name[b])
         np.testing.assert_allclose(D[:, k], ref, atol=1e-12, err_msg=f"{a}|{b}")
     assert D[0, pairs.index(("k0", "table"))] == pytest.approx(-0.08)  # 5 cm into the table, plus the radius
 
@@ -531,7 +531,7 @@ def test_kernel_sparse_pairs_and_groups():
     by_name = {s.name: s for s in shapes}
     for k, (a, b) in enumerate(pairs[:-1]):
         ia = "abcd".index(a)
-        np.testing.assert_allclose(D[:, k], P.capsule_shape(p0[:, ia], p1[:, ia], dict(caps)[a], by_name[b]), atol=1e-12)
+        np.testing.assert_allclose(D[:, k], PK.capsule_shape(p0[:, ia], p1[:, ia], dict(caps)[a], by_name[b]), atol=1e-12)
     groups = kern.groups()
     assert groups[("b", "bin")] == [2, 3]
     R = P.reduce_min(D, groups)
@@ -560,8 +560,8 @@ def test_kernel_moving_objects():
             kern.distances(p0, p1)
         D = kern.distances(p0, p1, poses={"held": poses})
         for k, ia in ((0, 0), (1, 2)):
-            np.testing.assert_allclose(D[:, k], P.capsule_shape(p0[:, ia], p1[:, ia], caps[ia][1], held, poses), atol=1e-12)
-        np.testing.assert_allclose(D[:, 5], P.capsule_shape(p0[:, 1], p1[:, 1], 0.03, by_name["table"]), atol=1e-12)
+            np.testing.assert_allclose(D[:, k], PK.capsule_shape(p0[:, ia], p1[:, ia], caps[ia][1], held, poses), atol=1e-12)
+        np.testing.assert_allclose(D[:, 5], PK.capsule_shape(p0[:, 1], p1[:, 1], 0.03, by_name["table"]), atol=1e-12)
         for k, name in ((2, "table"), (3, "apple"), (4, "plate")):
             s = by_name[name]
             g2, t2 = _coal_shape(s.kind, s.size, s.pose)
@@ -585,7 +585,7 @@ def test_kernel_moving_objects():
     kern = P.ProximityKernel(caps, _scene_shapes(2), [("u", "bin.floor"), ("u", "table")], moving={"bin.floor"})
     D = kern.distances(p0, p1, poses={"bin.floor": poses})
     floor = [s for s in _scene_shapes(2) if s.name == "bin.floor"][0]
-    np.testing.assert_allclose(D[:, 0], P.capsule_shape(p0[:, 0], p1[:, 0], 0.02, floor, poses), atol=1e-12)
+    np.testing.assert_allclose(D[:, 0], PK.capsule_shape(p0[:, 0], p1[:, 0], 0.02, floor, poses), atol=1e-12)
 
 
 def test_shape_shape_far_cutoff_is_a_lower_bound():
@@ -594,8 +594,8 @@ def test_shape_shape_far_cutoff_is_a_lower_bound():
     poses[:, 0, 3] = np.linspace(-1, 1, T)
     a = Shape("a", "a", "box", (0.1, 0.1, 0.1), np.eye(4))
     b = Shape("b", "b", "cylinder", (0.05, 0.2), np.eye(4))
-    exact = P.shape_shape(a, b, poses, None)
-    culled = P.shape_shape(a, b, poses, None, far_m=0.2)
+    exact = PS.shape_shape(a, b, poses, None)
+    culled = PS.shape_shape(a, b, poses, None, far_m=0.2)
     near = exact <= 0.2
     np.testing.assert_array_equal(culled[near], exact[near])
     assert (culled[~near] > 0.2).all() and (culled[~near] <= exact[~near] + 1e-12).all()
@@ -706,7 +706,7 @@ def test_carried_object_kernel_matches_the_per_sample_reference(seed, far):
     for k, (a, b) in enumerate(pairs):
         ref = _shape_shape_plain(by[a], by[b], pose.get(a, by[a].pose), pose.get(b, by[b].pose))
         if "ball" in (a, b):  # closed form, not coal
-            np.testing.assert_allclose(D[:, k], P.sphere_shape(by["ball"].pose[:3, 3], 0.03, by[a], pose[a]), atol=1e-12)
+            np.testing.assert_allclose(D[:, k], PK.sphere_shape(by["ball"].pose[:3, 3], 0.03, by[a], pose[a]), atol=1e-12)
             continue
         # exact up to the cutoff (apart: GJK at 1e-12; overlapping: EPA, boxes exact, cylinders ~1e-5 m) ...
         within = ref <= (np.inf if far is None else far)

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from robocritics.robot import proximity as P
+from robocritics.geometry import pairs as PS, proximity as P
 from robocritics.scene import Shape, rpy_matrix
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
@@ -71,17 +71,17 @@ def test_bounds_bracket_the_signed_distance(seed, kinds, spread, tilt):
     N = 30
     a, b = _shape(kinds[0], rng, "a"), _shape(kinds[1], rng, "b")
     Pa, Pb = _poses(rng, N, spread, tilt), _poses(rng, N, spread, tilt)
-    A = P._Convex.of(a.kind, np.tile(P._half_sizes(a), (N, 1)), Pa)
-    B = P._Convex.of(b.kind, np.tile(P._half_sizes(b), (N, 1)), Pb)
+    A = PS._Convex.of(a.kind, np.tile(PS._half_sizes(a), (N, 1)), Pa)
+    B = PS._Convex.of(b.kind, np.tile(PS._half_sizes(b), (N, 1)), Pb)
     ref = _reference(a, b, Pa, Pb)
     tol = _tolerance(ref, kinds)
-    lb, ub = P._convex_bounds(A, B)
+    lb, ub = PS._convex_bounds(A, B)
     assert (lb <= ref + tol).all(), np.max(lb - ref)
     assert (ub >= ref - tol).all(), np.max(ref - ub)
-    lb2, ub2 = P._refine_bounds(A, B, lb, ub, 4)
+    lb2, ub2 = PS._refine_bounds(A, B, lb, ub, 4)
     assert (lb2 >= lb).all() and (ub2 <= ub).all()
     assert (lb2 <= ref + tol).all() and (ub2 >= ref - tol).all()
-    certified = ub2 - lb2 <= P._CERTIFIED_M
+    certified = ub2 - lb2 <= PS._CERTIFIED_M
     np.testing.assert_allclose(ub2[certified], ref[certified], rtol=0, atol=1e-7 if "cylinder" not in kinds else 3e-5)
     apart = certified & (ref > 1e-6)
     np.testing.assert_allclose(ub2[apart], ref[apart], rtol=0, atol=1e-9)
@@ -104,26 +104,26 @@ def test_face_contacts_are_certified_in_closed_form():
         return pose
 
     def bounds(a, Pa, b, Pb):
-        A = P._Convex.of(a.kind, np.tile(P._half_sizes(a), (len(Pa), 1)), Pa)
-        B = P._Convex.of(b.kind, np.tile(P._half_sizes(b), (len(Pb), 1)), Pb)
-        return P._convex_bounds(A, B)
+        A = PS._Convex.of(a.kind, np.tile(PS._half_sizes(a), (len(Pa), 1)), Pa)
+        B = PS._Convex.of(b.kind, np.tile(PS._half_sizes(b), (len(Pb), 1)), Pb)
+        return PS._convex_bounds(A, B)
 
     table_pose = np.tile(at(-0.02), (N, 1, 1))
     fork_poses = np.array([at(z, yaw=0.3 * i) for i, z in enumerate(heights)])
     lb, ub = bounds(fork, fork_poses, table, table_pose)
     np.testing.assert_allclose(ub, heights - 0.006, rtol=0, atol=1e-15)  # at z = 0.005 sunk 1 mm: the exact depth
-    assert (ub - lb <= P._CERTIFIED_M).all()
+    assert (ub - lb <= PS._CERTIFIED_M).all()
     cup_poses = np.array([at(z + 0.045) for z in np.abs(heights - 0.005)])
     lb, ub = bounds(cup, cup_poses, table, table_pose)
     np.testing.assert_allclose(ub, np.abs(heights - 0.005), rtol=0, atol=1e-15)
-    assert (ub - lb <= P._CERTIFIED_M).all()
+    assert (ub - lb <= PS._CERTIFIED_M).all()
     # beside a wall, within its height: the side against the wall's face
     gaps = np.array([0.001, 0.01, 0.05, 0.0, 0.2])
     wall_pose = np.tile(at(0.04), (N, 1, 1))
     cup_poses = np.array([at(0.05, x=0.003 + 0.035 + g) for g in gaps])
     lb, ub = bounds(cup, cup_poses, wall, wall_pose)
     np.testing.assert_allclose(ub, gaps, rtol=0, atol=1e-15)
-    assert (ub - lb <= P._CERTIFIED_M).all()
+    assert (ub - lb <= PS._CERTIFIED_M).all()
     ref = _reference(cup, wall, cup_poses, wall_pose)
     np.testing.assert_allclose(ub, ref, rtol=0, atol=1e-9)
 
@@ -176,20 +176,20 @@ def test_carried_pairs_exact_within_the_cutoff_and_bounded_beyond(seed, held, fa
     pose = _carried_path(rng, T)
     args = (np.zeros((T, 1, 3)), np.zeros((T, 1, 3)))
     calls = []
-    original = P._coal_values
+    original = PS._coal_values
 
     def counting(a, b, Pa, Pb, at):
         calls.append(len(at))
         return original(a, b, Pa, Pb, at)
 
-    P._coal_values = counting
+    PS._coal_values = counting
     try:
         exact = kern.distances(*args, poses={"obj": pose})
         exact_calls = sum(calls)
         D = kern.distances(*args, poses={"obj": pose}, far_m=far)
     finally:
-        P._coal_values = original
-    runs = int(P._pose_changes(pose, T).sum())
+        PS._coal_values = original
+    runs = int(PS._pose_changes(pose, T).sum())
     assert exact_calls < len(pairs) * runs  # the closed forms settle some samples
     by = {s.name: s for s in shapes}
     for k, (a, b) in enumerate(pairs):
@@ -212,8 +212,8 @@ def test_shape_shape_cutoff_per_sample():
     poses[:, 0, 3] = np.linspace(-0.6, 0.6, T)
     poses[20:30] = poses[20]
     cut = np.where(np.arange(T) % 2 == 0, 0.02, 0.3)
-    exact = P.shape_shape(a, b, poses, None)
-    D = P.shape_shape(a, b, poses, None, far_m=cut)
+    exact = PS.shape_shape(a, b, poses, None)
+    D = PS.shape_shape(a, b, poses, None, far_m=cut)
     inside = exact <= cut
     inside[20:30] = exact[20:30] <= cut[20:30].max()  # one run: exact up to its largest cutoff
     np.testing.assert_array_equal(D[inside], exact[inside])

@@ -14,6 +14,7 @@ ROOT_NAMES = {
     "Trajectory",
     "Execution",
     "simulate",
+    "check",
     "critique",
     "repair",
     "Report",
@@ -47,25 +48,24 @@ def test_the_root_exports_exactly_the_designed_names():
 def test_each_root_name_is_the_object_its_module_defines():
     from robocritics.critic import Critic, CriticParams, critique
     from robocritics.execution import Execution
-    from robocritics.hookspecs import hookimpl
+    from robocritics.critic.hookspecs import hookimpl
     from robocritics.llm.loop import Loop
-    from robocritics.report import Report
+    from robocritics.critic.report import Report
     from robocritics.robot.model import Robot
     from robocritics.scene import Scene
     from robocritics.trajectory import Trajectory
-    from robocritics.verdict import Flag, Verdict
+    from robocritics.critic.verdict import Flag, Verdict
 
     from robocritics.repair import builtin  # noqa: F401  (submodules import under the function's name)
-    import robocritics.simulate as _  # noqa: F401  (the module, not the function the root binds)
-
-    simulate_module = sys.modules["robocritics.simulate"]
+    from robocritics.pipeline import check, simulate
     repair_package = sys.modules["robocritics.repair"]
     expected = {
         "Robot": Robot,
         "Scene": Scene,
         "Trajectory": Trajectory,
         "Execution": Execution,
-        "simulate": simulate_module.simulate,
+        "simulate": simulate,
+        "check": check,
         "repair": repair_package.repair,
         "critique": critique,
         "Report": Report,
@@ -78,7 +78,7 @@ def test_each_root_name_is_the_object_its_module_defines():
     }
     for name, obj in expected.items():
         assert getattr(robocritics, name) is obj, name
-    assert callable(robocritics.simulate) and robocritics.simulate.__module__ == "robocritics.simulate"
+    assert callable(robocritics.simulate) and robocritics.simulate.__module__ == "robocritics.pipeline"
     assert callable(robocritics.repair) and "Repair" in robocritics.repair.__doc__
     assert repair_package.Repair is sys.modules["robocritics.repair.search"].Repair  # the package's lazy names
     for name in ERROR_NAMES:

@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 
 from robocritics import hookimpl
-from robocritics.plugins import pm
+from robocritics.critic.plugins import pm
 from robocritics.repair import Edit, Insert, MoveBlock, ScaleNumbers, apply_edits, paragraphs, repair
-from robocritics.verdict import Flag
+from robocritics.critic.verdict import Flag
 
 PROGRAMS = Path(__file__).resolve().parents[1] / "examples" / "programs"
 

@@ -8,18 +8,20 @@ goal is still met.
 from __future__ import annotations
 
 import ast
+import re
 
 import numpy as np
 import pytest
 
 from robocritics import Scene
-from robocritics.critic import check_program, critique
+from robocritics.critic import critique
+from robocritics.pipeline import check
 from robocritics.errors import PlanningError
 from robocritics.repair import repair
 from robocritics.repair.builtin import _nearest_reachable_dz
 from robocritics.robot.model import Robot
-from robocritics.simulate import simulate
-from robocritics.verdict import Flag
+from robocritics.pipeline import simulate
+from robocritics.critic.verdict import Flag
 
 
 def _scores(report):
@@ -79,7 +81,7 @@ def test_natural_posture_faces_the_target_with_the_elbow_up():
 
 
 def test_bad_posture_is_a_program_error_naming_the_choices():
-    _, report = check_program('move_to(0.3, 0.0, 0.2, posture="sideways")\n', BEHIND)
+    _, report = check('move_to(0.3, 0.0, 0.2, posture="sideways")\n', BEHIND)
     v = report.verdict("runtime")
     assert v.flag == Flag.ERROR and "'nearest'" in v.message and "'natural'" in v.message
 
@@ -98,13 +100,14 @@ home()
 
 def test_unreachable_hover_is_lowered_to_a_reachable_height():
     scene = Scene.resolve("sorting")
-    _, before = check_program(UNREACHABLE, scene)
+    _, before = check(UNREACHABLE, scene)
     assert [v.critic for v in before.verdicts] == ["runtime"] and before.verdicts[0].evidence.lines == [1]
     r = repair(UNREACHABLE, scene, goal="green_apple in white_box")
     assert r.execution is not None and r.errors == []
     change = r.changes[0]
     assert change.critic == "runtime" and change.line == 1 and "lowered" in change.what and change.cost_s == 0.0
-    new_height = float(r.program.splitlines()[0].split("height=")[1].rstrip(")"))
+    hover = next(line for line in r.program.splitlines() if line.startswith("move_above(green_apple"))
+    new_height = float(hover.split("height=")[1].rstrip(")"))
     assert 0 < new_height < 0.42
     assert r.execution.object_inside("green_apple", "white_box")
     # the new hover point is reachable; the old one is not (the robot's own IK decides)
@@ -165,7 +168,10 @@ def test_spearing_repair_slows_only_the_plunge():
     assert change.line == 2 and change.cost_s > 0
     f = float(change.what.split("-> ")[1].split(" ")[0].rstrip(";"))
     assert f == pytest.approx(round(0.85 * spear.threshold / spear.value, 2))  # the smallest slowdown, not a blanket one
-    assert f"set_speed({f:g})\nmove_down(0.18)\nset_speed(1)\n" in r.program
+    # only the plunge is slowed (the Warning that follows may slow it further, within the same wrapper)
+    m = re.search(r"set_speed\(([0-9.]+)\)\nmove_down\(0.18\)\nset_speed\(1\)\n", r.program)
+    assert m and float(m.group(1)) <= f
+    assert r.program.count("move_down(0.18)") == 1 and r.program.count("set_speed(") % 2 == 0
     assert r.execution.object_inside("food_container", "trash_bin")
 
 
@@ -185,7 +191,7 @@ home()
 
 def _reference_overlaps(execution, line):
     """Per carried object, max over counted collision samples of ``line`` of top(b) - bottom(a): one sample at a time."""
-    from robocritics.critics.collision import counted_distances
+    from robocritics.critic.builtin.collision import counted_distances
 
     traj = execution.trajectory
     D = counted_distances(traj)
@@ -250,7 +256,7 @@ def test_release_raise_table_is_updated_not_duplicated():
 def test_an_unreachable_straight_lift_ends_where_the_line_is_still_reachable():
     src = UNREACHABLE.replace("height=0.42", "height=0.1").replace("move_up(0.12)", "move_up(0.4)")
     scene = Scene.resolve("sorting")
-    _, before = check_program(src, scene)
+    _, before = check(src, scene)
     assert before.verdicts[0].critic == "runtime" and before.verdicts[0].evidence.lines == [4]
     r = repair(src, scene, goal="green_apple in white_box")
     assert r.errors == [] and r.execution.object_inside("green_apple", "white_box")

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 from robocritics.critic import get_critics
-from robocritics.plugins import pm
+from robocritics.critic.plugins import pm
 from robocritics.repair import repair
-from robocritics.verdict import Flag
+from robocritics.critic.verdict import Flag
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "examples" / "plugins" / "robocritics-cycle-time" / "src"))
@@ -46,7 +46,7 @@ def test_cycle_time_repair_speeds_up_the_slowest_steps_without_new_flags(cycle_p
 class _BrokenRepairs:
     """A third-party plugin whose repair hook raises."""
 
-    from robocritics.hookspecs import hookimpl
+    from robocritics.critic.hookspecs import hookimpl
 
     @staticmethod
     @hookimpl

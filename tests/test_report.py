@@ -12,7 +12,7 @@ from hypothesis.extra import numpy as hnp
 
 from robocritics.critic import ALL_PASSED, BUILTIN_CRITICS, Evidence, Flag, Report, Verdict, critique, make_signal
 from robocritics.errors import CriticError
-from robocritics.report import format_score
+from robocritics.critic.report import format_score
 from robocritics.scene import Scene
 from robocritics.trajectory import Step
 from synth import FRAME_NAMES, line_motion, make_trajectory, realistic_trajectory

@@ -20,6 +20,7 @@ from robocritics.errors import RobotModelError
 from robocritics.robot.arms import ARMS
 from robocritics.robot.model import Robot
 from robocritics.scene import Scene, Workspace
+from robocritics.robot.model import default_workspace
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = resources.files("robocritics.robot") / "models"
@@ -143,10 +144,11 @@ def test_the_bundled_urdfs_are_what_the_generator_writes():
 # --- scenes follow the robot -------------------------------------------------------------
 
 
-def test_the_ur3e_workspace_is_the_scene_default():
-    assert Robot.ur3e().workspace == Workspace()
+def test_the_ur3e_workspace_is_the_default_workspace():
+    assert Robot.ur3e().workspace == default_workspace()
     scene = Scene.builtin("sorting")
-    assert Robot.ur3e().scene_for(scene).workspace == scene.workspace
+    assert scene.workspace is None  # a scene knows no arm: it follows its robot
+    assert Robot.ur3e().scene_for(scene).workspace == default_workspace()
 
 
 def test_a_larger_arm_brings_its_reach_sphere_unless_the_scene_gives_one():
@@ -154,7 +156,7 @@ def test_a_larger_arm_brings_its_reach_sphere_unless_the_scene_gives_one():
     scene = ur10e.scene_for(Scene.builtin("sorting"))
     assert scene.workspace.radius_m == 1.3
     assert scene.workspace.center == (0.0, 0.0, 0.1807)
-    own = Scene.builtin("sorting").model_copy(update={"workspace": Workspace(radius_m=0.7)})
+    own = Scene.builtin("sorting").model_copy(update={"workspace": Workspace(center=(0.0, 0.0, 0.1807), radius_m=0.7)})
     own = Scene.model_validate(own.model_dump())  # as a scene file that gives a workspace
     assert ur10e.scene_for(own).workspace.radius_m == 0.7
 
@@ -207,7 +209,7 @@ def variant(tmp_path: Path, edit, name: str = "variant.urdf", arm: str = "ur5e")
     return path
 
 
-def test_mesh_collisions_are_refused_naming_the_link_and_file(tmp_path):
+def test_a_missing_mesh_is_refused_naming_the_link_file_and_line(tmp_path):
     def meshed(text):
         return re.sub(
             r'<geometry><cylinder radius="0.057" length="[^"]+"/></geometry>',
@@ -217,7 +219,7 @@ def test_mesh_collisions_are_refused_naming_the_link_and_file(tmp_path):
 
     path = variant(tmp_path, meshed)
     assert "upperarm.stl" in path.read_text()
-    with pytest.raises(RobotModelError, match=r"link 'upper_arm_link' has a <mesh> filename='package://.*upperarm\.stl'.*capsules"):
+    with pytest.raises(RobotModelError, match=r"line \d+: <mesh filename='package://.*upperarm\.stl'> of link 'upper_arm_link': no such file"):
         Robot.from_urdf(path)
 
 

@@ -7,6 +7,11 @@ Real parts: the loopback UR controller (``robocritics.testing.ursim``, stepped c
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
+
+import numpy as np
+
 import pytest
 
 import robocritics as rc
@@ -109,7 +114,32 @@ def test_the_model_rule_refuses_when_the_dashboard_cannot_say(ur10e_trajectory):
     assert cause == "arm_model" and "connection reset" in text
 
 
-def test_the_model_rule_refuses_an_arm_deploy_does_not_know(ur10e_trajectory):
-    foreign = rc.Trajectory.from_dict({**ur10e_trajectory.to_dict(), "robot_name": "panda"})
+def test_the_model_rule_keys_on_kinematics_not_names(ur10e_trajectory):
+    data = ur10e_trajectory.to_dict()
+    # a name is only a label: the UR10e's motion called "panda" is still the UR10e's
+    assert check_model(rc.Trajectory.from_dict({**data, "robot_name": "panda"}), "UR10") == []
+    # the Panda's kinematics are no UR's, whatever the trajectory is called
+    foreign = rc.Trajectory.from_dict({**data, "kinematic_hash": rc.Robot.panda().kinematic_hash})
     [(cause, text)] = check_model(foreign, "UR10")
-    assert cause == "arm_model" and "'panda'" in text
+    assert cause == "arm_model" and "none of the UR arms deploy knows" in text
+    # a trajectory that does not say what it was planned for fails closed
+    [(cause, text)] = check_model(rc.Trajectory.from_dict({**data, "kinematic_hash": ""}), "UR10")
+    assert cause == "arm_model" and "no kinematic_hash" in text
+
+
+def test_a_ros_convention_urdf_that_calls_itself_ur3e_is_refused(tmp_path):
+    from robocritics.robot.model import Robot
+
+    text = (Path(rc.__file__).parent / "robot" / "models" / "ur3e.urdf").read_text()
+    old = '<joint name="shoulder_pan_joint" type="revolute">\n    <parent link="base_link"/>\n    <child link="shoulder_link"/>\n    <origin xyz="0 0 0" rpy="0 0 0"/>'
+    assert old in text
+    path = tmp_path / "ur3e_ros.urdf"
+    path.write_text(text.replace(old, old.replace('rpy="0 0 0"', f'rpy="0 0 {math.pi}"')))
+    ros = Robot.from_urdf(path, name="ur3e")
+    ur3e = Robot.ur3e()
+    q = np.array([0.0, -1.2, 1.1, -0.7, 0.9, 0.4])
+    # the same joints put the TCP on the other side of the base
+    np.testing.assert_allclose(ros.tcp_pose(q)[:2, 3], -ur3e.tcp_pose(q)[:2, 3], atol=1e-9)
+    assert ros.name == "ur3e" and ros.kinematic_hash != ur3e.kinematic_hash
+    # the bundled file loaded as a URDF is the same chain: same hash
+    assert Robot.from_urdf(Path(rc.__file__).parent / "robot" / "models" / "ur3e.urdf").kinematic_hash == ur3e.kinematic_hash

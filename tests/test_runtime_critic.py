@@ -10,9 +10,10 @@ import pytest
 from llm_fixtures import clean_llm_env, llm_server  # noqa: F401
 
 from robocritics.cli import main
-from robocritics.critic import RUNTIME, Flag, check_program
+from robocritics.critic import RUNTIME, CriticParams, Flag
+from robocritics.pipeline import check
 from robocritics.errors import CriticError, GoalError
-from robocritics.report import Report
+from robocritics.critic.report import Report
 from robocritics.scene import Scene
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "programs"
@@ -34,7 +35,7 @@ def sorting():
     ],
 )
 def test_a_program_that_does_not_run_gets_one_runtime_error(sorting, program, kind, line, words):
-    execution, report = check_program(program, sorting)
+    execution, report = check(program, sorting)
     assert execution is None
     assert isinstance(report, Report) and len(report.verdicts) == 1
     verdict = report.verdicts[0]
@@ -49,18 +50,47 @@ def test_a_program_that_does_not_run_gets_one_runtime_error(sorting, program, ki
 
 
 def test_a_program_that_runs_gets_the_critics_and_its_execution(sorting):
-    execution, report = check_program(
+    execution, report = check(
         (EXAMPLES / "sorting_careful.py").read_text(), sorting, goals=["green_apple in white_box"]
     )
     assert execution is not None and len(execution.trajectory) == report.samples
     assert report.critics[-1] == "task_outcome" and report.passed
 
 
+def test_check_keeps_the_error_and_judges_a_given_execution_the_same_way(sorting):
+    from robocritics.errors import PlanningError
+    from robocritics.pipeline import simulate
+
+    checked = check("home()\nmove_to(2.0, 0.0, 0.1)\n", sorting)
+    assert checked.execution is None and isinstance(checked.error, PlanningError) and checked.error.line == 2
+    assert checked.report.verdicts[0].details["text"] == str(checked.error)
+    program = (EXAMPLES / "sorting_naive.py").read_text()
+    from_source = check(program, sorting, critics=["joint_speed", "collision"])
+    given = check(simulate(program, sorting), critics=["joint_speed", "collision"])  # only critiqued
+    assert from_source.error is None and given.error is None
+    assert given.report == from_source.report and given.report.flag_of("joint_speed") is Flag.WARNING
+
+
+def test_a_critic_that_fails_raises_with_the_run_it_could_not_judge(sorting):
+    class Broken:
+        name, description = "broken", "fails"
+
+        class Params(CriticParams):
+            pass
+
+        def check(self, execution, params):
+            raise ZeroDivisionError("oops")
+
+    with pytest.raises(CriticError, match="critic 'broken' failed: ZeroDivisionError") as caught:
+        check((EXAMPLES / "sorting_careful.py").read_text(), sorting, critics=[Broken()])
+    assert len(caught.value.execution.trajectory) > 0
+
+
 def test_bad_input_of_the_caller_still_raises_before_simulating(sorting):
     with pytest.raises(CriticError, match="did you mean 'joint_speed'"):
-        check_program("import os\n", sorting, critics=["joint_sped"])
+        check("import os\n", sorting, critics=["joint_sped"])
     with pytest.raises(GoalError):
-        check_program("import os\n", sorting, goals=["green_apple in bin"])
+        check("import os\n", sorting, goals=["green_apple in bin"])
 
 
 def test_check_prints_the_runtime_report_and_exits_1(capsys, tmp_path):

@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from robocritics.errors import ProgramError
-from robocritics.program import Budget, Plan, SkillCall, check_program, run_program
+from robocritics.program import Budget, Plan, SkillCall, parse_program, run_program
 from robocritics.program.language import MATH_NAMES, SAFE_BUILTINS, SAFE_METHODS, reference_markdown
 from robocritics.scene import Scene
 
@@ -496,7 +496,7 @@ def test_runtime_errors_are_program_errors():
 
 def test_static_errors_have_positions_and_list_all_problems():
     with pytest.raises(ProgramError) as info:
-        check_program("home()\nimport os\nx = 1\ny = x.__class__\nopen('f')\n")
+        parse_program("home()\nimport os\nx = 1\ny = x.__class__\nopen('f')\n")
     e = info.value
     assert (e.line, e.col) == (2, 8)
     assert "import of 'os' is not allowed; the program can only use the skill API (lib.move_to, ...) and math" in str(e)
@@ -506,13 +506,13 @@ def test_static_errors_have_positions_and_list_all_problems():
 
 def test_syntax_error_position():
     with pytest.raises(ProgramError) as info:
-        check_program("home()\nmove_to(0.3, 0.1\n")
+        parse_program("home()\nmove_to(0.3, 0.1\n")
     assert info.value.line == 2
     assert "syntax error" in info.value.reason
 
 
-def test_check_program_returns_tree_and_accepts_good_code():
-    tree = check_program(textwrap.dedent(PAPER_STYLE))
+def test_parse_program_returns_tree_and_accepts_good_code():
+    tree = parse_program(textwrap.dedent(PAPER_STYLE))
     assert tree.body and type(tree).__name__ == "Module"
 
 
@@ -524,7 +524,7 @@ def test_break_and_return_outside_their_blocks_are_rejected():
         ("for i in range(3):\n    def f():\n        break", "'break' outside a loop"),
     ]:
         with pytest.raises(ProgramError, match=message):
-            check_program(source)
+            parse_program(source)
 
 
 def test_print_does_not_reach_stdout(capsys):

@@ -32,7 +32,7 @@ from hypothesis import strategies as st
 
 from robocritics.errors import ProgramError
 from robocritics.program import Budget
-from robocritics.program.check import check_program
+from robocritics.program.check import parse_program
 from robocritics.program.interpreter import _Interpreter
 from robocritics.scene import Scene
 
@@ -269,7 +269,7 @@ def programs(draw) -> str:
 
 def _run(source: str, budget: Budget) -> tuple[_Interpreter, tuple]:
     """Run ``source``; the interpreter (its meter) and the outcome (error kind, limit, line, or the plan)."""
-    interp = _Interpreter(source, check_program(source, budget), SCENE, budget)
+    interp = _Interpreter(source, parse_program(source, budget), SCENE, budget)
     try:
         plan = interp.run()
         return interp, ("plan", len(plan.calls), tuple(plan.output))
@@ -281,7 +281,7 @@ def _run(source: str, budget: Budget) -> tuple[_Interpreter, tuple]:
 @given(programs())
 def test_random_programs_never_escape_nor_exceed_their_budget(source):
     try:
-        check_program(source, BUDGET)
+        parse_program(source, BUDGET)
     except ProgramError:
         return  # a generated program the static check refuses (e.g. return outside a def) is fine
     modules_before = set(sys.modules)

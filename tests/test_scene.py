@@ -7,6 +7,7 @@ from importlib import resources
 import pytest
 
 from robocritics import Scene, SceneError
+from robocritics.robot.model import default_workspace
 
 GOOD_OBJECT = {"id": "cube", "shape": "box", "size": [0.04, 0.04, 0.04], "position": [0.3, 0.0, 0.02]}
 
@@ -16,7 +17,7 @@ def test_builtin_scenes_are_within_reach(name):
     scene = Scene.builtin(name)
     assert scene.objects and scene.containers
     for item in (*scene.objects, *scene.containers):
-        assert scene.workspace.outside_distance([item.position[0], item.position[1], item.top]) < 0, item.id
+        assert default_workspace().outside_distance([item.position[0], item.position[1], item.top]) < 0, item.id
 
 
 def test_builtin_scene_files_load_by_path():
@@ -69,7 +70,7 @@ def test_container_inside_is_free_space():
     assert not box.contains_point((box.position[0], box.position[1], box.top + 0.02))
     shapes = [s for s in scene.shapes() if s.owner == "white_box"]
     assert len(shapes) == 5  # floor and four walls
-    assert math.isclose(scene.workspace.volume_m3, 4 / 3 * math.pi * 0.5**3)
+    assert math.isclose(default_workspace().volume_m3, 4 / 3 * math.pi * 0.5**3)
 
 
 def test_round_trip_json():

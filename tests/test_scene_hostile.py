@@ -28,7 +28,7 @@ from robocritics.scene import (
     parse_json,
     reserved_names,
 )
-from robocritics.simulate import check_scene_ids
+from robocritics.pipeline import check_scene_ids
 
 CUBE = {"id": "cube", "shape": "box", "size": [0.04, 0.04, 0.04], "position": [0.3, 0.0, 0.02]}
 BOX = {"id": "bin_1", "size": [0.1, 0.1, 0.1], "position": [0.3, 0.2, 0.05]}
@@ -65,9 +65,9 @@ def refused(data) -> SceneError:
         ({"table": {"size": [math.inf, 1.2]}}, "table.size[0]", "inf is not a finite number"),
         ({"table": {"center_xy": [0, 1e12]}}, "table.center_xy[1]", "1e+12 is out of range"),
         ({"table": {"thickness_m": 0}}, "table.thickness_m", "0 is not a positive length"),
-        ({"workspace": {"center": [math.nan, 0, 0.15]}}, "workspace.center[0]", "nan is not a finite number"),
-        ({"workspace": {"radius_m": math.inf}}, "workspace.radius_m", "inf is not a finite number"),
-        ({"workspace": {"radius_m": 1e6}}, "workspace.radius_m", "1e+06 is out of range"),
+        ({"workspace": {"center": [math.nan, 0, 0.15], "radius_m": 0.5}}, "workspace.center[0]", "nan is not a finite number"),
+        ({"workspace": {"center": [0, 0, 0.15], "radius_m": math.inf}}, "workspace.radius_m", "inf is not a finite number"),
+        ({"workspace": {"center": [0, 0, 0.15], "radius_m": 1e6}}, "workspace.radius_m", "1e+06 is out of range"),
     ],
 )
 def test_every_number_is_finite_and_in_range(data, path, words):
@@ -218,7 +218,7 @@ def test_attributes_stay_plain_json_and_built_in_scenes_are_unchanged():
         (lambda: SceneObject.model_validate({**CUBE, "size": [1]}), "size", "a box needs 3 numbers"),
         (lambda: Container(id="bin", size=(0.2, 0.15, 0.1), position=(0.1, -0.2, 0.05), yaw=7.0), "yaw", "out of range"),
         (lambda: Table(top_z=float("nan")), "top_z", "nan is not a finite number"),
-        (lambda: Workspace(radius_m=-1), "radius_m", "is not a positive length"),
+        (lambda: Workspace(center=(0.0, 0.0, 0.0), radius_m=-1), "radius_m", "is not a positive length"),
         (lambda: Scene(objects=[{**CUBE, "position": [0, 0, float("inf")]}]), "objects[0].position[2]", "inf is not a finite"),
     ],
 )
@@ -260,7 +260,7 @@ def good_scene_text(**changes):
         (good_scene_text(position="[" + "9" * 5000 + ", 0, 0.02]"), "objects[0].position[0]: a 5000-digit integer is out of range"),
         (good_scene_text(position=[1e300, 0, 0.02]), "objects[0].position[0]: 1e+300 is out of range"),
         (good_scene_text(position="[1e999, 0, 0.02]"), "objects[0].position[0]: inf is not a finite number"),
-        ('{"workspace": {"center": [NaN, 0, 0.15]}}', "workspace.center[0]: nan is not a finite number"),
+        ('{"workspace": {"center": [NaN, 0, 0.15], "radius_m": 0.5}}', "workspace.center[0]: nan is not a finite number"),
         ('{"table": {"top_z": -Infinity}}', "table.top_z: -inf is not a finite number"),
         (good_scene_text(attributes='{"n": ' + "1" * 30 + "}"), "objects[0].attributes.n: a 30-digit integer; the limit is 20 digits"),
     ],

@@ -1,4 +1,4 @@
-"""robot.spline: the numpy cubic spline and PCHIP against scipy's (the slow reference stays in the tests)."""
+"""planning.spline: the numpy cubic spline and PCHIP against scipy's (the slow reference stays in the tests)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
-from robocritics.robot.spline import cubic_spline, pchip
+from robocritics.planning.spline import cubic_spline, pchip
 
 finite = st.floats(-10.0, 10.0, allow_nan=False, allow_infinity=False)
 
@@ -98,7 +98,7 @@ def _numpy_thomas(diag, upper, lower, rhs):
 @given(knots(max_n=60))
 def test_not_a_knot_slopes_are_the_numpy_thomas_solution_bit_for_bit(data):
     # the system _not_a_knot_slopes builds, solved by numpy row operations
-    from robocritics.robot.spline import _not_a_knot_slopes, _not_a_knot_system
+    from robocritics.planning.spline import _not_a_knot_slopes, _not_a_knot_system
 
     x, y, _ = data
     if len(x) < 4:

@@ -329,7 +329,7 @@ def test_state_sends_the_chat_only_when_something_was_said_since(studio):
 def test_fix_all_of_a_program_that_does_not_run_asks_the_model_with_its_runtime_error():
     """#5/#6 with an LLM: the runtime row is fixable; the model is told what did not run, and its revision runs."""
     from llm_server import LLMServer
-    from robocritics.llm.client import OpenAICompatible
+    from robocritics.llm.providers.openai_compatible import OpenAICompatible
 
     fixed = "move_above(green_apple)\nhome()\n"
     with LLMServer() as llm:

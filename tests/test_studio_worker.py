@@ -22,7 +22,7 @@ from robocritics.critic import critique
 from robocritics.errors import PlanningError, ProgramError, RoboCriticsError
 from robocritics.llm.loop import Loop
 from robocritics.scene import Scene
-from robocritics.simulate import simulate
+from robocritics.pipeline import simulate
 from robocritics.viz.studio.worker import DEFAULT_MEMORY_BYTES, Evaluation, Evaluator, EvaluatorError
 
 PROGRAMS = Path(__file__).resolve().parent.parent / "examples" / "programs"

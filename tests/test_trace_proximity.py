@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from robocritics import Robot, Scene
-from robocritics.robot.trace import EXACT_WITHIN_M
+from robocritics.planning.trace import EXACT_WITHIN_M
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import robocritics as rc
-from robocritics.viz import MAX_FRAME_RATE_HZ, REPLAY_FORMAT, Replay, closest_points, replay_data, replay_html
+from robocritics.geometry.pairs import closest_points
+from robocritics.viz import MAX_FRAME_RATE_HZ, REPLAY_FORMAT, Replay, replay_data, replay_html
 from robocritics.viz.html import script_json
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "programs"
@@ -92,7 +93,7 @@ def test_verdicts_carry_flags_windows_and_worst_times_of_the_report():
 
 @pytest.mark.parametrize("name", ["sorting_naive", "recycling_naive", "breakfast_naive"])
 def test_closest_points_segment_has_the_length_the_critic_measured(name):
-    # coal's closest points (viz) against the critic's own distance (robot.proximity): two implementations
+    # coal's closest points (viz) against the critic's own distance (geometry.proximity): two implementations
     execution, report = run(name)
     data = replay_data(execution, report)
     checked = 0

@@ -30,13 +30,15 @@ _EXPORTS = {
     "Scene": "robocritics.scene",
     "Trajectory": "robocritics.trajectory",
     "Execution": "robocritics.execution",
+    "simulate": "robocritics.pipeline",
+    "check": "robocritics.pipeline",
     "critique": "robocritics.critic",
     "Critic": "robocritics.critic",
     "CriticParams": "robocritics.critic",
-    "Flag": "robocritics.verdict",
-    "Verdict": "robocritics.verdict",
-    "Report": "robocritics.report",
-    "hookimpl": "robocritics.hookspecs",
+    "Flag": "robocritics.critic.verdict",
+    "Verdict": "robocritics.critic.verdict",
+    "Report": "robocritics.critic.report",
+    "hookimpl": "robocritics.critic.hookspecs",
     "Loop": "robocritics.llm.loop",
 }
 # Names that used to be exported here, and the module to import them from.
@@ -50,9 +52,8 @@ _MOVED = {
     "OpenAICompatible": "robocritics.llm",
 }
 
-# Eager, and cheap (their heavy imports are inside the functions): the submodules
-# `robocritics.simulate` and `robocritics.repair` would otherwise shadow the functions of the same names.
-from .simulate import simulate  # noqa: E402
+# Eager, and cheap (its heavy imports are inside the function): the subpackage
+# `robocritics.repair` would otherwise shadow the function of the same name.
 from .repair import repair  # noqa: E402
 from .errors import (  # noqa: E402
     CriticError,
@@ -80,7 +81,7 @@ _ERRORS = (
     "RTDEError",
 )
 
-__all__ = [*_EXPORTS, "simulate", "repair", *_ERRORS]
+__all__ = [*_EXPORTS, "repair", *_ERRORS]
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), moved=_MOVED)
@@ -89,10 +90,11 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), moved=_MOVED)
 if TYPE_CHECKING:  # pragma: no cover
     from .critic import Critic, CriticParams, critique
     from .execution import Execution
-    from .hookspecs import hookimpl
+    from .pipeline import check, simulate
+    from .critic.hookspecs import hookimpl
     from .llm.loop import Loop
-    from .report import Report
+    from .critic.report import Report
     from .robot.model import Robot
     from .scene import Scene
     from .trajectory import Trajectory
-    from .verdict import Flag, Verdict
+    from .critic.verdict import Flag, Verdict

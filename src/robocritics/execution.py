@@ -24,9 +24,9 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .goals import Goal
     from .program.plan import Plan
-    from .report import Report
+    from .critic.report import Report
     from .robot.model import Robot
-    from .robot.planner import Event
+    from .planning.planner import Event
     from .scene import Scene
     from .trajectory import Trajectory
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import re
-from typing import TYPE_CHECKING, Iterable, Literal
+from typing import TYPE_CHECKING, Any, Iterable, Literal, Mapping, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -19,9 +19,24 @@ from .errors import GoalError
 
 if TYPE_CHECKING:
     from .scene import Scene
-    from .execution import Execution
 
-__all__ = ["Goal", "GoalError", "GoalOutcome", "parse_goals", "program_goals", "check_outcomes"]
+__all__ = ["Goal", "GoalError", "GoalOutcome", "Run", "parse_goals", "program_goals", "check_outcomes"]
+
+
+class Run(Protocol):
+    """What goals are checked on: the scene at the start and the end of a run, where the program set objects
+    down, the run's own goals and its plan (None for motion not from a program). An
+    :class:`~robocritics.execution.Execution` is one; this module does not import it (goals sit below it)."""
+
+    scene: Scene
+    final_scene: Scene
+    resting_on: Mapping[str, str]
+    goals: tuple[Goal, ...]
+    plan: Any
+
+    def object_on(self, obj_id: str, support_id: str) -> bool: ...
+
+    def object_inside(self, obj_id: str, container_id: str) -> bool: ...
 
 TABLE = "table"
 """The support id of the table top."""
@@ -99,7 +114,7 @@ class Goal(BaseModel):
                 raise GoalError(f"goal '{self}': an object cannot rest on itself")
         return self
 
-    def met(self, execution: "Execution") -> bool:
+    def met(self, execution: Run) -> bool:
         """Whether the object ended where this goal says, in ``execution``'s final scene."""
         final = execution.final_scene
         if self.relation == "in":
@@ -116,7 +131,7 @@ class Goal(BaseModel):
         horizontal = math.hypot(obj.position[0] - support.position[0], obj.position[1] - support.position[1])
         return abs(obj.bottom - support.top) <= ON_TOLERANCE_M and horizontal <= max(support.width, obj.width) / 2
 
-    def outcome(self, execution: "Execution") -> tuple[bool, str]:
+    def outcome(self, execution: Run) -> tuple[bool, str]:
         """``(met, where)``: whether the goal holds, and where the object ended, in plain words with metres."""
         self.check(execution.scene)
         final = execution.final_scene
@@ -182,7 +197,7 @@ def program_goals(plan) -> list[tuple[Goal, int]]:
     ]
 
 
-def check_outcomes(execution: "Execution", goals: "Iterable[str | Goal] | str | Goal | None" = None) -> list[GoalOutcome]:
+def check_outcomes(execution: Run, goals: "Iterable[str | Goal] | str | Goal | None" = None) -> list[GoalOutcome]:
     """:class:`GoalOutcome` of every goal in ``goals``, in ``execution.goals`` and of the program's ``expect(...)``
     calls, checked on ``execution``'s final scene (each goal once, with all its lines)."""
     lines: dict[Goal, list[int]] = {g: [] for g in parse_goals(goals, execution.scene)}

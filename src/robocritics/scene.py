@@ -6,13 +6,20 @@ fixed x, y, z axes) orients it. Sizes are full extents in metres:
 
 * ``box``: ``[x, y, z]`` edge lengths;
 * ``cylinder``: ``[radius, height]`` (axis along the object's z);
-* ``sphere``: ``[radius]``.
+* ``sphere``: ``[radius]``;
+* ``mesh``: a fixture from CAD, ``{"shape": "mesh", "file": "jig.stl", "scale": 0.001}``: the triangles of an
+  STL, DAE or OBJ file (read with coal's loader, :func:`robocritics.robot.fit.load_mesh`; a DAE with a DOCTYPE
+  is refused), ``file`` relative to the scene file (to the working directory for a scene not read from a file),
+  ``scale`` the file's unit in metres. ``position`` and ``rpy`` place the file's origin (not a centre);
+  ``size`` is derived (the scaled mesh's bounding-box extents). A mesh object is a fixture: never graspable.
+  The file is bounded (:data:`MAX_MESH_FILE_BYTES`, :data:`MAX_MESH_TRIANGLES`, finite vertices, the placed
+  mesh within :data:`MAX_COORD_M`).
 
 A container is an open-top box of outer extents ``size`` whose floor and four
 walls are ``wall_m`` thick: its inside is free space, so placing something
 *into* it is not a collision. The table top is the plane ``z = table.top_z``
-(the robot base stands on it). The allowed workspace is a sphere (default the
-UR3e reach, radius 0.5 m around the shoulder) cut by the table top.
+(the robot base stands on it). The allowed workspace is a sphere (by default the
+robot's reach around its shoulder) cut by the table top.
 
 Invalid input raises :class:`~robocritics.errors.SceneError` naming the field
 path (``objects[2].size[0]``) and the problem, or the file and the problem. A
@@ -29,7 +36,7 @@ scene is untrusted input, so everything in it is bounded:
   (:data:`robocritics.program.language.SAFE_BUILTINS`, e.g. ``print``) or
   ``table`` (see :func:`reserved_names`). The names of the skill API (``home``,
   ``lib``, ``objects``, ``open``, ...) are checked where a scene meets it, by
-  :func:`robocritics.simulate.check_scene_ids`: the skills are built on scenes,
+  :func:`robocritics.pipeline.check_scene_ids`: the skills are built on scenes,
   so this module cannot import them;
 * at most :data:`MAX_ENTITIES` objects and containers; text fields and free
   attributes are bounded in length, nesting and count, and are JSON-like text
@@ -50,7 +57,7 @@ import unicodedata
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Optional
 
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
@@ -58,7 +65,6 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationEr
 from ._suggest import did_you_mean
 from ._files import read_bounded_text
 from .errors import SceneError
-from .robot.arms import UR3E
 
 __all__ = [
     "SceneObject",
@@ -77,6 +83,9 @@ __all__ = [
     "MAX_ENTITIES",
     "MAX_FILE_BYTES",
     "MAX_JSON_DEPTH",
+    "MAX_MESH_FILE_BYTES",
+    "MAX_MESH_TRIANGLES",
+    "mesh_triangles",
 ]
 
 MAX_COORD_M = 10.0
@@ -103,6 +112,12 @@ MAX_FILE_BYTES = 1_000_000
 """Largest scene file [bytes]: a hundred richly described objects take some 50 kB."""
 MAX_JSON_DEPTH = 32
 """Deepest nesting of a scene file's JSON (a scene needs 4 plus its attributes' depth)."""
+MAX_MESH_FILE_BYTES = 32_000_000
+"""Largest mesh file of a scene object [bytes]: a binary STL of MAX_MESH_TRIANGLES takes 10 MB."""
+MAX_MESH_TRIANGLES = 200_000
+"""Most triangles of one scene mesh: a CAD fixture exported for collision checking has thousands."""
+MAX_MESH_SCALE = 1000.0
+"""Largest mesh ``scale`` (file units to metres; 0.001 for millimetres, 0.0254 for inches)."""
 
 
 class _LongInt:
@@ -223,7 +238,7 @@ def reserved_names() -> dict[str, str]:
 
     Python's keywords (soft ones too), the builtins of robot programs
     (:data:`robocritics.program.language.SAFE_BUILTINS`) and ``table``. The names of
-    the skill API are checked by :func:`robocritics.simulate.check_scene_ids`.
+    the skill API are checked by :func:`robocritics.pipeline.check_scene_ids`.
     """
     from .program import language  # the program language's names (a leaf module: no import cycle)
 
@@ -336,9 +351,11 @@ def rpy_matrix(rpy: Vec3) -> np.ndarray:
 class Shape:
     """One primitive collision shape of the scene, posed in the base frame.
 
-    ``kind`` is ``box`` (``size`` = full extents), ``cylinder`` (radius, height)
-    or ``sphere`` (radius); ``pose`` is a 4x4 homogeneous transform of the
-    shape's centre; ``owner`` is the id of the scene entity it belongs to.
+    ``kind`` is ``box`` (``size`` = full extents), ``cylinder`` (radius, height),
+    ``sphere`` (radius) or ``mesh`` (``size`` = bounding-box extents; ``mesh`` =
+    ``(vertices (V, 3) m, triangles (F, 3))`` in the shape frame); ``pose`` is a 4x4
+    homogeneous transform of the shape's centre (a mesh: its file's origin);
+    ``owner`` is the id of the scene entity it belongs to.
     """
 
     name: str
@@ -346,6 +363,7 @@ class Shape:
     kind: str
     size: tuple[float, ...]
     pose: np.ndarray
+    mesh: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class _Model(BaseModel):
@@ -382,15 +400,53 @@ class SceneObject(_Model):
     """A movable or fixed object on the table."""
 
     id: EntityId = Field(description="unique name, usable in programs (e.g. 'green_apple')")
-    shape: Literal["box", "cylinder", "sphere"]
-    size: tuple[Length, ...] = Field(description="m; box [x,y,z], cylinder [radius,height], sphere [radius]")
-    position: Vec3 = Field(description="centre of the shape, m, base frame")
+    shape: Literal["box", "cylinder", "sphere", "mesh"]
+    size: tuple[Length, ...] = Field((), description="m; box [x,y,z], cylinder [radius,height], sphere [radius]; mesh: derived")
+    position: Vec3 = Field(description="centre of the shape (a mesh: its file's origin), m, base frame")
     rpy: Angles3 = (0.0, 0.0, 0.0)
     graspable: bool = Field(True, strict=True)
     attributes: Attributes = Field(default_factory=dict, description="free attributes: colour, ripeness, ...")
+    # left out of dumps when unset, so the JSON (and the hashes) of scenes without meshes stay as they were
+    file: Optional[str] = Field(
+        None, max_length=4096, exclude_if=lambda v: v is None, description="mesh file (STL, DAE, OBJ); shape 'mesh' only"
+    )
+    scale: float = Field(
+        1.0, exclude_if=lambda v: v == 1.0, description="mesh file unit in metres (0.001: millimetres); shape 'mesh' only"
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _mesh_fields(cls, data: Any) -> Any:
+        """A mesh object's ``size`` comes from its file and it is never graspable; other shapes take no file."""
+        if not isinstance(data, dict):
+            return data
+        if data.get("shape") != "mesh":
+            for key in ("file", "scale"):
+                if key in data:
+                    raise ValueError(f"{key}: only a shape 'mesh' object has a {key}")
+            return data
+        data = dict(data)
+        if data.get("graspable", False) is not False:
+            raise ValueError("graspable: a mesh object is a fixture; robocritics does not grasp meshes")
+        data["graspable"] = False
+        scale = _mesh_scale(data.get("scale", 1.0))
+        data["scale"] = scale
+        size = tuple(float(v) for v in _mesh_extents(_mesh_of(data.get("file"), scale)))
+        if max(size) > MAX_LENGTH_M:
+            raise ValueError(f"file: the mesh spans {max(size):.3g} m at scale {scale}; the limit is {MAX_LENGTH_M} m (is scale right?)")
+        given = data.get("size")
+        # a dumped scene carries the derived size: the same numbers are accepted, others are a mistake
+        if given is not None and not (isinstance(given, (list, tuple)) and len(given) == 3 and all(
+            isinstance(v, numbers.Real) and not isinstance(v, bool) and abs(float(v) - w) <= 1e-9 * max(1.0, w) for v, w in zip(given, size)
+        )):  # fmt: skip
+            raise ValueError(f"size: a mesh object's size comes from its file ({list(size)} m); leave size out")
+        data["size"] = size
+        return data
 
     @model_validator(mode="after")
     def _check_size(self) -> "SceneObject":
+        if self.shape == "mesh":
+            return self._check_mesh_placement()
         expected = {"box": 3, "cylinder": 2, "sphere": 1}[self.shape]
         if len(self.size) != expected:
             raise ValueError(
@@ -402,9 +458,29 @@ class SceneObject(_Model):
                 raise ValueError(f"size[{i}]: {s} is not a positive length in metres")
         return self
 
+    def _check_mesh_placement(self) -> "SceneObject":
+        vertices = self.placed_vertices()
+        if np.abs(vertices).max() > MAX_COORD_M:
+            raise ValueError(f"file: the placed mesh reaches {np.abs(vertices).max():.3g} m from the base; the limit is {MAX_COORD_M} m (is scale right?)")
+        return self
+
+    def _pose(self) -> np.ndarray:
+        pose = np.eye(4)
+        pose[:3, :3] = rpy_matrix(self.rpy)
+        pose[:3, 3] = self.position
+        return pose
+
+    def placed_vertices(self) -> np.ndarray:
+        """A mesh object's vertices in the base frame, m ``(V, 3)``."""
+        vertices, _ = _mesh_of(self.file, self.scale)
+        pose = self._pose()
+        return vertices @ pose[:3, :3].T + pose[:3, 3]
+
     @property
     def half_height(self) -> float:
         """Half the object's vertical extent, m (exact for upright shapes)."""
+        if self.shape == "mesh":
+            return (self.top - self.bottom) / 2
         if self.shape == "box":
             return self.size[2] / 2
         if self.shape == "cylinder":
@@ -414,25 +490,39 @@ class SceneObject(_Model):
     @property
     def top(self) -> float:
         """z of the object's top surface, m."""
+        if self.shape == "mesh":
+            return float(self.placed_vertices()[:, 2].max())
         return self.position[2] + self.half_height
 
     @property
     def bottom(self) -> float:
         """z of the object's lowest point, m."""
+        if self.shape == "mesh":
+            return float(self.placed_vertices()[:, 2].min())
         return self.position[2] - self.half_height
 
     @property
     def width(self) -> float:
-        """Horizontal extent a gripper closes on, m (the smaller horizontal size)."""
+        """Horizontal extent a gripper closes on, m (the smaller horizontal size; a mesh: of its placed bounding box)."""
+        if self.shape == "mesh":
+            extent = np.ptp(self.placed_vertices()[:, :2], axis=0)
+            return float(extent.min())
         if self.shape == "box":
             return min(self.size[0], self.size[1])
         return 2 * self.size[0]
 
+    @property
+    def centre(self) -> tuple[float, float, float]:
+        """The centre of the object, m (base frame): its ``position``, or for a mesh the middle of its placed
+        axis-aligned bounding box (a mesh's ``position`` is its file's origin). Programs see this as x, y, z."""
+        if self.shape != "mesh":
+            return self.position
+        vertices = self.placed_vertices()
+        return tuple(float(v) for v in (vertices.max(axis=0) + vertices.min(axis=0)) / 2)
+
     def shapes(self) -> list[Shape]:
-        pose = np.eye(4)
-        pose[:3, :3] = rpy_matrix(self.rpy)
-        pose[:3, 3] = self.position
-        return [Shape(self.id, self.id, self.shape, tuple(self.size), pose)]
+        mesh = _mesh_of(self.file, self.scale) if self.shape == "mesh" else None
+        return [Shape(self.id, self.id, self.shape, tuple(self.size), self._pose(), mesh)]
 
     def moved_to(self, position: Vec3, rpy: Vec3 | None = None) -> "SceneObject":
         return self.model_copy(update={"position": tuple(float(v) for v in position), "rpy": rpy or self.rpy})
@@ -519,12 +609,13 @@ class Table(_Model):
 class Workspace(_Model):
     """The allowed workspace W_allowed: a sphere (m) above the plane ``min_z``.
 
-    A scene without one follows its robot: ``robot.scene_for(scene)`` puts in ``robot.workspace``, the reach
-    sphere around that robot's shoulder. The field defaults are the UR3e's (the bundled scenes' robot).
+    A scene without one (``workspace`` None) follows its robot: ``robot.scene_for(scene)`` puts in
+    ``robot.workspace``, the reach sphere around that robot's shoulder. A scene knows no arm, so it has no
+    default sphere of its own (the default arm's is :func:`robocritics.robot.model.default_workspace`).
     """
 
-    center: Vec3 = Field((0.0, 0.0, UR3E.dh.d1), description="sphere centre, m (default: UR3e shoulder)")
-    radius_m: Length = Field(UR3E.reach_m, description="sphere radius, m (default: UR3e reach)")
+    center: Vec3 = Field(description="sphere centre, m (e.g. the arm's shoulder)")
+    radius_m: Length = Field(description="sphere radius, m (e.g. the arm's reach)")
 
     @property
     def volume_m3(self) -> float:
@@ -597,7 +688,7 @@ class Scene(_Model):
         default_factory=list, description="people in the cell (robocritics.humans builds their body model)"
     )
     table: Table = Field(default_factory=Table)
-    workspace: Workspace = Field(default_factory=Workspace)
+    workspace: Optional[Workspace] = Field(None, description="the allowed workspace; None: the robot's reach")
     robot: Name = Field("", description="the robot this scene was made for (e.g. 'ur3e'); '' = any robot")
 
     @model_validator(mode="after")
@@ -623,6 +714,7 @@ class Scene(_Model):
         data = parse_json(text, shown)
         if not isinstance(data, dict):
             raise SceneError(f"{shown}: a scene is a JSON object, got {type(data).__name__}")
+        _resolve_mesh_files(data, Path(path).absolute().parent)
         try:
             return cls.model_validate(data)
         except SceneError as exc:
@@ -686,6 +778,64 @@ class Scene(_Model):
         return None
 
 
+def _resolve_mesh_files(data: dict, folder: Path) -> None:
+    """Make the relative ``file`` of every mesh object relative to ``folder`` (the scene file's), in place."""
+    objects = data.get("objects")
+    for obj in objects if isinstance(objects, list) else ():
+        if isinstance(obj, dict) and obj.get("shape") == "mesh" and isinstance(obj.get("file"), str) and obj["file"]:
+            if "\x00" not in obj["file"] and not Path(obj["file"]).is_absolute():
+                obj["file"] = str(folder / obj["file"])
+
+
+def _mesh_scale(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or isinstance(value, _LongInt):
+        raise ValueError(f"scale: {_quoted(value)} is not a number")
+    scale = float(value)
+    if not (math.isfinite(scale) and 0.0 < scale <= MAX_MESH_SCALE):
+        raise ValueError(f"scale: {scale} is not a positive finite unit in metres (at most {MAX_MESH_SCALE})")
+    return scale
+
+
+def _mesh_of(file: Any, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The scaled triangles of mesh ``file``; a ValueError naming ``file`` if it is missing, too big or not a mesh."""
+    if not isinstance(file, str) or not file or "\x00" in file:
+        raise ValueError("file: a mesh object needs the path of an STL, DAE or OBJ file")
+    path = Path(file)
+    try:
+        info = path.stat()
+    except OSError as exc:
+        raise ValueError(f"file: cannot read mesh {_path_label(file)}: {exc.strerror}") from None
+    if not path.is_file():
+        raise ValueError(f"file: {_path_label(file)} is not a regular file")
+    if info.st_size > MAX_MESH_FILE_BYTES:
+        raise ValueError(f"file: {_path_label(file)} has {info.st_size:,} bytes; a scene mesh has at most {MAX_MESH_FILE_BYTES:,}")
+    return _cached_mesh(str(path.resolve()), info.st_mtime_ns, info.st_size, float(scale))
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_mesh(path: str, mtime_ns: int, size: int, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    from .errors import RobotModelError
+    from .robot.fit import load_mesh
+
+    try:
+        mesh = load_mesh(Path(path), (scale, scale, scale), max_triangles=MAX_MESH_TRIANGLES)
+    except RobotModelError as exc:
+        raise ValueError(f"file: {exc}") from None
+    vertices, triangles = mesh.vertices.copy(), mesh.triangles.copy()
+    vertices.flags.writeable = triangles.flags.writeable = False  # shared by every Shape of this file
+    return vertices, triangles
+
+
+def mesh_triangles(obj: "SceneObject") -> tuple[np.ndarray, np.ndarray]:
+    """A mesh object's triangles in its own frame: ``vertices (V, 3)`` m (scaled) and ``triangles (F, 3)``."""
+    return _mesh_of(obj.file, obj.scale)
+
+
+def _mesh_extents(mesh: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    vertices = mesh[0]
+    return np.maximum(vertices.max(axis=0) - vertices.min(axis=0), 1e-9)  # a flat plate still has a (tiny) size
+
+
 def _read_scene_file(path: str | Path) -> str:
     """The text of scene file ``path``: a regular file of at most MAX_FILE_BYTES bytes of UTF-8."""
     return read_bounded_text(path, "scene", repr(_path_label(path)), MAX_FILE_BYTES, SceneError)
@@ -730,7 +880,7 @@ def _scene_error(exc: ValidationError, model: str = "Scene") -> SceneError:
         path = field if not path else path + (field if field.startswith("[") else "." + field)
         message = sub.group(2)
     if err["type"] == "literal_error" and path.endswith("shape"):
-        message = f"unknown shape {_quoted(err.get('input'))}; use one of box, cylinder, sphere"
+        message = f"unknown shape {_quoted(err.get('input'))}; use one of box, cylinder, sphere, mesh"
     if err["type"] == "literal_error" and path.endswith("posture"):
         message = f"unknown posture {_quoted(err.get('input'))}; use standing or seated"
     more = len(exc.errors()) - 1

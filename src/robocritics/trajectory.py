@@ -10,7 +10,7 @@ frames and ``K`` proximity pairs holds
 * ``proximity`` ``(T, K)`` signed distances, m, of the named pairs in ``pairs``
   (P_t; <= 0 on penetration; a simulated trajectory's array is column-major, each pair's
   time series contiguous, as the critics read it). Self pairs are exact; an environment pair's value
-  is exact when it is at most 0.10 m (:data:`robocritics.robot.trace.EXACT_WITHIN_M`)
+  is exact when it is at most 0.10 m (:data:`robocritics.planning.trace.EXACT_WITHIN_M`)
   or at most the arm's closest environment distance at that sample, and otherwise
   a lower bound beyond both (far pairs are not measured exactly). So every
   threshold up to 0.10 m, and the closest distance over any set of environment
@@ -133,6 +133,7 @@ class Trajectory:
         limits: RobotLimits,
         robot_name: str = "",
         tcp_frame: str = "tcp",
+        kinematic_hash: str = "",
     ):
         self.q = _array("q", q, ndim=2)
         T, n = self.q.shape
@@ -148,6 +149,7 @@ class Trajectory:
         self.limits = limits if isinstance(limits, RobotLimits) else RobotLimits.model_validate(limits)
         self.robot_name = robot_name
         self.tcp_frame = str(tcp_frame)
+        self.kinematic_hash = str(kinematic_hash)  # Robot.kinematic_hash of the arm it was planned for
         self._validate(T, n)
         for arr in (self.q, self.time, self.frames, self.proximity, self.gripper_opening_m, self.attached, self.step):
             arr.setflags(write=False)
@@ -266,6 +268,7 @@ class Trajectory:
         return {
             "robot_name": self.robot_name,
             "tcp_frame": self.tcp_frame,
+            "kinematic_hash": self.kinematic_hash,
             "q": self.q.tolist(),
             "time": self.time.tolist(),
             "frames": self.frames.tolist(),
@@ -303,6 +306,7 @@ class Trajectory:
                 limits=data["limits"],
                 robot_name=data.get("robot_name", ""),
                 tcp_frame=data.get("tcp_frame", "tcp"),
+                kinematic_hash=data.get("kinematic_hash", ""),
             )
         except KeyError as exc:
             raise TrajectoryError(f"trajectory data lacks the field {exc.args[0]!r}") from None
@@ -360,6 +364,7 @@ class Trajectory:
             limits=self.limits,
             robot_name=self.robot_name,
             tcp_frame=self.tcp_frame,
+            kinematic_hash=self.kinematic_hash,
         )
 
     def __repr__(self) -> str:

@@ -59,9 +59,9 @@ def _serve(conn, robot, memory_bytes: int, sample_rate_hz: float) -> None:
     os.environ.update(SINGLE_THREADED_ENV)  # for anything this process starts
     limit_address_space(memory_bytes)
     try:
-        from ..robot.model import Robot
+        from ..robot.model import default_robot
 
-        robot = robot if robot is not None else Robot.ur3e()
+        robot = robot if robot is not None else default_robot()
     except BaseException as exc:  # noqa: BLE001 - the parent raises it as a BatchError
         conn.send(("failed", f"{type(exc).__name__}: {exc}"))
         return

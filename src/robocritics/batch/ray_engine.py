@@ -59,9 +59,9 @@ class _Actor:
     """A Ray actor: the robot loaded once, scenes cached, rows evaluated one at a time."""
 
     def __init__(self, robot, sample_rate_hz: float):
-        from ..robot.model import Robot
+        from ..robot.model import default_robot
 
-        self.robot = robot if robot is not None else Robot.ur3e()
+        self.robot = robot if robot is not None else default_robot()
         self.scenes = SceneCache()
         self.sample_rate_hz = sample_rate_hz
 

@@ -7,7 +7,7 @@ The formula, per program::
            = score / 10               otherwise
 
 where ``score`` is the 0-10 program quality index of the five built-in motion critics
-(:attr:`robocritics.report.Report.score`: OK 2, Warning 1, Error 0 points each). With goals, a program
+(:attr:`robocritics.critic.report.Report.score`: OK 2, Warning 1, Error 0 points each). With goals, a program
 that moves well but leaves the objects in the wrong place earns nothing: the motion quality only counts
 once the task is done.
 

@@ -228,16 +228,18 @@ def _error_of(exc: BaseException) -> dict:
 
 def evaluate_job(job: Job, robot, scenes: SceneCache, sample_rate_hz: float = 125.0) -> dict:
     """Simulate and critique ``job`` in this process; every library error becomes the row's ``error``."""
-    from ..critic import critique
     from ..errors import RoboCriticsError
-    from ..simulate import simulate
+    from ..pipeline import check
 
     started = time.perf_counter()
     try:
         scene = scenes.get(job.scene)
-        execution = simulate(job.program, scene, robot, sample_rate_hz=sample_rate_hz)
-        report = critique(execution, critics=list(job.critics) if job.critics else None, params=job.params,
-                          goals=list(job.goals) if job.goals else None)  # fmt: skip
+        checked = check(job.program, scene, robot=robot, sample_rate_hz=sample_rate_hz, params=job.params,
+                        critics=list(job.critics) if job.critics else None,
+                        goals=list(job.goals) if job.goals else None)  # fmt: skip
+        if checked.error is not None:  # the program did not run: the row names its error and line
+            raise checked.error
+        report = checked.report
     except MemoryError:
         raise  # the worker's heap may be in any state: its engine replaces it
     except Exception as exc:  # noqa: BLE001 - a library error, or a plugin's bug: the row says which

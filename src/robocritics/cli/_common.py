@@ -104,7 +104,7 @@ def positive_int(text: str) -> int:
 def sample_rate(text: str) -> float:
     """A trajectory sample rate [Hz] in the range the critics can trust (robot.motion.check_sample_rate)."""
     from ..errors import PlanningError
-    from ..robot.motion import check_sample_rate
+    from ..planning.timing import check_sample_rate
 
     try:
         value = float(text)
@@ -227,7 +227,7 @@ def scene_for(program_path: str, scene_arg: str | None):
     with, else an empty table; refused (SceneError naming the field) if its ids are names of the skill API."""
     from ..errors import SceneError
     from ..scene import Scene
-    from ..simulate import check_scene_ids
+    from ..pipeline import check_scene_ids
 
     if scene_arg is not None and not scene_arg.strip():
         raise UsageError("--scene is empty; give a built-in scene name or a scene JSON file")
@@ -355,13 +355,13 @@ def llm_api_key(args: argparse.Namespace) -> str | None:
 
 
 def llm_client(args: argparse.Namespace, api_key: str | None, *, embedding_model: str | None = None):
-    """The :class:`~robocritics.llm.client.OpenAICompatible` the options of :func:`add_llm_options` describe;
+    """The :class:`~robocritics.llm.providers.openai_compatible.OpenAICompatible` the options of :func:`add_llm_options` describe;
     UsageError when no endpoint or model is configured (or the endpoint is unusable)."""
     from ..errors import LLMError
-    from ..llm.client import OpenAICompatible
+    from ..llm.providers import provider
 
     try:
-        return OpenAICompatible(
+        return provider()(
             base_url=args.base_url,
             model=args.model,
             api_key=api_key,
@@ -374,3 +374,44 @@ def llm_client(args: argparse.Namespace, api_key: str | None, *, embedding_model
         )
     except LLMError as exc:
         raise UsageError(f"{exc} (or use --base-url / --model)" if "configured" in str(exc) else str(exc)) from None
+
+
+#: The arms ``--robot NAME`` names (the bundled models).
+BUNDLED_ROBOTS = ("ur3e", "ur5e", "ur10e", "ur16e", "panda")
+
+
+def add_robot_options(p: argparse.ArgumentParser) -> None:
+    """``--robot NAME|PATH.urdf``, ``--tool NAME|PATH.urdf`` and ``--tip LINK`` (see :func:`robot_for`)."""
+    p.add_argument(
+        "--robot",
+        metavar="NAME|PATH.urdf",
+        help=f"the arm: a bundled one ({', '.join(BUNDLED_ROBOTS)}) or a vendor URDF file, loaded as shipped (meshes "
+        "enclosed by fitted capsules; docs/robots.md); default: the scene's \"robot\", else ur3e",
+    )
+    p.add_argument(
+        "--tool",
+        metavar="NAME|PATH.urdf",
+        help="the tool on a URDF arm's flange: robotiq_2f85, robotiq_hande, franka_hand, none, or a tool URDF; "
+        "default: the file's own robocritics gripper, else none",
+    )
+    p.add_argument("--tip", metavar="LINK", help="the URDF arm's flange link (needed where its chain branches)")
+
+
+def robot_for(args: argparse.Namespace, scene):
+    """The robot of ``--robot``/``--tool``/``--tip``, else the bundled arm the scene names (``"robot"``), else None
+    (the default UR3e). A URDF's errors are :class:`~robocritics.errors.RobotModelError` naming file and line."""
+    name = getattr(args, "robot", None) or scene.robot or None
+    tool, tip = getattr(args, "tool", None), getattr(args, "tip", None)
+    if name is None:
+        if tool or tip:
+            raise UsageError("--tool and --tip need --robot PATH.urdf (the bundled arms carry their own gripper)")
+        return None  # the default arm, loaded where the work is done (a batch parent never needs Pinocchio)
+    from ..robot.model import Robot
+
+    if name in BUNDLED_ROBOTS and not name.endswith(".urdf"):
+        if tool or tip:
+            raise UsageError(f"--robot {name} carries its own gripper; --tool and --tip are for --robot PATH.urdf")
+        return Robot.panda() if name == "panda" else Robot.ur(name)
+    if not name.lower().endswith(".urdf"):
+        raise UsageError(f"--robot {shown(name)}: not a bundled arm ({', '.join(BUNDLED_ROBOTS)}) nor a .urdf file")
+    return Robot.from_urdf(name, tool=tool, tip=tip)

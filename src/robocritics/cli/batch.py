@@ -14,7 +14,17 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TextIO
 
-from ._common import UsageError, bounded_float, file_name, one_line, positive_int, shown_path, subcommand
+from ._common import (
+    UsageError,
+    add_robot_options,
+    bounded_float,
+    file_name,
+    one_line,
+    positive_int,
+    robot_for,
+    shown_path,
+    subcommand,
+)
 
 #: Longest input line, bytes: a program is at most 100,000 characters and a scene is bounded; a longer
 #: line is an error row, not read whole.
@@ -36,6 +46,7 @@ def _build_batch(sub) -> None:
     p.add_argument("-o", "--output", metavar="OUT.jsonl", required=True, type=file_name,
                    help="output rows (JSON lines; Parquet when the name ends in .parquet, which needs pyarrow; "
                    "- for standard output)")  # fmt: skip
+    add_robot_options(p)  # one arm for every row (a row's scene that names another arm is an error row)
     p.add_argument("--engine", choices=("local", "ray"), default="local",
                    help="local: worker processes on this machine (default); ray: Ray actors (robocritics[ray])")  # fmt: skip
     p.add_argument("--workers", type=positive_int, metavar="N",
@@ -521,7 +532,10 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             writer = ParquetWriter(out, args.resume) if parquet else JsonlWriter(out, append=args.resume)
     except OSError as exc:
         raise UsageError(f"--output {shown_path(args.output)}: cannot write it: {exc.strerror or exc}") from None
-    rows = evaluate(pending(), args.engine, args.workers, timeout_s=args.timeout, ray_address=args.ray_address)
+    from ..scene import Scene
+
+    robot = robot_for(args, Scene())  # a URDF's error is bad usage, before any worker starts
+    rows = evaluate(pending(), args.engine, args.workers, robot=robot, timeout_s=args.timeout, ray_address=args.ray_address)
     failed = True
     on_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminated) if on_main_thread else None

@@ -7,12 +7,14 @@ import argparse
 from ._common import (
     UsageError,
     add_critic_options,
+    add_robot_options,
     add_goal_option,
     check_output,
     file_name,
     load_params,
     one_line,
     read_text,
+    robot_for,
     sample_rate,
     scene_for,
     subcommand,
@@ -32,7 +34,13 @@ def _build_check(sub) -> None:
         "Exit status: 0 no Error verdict (from any critic), 1 at least one Error (or the program does not run), "
         "2 bad input.",
     )
-    p.add_argument("program", metavar="PROGRAM", help="robot program file (Python using the skill API)")
+    p.add_argument(
+        "program",
+        metavar="PROGRAM",
+        help="robot program file (Python using the skill API), or motion from another tool: URScript (.script, "
+        ".urscript), a ur_rtde or generic CSV recording, JointTrajectory JSON, MoveIt YAML, rosbag2 (.mcap, .db3) "
+        "(docs/formats.md)",
+    )
     p.add_argument(
         "--scene",
         metavar="NAME|PATH",
@@ -41,6 +49,7 @@ def _build_check(sub) -> None:
     )
     add_critic_options(p)
     add_goal_option(p)
+    add_robot_options(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument(
         "--html",
@@ -57,6 +66,9 @@ def _build_check(sub) -> None:
         help="trajectory sample rate, Hz, from 25 (sparser sampling hides fast motion from the critics) to 500 "
         "(the controller's rate); default 125",
     )
+    from ._motion import add_motion_options
+
+    add_motion_options(p)
     p.set_defaults(func=_cmd_check)
 
 
@@ -82,9 +94,15 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _check(args: argparse.Namespace) -> int:
     import sys
 
-    from ..critic import check_program
     from ..goals import parse_goals
+    from ..pipeline import check
 
+    from ..formats import motion_kind
+
+    if motion_kind(args.program) is not None:
+        from ._motion import check_motion
+
+        return check_motion(args)
     source = read_text(args.program, "program")
     if args.html:  # checked before simulating, so a typo (or a link at the name) costs nothing
         check_output(args.html, "--html")
@@ -92,7 +110,9 @@ def _check(args: argparse.Namespace) -> int:
     params = load_params(args.params)
     critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
     goals = parse_goals(args.goals, scene)  # GoalError naming a wrong id, before simulating
-    execution, report = check_program(source, scene, goals=goals, critics=critics, params=params, sample_rate_hz=args.rate)
+    robot = robot_for(args, scene)
+    execution, report = check(source, scene, goals=goals, critics=critics, params=params, robot=robot,
+                              sample_rate_hz=args.rate)  # fmt: skip
     print(report.to_json() if args.json else terminal_text(report.to_text()))  # it quotes the program
     if execution is None:  # the program did not run: its error, as before, beside the report
         verdict = report.verdicts[0]

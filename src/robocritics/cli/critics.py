@@ -21,7 +21,7 @@ def _build_critics(sub) -> None:
 
 
 def _cmd_critics(args: argparse.Namespace) -> int:
-    from ..plugins import critic_distributions, get_critics, plugin_errors
+    from ..critic.plugins import critic_distributions, get_critics, plugin_errors
 
     critics = get_critics()
     dists = critic_distributions()

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from .._text import safe_text
-from ._common import host, one_line, port, read_text, scene_for, subcommand
+from ._common import add_robot_options, host, one_line, port, read_text, robot_for, scene_for, subcommand
 
 
 REPORT_CHARS = 20_000
@@ -30,26 +30,26 @@ def _build_deploy(sub) -> None:
     p.add_argument("--rtde-port", type=port, default=30004)
     p.add_argument("--dashboard-port", type=port, default=29999)
     p.add_argument("--secondary-port", type=port, default=30002)
+    add_robot_options(p)
     p.add_argument("--dry-run", action="store_true", help="do everything but send the program and move")
     p.set_defaults(func=_cmd_deploy)
 
 
 def _cmd_deploy(args: argparse.Namespace) -> int:
-    from ..critic import critique
     from ..deploy import URArm
     from ..errors import DeployError
+    from ..pipeline import check
     from ..program.sandbox import run_program
-    from ..simulate import simulate
 
     scene = scene_for(args.program, args.scene)
+    robot = robot_for(args, scene)  # a URDF's error is bad input, before connecting
     plan = run_program(read_text(args.program, "program"), scene)  # a bad program is reported before connecting
     try:
         with URArm(
             args.host, rtde_port=args.rtde_port, dashboard_port=args.dashboard_port, secondary_port=args.secondary_port
         ) as arm:
             start_q = arm.actual_q()
-            execution = simulate(plan, scene, start_q=start_q)
-            report = critique(execution)  # every installed critic: all of them gate the deploy
+            execution, report = check(plan, scene, robot=robot, start_q=start_q)  # every installed critic gates the deploy
             print(f"planned from the arm's joints [{', '.join(f'{v:.4f}' for v in start_q)}] rad")
             print(safe_text(report.to_text(), REPORT_CHARS, newlines=True))  # it quotes names from the scene file
             result = arm.deploy(execution, report, dry_run=args.dry_run)

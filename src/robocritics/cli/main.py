@@ -32,7 +32,7 @@ __all__ = ["main", "build_parser"]
 
 #: The built-in subcommands, each the module of that name here (in help order). A command line naming one
 #: imports only that module: ``robocritics check`` does not pay for batch, deploy, studio or the LLM client.
-BUILTIN = ("batch", "check", "critics", "deploy", "fix", "run", "studio", "ursim")
+BUILTIN = ("batch", "check", "critics", "deploy", "export", "fix", "run", "studio", "ursim")
 
 
 def _register(names) -> None:

@@ -55,12 +55,14 @@ from ._common import (
     add_critic_options,
     add_goal_option,
     add_llm_options,
+    add_robot_options,
     file_name,
     llm_api_key,
     llm_client,
     load_params,
     one_line,
     positive_int,
+    robot_for,
     subcommand,
     terminal_text,
 )
@@ -70,7 +72,7 @@ __all__ = ["add_run_parser", "run_command"]
 
 # Seconds between two progress lines while tokens arrive (--verbose).
 _PROGRESS_EVERY_S = 2.0
-# Model replies with --auto: the paper's five attempts per task (llm.loop.DEFAULT_MAX_ATTEMPTS, not imported
+# Model replies with --auto: the paper's five attempts per task (llm.options.DEFAULT_MAX_ATTEMPTS, not imported
 # here so that building the parser stays cheap).
 _MAX_ATTEMPTS = 5
 
@@ -113,6 +115,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     )
     add_critic_options(p)
     add_goal_option(p)
+    add_robot_options(p)
     p.add_argument("--memory", metavar="FILE", type=file_name, help="interaction memory (SQLite file, created if missing)")
     p.add_argument(
         "--embedded-rules",
@@ -206,7 +209,7 @@ def _error(message: str, stream: TextIO) -> int:
 
 def _print_attempt(attempt, out: TextIO) -> None:
     from ..llm.limits import MAX_PRINTED_CHARS, cut_text
-    from ..report import format_score
+    from ..critic.report import format_score
 
     _say(out, f"=== attempt {attempt.index} [{attempt.kind}] ===")
     if attempt.error and attempt.program is None:
@@ -237,11 +240,11 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
     from ..critic import select_critics
     from ..goals import parse_goals
     from ..scene import Scene
-    from ..simulate import check_scene_ids
+    from ..pipeline import check_scene_ids
     from ..llm.loop import Loop
     from ..llm.memory import InteractionMemory
     from ..llm.prompts import check_task
-    from ..report import format_score
+    from ..critic.report import format_score
 
     out = stdout or sys.stdout
     err = stderr or sys.stderr
@@ -259,6 +262,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         critics = [c.strip() for c in args.critics.split(",") if c.strip()] if args.critics else None
         select_critics(critics, params)
         goals = parse_goals(getattr(args, "goals", None), scene)
+        robot = robot_for(args, scene)
     except RoboCriticsError as exc:
         return _error(str(exc), err)
     if goals:  # the model is asked to state them with expect(...), which the task_outcome critic checks
@@ -291,6 +295,7 @@ def run_command(args: argparse.Namespace, *, stdout: TextIO | None = None, stder
         loop = Loop(
             client,
             scene,
+            robot=robot,
             critics=critics,
             params=params,
             memory=memory,

@@ -1,6 +1,6 @@
 """Deployment to a Universal Robots arm: RTDE and Dashboard clients, the URScript
 streaming program, the gate and the paced servo stream — typed on
-:class:`~robocritics.trajectory.Trajectory` and :class:`~robocritics.report.Report`.
+:class:`~robocritics.trajectory.Trajectory` and :class:`~robocritics.critic.report.Report`.
 
 * :mod:`~robocritics.deploy.rtde` — :class:`RTDEClient`, RTDE protocol v2/v1 with a background reader;
   the mode tables :class:`RobotMode`, :class:`SafetyMode`, :class:`RuntimeState`.
@@ -18,6 +18,7 @@ this package never imports it.
 """
 
 from robocritics.deploy.arm import URArm, approach_trajectory
+from robocritics.deploy.backend import Backend
 from robocritics.deploy.dashboard import DASHBOARD_PORT, DashboardClient
 from robocritics.deploy.gate import DeployRefused
 from robocritics.deploy.rtde import (
@@ -47,6 +48,7 @@ from robocritics.deploy.urscript import (
 )
 
 __all__ = [
+    "Backend",
     "RTDE_PORT",
     "DASHBOARD_PORT",
     "SECONDARY_PORT",

@@ -25,7 +25,6 @@ streaming (:mod:`robocritics.deploy.stream`).
 
 from __future__ import annotations
 
-import collections
 import math
 import random
 import socket
@@ -34,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
+from robocritics.deploy.connection import URConnection
 from robocritics.deploy.dashboard import DASHBOARD_PORT, DashboardClient
 from robocritics.deploy.gate import (
     DeployRefused,
@@ -44,7 +44,7 @@ from robocritics.deploy.gate import (
     trajectory_of,
 )
 from robocritics._text import safe_text
-from robocritics.deploy.rtde import RTDE_PORT, InputRecipe, Recipe, RTDEClient, RTDEValueError, TextMessage
+from robocritics.deploy.rtde import RTDE_PORT, Recipe, RTDEClient, RTDEValueError
 from robocritics.deploy.stream import (
     STATE_FIELDS,
     DeployProgress,
@@ -81,14 +81,14 @@ def approach_trajectory(
 ) -> Trajectory:
     """A slow joint move from ``start_q`` [rad] to the first sample of ``goal``, as a Trajectory.
 
-    Planned by :func:`robocritics.robot.planner.plan_approach` at ``speed_fraction``
+    Planned by :func:`robocritics.planning.planner.plan_approach` at ``speed_fraction``
     of the robot's limits and sampled at ``goal``'s rate, with ``goal``'s first
     gripper opening, in ``scene`` (where the objects are when ``goal`` starts).
     Critique it (``robocritics.critique(approach, scene)``) and deploy it with that
     report: it passes the same gate as any motion. Raises :class:`DeployError` if
     ``goal`` starts holding an object (plan that approach in the program instead).
     """
-    from robocritics.robot.planner import plan_approach
+    from robocritics.planning.planner import plan_approach
 
     if not isinstance(goal, Trajectory):
         raise DeployError(f"approach_trajectory(): goal must be a robocritics.Trajectory, got {type(goal).__name__}")
@@ -125,20 +125,9 @@ class URArm:
     ) -> None:
         if not timeout_s > 0:
             raise DeployError(f"timeout_s must be > 0 s, got {timeout_s}")
-        self.host = host
-        self.rtde_port = int(rtde_port)
-        self.dashboard_port = int(dashboard_port)
-        self.secondary_port = int(secondary_port)
-        self.timeout_s = float(timeout_s)
-        self.frequency_hz = float(frequency_hz)
-        self._rtde: RTDEClient | None = None
-        self._dashboard: DashboardClient | None = None
-        self._dashboard_broken = False
-        self._dash_lock = threading.Lock()
-        self._inputs: InputRecipe | None = None
-        self._seq = 0
-        self._out_freq = self.frequency_hz
-        self._messages: collections.deque[TextMessage] = collections.deque(maxlen=256)
+        #: The controller's channels and their state, which the stream uses (it never sees this arm).
+        self.connection = URConnection(host, int(rtde_port), int(dashboard_port), int(secondary_port),
+                                       float(timeout_s), float(frequency_hz))  # fmt: skip
 
     # ------------------------------------------------------------------ connection
 
@@ -154,8 +143,8 @@ class URArm:
 
         After a dropped connection (``DeployFault.cause == "connection_drop"``) call it again to reconnect.
         """
-        if self._rtde is not None:
-            if self._rtde.connected:
+        if self.connection.rtde_client is not None:
+            if self.connection.rtde_client.connected:
                 raise DeployError(f"URArm {self.host} is already connected")
             self.close()
         rtde = RTDEClient(self.host, self.rtde_port, timeout_s=self.timeout_s, buffer_size=4096)
@@ -163,9 +152,9 @@ class URArm:
         try:
             recipe = rtde.setup_outputs(list(STATE_FIELDS), self.frequency_hz)
             _check_types(recipe, rtde.address)
-            self._out_freq = recipe.frequency_hz
-            self._inputs = rtde.setup_inputs(list(INPUT_FIELDS))
-            _check_types(self._inputs, rtde.address)
+            self.connection.out_freq = recipe.frequency_hz
+            self.connection.inputs = rtde.setup_inputs(list(INPUT_FIELDS))
+            _check_types(self.connection.inputs, rtde.address)
             rtde.start()
             rtde.wait_next(self.timeout_s)
         except BaseException:
@@ -177,44 +166,37 @@ class URArm:
         except BaseException:
             rtde.close()
             raise
-        self._rtde = rtde
-        self._dashboard = dash
-        self._dashboard_broken = False
+        self.connection.rtde_client = rtde
+        self.connection.dashboard_client = dash
+        self.connection.dashboard_broken = False
 
     def close(self) -> None:
         """Close both connections (bounded)."""
-        rtde, self._rtde = self._rtde, None
-        with self._dash_lock:
-            dash, self._dashboard = self._dashboard, None
+        rtde, self.connection.rtde_client = self.connection.rtde_client, None
+        with self.connection.dash_lock:
+            dash, self.connection.dashboard_client = self.connection.dashboard_client, None
         if rtde is not None:
             rtde.close()
         if dash is not None:
             dash.close()
 
+    # where the controller is: the connection's (one source for the stream and the arm)
+    host = property(lambda self: self.connection.host)
+    rtde_port = property(lambda self: self.connection.rtde_port)
+    dashboard_port = property(lambda self: self.connection.dashboard_port)
+    secondary_port = property(lambda self: self.connection.secondary_port)
+    timeout_s = property(lambda self: self.connection.timeout_s)
+    frequency_hz = property(lambda self: self.connection.frequency_hz)
+
     @property
     def rtde(self) -> RTDEClient:
         """The RTDE client (raises if not connected)."""
-        if self._rtde is None:
-            raise DeployError(f"URArm {self.host} is not connected; use 'with URArm(...) as arm:' or connect()")
-        return self._rtde
+        return self.connection.rtde
 
     @property
     def dashboard(self) -> DashboardClient:
         """The dashboard client, e.g. to power on: ``arm.dashboard.power_on()``."""
-        if self._dashboard is None:
-            raise DeployError(f"URArm {self.host} is not connected; use 'with URArm(...) as arm:' or connect()")
-        return self._dashboard
-
-    def _healthy_dashboard(self) -> DashboardClient:
-        """The dashboard client, reconnected if an earlier exchange failed (caller holds ``_dash_lock``)."""
-        dash = self.dashboard
-        if self._dashboard_broken:
-            dash.close()
-            dash = DashboardClient(self.host, self.dashboard_port, timeout_s=self.timeout_s)
-            dash.connect()
-            self._dashboard = dash
-            self._dashboard_broken = False
-        return dash
+        return self.connection.dashboard
 
     def state(self) -> dict[str, Any]:
         """The next RTDE data package (fresh, waits at most ``timeout_s``)."""
@@ -270,10 +252,10 @@ class URArm:
     ) -> DeployResult:
         """Check ``motion`` against ``report`` and the arm (the gate), then stream it.
 
-        ``motion``: the :class:`~robocritics.simulate.Execution` that
+        ``motion``: the :class:`~robocritics.execution.Execution` that
         :func:`robocritics.simulate` returned, or a
         :class:`~robocritics.trajectory.Trajectory` (e.g. :meth:`approach`);
-        ``report``: the :class:`~robocritics.report.Report` of exactly that trajectory.
+        ``report``: the :class:`~robocritics.critic.report.Report` of exactly that trajectory.
         ``allow_errors`` must be passed explicitly to deploy a report with Errors.
         ``dry_run`` does the gate, the connection checks, the resampling, the
         program text and the pacing schedule, and checks that the secondary
@@ -324,7 +306,7 @@ class URArm:
             stop=stop,
             progress=progress,
         )
-        return _Stream(self).run(
+        return _Stream(self.connection).run(
             run,
             program,
             trajectory_hash=trajectory_hash,
@@ -346,13 +328,13 @@ class URArm:
             state = rtde.wait_next(self.timeout_s)
         except RTDEValueError as exc:
             raise DeployRefused([("non_finite", str(exc))]) from None
-        with self._dash_lock:
+        with self.connection.dash_lock:
             try:
-                remote, dashboard_error = self._healthy_dashboard().is_in_remote_control(), ""
+                remote, dashboard_error = self.connection.healthy_dashboard().is_in_remote_control(), ""
             except RTDEError as exc:
                 remote, dashboard_error = None, str(exc)
             try:  # joint angles mean a pose only on the arm they were planned for
-                model, model_error = self._healthy_dashboard().robot_model(), ""
+                model, model_error = self.connection.healthy_dashboard().robot_model(), ""
             except RTDEError as exc:
                 model, model_error = None, str(exc)
         reasons = check_robot(state, plan.q[0], remote_control=remote, start_tolerance_rad=start_tolerance_rad,

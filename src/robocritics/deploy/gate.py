@@ -1,7 +1,7 @@
 """The deploy gate: what a trajectory, its report and the arm must satisfy before anything moves.
 
 Plain functions of typed inputs — a :class:`~robocritics.trajectory.Trajectory`,
-the :class:`~robocritics.report.Report` that judged it, the resampled
+the :class:`~robocritics.critic.report.Report` that judged it, the resampled
 :class:`~robocritics.deploy.stream.StreamPlan` and one RTDE state package — each
 returning the ``(cause, explanation)`` reasons it finds (empty: the rule passes).
 :meth:`robocritics.deploy.URArm.deploy` runs them and raises :class:`DeployRefused`
@@ -10,7 +10,7 @@ with every reason before it sends anything that could move the arm.
 ===================  ===========================================================
 cause                rule
 ===================  ===========================================================
-``no_report``        a :class:`~robocritics.report.Report` is required
+``no_report``        a :class:`~robocritics.critic.report.Report` is required
 ``report_errors``    the report has an Error verdict (names each critic and its
                      message); ``allow_errors=True`` overrides this rule only
 ``hash_mismatch``    ``report.trajectory_hash != trajectory.content_hash()``:
@@ -31,8 +31,9 @@ cause                rule
                      guard :func:`~robocritics.deploy.rtde.first_non_finite`);
                      no other robot rule is judged on such a state
 ``arm_model``        the dashboard's ``get robot model`` is not the arm the
-                     trajectory was planned for (``trajectory.robot_name``,
-                     e.g. a UR10e plan on a UR5e), or cannot be asked
+                     trajectory was planned for (found by its
+                     ``kinematic_hash``, e.g. a UR10e plan on a UR5e; a chain
+                     that is no bundled UR's is refused), or cannot be asked
 ``secondary_         (dry run only) the secondary interface does not accept
 interface``          connections
 ===================  ===========================================================
@@ -53,7 +54,7 @@ from robocritics.deploy.rtde import RobotMode, RuntimeState, SafetyMode, first_n
 from robocritics.deploy.stream import StreamPlan
 from robocritics.errors import DeployError
 from robocritics.robot.arms import ARMS
-from robocritics.report import Report
+from robocritics.critic.report import Report
 from robocritics.execution import Execution
 from robocritics.trajectory import Trajectory
 
@@ -168,15 +169,25 @@ def check_model(trajectory: Trajectory, reported_model: str | None, *, dashboard
     """``arm_model``: the controller is the arm ``trajectory`` was planned for.
 
     ``reported_model`` is the dashboard's answer to ``get robot model`` (``"UR3"``, ``"UR5"``, ``"UR10"``,
-    ``"UR16"``; None with ``dashboard_error`` when it could not be asked). A trajectory planned for an
-    arm robocritics does not bundle (``Robot.from_urdf``) cannot be matched and is refused too: joint
-    angles mean a pose only on the arm they were planned for.
+    ``"UR16"``; None with ``dashboard_error`` when it could not be asked). The arm is found by the
+    trajectory's ``kinematic_hash`` (:attr:`Robot.kinematic_hash`), never by its name: a trajectory whose
+    kinematics are none of the bundled UR arms' in UR's base convention (another arm, a ROS-convention UR
+    description named "ur3e") or that has no hash is refused: joint angles mean a pose only on the arm they
+    were planned for.
     """
-    spec = ARMS.get(trajectory.robot_name)
-    if spec is None:
-        known = ", ".join(ARMS)
-        return [("arm_model", f"the trajectory was planned for {trajectory.robot_name or 'an unnamed robot'!r}, "
-                              f"not one of the UR arms deploy knows ({known}); plan it with Robot.ur5e() etc.")]
+    # keyed on what the joint angles mean (Robot.kinematic_hash: flange poses in the base frame), not on the
+    # name: a URDF that calls itself "ur3e" in ROS's base convention puts the TCP on the other side of the base
+    known = ", ".join(ARMS)
+    name = (trajectory.robot_name or "an unnamed robot")[:60]  # a name from a file: clipped (repr escapes it)
+    if not trajectory.kinematic_hash:
+        return [("arm_model", f"the trajectory planned for {name!r} does not say which kinematics it was planned for "
+                              "(no kinematic_hash: written before robocritics recorded it); plan it again")]
+    matches = [arm for arm, digest in bundled_kinematic_hashes().items() if digest == trajectory.kinematic_hash]
+    if not matches:
+        return [("arm_model", f"the trajectory was planned for {name!r}, whose kinematics (hash "
+                              f"{trajectory.kinematic_hash[:20]!r}) are none of the UR arms deploy knows ({known}) in UR's "
+                              "base convention; plan it with Robot.ur5e() etc.")]
+    spec = ARMS[matches[0]]
     if reported_model is None:
         return [("arm_model", f"cannot ask the dashboard which arm this is ('get robot model'): {dashboard_error}")]
     reported = reported_model.strip().upper()
@@ -187,6 +198,17 @@ def check_model(trajectory: Trajectory, reported_model: str | None, *, dashboard
                               f"{reported_model.strip()!r} (a {spec.name} reports {spec.dashboard_model!r}); {hint}")]
     return []
 
+
+def bundled_kinematic_hashes() -> dict[str, str]:
+    """``Robot.kinematic_hash`` of each bundled UR arm, by name (computed once)."""
+    if not _HASHES:
+        from robocritics.robot.model import Robot
+
+        _HASHES.update({name: Robot.ur(name).kinematic_hash for name in ARMS})
+    return dict(_HASHES)
+
+
+_HASHES: dict[str, str] = {}
 
 ARMS_BY_DASHBOARD = {spec.dashboard_model: spec.name for spec in ARMS.values()}
 """The bundled arm's name for each dashboard ``get robot model`` answer (``"UR5"`` -> ``"ur5e"``)."""

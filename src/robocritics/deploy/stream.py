@@ -61,10 +61,11 @@ import statistics
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from robocritics.deploy.connection import URConnection
 from robocritics.deploy.dashboard import DashboardClient
 from robocritics._text import safe_text
 from robocritics.deploy.rtde import (
@@ -81,8 +82,6 @@ from robocritics.errors import DeployError, RTDEError
 from robocritics.robot.arms import UR3E
 from robocritics.trajectory import Trajectory
 
-if TYPE_CHECKING:  # pragma: no cover
-    from robocritics.deploy.arm import URArm
 
 __all__ = ["DeployFault", "DeployResult", "StreamPlan", "resample", "STATE_FIELDS", "STILL_RAD_S"]
 
@@ -310,7 +309,7 @@ def resample(trajectory: Trajectory, rate_hz: float = UR3E.control_rate_hz) -> S
         g = np.interp(ts, t, g_src)
         how = "linear"
     else:
-        from ..robot.spline import pchip
+        from ..planning.spline import pchip
 
         q = pchip(t, q_src, ts)
         g = np.clip(pchip(t, g_src, ts), g_src.min(), g_src.max())
@@ -360,8 +359,8 @@ def _safety_fault(safety_mode: Any, when: str = "") -> _Fault:
 class _DashboardMonitor:
     """Polls ``is in remote control`` while a deployment runs (its own thread)."""
 
-    def __init__(self, arm: "URArm", period_s: float) -> None:
-        self.arm = arm
+    def __init__(self, conn: URConnection, period_s: float) -> None:
+        self.conn = conn
         self.period_s = period_s
         self.fault: _Fault | None = None
         self._stop = threading.Event()
@@ -374,18 +373,18 @@ class _DashboardMonitor:
         """Ask the thread to end; wait at most ``wait_s`` (default: one dashboard timeout) [s]."""
         self._stop.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout=self.arm.timeout_s + 0.5 if wait_s is None else wait_s)
+            self._thread.join(timeout=self.conn.timeout_s + 0.5 if wait_s is None else wait_s)
 
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
             try:
-                with self.arm._dash_lock:
-                    dash = self.arm._dashboard
+                with self.conn.dash_lock:
+                    dash = self.conn.dashboard_client
                     if dash is None:
                         raise RTDEError("the dashboard connection is closed")
                     remote = dash.is_in_remote_control()
             except RTDEError as exc:
-                self.arm._dashboard_broken = True
+                self.conn.dashboard_broken = True
                 self.fault = _Fault("dashboard", f"the dashboard server stopped answering, so remote control cannot be confirmed: {exc}")
                 return
             if not remote:
@@ -448,21 +447,56 @@ def report_progress(run: _Run) -> None:
         pass
 
 
+def _result(run: _Run, program: str, sent_times: list[float], deadlines: list[float], final: dict[str, Any],
+            settle_s: float, resyncs: int, trajectory_hash: str, trajectory_samples: int) -> DeployResult:
+    """The :class:`DeployResult` of a run that finished: timing statistics of the sends, the final pose."""
+    plan = run.plan
+    period = 1.0 / plan.rate_hz
+    rate = plan.rate_hz
+    intervals = np.diff(np.asarray(sent_times))
+    perr = np.abs(intervals - period) * 1e3 if len(intervals) else np.zeros(1)
+    late = (np.asarray(sent_times) - np.asarray(deadlines)) * 1e3 if sent_times else np.zeros(1)
+    final_q = tuple(float(v) for v in final["actual_q"])
+    return DeployResult(
+        samples_sent=len(sent_times),
+        trajectory_samples=trajectory_samples,
+        rate_hz=rate,
+        duration_s=float(sent_times[-1] - sent_times[0]) if sent_times else 0.0,
+        trajectory_duration_s=float(plan.time[-1]),
+        period_error_median_ms=float(statistics.median(perr.tolist())),
+        period_error_p99_ms=_percentile(perr.tolist(), 99),
+        period_error_max_ms=float(np.max(perr)),
+        lateness_p99_ms=_percentile(late.tolist(), 99),
+        max_tracking_error_rad=run.max_err,
+        final_q=final_q,
+        final_error_rad=float(np.max(np.abs(np.asarray(final_q) - plan.q[-1]))),
+        settle_s=settle_s,
+        resyncs=resyncs,
+        data_packages=run.packages,
+        trajectory_hash=trajectory_hash,
+        session=run.session,
+        dry_run=False,
+        program=program,
+        planned_setpoints=len(plan),
+    )
+
+
 # ---------------------------------------------------------------------------- the stream
 
 
 class _Stream:
-    """One streaming run on a connected :class:`~robocritics.deploy.URArm` (its connections, its sequence counter)."""
+    """One streaming run over a connected :class:`~robocritics.deploy.connection.URConnection` (a
+    :class:`~robocritics.deploy.URArm`'s channels and its sequence counter)."""
 
-    def __init__(self, arm: "URArm") -> None:
-        self.arm = arm
+    def __init__(self, conn: URConnection) -> None:
+        self.conn = conn
 
 
     def _send(self, run: _Run, q: np.ndarray, opening: float, *, done: bool = False, bump: bool = True) -> None:
         if bump:
-            self.arm._seq = ((self.arm._seq + run.step + 2**31) % 2**32) - 2**31
+            self.conn.seq = ((self.conn.seq + run.step + 2**31) % 2**32) - 2**31
         try:
-            self.arm.rtde.send(setpoint(self.arm._seq, q, opening, done=done, session=run.session), self.arm._inputs)
+            self.conn.rtde.send(setpoint(self.conn.seq, q, opening, done=done, session=run.session), self.conn.inputs)
         except RTDEError as exc:
             raise _rtde_fault(exc) from None
         run.sent_any = True
@@ -470,18 +504,18 @@ class _Stream:
         run.last_opening = opening
 
     def _collect_messages(self, run: _Run) -> None:
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         if rtde is None:
             return
         for m in rtde.messages():
-            self.arm._messages.append(m)
+            self.conn.messages.append(m)
             if m.level <= MessageLevel.WARNING and len(run.messages) < MAX_KEPT_MESSAGES:
                 run.messages.append(safe_text(f"{m.level_name} [{m.source}] {m.message}", 600))
 
     def _check(self, run: _Run, monitor: _DashboardMonitor | None, now: float, silence_timeout_s: float,
                min_rate: float) -> None:
         """Raise _Fault if anything is wrong; process every data package received since the last check."""
-        rtde = self.arm.rtde
+        rtde = self.conn.rtde
         if run.stop is not None and run.stop.is_set():
             raise _Fault("stop_requested", "stopped on request (Stop)")
         if monitor is not None and monitor.fault is not None:
@@ -546,7 +580,7 @@ class _Stream:
     def _drain(self) -> list[dict[str, Any]]:
         """The data packages received since the last call; an RTDE error (non-finite value, flood, drop) is a fault."""
         try:
-            return self.arm.rtde.drain()
+            return self.conn.rtde.drain()
         except RTDEError as exc:
             raise _rtde_fault(exc) from None
 
@@ -562,12 +596,12 @@ class _Stream:
         span = timestamp_s - run.rate_ts0
         if span < STREAM_RATE_WINDOW_S:
             return
-        expected = self.arm._out_freq * span
+        expected = self.conn.out_freq * span
         if not run.rate_n >= min_rate * expected:
             raise _Fault(
                 "controller_slow",
                 f"the controller sent {run.rate_n} data packages in {span:.3f} s of its own time "
-                f"({run.rate_n / span:.0f} Hz, expected {self.arm._out_freq:g} Hz; minimum {min_rate:.0%}): "
+                f"({run.rate_n / span:.0f} Hz, expected {self.conn.out_freq:g} Hz; minimum {min_rate:.0%}): "
                 "it drops packages or is throttled",
             )
         run.rate_ts0, run.rate_n = timestamp_s, 0
@@ -588,174 +622,28 @@ class _Stream:
         monitor_period_s: float,
         spin_s: float,
     ) -> DeployResult:
-        rtde = self.arm.rtde
-        plan = run.plan
-        period = 1.0 / plan.rate_hz
-        rate = plan.rate_hz
+        """The stream in its phases: start (hold the first setpoint until the program streams with our session),
+        stream (every setpoint on an absolute schedule), settle (hold the last until the arm is there), finish
+        (the done command until the program ends); any fault stops the arm (:meth:`_fail`)."""
+        rtde = self.conn.rtde
+        period = 1.0 / run.plan.rate_hz
         try:
             rtde.drain()
         except RTDEError:
             pass  # the first check below reports it, with the stop path
         self._collect_messages(run)
         run.messages.clear()
-        monitor = _DashboardMonitor(self.arm, monitor_period_s)
+        monitor = _DashboardMonitor(self.conn, monitor_period_s)
         monitor.start()
-        sent_times: list[float] = []
-        deadlines: list[float] = []
-        settle_s = 0.0
-        resyncs = 0
-        resync_after_s = RESYNC_AFTER_PERIODS * period
 
         def check(now: float) -> None:
             self._check(run, monitor, now, silence_timeout_s, min_data_rate_fraction)
 
         try:
-            # ---- hold the first setpoint, send the program, wait until it streams with our session
-            q0, g0 = plan.q[0], float(plan.gripper_opening_m[0])
-            if rtde.data_fault is not None:  # nothing is sent after a value that is not a number
-                raise _rtde_fault(rtde.data_fault)
-            try:
-                state_before = rtde.latest().get(OUTPUT_FIELDS[1])
-            except RTDEError as exc:
-                raise _rtde_fault(exc) from None
-            self._send(run, q0, g0)
-            first_hold = self.arm._seq
-            sender_error: list[BaseException] = []
-
-            def send_it() -> None:
-                try:
-                    send_program(self.arm.host, program, self.arm.secondary_port, timeout_s=self.arm.timeout_s)
-                except BaseException as exc:  # reported by the streaming thread
-                    sender_error.append(exc)
-
-            sender: threading.Thread | None = None
-            t_next = time.perf_counter()
-            give_up = t_next + start_timeout_s
-            while True:
-                t_next += period
-                delay = t_next - time.perf_counter()
-                if delay > 0:
-                    time.sleep(delay)
-                elif delay < -0.05:
-                    t_next = time.perf_counter()
-                self._send(run, q0, g0)
-                now = time.perf_counter()
-                check(now)
-                self._collect_messages(run)
-                if sender is None and _holds_ours(run.last_state.get(SEQ_ECHO_FIELD), first_hold, self.arm._seq):
-                    # the controller has our first setpoint in its registers: the program will read it, not zeros
-                    sender = threading.Thread(target=send_it, name="urarm-send-program", daemon=True)
-                    sender.start()
-                if sender_error:
-                    raise _Fault("program_not_started", f"sending the program failed: {sender_error[0]}")
-                st = run.last_state
-                if st:
-                    pstate = st[OUTPUT_FIELDS[1]]
-                    if (
-                        st["runtime_state"] == RuntimeState.PLAYING
-                        and pstate == ProgramState.STREAMING
-                        and st[OUTPUT_FIELDS[2]] == run.session
-                    ):
-                        break
-                    if pstate == ProgramState.START_REJECTED and state_before != ProgramState.START_REJECTED:
-                        raise _Fault("start_rejected", "the program refused to start: the first setpoint is too far from the actual joint positions")
-                if sender is not None and not sender.is_alive() and run.messages and any(
-                    m.startswith(("ERROR", "EXCEPTION")) for m in run.messages
-                ):
-                    raise _Fault("program_not_started", "the controller reported an error after the program was sent")
-                if now > give_up:
-                    if sender is None:
-                        raise _Fault(
-                            "program_not_started",
-                            f"the controller did not echo the held setpoint ({SEQ_ECHO_FIELD}) within start_timeout_s "
-                            f"{start_timeout_s:g} s; the program was not sent",
-                        )
-                    raise _Fault(
-                        "program_not_started",
-                        f"the program did not report STREAMING with session {run.session} within start_timeout_s "
-                        f"{start_timeout_s:g} s (last state {st.get(OUTPUT_FIELDS[1]) if st else None}, runtime "
-                        f"{st.get('runtime_state') if st else None})",
-                    )
-            if sender is not None:
-                sender.join(timeout=self.arm.timeout_s)
-
-            # ---- stream with absolute deadlines
-            run.phase = "streaming"
-            t0 = time.perf_counter() + period
-            n = len(plan)
-            for k in range(n):
-                deadline = t0 + k * period
-                remaining = deadline - time.perf_counter()
-                if remaining > spin_s:
-                    time.sleep(remaining - spin_s)
-                elif remaining < -resync_after_s:
-                    # far behind (the host stalled): shift the schedule instead of bursting the missed
-                    # setpoints, which the controller would see as one jump of the target
-                    t0 -= remaining
-                    deadline -= remaining
-                    resyncs += 1
-                while time.perf_counter() < deadline:
-                    pass
-                run.k = k
-                self._send(run, plan.q[k], float(plan.gripper_opening_m[k]))
-                now = time.perf_counter()
-                sent_times.append(now)
-                deadlines.append(deadline)
-                check(now)
-            self._collect_messages(run)
-            if run.progress is not None:
-                report_progress(run)
-
-            # ---- hold the final setpoint until the arm settles
-            run.phase = "settling"
-            q_end, g_end = plan.q[-1], float(plan.gripper_opening_m[-1])
-            t_settle = time.perf_counter()
-            t_next = sent_times[-1] if sent_times else t_settle
-            while True:
-                t_next += period
-                delay = t_next - time.perf_counter()
-                if delay > 0:
-                    time.sleep(delay)
-                self._send(run, q_end, g_end)
-                now = time.perf_counter()
-                check(now)
-                st = run.last_state
-                if st and float(np.max(np.abs(np.asarray(st["actual_q"]) - q_end))) <= settle_tolerance_rad:
-                    break
-                if now - t_settle >= settle_timeout_s:
-                    break
-            settle_s = time.perf_counter() - t_settle
-
-            # ---- done: the program stopj's and ends
-            run.phase = "finishing"
-            monitor.stop(wait_s=0.0)
-            end_by = time.perf_counter() + stop_timeout_s
-            final = None
-            while True:
-                self._send(run, q_end, g_end, done=True)
-                time.sleep(period)
-                now = time.perf_counter()
-                if not rtde.connected:
-                    raise _Fault("connection_drop", "the RTDE connection failed while the program was finishing")
-                packages = self._drain()
-                run.packages += len(packages)
-                for st in packages:
-                    if st["safety_mode"] != SafetyMode.NORMAL:
-                        raise _safety_fault(st["safety_mode"], " while finishing")
-                    if st["runtime_state"] == RuntimeState.STOPPED and max(abs(v) for v in st["actual_qd"]) < STILL_RAD_S:
-                        final = st
-                        break
-                    run.last_state = st
-                if final is not None:
-                    break
-                if rtde.age_s() > silence_timeout_s:
-                    raise _Fault("controller_silent", f"no RTDE data package for {rtde.age_s():.3f} s while the program was finishing")
-                if now > end_by:
-                    raise _Fault(
-                        "program_did_not_finish",
-                        f"the program did not end within stop_timeout_s {stop_timeout_s:g} s after the done command",
-                    )
-            self._collect_messages(run)
+            self._start(run, program, check, period, start_timeout_s)
+            sent_times, deadlines, resyncs = self._stream(run, check, period, spin_s)
+            settle_s = self._settle(run, check, period, sent_times, settle_tolerance_rad, settle_timeout_s)
+            final = self._finish(run, monitor, period, stop_timeout_s, silence_timeout_s)
         except _Fault as fault:
             raise self._fail(run, fault, monitor, stop_timeout_s, silence_timeout_s) from None
         except RTDEError as exc:  # a read outside the checks above: the same stop
@@ -766,33 +654,181 @@ class _Stream:
             raise
         finally:
             monitor.stop(wait_s=0.1)
+        return _result(run, program, sent_times, deadlines, final, settle_s, resyncs, trajectory_hash,
+                       trajectory_samples)  # fmt: skip
 
-        intervals = np.diff(np.asarray(sent_times))
-        perr = np.abs(intervals - period) * 1e3 if len(intervals) else np.zeros(1)
-        late = (np.asarray(sent_times) - np.asarray(deadlines)) * 1e3 if sent_times else np.zeros(1)
-        final_q = tuple(float(v) for v in final["actual_q"])
-        return DeployResult(
-            samples_sent=len(sent_times),
-            trajectory_samples=trajectory_samples,
-            rate_hz=rate,
-            duration_s=float(sent_times[-1] - sent_times[0]) if sent_times else 0.0,
-            trajectory_duration_s=float(plan.time[-1]),
-            period_error_median_ms=float(statistics.median(perr.tolist())),
-            period_error_p99_ms=_percentile(perr.tolist(), 99),
-            period_error_max_ms=float(np.max(perr)),
-            lateness_p99_ms=_percentile(late.tolist(), 99),
-            max_tracking_error_rad=run.max_err,
-            final_q=final_q,
-            final_error_rad=float(np.max(np.abs(np.asarray(final_q) - plan.q[-1]))),
-            settle_s=settle_s,
-            resyncs=resyncs,
-            data_packages=run.packages,
-            trajectory_hash=trajectory_hash,
-            session=run.session,
-            dry_run=False,
-            program=program,
-            planned_setpoints=len(plan),
-        )
+    def _start(self, run: _Run, program: str, check: Callable[[float], None], period: float,
+               start_timeout_s: float) -> None:
+        """Hold the first setpoint, send the program once the controller echoes it, wait until it streams with
+        our session."""
+        rtde, plan = self.conn.rtde, run.plan
+        # ---- hold the first setpoint, send the program, wait until it streams with our session
+        q0, g0 = plan.q[0], float(plan.gripper_opening_m[0])
+        if rtde.data_fault is not None:  # nothing is sent after a value that is not a number
+            raise _rtde_fault(rtde.data_fault)
+        try:
+            state_before = rtde.latest().get(OUTPUT_FIELDS[1])
+        except RTDEError as exc:
+            raise _rtde_fault(exc) from None
+        self._send(run, q0, g0)
+        first_hold = self.conn.seq
+        sender_error: list[BaseException] = []
+
+        def send_it() -> None:
+            try:
+                send_program(self.conn.host, program, self.conn.secondary_port, timeout_s=self.conn.timeout_s)
+            except BaseException as exc:  # reported by the streaming thread
+                sender_error.append(exc)
+
+        sender: threading.Thread | None = None
+        t_next = time.perf_counter()
+        give_up = t_next + start_timeout_s
+        while True:
+            t_next += period
+            delay = t_next - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            elif delay < -0.05:
+                t_next = time.perf_counter()
+            self._send(run, q0, g0)
+            now = time.perf_counter()
+            check(now)
+            self._collect_messages(run)
+            if sender is None and _holds_ours(run.last_state.get(SEQ_ECHO_FIELD), first_hold, self.conn.seq):
+                # the controller has our first setpoint in its registers: the program will read it, not zeros
+                sender = threading.Thread(target=send_it, name="urarm-send-program", daemon=True)
+                sender.start()
+            if sender_error:
+                raise _Fault("program_not_started", f"sending the program failed: {sender_error[0]}")
+            st = run.last_state
+            if st:
+                pstate = st[OUTPUT_FIELDS[1]]
+                if (
+                    st["runtime_state"] == RuntimeState.PLAYING
+                    and pstate == ProgramState.STREAMING
+                    and st[OUTPUT_FIELDS[2]] == run.session
+                ):
+                    break
+                if pstate == ProgramState.START_REJECTED and state_before != ProgramState.START_REJECTED:
+                    raise _Fault("start_rejected", "the program refused to start: the first setpoint is too far from the actual joint positions")
+            if sender is not None and not sender.is_alive() and run.messages and any(
+                m.startswith(("ERROR", "EXCEPTION")) for m in run.messages
+            ):
+                raise _Fault("program_not_started", "the controller reported an error after the program was sent")
+            if now > give_up:
+                if sender is None:
+                    raise _Fault(
+                        "program_not_started",
+                        f"the controller did not echo the held setpoint ({SEQ_ECHO_FIELD}) within start_timeout_s "
+                        f"{start_timeout_s:g} s; the program was not sent",
+                    )
+                raise _Fault(
+                    "program_not_started",
+                    f"the program did not report STREAMING with session {run.session} within start_timeout_s "
+                    f"{start_timeout_s:g} s (last state {st.get(OUTPUT_FIELDS[1]) if st else None}, runtime "
+                    f"{st.get('runtime_state') if st else None})",
+                )
+        if sender is not None:
+            sender.join(timeout=self.conn.timeout_s)
+
+    def _stream(self, run: _Run, check: Callable[[float], None], period: float,
+                spin_s: float) -> tuple[list[float], list[float], int]:
+        """Every setpoint at its absolute deadline: ``(send times, deadlines, resyncs)`` (perf_counter s)."""
+        plan = run.plan
+        sent_times: list[float] = []
+        deadlines: list[float] = []
+        resyncs = 0
+        resync_after_s = RESYNC_AFTER_PERIODS * period
+        # ---- stream with absolute deadlines
+        run.phase = "streaming"
+        t0 = time.perf_counter() + period
+        n = len(plan)
+        for k in range(n):
+            deadline = t0 + k * period
+            remaining = deadline - time.perf_counter()
+            if remaining > spin_s:
+                time.sleep(remaining - spin_s)
+            elif remaining < -resync_after_s:
+                # far behind (the host stalled): shift the schedule instead of bursting the missed
+                # setpoints, which the controller would see as one jump of the target
+                t0 -= remaining
+                deadline -= remaining
+                resyncs += 1
+            while time.perf_counter() < deadline:
+                pass
+            run.k = k
+            self._send(run, plan.q[k], float(plan.gripper_opening_m[k]))
+            now = time.perf_counter()
+            sent_times.append(now)
+            deadlines.append(deadline)
+            check(now)
+        self._collect_messages(run)
+        if run.progress is not None:
+            report_progress(run)
+        return sent_times, deadlines, resyncs
+
+    def _settle(self, run: _Run, check: Callable[[float], None], period: float, sent_times: list[float],
+                settle_tolerance_rad: float, settle_timeout_s: float) -> float:
+        """Hold the final setpoint until the arm is within ``settle_tolerance_rad`` of it (or the timeout); the
+        time it took [s]."""
+        plan = run.plan
+        # ---- hold the final setpoint until the arm settles
+        run.phase = "settling"
+        q_end, g_end = plan.q[-1], float(plan.gripper_opening_m[-1])
+        t_settle = time.perf_counter()
+        t_next = sent_times[-1] if sent_times else t_settle
+        while True:
+            t_next += period
+            delay = t_next - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            self._send(run, q_end, g_end)
+            now = time.perf_counter()
+            check(now)
+            st = run.last_state
+            if st and float(np.max(np.abs(np.asarray(st["actual_q"]) - q_end))) <= settle_tolerance_rad:
+                break
+            if now - t_settle >= settle_timeout_s:
+                break
+        settle_s = time.perf_counter() - t_settle
+        return settle_s
+
+    def _finish(self, run: _Run, monitor: _DashboardMonitor, period: float, stop_timeout_s: float,
+                silence_timeout_s: float) -> dict[str, Any]:
+        """Send the done command until the program has ended and the arm stands still; that state package."""
+        rtde, plan = self.conn.rtde, run.plan
+        q_end, g_end = plan.q[-1], float(plan.gripper_opening_m[-1])
+        # ---- done: the program stopj's and ends
+        run.phase = "finishing"
+        monitor.stop(wait_s=0.0)
+        end_by = time.perf_counter() + stop_timeout_s
+        final = None
+        while True:
+            self._send(run, q_end, g_end, done=True)
+            time.sleep(period)
+            now = time.perf_counter()
+            if not rtde.connected:
+                raise _Fault("connection_drop", "the RTDE connection failed while the program was finishing")
+            packages = self._drain()
+            run.packages += len(packages)
+            for st in packages:
+                if st["safety_mode"] != SafetyMode.NORMAL:
+                    raise _safety_fault(st["safety_mode"], " while finishing")
+                if st["runtime_state"] == RuntimeState.STOPPED and max(abs(v) for v in st["actual_qd"]) < STILL_RAD_S:
+                    final = st
+                    break
+                run.last_state = st
+            if final is not None:
+                break
+            if rtde.age_s() > silence_timeout_s:
+                raise _Fault("controller_silent", f"no RTDE data package for {rtde.age_s():.3f} s while the program was finishing")
+            if now > end_by:
+                raise _Fault(
+                    "program_did_not_finish",
+                    f"the program did not end within stop_timeout_s {stop_timeout_s:g} s after the done command",
+                )
+        self._collect_messages(run)
+        return final
 
     # ------------------------------------------------------------------ stopping
 
@@ -803,7 +839,7 @@ class _Stream:
         stopped, how = self._stop_arm(run, stop_timeout_s, silence_timeout_s)
         self._collect_messages(run)
         actual = None
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         if rtde is not None:
             try:
                 latest = rtde.latest(allow_stale=True)
@@ -833,7 +869,7 @@ class _Stream:
 
     def _stop_arm(self, run: _Run, stop_timeout_s: float, silence_timeout_s: float) -> tuple[bool, str]:
         """Stop the program and the arm: the done command over RTDE, else the dashboard ``stop``. Bounded."""
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         deadline = time.monotonic() + stop_timeout_s
         steps: list[str] = []
         rtde_ok = rtde is not None and rtde.connected
@@ -876,13 +912,13 @@ class _Stream:
         return False, "; ".join(steps)
 
     def _dashboard_stop(self, timeout_s: float) -> str:
-        timeout_s = min(timeout_s, self.arm.timeout_s)
-        acquired = self.arm._dash_lock.acquire(timeout=min(0.05, timeout_s))  # busy (monitor stuck)? use a fresh connection
+        timeout_s = min(timeout_s, self.conn.timeout_s)
+        acquired = self.conn.dash_lock.acquire(timeout=min(0.05, timeout_s))  # busy (monitor stuck)? use a fresh connection
         try:
-            dash = self.arm._dashboard if acquired and not self.arm._dashboard_broken else None
+            dash = self.conn.dashboard_client if acquired and not self.conn.dashboard_broken else None
             fresh = None
             if dash is None:
-                fresh = DashboardClient(self.arm.host, self.arm.dashboard_port, timeout_s=max(0.1, timeout_s))
+                fresh = DashboardClient(self.conn.host, self.conn.dashboard_port, timeout_s=max(0.1, timeout_s))
                 try:
                     fresh.connect()
                 except RTDEError as exc:
@@ -892,19 +928,19 @@ class _Stream:
                 ran = dash.stop()
                 return "dashboard stop sent" + ("" if ran else " (no program was running)")
             except RTDEError as exc:
-                if dash is self.arm._dashboard:
-                    self.arm._dashboard_broken = True
+                if dash is self.conn.dashboard_client:
+                    self.conn.dashboard_broken = True
                 return f"dashboard stop failed ({exc})"
             finally:
                 if fresh is not None:
                     fresh.close()
         finally:
             if acquired:
-                self.arm._dash_lock.release()
+                self.conn.dash_lock.release()
 
     def _confirm_stopped(self, deadline: float, silence_timeout_s: float) -> bool | None:
         """True once runtime_state is not PLAYING (RTDE, else dashboard ``running``); None if unknown."""
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         while time.monotonic() < deadline:
             if rtde is not None and rtde.connected and rtde.data_fault is None and rtde.age_s() <= silence_timeout_s:
                 try:
@@ -917,11 +953,11 @@ class _Stream:
                 continue
             break
         # RTDE is gone or silent: ask the dashboard
-        acquired = self.arm._dash_lock.acquire(timeout=max(0.0, min(0.05, deadline - time.monotonic())))
+        acquired = self.conn.dash_lock.acquire(timeout=max(0.0, min(0.05, deadline - time.monotonic())))
         if not acquired:
             return None
         try:
-            dash = self.arm._dashboard if not self.arm._dashboard_broken else None
+            dash = self.conn.dashboard_client if not self.conn.dashboard_broken else None
             if dash is None:
                 return None
             while time.monotonic() < deadline:
@@ -929,15 +965,15 @@ class _Stream:
                     if not dash.running():
                         return True
                 except RTDEError:
-                    self.arm._dashboard_broken = True
+                    self.conn.dashboard_broken = True
                     return None
                 time.sleep(0.02)
             return False
         finally:
-            self.arm._dash_lock.release()
+            self.conn.dash_lock.release()
 
     def _wait_still(self, deadline: float) -> bool:
-        rtde = self.arm._rtde
+        rtde = self.conn.rtde_client
         if rtde is None or not rtde.connected:
             return False
         while time.monotonic() < deadline:

@@ -10,10 +10,10 @@ from typing import TYPE_CHECKING
 from .._lazy import lazy_exports
 
 _EXPORTS = {
-    "ChatModel": "robocritics.llm.client",
-    "EmbeddingModel": "robocritics.llm.client",
-    "OpenAICompatible": "robocritics.llm.client",
-    "LLMArgumentError": "robocritics.llm.client",
+    "ChatModel": "robocritics.llm.protocol",
+    "EmbeddingModel": "robocritics.llm.protocol",
+    "OpenAICompatible": "robocritics.llm.providers.openai_compatible",
+    "LLMArgumentError": "robocritics.llm.protocol",
     "InteractionMemory": "robocritics.llm.memory",
     "Interaction": "robocritics.llm.memory",
     "InteractionMemoryError": "robocritics.llm.memory",
@@ -34,7 +34,8 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .client import ChatModel, EmbeddingModel, LLMArgumentError, OpenAICompatible
+    from .protocol import ChatModel, EmbeddingModel, LLMArgumentError
+    from .providers.openai_compatible import OpenAICompatible
     from .loop import Attempt, Loop, NothingToFixError
     from .memory import Interaction, InteractionMemory, InteractionMemoryError
     from .prompts import PromptError, extract_code, fix_prompt, runtime_feedback, system_prompt

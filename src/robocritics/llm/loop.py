@@ -9,7 +9,7 @@
     best = loop.run("sort the apples by ripeness", max_attempts=5)   # iterate automatically
 
 Every model reply becomes an :class:`Attempt`: its program is extracted,
-simulated (:func:`~robocritics.simulate.simulate`) and critiqued
+simulated (:func:`~robocritics.pipeline.simulate`) and critiqued
 (:func:`~robocritics.critic.critique`), and the attempt is stored in the
 interaction memory as ``(request, program, feedback, score)``.
 
@@ -96,14 +96,16 @@ from __future__ import annotations
 import difflib
 import logging
 import os
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
 from ..errors import CriticError, LLMError, PlanningError, ProgramError, RoboCriticsError, TrajectoryError
-from ..report import format_score
-from .client import ChatModel, ContextLengthError
-from .limits import DEFAULT_MAX_TOKENS, MAX_MESSAGE_CHARS, MIN_REPLY_TOKENS, clean_text, cut_text
+from ..critic.report import format_score
+from .protocol import ChatModel, ContextLengthError
+from .fitting import MIN_CONTEXT_TOKENS, fit_messages
+from .options import AUTOMATION_LEVELS, Automation, LoopOptions
+from .limits import DEFAULT_MAX_TOKENS, MAX_MESSAGE_CHARS, clean_text, cut_text
 from .memory import MAX_SEARCH_K, SOURCES, Interaction, InteractionMemory  # SOURCES: who wrote a program
 from .prompts import (
     REVIEW_INSTRUCTION,
@@ -123,35 +125,19 @@ from .prompts import (
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic import Report
     from ..repair import Change
-    from ..simulate import Execution
+    from ..execution import Execution
     from ..robot.model import Robot
     from ..scene import Scene
 
-__all__ = ["Attempt", "Loop", "NothingToFixError", "AUTOMATION_LEVELS", "SOURCES"]
+__all__ = ["Attempt", "Loop", "LoopOptions", "NothingToFixError", "AUTOMATION_LEVELS", "SOURCES"]
 
-AUTOMATION_LEVELS = ("manual", "guided", "auto")
-Automation = Literal["manual", "guided", "auto"]
 #: How the loop asks for the next revision in :meth:`Loop.run`.
 FeedbackMode = Literal["critics", "review"]
 
-Approve = Callable[[str, str], bool]
-
 log = logging.getLogger("robocritics.llm")
 
-#: User/assistant messages sent per call: the last few revisions, small enough for a small model's context.
-DEFAULT_MAX_HISTORY_MESSAGES = 12
-#: Model replies per run: the paper's limit of five attempts per task.
-DEFAULT_MAX_ATTEMPTS = 5
 # Memory hits fetched per example wanted: attempts at the same request share a text, only the best one is kept.
 _HITS_PER_EXAMPLE = 4
-#: Tokens of the context left unused by a fitted prompt: the estimate's error on short texts, chat-template tokens.
-CONTEXT_MARGIN_TOKENS = 64
-#: Smallest context a loop accepts, tokens: the minimal prompt of a built-in scene is ~1,000 tokens plus a reply.
-MIN_CONTEXT_TOKENS = 512
-# History lengths tried, in messages, when the prompt does not fit (0: only the new message, the task restated).
-_FITTING_HISTORY = (8, 4, 2, 0)
-# Characters of the new message's feedback always kept when it is cut to fit.
-_MIN_FEEDBACK_CHARS = 600
 
 
 class NothingToFixError(RoboCriticsError):
@@ -274,8 +260,8 @@ class Loop:
 
     Arguments:
 
-    * ``model`` — a :class:`~robocritics.llm.client.ChatModel` (e.g.
-      :class:`~robocritics.llm.client.OpenAICompatible`).
+    * ``model`` — a :class:`~robocritics.llm.providers.openai_compatible.ChatModel` (e.g.
+      :class:`~robocritics.llm.providers.openai_compatible.OpenAICompatible`).
     * ``scene`` — the :class:`~robocritics.scene.Scene`; ``robot`` defaults to the UR3e.
     * ``critics`` / ``params`` — which critics run and their thresholds, as in
       :func:`~robocritics.critic.critique` (default: every installed critic).
@@ -288,6 +274,11 @@ class Loop:
       are not. Each request retrieves the ``memory_k`` most relevant past
       interactions (other than this loop's own; the best-scored one per
       request text) into the system prompt.
+    * ``goals`` — task goals (``"green_apple in white_box"`` or :class:`~robocritics.goals.Goal`) that
+      every attempt's ``task_outcome`` critic checks on the final scene, beside the program's own
+      ``expect(...)`` calls (in-process checking; a ``simulate`` hook checks its own).
+    * ``options`` — a :class:`~robocritics.llm.options.LoopOptions` of the rest, which may also be given one by
+      one as keywords (``Loop(model, scene, automation="auto", max_attempts=3)``):
     * ``automation`` — ``"manual"``, ``"guided"`` or ``"auto"`` (module docstring).
     * ``approve`` — ``approve(program, diff) -> bool`` for revisions, the model's and the repairs' (module docstring).
     * ``repairs`` — apply the critics' own repairs before asking the model to fix (module docstring);
@@ -304,17 +295,14 @@ class Loop:
     * ``on_attempt`` — called with each :class:`Attempt` as soon as it is made.
     * ``model_options`` — keyword arguments for ``model.complete`` (temperature, seed ...).
     * ``sample_rate_hz`` — trajectory sample rate for simulation, Hz (default:
-      :func:`~robocritics.simulate.simulate`'s).
+      :func:`~robocritics.pipeline.simulate`'s).
     * ``context_tokens`` — the model's context window in tokens, to fit every
       prompt to (module docstring); None: unknown until the server refuses one.
-    * ``goals`` — task goals (``"green_apple in white_box"`` or :class:`~robocritics.goals.Goal`) that
-      every attempt's ``task_outcome`` critic checks on the final scene, beside the program's own
-      ``expect(...)`` calls (in-process checking; a ``simulate`` hook checks its own).
     * ``simulate`` — ``simulate(program) -> (Execution, Report)`` to check a
       program elsewhere (e.g. :meth:`robocritics.viz.studio.worker.Evaluator.loop_simulate`,
       in a resource-limited process); it raises :class:`ProgramError`,
       :class:`PlanningError`, :class:`TrajectoryError` or :class:`CriticError`
-      as the in-process check does. None: :func:`~robocritics.simulate.simulate`
+      as the in-process check does. None: :func:`~robocritics.pipeline.simulate`
       and :func:`~robocritics.critic.critique` here, with ``robot``,
       ``critics``, ``params`` and ``sample_rate_hz``.
     """
@@ -327,40 +315,16 @@ class Loop:
         critics: Iterable[str] | str | None = None,
         params: Mapping[str, Any] | None = None,
         memory: InteractionMemory | str | os.PathLike[str] | None = None,
-        automation: Automation = "guided",
-        approve: Approve | None = None,
-        session: str | None = None,
-        max_history_messages: int = DEFAULT_MAX_HISTORY_MESSAGES,
         *,
-        max_attempts: int = DEFAULT_MAX_ATTEMPTS,
-        memory_k: int = 3,
-        embedded_rules: bool = False,
-        on_attempt: Callable[[Attempt], None] | None = None,
-        model_options: Mapping[str, Any] | None = None,
-        sample_rate_hz: float | None = None,
-        context_tokens: int | None = None,
-        simulate: Callable[[str], tuple[Execution, Report]] | None = None,
         goals: Iterable[Any] | None = None,
-        repairs: bool | Callable[[str], Any] = True,
+        options: LoopOptions | None = None,
+        **keywords: Any,
     ):
         from ..critic import select_critics
 
         if not callable(getattr(model, "complete", None)):
             raise TypeError(f"model must be a ChatModel (with a complete(messages) method), got {type(model).__name__}")
-        if automation not in AUTOMATION_LEVELS:
-            raise ValueError(f"automation must be one of {', '.join(AUTOMATION_LEVELS)}, got {automation!r}")
-        if int(max_history_messages) < 2:
-            raise ValueError(f"max_history_messages must be at least 2, got {max_history_messages}")
-        if int(max_attempts) < 1:
-            raise ValueError(f"max_attempts must be at least 1, got {max_attempts}")
-        if int(memory_k) < 0:
-            raise ValueError(f"memory_k must be >= 0, got {memory_k}")
-        if context_tokens is not None and int(context_tokens) < MIN_CONTEXT_TOKENS:
-            raise ValueError(f"context_tokens must be at least {MIN_CONTEXT_TOKENS}, got {context_tokens}")
-        if approve is not None and not callable(approve):
-            raise TypeError("approve must be a callable approve(program, diff) -> bool")
-        if simulate is not None and not callable(simulate):
-            raise TypeError("simulate must be a callable simulate(program) -> (Execution, Report)")
+        options = (options or LoopOptions()).updated(**keywords)  # the options given one by one, by keyword
         if isinstance(critics, str):
             critics = [c.strip() for c in critics.split(",") if c.strip()]
         selected = select_critics(critics, params)  # fail fast on unknown critics / parameters
@@ -374,20 +338,21 @@ class Loop:
         self.memory: InteractionMemory | None = (
             InteractionMemory(memory) if self._owns_memory else memory  # type: ignore[arg-type]
         )
-        self.session = session or InteractionMemory.new_session_id()
-        self.automation: Automation = automation
-        self.approve = approve
-        self.repairs = bool(repairs)
-        self._repair_hook = repairs if callable(repairs) else None
-        self.max_history_messages = int(max_history_messages)
-        self.max_attempts = int(max_attempts)
-        self.memory_k = int(memory_k)
-        self.embedded_rules = bool(embedded_rules)
-        self.on_attempt = on_attempt
-        self.model_options = dict(model_options or {})
-        self.sample_rate_hz = None if sample_rate_hz is None else float(sample_rate_hz)
-        self.context_tokens: int | None = None if context_tokens is None else int(context_tokens)
-        self._simulate = simulate
+        self.options = options
+        self.session = options.session or InteractionMemory.new_session_id()
+        self.automation: Automation = options.automation
+        self.approve = options.approve
+        self.repairs = bool(options.repairs)
+        self._repair_hook = options.repairs if callable(options.repairs) else None
+        self.max_history_messages = int(options.max_history_messages)
+        self.max_attempts = int(options.max_attempts)
+        self.memory_k = int(options.memory_k)
+        self.embedded_rules = bool(options.embedded_rules)
+        self.on_attempt = options.on_attempt
+        self.model_options = dict(options.model_options or {})
+        self.sample_rate_hz = None if options.sample_rate_hz is None else float(options.sample_rate_hz)
+        self.context_tokens: int | None = None if options.context_tokens is None else int(options.context_tokens)
+        self._simulate = options.simulate
         from ..goals import parse_goals
 
         self.goals = parse_goals(goals, scene) if goals else []  # a bad goal fails here, before any model call
@@ -411,9 +376,9 @@ class Loop:
     @property
     def robot(self) -> Robot:
         if self._robot is None:
-            from ..robot.model import Robot
+            from ..robot.model import default_robot
 
-            self._robot = Robot.ur3e()
+            self._robot = default_robot()
         return self._robot
 
     @property
@@ -635,7 +600,7 @@ class Loop:
         nothing (or fail: then the model is asked, as without repairs).
         """
         from ..repair import repair
-        from ..verdict import Flag
+        from ..critic.verdict import Flag
 
         did_not_run = self._did_not_run()  # the runtime critic's Error: e.g. an unreachable target
         if did_not_run:
@@ -765,7 +730,6 @@ class Loop:
             messages = [*self.messages(), user]
             self.last_prompt_tokens = estimate_tokens(messages)
             return messages, options
-        budget = self.context_tokens - CONTEXT_MARGIN_TOKENS
         reply_tokens = self._reply_tokens(options)
         keep_all = self.max_history_messages - 1
 
@@ -783,42 +747,13 @@ class Loop:
                 text = f"The task: {self.task}\n\n{text}"  # the task always survives
             return [{"role": "system", "content": system}, *history, {"role": "user", "content": text}]
 
-        candidates = [(n, False, keep_all) for n in range(len(self.examples), -1, -1)]
-        candidates += [(0, "compact", keep_all), (0, "minimal", keep_all)]
-        candidates += [(0, "minimal", k) for k in _FITTING_HISTORY if k < keep_all]
-        messages: list[dict[str, str]] = []
-        for n, api, keep in candidates:
-            messages = build(n, api, keep, content)
-            if estimate_tokens(messages) + reply_tokens <= budget:
-                self.last_prompt_tokens = estimate_tokens(messages)
-                return messages, options
-        # The smallest prompt still does not fit with a full reply: cut the new message, then the reply.
-        _, api, keep = candidates[-1]
-        fixed = estimate_tokens(messages) - estimate_tokens(content)
-        room_chars = int((budget - reply_tokens - fixed) * 3.0)
-        if room_chars >= _MIN_FEEDBACK_CHARS and room_chars < len(content):
-            messages = build(0, api, keep, cut_text(content, room_chars))
-        elif room_chars < len(content):
-            messages = build(0, api, keep, cut_text(content, max(_MIN_FEEDBACK_CHARS, 80)))
-        prompt = estimate_tokens(messages)
-        room = budget - prompt
-        if room >= reply_tokens:
-            self.last_prompt_tokens = prompt
-            return messages, options
-        if room >= MIN_REPLY_TOKENS:
-            log.warning(
-                "the prompt (~%d tokens) leaves %d of the %d context tokens for the reply; max_tokens lowered "
-                "from %d", prompt, room, self.context_tokens, reply_tokens,
-            )  # fmt: skip
-            options["max_tokens"] = room
-            self.last_prompt_tokens = prompt
-            return messages, options
-        raise PromptError(
-            f"the smallest prompt for this task and scene (task, short skill API, scene) is about {prompt:,} "
-            f"tokens; with {MIN_REPLY_TOKENS} tokens for the reply it needs a context of at least "
-            f"{prompt + MIN_REPLY_TOKENS + CONTEXT_MARGIN_TOKENS:,} tokens, and the model has "
-            f"{self.context_tokens:,} (context_tokens): use a model or server setting with a larger context"
-        )
+        messages, max_tokens, self.last_prompt_tokens = fit_messages(
+            build, content, context_tokens=self.context_tokens, reply_tokens=reply_tokens,
+            examples=len(self.examples), keep_all=keep_all,
+        )  # fmt: skip
+        if max_tokens is not None:
+            options["max_tokens"] = max_tokens
+        return messages, options
 
     def _interpret(self, kind: str, prompt: str, reply: str, details: Any = None) -> Attempt:
         index = len(self.attempts) + 1
@@ -888,8 +823,7 @@ class Loop:
 
     def _check(self, attempt: Attempt) -> None:
         """Simulate and critique ``attempt.program``; a failure becomes runtime feedback."""
-        from ..critic import critique
-        from ..simulate import simulate
+        from ..pipeline import check
 
         assert attempt.program is not None
         if self._simulate is not None:
@@ -901,21 +835,21 @@ class Loop:
                 return
             attempt.score = attempt.report.score
             return
+        rate = {} if self.sample_rate_hz is None else {"sample_rate_hz": self.sample_rate_hz}
         try:
-            rate = {} if self.sample_rate_hz is None else {"sample_rate_hz": self.sample_rate_hz}
-            execution = simulate(attempt.program, self.scene, self.robot, **rate)
-        except (ProgramError, PlanningError, TrajectoryError) as exc:
-            attempt.error = runtime_feedback(exc, program=attempt.program)
-            self._pending_error = attempt.error
-            return
-        attempt.execution = execution
-        try:
-            attempt.report = critique(execution, self.scene, self._selection, self.params or None, goals=self.goals)
-        except CriticError as exc:  # a critic could not judge this motion: report it, never crash the loop
+            checked = check(attempt.program, self.scene, robot=self.robot, goals=self.goals, critics=self._selection,
+                            params=self.params or None, **rate)  # fmt: skip
+        except (TrajectoryError, CriticError) as exc:  # a critic could not judge this motion: report it, never crash
             log.warning("attempt %d: %s", attempt.index, exc)
+            attempt.execution = getattr(exc, "execution", None)
             attempt.error = runtime_feedback(exc, program=attempt.program)
             self._pending_error = attempt.error
             return
+        if checked.error is not None:  # the program did not run: the model gets the error, with its line
+            attempt.error = runtime_feedback(checked.error, program=attempt.program)
+            self._pending_error = attempt.error
+            return
+        attempt.execution, attempt.report = checked
         attempt.score = attempt.report.score
 
     # --- memory and prompts ----------------------------------------------------------------------

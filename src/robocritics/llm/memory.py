@@ -92,7 +92,7 @@ import numpy as np
 from robocritics.errors import LLMError, RoboCriticsError
 from robocritics.llm import memory_guard as guard
 from robocritics.llm.bm25 import tokenize
-from robocritics.llm.client import EmbeddingModel, embedding_space_name
+from robocritics.llm.protocol import EmbeddingModel, embedding_space_name
 from robocritics.llm.limits import (
     MAX_QUERY_TERMS,
     MAX_STORED_FEEDBACK_CHARS,

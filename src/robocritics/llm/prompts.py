@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ..errors import CriticError, LLMError, PlanningError, ProgramError, RoboCriticsError
-from ..report import format_score
+from ..critic.report import format_score
 from .limits import CHARS_PER_TOKEN, MAX_FEEDBACK_CHARS, MAX_REPLY_CHARS, MAX_TASK_CHARS, clean_text, cut_text
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -117,6 +117,8 @@ def _shape_text(obj: Any) -> str:
         return f"box {_m(size[0])} x {_m(size[1])} x {_m(size[2])} m (x, y, z)"
     if obj.shape == "cylinder":
         return f"upright cylinder, radius {_m(size[0])} m, height {_m(size[1])} m"
+    if obj.shape == "mesh":
+        return f"fixture (CAD mesh, not graspable), bounding box {_m(size[0])} x {_m(size[1])} x {_m(size[2])} m, top z {_m(obj.top)} m"
     return f"sphere, radius {_m(size[0])} m"
 
 
@@ -135,6 +137,10 @@ def describe_scene(scene: "Scene") -> str:
         f"centred at (x, y) = ({_m(table.center_xy[0])}, {_m(table.center_xy[1])})."
     )
     ws = scene.workspace
+    if ws is None:  # the scene follows its robot; the prompt describes the default arm's reach
+        from ..robot.model import default_workspace
+
+        ws = default_workspace()
     lines.append(
         f"Allowed workspace: a sphere of radius {_m(ws.radius_m)} m around {_xyz(ws.center)} "
         f"(volume {ws.volume_m3:.3f} m^3); every part of the robot must stay inside it."
@@ -143,7 +149,7 @@ def describe_scene(scene: "Scene") -> str:
     if not scene.objects:
         lines.append("- (none)")
     for o in scene.objects:
-        text = f"- {o.id}: {_shape_text(o)}; centre {_xyz(o.position)}; top z = {_m(o.top)}"
+        text = f"- {o.id}: {_shape_text(o)}; centre {_xyz(o.centre)}; top z = {_m(o.top)}"
         if any(abs(a) > 1e-9 for a in o.rpy):
             text += f"; rotated rpy {_xyz(o.rpy)} rad"
         text += "; graspable" if o.graspable else "; NOT graspable (fixed)"

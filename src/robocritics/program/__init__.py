@@ -10,7 +10,7 @@
 from .budget import Budget, BudgetError
 from .language import SAFE_BUILTINS
 from .plan import FrozenArgs, Plan, SkillCall
-from .sandbox import check_program, run_program
+from .sandbox import parse_program, run_program
 from .skills import SKILLS, ObjectView, api_reference, recording
 
 __all__ = [
@@ -20,7 +20,7 @@ __all__ = [
     "Budget",
     "BudgetError",
     "run_program",
-    "check_program",
+    "parse_program",
     "SAFE_BUILTINS",
     "SKILLS",
     "ObjectView",

@@ -19,7 +19,7 @@ from .language import MATH_NAMES
 from .render import bounded_repr, clip
 from .skills import SKILLS, _close_names
 
-__all__ = ["check_program", "Source", "quote"]
+__all__ = ["parse_program", "Source", "quote"]
 
 _MAX_COLLECTED_PROBLEMS = 20
 """The static check stops collecting after this many problems: more only slow down rejecting a hostile program."""
@@ -95,7 +95,7 @@ def quote(name: str) -> str:
     return bounded_repr(name)
 
 
-def check_program(source: str, budget: Budget | None = None) -> ast.Module:
+def parse_program(source: str, budget: Budget | None = None) -> ast.Module:
     """Parse ``source`` and reject anything outside the allowed subset; return the syntax tree.
 
     Raises :class:`ProgramError` with the line and column of the first problem

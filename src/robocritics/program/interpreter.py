@@ -18,18 +18,18 @@ from __future__ import annotations
 import ast
 import math
 import sys
-import traceback
 from itertools import islice
 from typing import Any, Callable, Iterator
 
 from ..errors import ProgramError
 from ..scene import Scene
-from . import skills as _skills
 from .budget import Budget, BudgetError
 from .builtins import _Builtins
 from .check import MATH_ALL, MODULE_ALIASES, Source, quote
 from .keys import KeyGuard
-from .language import MATH_NAMES, SAFE_BUILTINS, SAFE_METHODS
+from .frames import released, stack_depth
+from .messages import ALLOWED_METHODS, attr_message, called_from, usage
+from .language import EXPRESSION_TYPES, MATH_NAMES, SAFE_BUILTINS, STATEMENT_TYPES
 from .meter import MAKE_OPS, SLOT_BYTES, LimitReached, Meter
 from .methods import _Methods
 from .operations import TUPLE_ITERATORS, _Operations, produced_size
@@ -72,61 +72,13 @@ _MAX_KEYS_SHOWN = 20
 _SUGGESTED_KEYS = 1_000
 """A mistyped dict key is compared with at most this many of the dict's string keys."""
 
-_METHODS: dict[type, frozenset[str]] = {t: frozenset(names) for t, names in SAFE_METHODS.items()}
 # math functions whose C versions would iterate without limits: the interpreter implements them (_m_<name>)
 _MATH_WRAPPED = ("fsum", "prod", "dist")
 
-_STMT_TYPES = (
-    ast.Expr, ast.Assign, ast.AugAssign, ast.AnnAssign, ast.If, ast.For, ast.While, ast.Break, ast.Continue,
-    ast.Pass, ast.FunctionDef, ast.Return, ast.Import, ast.ImportFrom, ast.Assert, ast.Delete,
-)  # fmt: skip
-_EXPR_TYPES = (
-    ast.Constant, ast.Name, ast.Attribute, ast.Subscript, ast.Slice, ast.Call, ast.BinOp, ast.UnaryOp, ast.BoolOp,
-    ast.Compare, ast.IfExp, ast.List, ast.Tuple, ast.Set, ast.Dict, ast.ListComp, ast.SetComp, ast.DictComp,
-    ast.GeneratorExp, ast.Lambda, ast.JoinedStr, ast.FormattedValue, ast.Starred,
-)  # fmt: skip
 
 
 _BIG_INT_ARG = 2**64
 """Integers from this size on cost a math function big-int work (paid like writing them in decimal)."""
-
-
-def _stack_depth() -> int:
-    """Python frames on the calling thread's stack."""
-    depth = 0
-    frame = sys._getframe(1)
-    while frame is not None:
-        depth += 1
-        frame = frame.f_back
-    return depth
-
-
-def _released(error: ProgramError) -> ProgramError:
-    """``error`` cut loose from the interpreter's frames, so the program's values are freed now, not at the
-    next garbage collection (each frame of the traceback holds the exception it caught, a reference cycle)."""
-    seen: BaseException | None = error
-    while seen is not None:
-        traceback.clear_frames(seen.__traceback__)
-        seen = seen.__context__
-    error.__context__ = error.__cause__ = None
-    error.__suppress_context__ = True
-    return error.with_traceback(None)
-
-
-def _attr_message(obj: Any, name: str) -> str:
-    t = type(obj)
-    if t is str and name in ("format", "format_map"):
-        return f"str.{name} is not available; use an f-string such as f\"{{x:.2f}}\""
-    if t in (_SandboxFunction, _Builtin, _Method):
-        return f"{tname(obj)} {quote(getattr(obj, 'name', ''))} has no attribute {quote(name)}; functions have no fields"
-    allowed = _METHODS.get(t)
-    if allowed is not None:
-        hint = _close_names(name, allowed, 1)
-        return (
-            f"'{t.__name__}' method {quote(name)} is not available{hint or '.'} "
-            f"{t.__name__} methods you can use: {', '.join(sorted(allowed))}"
-        )
-    return f"'{tname(obj)}' object has no attribute {quote(name)}"
 
 
 class _Interpreter(_Builtins, _Methods, _Operations):
@@ -149,8 +101,8 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         """Scopes in which the program made a function: the function and the scope refer to each other."""
         self._call_node: Any = None
         self._locals_cache: dict[int, frozenset] = {}
-        self._exec_table = {t: getattr(self, "_exec_" + t.__name__) for t in _STMT_TYPES}
-        self._eval_table = {t: getattr(self, "_eval_" + t.__name__) for t in _EXPR_TYPES}
+        self._exec_table = {t: getattr(self, "_exec_" + t.__name__) for t in STATEMENT_TYPES}
+        self._eval_table = {t: getattr(self, "_eval_" + t.__name__) for t in EXPRESSION_TYPES}
         self.modules, self.base = self._namespace(self.rec.views)
 
     def _namespace(self, views: dict[str, ObjectView]) -> tuple[dict[str, Namespace], dict[str, Any]]:
@@ -179,7 +131,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         token = _CURRENT.set(self.rec)
         error: ProgramError | None = None
         try:
-            self.frame_room = min(_MAX_INTERPRETER_FRAMES, sys.getrecursionlimit() - _stack_depth() - _RESERVED_FRAMES)
+            self.frame_room = min(_MAX_INTERPRETER_FRAMES, sys.getrecursionlimit() - stack_depth() - _RESERVED_FRAMES)
             self.frame_marks = [(sys._getframe(), 0)]
             self.meter.start()
             self._exec_block(self.tree.body, self.module_scope)
@@ -193,7 +145,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             _CURRENT.reset(token)
             self._forget()
         if error is not None:
-            raise _released(error)
+            raise released(error)
         return self.plan
 
     def _forget(self) -> None:
@@ -666,24 +618,11 @@ class _Interpreter(_Builtins, _Methods, _Operations):
                 return ret.value
             return None
         except ProgramError as exc:
-            raise self._called_from(exc, fn, line) from None
+            raise called_from(exc, fn, line) from None
         finally:
             self.depth -= 1
             self.call_lines.pop()
             self.frame_marks.pop()
-
-    @staticmethod
-    def _called_from(exc: ProgramError, fn: _SandboxFunction, line: int) -> ProgramError:
-        """``exc`` saying which call of ``fn`` it happened in (said once, by the innermost call)."""
-        if getattr(exc, "_in_function", False):
-            return exc
-        message = f"{exc.reason} (in {quote(fn.name)[1:-1]}(), called from line {line})"
-        if isinstance(exc, BudgetError):
-            new: ProgramError = BudgetError(message, exc.line, exc.col, limit=exc.limit)
-        else:
-            new = ProgramError(message, exc.line, exc.col)
-        new._in_function = True  # type: ignore[attr-defined]
-        return new
 
     def _call(self, func: Any, args: Any, kwargs: dict, node: Any) -> Any:
         t = type(func)
@@ -714,7 +653,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
                 text = str(exc)
                 unexpected = text.split("unexpected keyword argument ", 1)
                 hint = _close_names(unexpected[1].strip("'"), b.sig.parameters, 1) if len(unexpected) > 1 else ""
-                raise self._error(f"{b.name}(): {text}{hint}; usage: {self._usage(b)}", node) from None
+                raise self._error(f"{b.name}(): {text}{hint}; usage: {usage(b)}", node) from None
         if b.kind == "skill" or b.name == "print":
             line, col = self._pos(node)
             self.rec.where = (line, col, tuple(self.call_lines))
@@ -725,13 +664,6 @@ class _Interpreter(_Builtins, _Methods, _Operations):
                     self._charge_int_text(a)
             return self._new_value(b.fn(*args, **kwargs), node)
         return b.fn(*args, **kwargs)
-
-    @staticmethod
-    def _usage(b: _Builtin) -> str:
-        """How to call ``b``, for error messages."""
-        if b.kind == "skill" or b.name == "print":
-            return _skills.usage(b.name)
-        return f"{b.name}{b.sig}".replace("=<no value>", "")
 
     # ---- expressions ------------------------------------------------------------------
 
@@ -815,10 +747,10 @@ class _Interpreter(_Builtins, _Methods, _Operations):
             if type(value) in (dict, list):  # a fresh copy of scene data
                 self._made(value)
             return value
-        allowed = _METHODS.get(t)
+        allowed = ALLOWED_METHODS.get(t)
         if allowed is not None and name in allowed:
             return self._made(_Method(obj, name))
-        raise self._attr_error(_attr_message(obj, name), node)
+        raise self._attr_error(attr_message(obj, name), node)
 
     def _eval_Subscript(self, node: ast.Subscript, scope: _Scope) -> Any:
         obj = self._eval(node.value, scope)
@@ -838,7 +770,7 @@ class _Interpreter(_Builtins, _Methods, _Operations):
         func_node = node.func
         if type(func_node) is ast.Attribute:  # obj.method(...) calls the method without making it a value
             obj = self._eval(func_node.value, scope)
-            allowed = _METHODS.get(type(obj))
+            allowed = ALLOWED_METHODS.get(type(obj))
             if allowed is not None and func_node.attr in allowed:
                 args, kwargs = self._arguments(node, scope)
                 return self._call(_Method(obj, func_node.attr), args, kwargs, node)

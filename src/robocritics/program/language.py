@@ -10,10 +10,11 @@ Anything not listed here does not exist for a program.
 
 from __future__ import annotations
 
+import ast
 from types import MappingProxyType
 from typing import Mapping
 
-__all__ = ["SAFE_BUILTINS", "SAFE_METHODS", "MATH_NAMES", "reference_markdown"]
+__all__ = ["SAFE_BUILTINS", "SAFE_METHODS", "MATH_NAMES", "STATEMENT_TYPES", "EXPRESSION_TYPES", "reference_markdown"]
 
 SAFE_BUILTINS: Mapping[str, str] = MappingProxyType(
     {
@@ -68,6 +69,18 @@ MATH_NAMES: tuple[str, ...] = tuple(
     ).split()
 )
 """Members of ``math`` a program may use (``import math``, ``from math import ...``)."""
+
+#: The statements and expressions programs may use: the AST node types the interpreter runs.
+STATEMENT_TYPES = (
+    ast.Expr, ast.Assign, ast.AugAssign, ast.AnnAssign, ast.If, ast.For, ast.While, ast.Break, ast.Continue,
+    ast.Pass, ast.FunctionDef, ast.Return, ast.Import, ast.ImportFrom, ast.Assert, ast.Delete,
+)  # fmt: skip
+EXPRESSION_TYPES = (
+    ast.Constant, ast.Name, ast.Attribute, ast.Subscript, ast.Slice, ast.Call, ast.BinOp, ast.UnaryOp, ast.BoolOp,
+    ast.Compare, ast.IfExp, ast.List, ast.Tuple, ast.Set, ast.Dict, ast.ListComp, ast.SetComp, ast.DictComp,
+    ast.GeneratorExp, ast.Lambda, ast.JoinedStr, ast.FormattedValue, ast.Starred,
+)  # fmt: skip
+
 
 
 def reference_markdown() -> str:

@@ -3,7 +3,7 @@
 Design: an AST interpreter
 --------------------------
 The program is parsed with :mod:`ast`, checked against a whitelist of node
-types (:func:`check_program`, in :mod:`.check`), and then *interpreted* node by
+types (:func:`parse_program`, in :mod:`.check`), and then *interpreted* node by
 node (:mod:`.interpreter`). It is never compiled to bytecode and never
 ``exec``'d, so the program never touches real builtins, real modules, frames
 or code objects. We chose this over "compile after rewriting every attribute
@@ -70,11 +70,11 @@ from ..errors import SceneError
 from ..scene import Scene
 from .budget import Budget, BudgetError
 from .check import FORBIDDEN_NAMES as _FORBIDDEN_NAMES  # noqa: F401  (read here by tests and tools)
-from .check import check_program
+from .check import parse_program
 from .interpreter import _Interpreter
 from .plan import Plan
 
-__all__ = ["Budget", "BudgetError", "run_program", "check_program"]
+__all__ = ["Budget", "BudgetError", "run_program", "parse_program"]
 
 
 def run_program(source: str, scene: Scene | None = None, budget: Budget | None = None) -> Plan:
@@ -85,7 +85,7 @@ def run_program(source: str, scene: Scene | None = None, budget: Budget | None =
     for a budget stop) with the line and column.
     """
     b = budget or Budget()
-    tree = check_program(source, b)
+    tree = parse_program(source, b)
     scene = scene if scene is not None else Scene()
     if not isinstance(scene, Scene):
         raise SceneError(

@@ -133,7 +133,8 @@ class ObjectView:
 
     def __init__(self, entity: SceneObject | Container):
         fields: dict[str, Any] = {"id": entity.id, "name": entity.id}
-        pos = tuple(float(v) for v in entity.position)
+        # a mesh's position is its file's origin: programs get its centre, as for every other shape
+        pos = tuple(float(v) for v in (entity.position if isinstance(entity, Container) else entity.centre))
         if isinstance(entity, Container):
             size = tuple(float(v) for v in entity.size)
             fields.update(

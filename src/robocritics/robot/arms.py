@@ -21,7 +21,7 @@ from typing import Mapping
 
 from ..errors import RobotModelError
 
-__all__ = ["DH", "ModifiedDH", "ArmSpec", "UR3E", "UR5E", "UR10E", "UR16E", "ARMS", "PANDA"]
+__all__ = ["DH", "ModifiedDH", "ArmSpec", "UR3E", "UR5E", "UR10E", "UR16E", "ARMS", "PANDA", "DEFAULT_ARM"]
 
 _HALF_PI = 0.5 * math.pi
 _UR_ALPHA = (_HALF_PI, 0.0, 0.0, _HALF_PI, -_HALF_PI, 0.0)
@@ -318,6 +318,11 @@ UR16E = _ur_e_series(
 """The UR16e (e-series), 900 mm reach."""
 
 ARMS: Mapping[str, ArmSpec] = MappingProxyType({arm.name: arm for arm in (UR3E, UR5E, UR10E, UR16E)})
+
+#: The arm a run uses when none is given (the bundled scenes are laid out for it): the one place this is said.
+#: :func:`robocritics.robot.model.default_robot` loads it, :func:`robocritics.robot.model.default_workspace` is
+#: its reach sphere.
+DEFAULT_ARM: ArmSpec = UR3E
 """The UR e-series arms, by name: what ``Robot.ur(name)``, deploy and the loopback controller know."""
 
 PANDA = ArmSpec(

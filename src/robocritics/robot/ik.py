@@ -55,7 +55,7 @@ kinematics (Pinocchio on the URDF of the DH chain, :func:`dh_forward`) before it
 is returned. :func:`ur_ik_all` lists the branches; :func:`ur_ik` searches the same
 steps branch-and-bound for the one nearest a seed configuration.
 
-For arms that are not UR-like, :func:`numeric_ik` runs a damped-least-squares
+For arms that are not UR-like, :func:`~robocritics.robot.ik_numeric.numeric_ik` runs a damped-least-squares
 (Levenberg-Marquardt) iteration on a Pinocchio model with random restarts.
 """
 
@@ -72,41 +72,33 @@ import pinocchio as pin
 from robocritics.errors import PlanningError, RobotModelError
 
 from .arms import DH, UR3E
+from .ik_many import (
+    _CLIP_TOL,
+    _DUPLICATE_TOL,
+    _HALF_PI,
+    _LIMIT_SLACK,
+    _LINE_CHUNK,
+    _PI,
+    _TWO_PI,
+    _VECTORISED_WALK_POSES,
+    _VERIFY_TOL,
+    _WRIST_NEAR_SINGULAR,
+    _WRIST_SINGULAR,
+    _branches_many,
+    _nearest_chain,
+)
 
 __all__ = [
     "DH",
     "UR3E_DH",
     "dh_forward",
     "dh_urdf",
-    "numeric_ik",
     "ur_ik",
     "ur_ik_all",
     "ur_reach",
 ]
 
-_PI = math.pi
-_TWO_PI = 2.0 * math.pi
-_HALF_PI = 0.5 * math.pi
-# |arg| of acos may exceed 1 by this much from rounding and still be clipped;
-# beyond it the target is genuinely out of reach. The FK check decides the rest.
-_CLIP_TOL = 1e-8
-# |sin q5| below this is the wrist singularity (q6 is then a free choice). At
-# this size any choice of q6 costs at most pi * 1e-10 rad of orientation error.
-_WRIST_SINGULAR = 1e-10
-# Below this |sin q5| the computed q6 is only known to ~1e-16 / |sin q5| rad; if
-# that leaves the wrist just out of the elbow's range (a pose at the edge of
-# the workspace), q6 is nudged to the nearest value that reaches, which moves
-# the flange orientation by at most |sin q5| times the nudge. The FK check
-# below has the last word.
-_WRIST_NEAR_SINGULAR = 1e-6
-# Forward-kinematics acceptance of a branch: position (m) and rotation (rad).
-_VERIFY_TOL = 1e-9
-# Branches closer than this (rad, every joint) are one configuration (they
-# differ only by rounding at a shoulder, elbow or wrist singularity).
-_DUPLICATE_TOL = 1e-7
-# A solution this close outside a joint limit (rad) counts as on it and is
-# clamped to it (the closed form is accurate to ~1e-11 rad near singularities).
-_LIMIT_SLACK = 1e-10
+_UNIT_WEIGHTS = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
 _JOINT_NAMES = (
     "joint 1 (base)",
     "joint 2 (shoulder)",
@@ -195,6 +187,30 @@ class _Chain:
         """(position error m, rotation error rad) of the flange at ``q`` against the 12-float target ``t``."""
         return _pose_error(self.pose(q).homogeneous[:3].ravel().tolist(), t)
 
+    def reproduces(self, q: np.ndarray, t: Sequence[float], tol: float) -> bool:
+        """Whether the flange at ``q`` ((6,) float array, rad) is within ``tol`` m and ``tol`` rad of the 12-float
+        target ``t``: :meth:`error` within ``tol``, its sums written out (the same floats, half the time)."""
+        pin.forwardKinematics(self.model, self.data, q)
+        f = pin.updateFramePlacement(self.model, self.data, self.flange).homogeneous.ravel().tolist()
+        # ``** 2`` as in _pose_error: libm's pow may round x ** 2 differently from x * x
+        if not math.sqrt((f[3] - t[3]) ** 2 + (f[7] - t[7]) ** 2 + (f[11] - t[11]) ** 2) <= tol:
+            return False
+        e0, e1, e2, e4, e5, e6 = f[0] - t[0], f[1] - t[1], f[2] - t[2], f[4] - t[4], f[5] - t[5], f[6] - t[6]
+        e8, e9, e10 = f[8] - t[8], f[9] - t[9], f[10] - t[10]
+        sq = 0.0 + e0 * e0 + e1 * e1 + e2 * e2 + e4 * e4 + e5 * e5 + e6 * e6 + e8 * e8 + e9 * e9 + e10 * e10
+        return math.sqrt(0.5 * sq) <= tol
+
+
+def _chain(dh: DH) -> _Chain:
+    """This thread's :class:`_Chain` of ``dh``, built once (a solve looks it up instead of building one)."""
+    chains = getattr(_THREAD, "chains", None)
+    if chains is None:
+        chains = _THREAD.chains = {}
+    chain = chains.get(dh)
+    if chain is None:
+        chain = chains[dh] = _Chain(dh)
+    return chain
+
 
 def dh_forward(dh: DH, q: Any) -> np.ndarray:
     """Flange pose ``T_06(q) = A_1 ... A_6`` in the base frame (Pinocchio on :func:`dh_urdf`).
@@ -205,7 +221,7 @@ def dh_forward(dh: DH, q: Any) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (6,):
         raise RobotModelError(f"dh_forward: q must have 6 joint values in its last axis, got shape {q.shape}")
-    chain = _Chain(dh)
+    chain = _chain(dh)
     flat = q.reshape(-1, 6)
     out = np.empty((len(flat), 4, 4))
     for i, qi in enumerate(flat):
@@ -509,16 +525,27 @@ def ur_ik_all(dh: DH, flange_pose: Any, *, q6_singular: float = 0.0) -> np.ndarr
 
 def _solutions(dh: DH, t: Sequence[float], q6_singular: float) -> list[list[float]]:
     """:func:`ur_ik_all` for the 12-float target ``t``."""
-    chain = _Chain(dh)
+    chain = _chain(dh)
     sols: list[list[float]] = []
+    remainder = math.remainder
     for b in _branches(dh._ur, t, q6_singular):
-        w = [_wrap(x) for x in b]
-        if any(max(abs(_wrap(u - v)) for u, v in zip(w, s)) < _DUPLICATE_TOL for s in sols):
-            continue
-        dp, dr = chain.error(w, t)
-        if dp <= _VERIFY_TOL and dr <= _VERIFY_TOL:
+        w = [x + _TWO_PI if x <= -_PI else x for x in [remainder(x, _TWO_PI) for x in b]]  # _wrap
+        if not _is_duplicate(w, sols) and chain.reproduces(np.array(w), t, _VERIFY_TOL):
             sols.append(w)
     return sols
+
+
+def _is_duplicate(q: list[float], solutions: list[list[float]]) -> bool:
+    """Whether ``q`` is within ``_DUPLICATE_TOL`` rad of one of ``solutions`` in every joint (modulo ``2 pi``)."""
+    remainder = math.remainder
+    for s in solutions:
+        for u, v in zip(q, s):
+            # abs(_wrap(x)) < tol without the call: _wrap differs from remainder only at -pi, far from 0
+            if not abs(remainder(u - v, _TWO_PI)) < _DUPLICATE_TOL:
+                break
+        else:
+            return True
+    return False
 
 
 def _nearest_equivalent(x: float, seed: float, lo: float, hi: float) -> float | None:
@@ -547,105 +574,180 @@ def _nearest_solution(
     """The branch of the closed form with the smallest ``sum w_i (q_i - seed_i)²``
     within the limits (and, if ``verify`` is given, that passes it), or None.
 
-    The same steps as :func:`_branches`, searched branch-and-bound: each angle
-    is moved to its ``2 pi``-equivalent within the limits nearest to the seed
-    as soon as it is known, and a branch is abandoned as soon as its partial
-    cost reaches the best complete one, so the trigonometry of branches that
-    cannot win is never evaluated. At the wrist singularity ``q6`` keeps the seed's.
+    The steps of :func:`_branches` (the same expressions, so the same floats), searched branch-and-bound: each
+    angle is moved to its ``2 pi``-equivalent within the limits nearest to the seed as soon as it is known, and a
+    branch is abandoned as soon as its partial cost (shoulder pan, then wrists, then elbow, shoulder lift, wrist
+    1) reaches the best complete one, so the elbow of a branch that cannot win is never computed; shoulders and
+    wrists are tried cheapest first (a branch whose angle has no equivalent within the limits costs inf). At the
+    wrist singularity ``q6`` keeps the seed's. The steps are written out here rather than called, and
+    :func:`_nearest_equivalent`'s common case (the seed-nearest equivalent within the limits) at each use: a
+    call per step or joint was half the time of a solve.
     """
-    shoulder = _shoulder_pans(k, t)
-    if shoulder is None:
+    xx, yx, zx, px, xy, yy, zy, py = t[:8]
+    d6 = k[5]
+    # step 1 (_shoulder_pans)
+    p5x = px - d6 * zx
+    p5y = py - d6 * zy
+    r = math.sqrt(p5x * p5x + p5y * p5y)
+    if r == 0.0:
         return None
-    p5x, p5y, pans = shoulder
-    s0, s1_, s2, s3, s4, s5 = sd
-    l0, l1, l2, l3, l4, l5 = lo
-    h0, h1, h2, h3, h4, h5 = hi
-    w0, w1, w2, w3, w4, w5 = w
-    # _nearest_equivalent, its common case (the seed-nearest equivalent within the limits) written out at each
-    # use: the same expression, without a call per joint per branch (a third of a line walk's time otherwise)
-    near = _nearest_equivalent
-    shoulders = []
-    for q1 in pans:
-        v1 = q1 + round((s0 - q1) / _TWO_PI) * _TWO_PI
-        if not l0 <= v1 <= h0:
-            v1 = near(q1, s0, l0, h0)
-        if v1 is not None:
-            shoulders.append((w0 * (v1 - s0) * (v1 - s0), q1, v1))
-    if len(shoulders) == 2 and shoulders[1][0] < shoulders[0][0]:
-        shoulders.reverse()
+    ratio = k[3] / r
+    if not -1.0 - _CLIP_TOL <= ratio <= 1.0 + _CLIP_TOL:
+        return None
+    ratio = 1.0 if ratio > 1.0 else (-1.0 if ratio < -1.0 else ratio)
+    phi = math.atan2(p5y, p5x) + _HALF_PI
+    dphi = math.acos(ratio)
+    s0, s4, s5 = sd[0], sd[4], sd[5]
+    l0, l4, l5 = lo[0], lo[4], lo[5]
+    h0, h4, h5 = hi[0], hi[4], hi[5]
+    w0, w4, w5 = w[0], w[4], w[5]
+    inf, near, tau = math.inf, _nearest_equivalent, _TWO_PI
+    qa = phi + dphi
+    va = qa + round((s0 - qa) / tau) * tau
+    if not l0 <= va <= h0:
+        va = near(qa, s0, l0, h0)
+    ca = inf if va is None else w0 * (va - s0) * (va - s0)
+    qb = phi - dphi
+    vb = qb + round((s0 - qb) / tau) * tau
+    if not l0 <= vb <= h0:
+        vb = near(qb, s0, l0, h0)
+    cb = inf if vb is None else w0 * (vb - s0) * (vb - s0)
+    shoulders = ((cb, qb, vb), (ca, qa, va)) if cb < ca else ((ca, qa, va), (cb, qb, vb))
 
-    best = math.inf
+    best = inf
     best_q: list[float] | None = None
     for cost1, q1, v1 in shoulders:
         if cost1 >= best:
             break
+        # steps 2 and 3 (_wrists)
         c1, s1 = math.cos(q1), math.sin(q1)
-        s5abs, pairs = _wrists(t, c1, s1, s5)
+        xz1 = xx * s1 - xy * c1
+        yz1 = yx * s1 - yy * c1
+        zz1 = zx * s1 - zy * c1
+        s5abs = math.sqrt(xz1 * xz1 + yz1 * yz1)
+        if s5abs < _WRIST_SINGULAR:
+            pairs = ((math.atan2(s5abs, zz1), s5), (math.atan2(-s5abs, zz1), s5))
+        else:
+            pairs = ((math.atan2(s5abs, zz1), math.atan2(-yz1, xz1)), (math.atan2(-s5abs, zz1), math.atan2(yz1, -xz1)))
         q6_final = s5abs >= _WRIST_NEAR_SINGULAR  # else the elbow step may nudge q6
         wrists = []
         for q5, q6 in pairs:
-            v5 = q5 + round((s4 - q5) / _TWO_PI) * _TWO_PI
+            v5 = q5 + round((s4 - q5) / tau) * tau
             if not l4 <= v5 <= h4:
                 v5 = near(q5, s4, l4, h4)
             if v5 is None:
+                wrists.append((inf, q5, q6, v5, None))
                 continue
             cost = cost1 + w4 * (v5 - s4) * (v5 - s4)
             v6 = None
             if q6_final:
-                v6 = q6 + round((s5 - q6) / _TWO_PI) * _TWO_PI
+                v6 = q6 + round((s5 - q6) / tau) * tau
                 if not l5 <= v6 <= h5:
                     v6 = near(q6, s5, l5, h5)
-                if v6 is None:
-                    continue
-                cost += w5 * (v6 - s5) * (v6 - s5)
+                cost = inf if v6 is None else cost + w5 * (v6 - s5) * (v6 - s5)
             wrists.append((cost, q5, q6, v5, v6))
-        if len(wrists) == 2 and wrists[1][0] < wrists[0][0]:
+        if wrists[1][0] < wrists[0][0]:
             wrists.reverse()
         for cost56, q5, q6, v5, v6 in wrists:
             if cost56 >= best:
                 break
-            elbow = _elbow(k, t, c1, s1, p5x, p5y, s5abs, q5, q6)
-            if elbow is None:
-                continue
-            c3, base, q234, q6 = elbow
-            if v6 is None:
-                v6 = q6 + round((s5 - q6) / _TWO_PI) * _TWO_PI
-                if not l5 <= v6 <= h5:
-                    v6 = near(q6, s5, l5, h5)
-                if v6 is None:
-                    continue
-                cost56 += w5 * (v6 - s5) * (v6 - s5)
-            t3 = math.acos(c3)
-            for q3 in (t3, -t3):
-                v3 = q3 + round((s2 - q3) / _TWO_PI) * _TWO_PI
-                if not l2 <= v3 <= h2:
-                    v3 = near(q3, s2, l2, h2)
-                if v3 is None:
-                    continue
-                cost3 = cost56 + w2 * (v3 - s2) * (v3 - s2)
-                if cost3 >= best:
-                    continue
-                q2 = _shoulder_lift(k, base, q3, c3)
-                v2 = q2 + round((s1_ - q2) / _TWO_PI) * _TWO_PI
-                if not l1 <= v2 <= h1:
-                    v2 = near(q2, s1_, l1, h1)
-                if v2 is None:
-                    continue
-                cost2 = cost3 + w1 * (v2 - s1_) * (v2 - s1_)
-                if cost2 >= best:
-                    continue
-                q4 = q234 - q2 - q3
-                v4 = q4 + round((s3 - q4) / _TWO_PI) * _TWO_PI
-                if not l3 <= v4 <= h3:
-                    v4 = near(q4, s3, l3, h3)
-                if v4 is None:
-                    continue
-                cost = cost2 + w3 * (v4 - s3) * (v4 - s3)
-                if cost < best:
-                    q = [v1, v2, v3, v4, v5, v6]
-                    if verify is None or verify(q):
-                        best, best_q = cost, q
+            found = _nearest_elbow(k, t, c1, s1, p5x, p5y, s5abs, q5, q6, v1, v5, v6, cost56, best, sd, lo, hi, w, verify)
+            if found is not None:
+                best, best_q = found
     return best_q
+
+
+def _nearest_elbow(
+    k: tuple[float, ...], t: Sequence[float], c1: float, s1: float, p5x: float, p5y: float, s5abs: float,
+    q5: float, q6: float, v1: float, v5: float, v6: float | None, cost56: float, best: float,
+    sd: Sequence[float], lo: Sequence[float], hi: Sequence[float], w: Sequence[float],
+    verify: Callable[[list[float]], bool] | None,
+) -> tuple[float, list[float]] | None:
+    """Step 4 of :func:`_nearest_solution` for one (shoulder, wrist) branch whose shoulder pan and wrist angles
+    cost ``cost56``: ``(cost, q)`` of its elbow cheaper than ``best``, or None. ``v6`` None: ``q6`` may still be
+    nudged (near the wrist singularity), so its cost is not yet in ``cost56``."""
+    d1, a2, a3, _, d5, d6, a2a3_sq, two_a2a3 = k
+    xx, yx, zx, _, xy, yy, zy, _, xz, yz, zz, pz = t
+    # _elbow and _wrist1_planar
+    c6 = math.cos(q6)
+    s6 = math.sin(q6)
+    z4x = -(s6 * xx + c6 * yx)
+    z4y = -(s6 * xy + c6 * yy)
+    z4z = -(s6 * xz + c6 * yz)
+    X = (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1
+    Y = pz - d6 * zz - d5 * z4z - d1
+    c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
+    if not -1.0 <= c3 <= 1.0 and s5abs < _WRIST_NEAR_SINGULAR:
+        nudged = _singular_q6(k, t, c1, s1, p5x, p5y, q6, c3 > 1.0)
+        if nudged is not None:
+            q6 = nudged
+            c6 = math.cos(q6)
+            s6 = math.sin(q6)
+            X, Y = _wrist1_planar(k, t, c1, s1, p5x, p5y, q6)
+            c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
+    if not -1.0 <= c3 <= 1.0:
+        if not -1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL:
+            return None
+        c3 = 1.0 if c3 > 1.0 else -1.0
+    near = _nearest_equivalent
+    s5 = sd[5]
+    if v6 is None:
+        l5, h5 = lo[5], hi[5]
+        v6 = q6 + round((s5 - q6) / _TWO_PI) * _TWO_PI
+        if not l5 <= v6 <= h5:
+            v6 = near(q6, s5, l5, h5)
+        if v6 is None:
+            return None
+        cost56 += w[5] * (v6 - s5) * (v6 - s5)
+    c5 = math.cos(q5)
+    s5_ = math.sin(q5)
+    # x4 = c5 x5 - s5 z6 with x5 = c6 x6 - s6 y6
+    x4x = c5 * (c6 * xx - s6 * yx) - s5_ * zx
+    x4y = c5 * (c6 * xy - s6 * yy) - s5_ * zy
+    x4z = c5 * (c6 * xz - s6 * yz) - s5_ * zz
+    base = math.atan2(Y, X)
+    q234 = math.atan2(x4z, x4x * c1 + x4y * s1)
+    _, s1_, s2, s3, _, _ = sd
+    _, l1, l2, l3, _, _ = lo
+    _, h1, h2, h3, _, _ = hi
+    _, w1, w2, w3, _, _ = w
+    # the two elbows (q3 = +acos, -acos), the one nearer the seed in q3 first: the other then rarely gets further
+    t3 = math.acos(c3)
+    elbows = []
+    for q3 in (t3, -t3):
+        v3 = q3 + round((s2 - q3) / _TWO_PI) * _TWO_PI
+        if not l2 <= v3 <= h2:
+            v3 = near(q3, s2, l2, h2)
+        if v3 is not None:
+            elbows.append((cost56 + w2 * (v3 - s2) * (v3 - s2), q3, v3))
+    if len(elbows) == 2 and elbows[1][0] < elbows[0][0]:
+        elbows.reverse()
+    found = None
+    for cost3, q3, v3 in elbows:
+        if cost3 >= best:
+            break
+        q2 = base - math.atan2(a3 * math.sin(q3), a2 + a3 * c3)  # _shoulder_lift
+        v2 = q2 + round((s1_ - q2) / _TWO_PI) * _TWO_PI
+        if not l1 <= v2 <= h1:
+            v2 = near(q2, s1_, l1, h1)
+        if v2 is None:
+            continue
+        cost2 = cost3 + w1 * (v2 - s1_) * (v2 - s1_)
+        if cost2 >= best:
+            continue
+        q4 = q234 - q2 - q3
+        v4 = q4 + round((s3 - q4) / _TWO_PI) * _TWO_PI
+        if not l3 <= v4 <= h3:
+            v4 = near(q4, s3, l3, h3)
+        if v4 is None:
+            continue
+        cost = cost2 + w3 * (v4 - s3) * (v4 - s3)
+        if cost < best:
+            q = [v1, v2, v3, v4, v5, v6]
+            if verify is None or verify(q):
+                best = cost
+                found = (cost, q)
+    return found
 
 
 def ur_ik(
@@ -685,22 +787,20 @@ def ur_ik(
     if len(sd) != 6 or len(lo) != 6 or len(hi) != 6:
         raise PlanningError("ur_ik: seed, lower and upper must each have 6 values")
     if weights is None:
-        w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+        w = _UNIT_WEIGHTS
     else:
         w = weights.tolist() if isinstance(weights, np.ndarray) else [float(v) for v in weights]
-    chain = _Chain(dh)
-
-    def reproduces_pose(q: list[float]) -> bool:
-        dp, dr = chain.error(q, t)
-        return dp <= tol and dr <= tol
-
+    chain = _chain(dh)
     # The nearest branch nearly always reproduces the pose; only at the edge of the
     # workspace does it not, and then the search is repeated checking every candidate.
     best = _nearest_solution(k, t, sd, lo, hi, w)
-    if best is not None and not reproduces_pose(best):
-        best = _nearest_solution(k, t, sd, lo, hi, w, reproduces_pose)
     if best is not None:
-        return np.array(best)
+        q = np.array(best)
+        if chain.reproduces(q, t, tol):
+            return q
+        best = _nearest_solution(k, t, sd, lo, hi, w, lambda q: chain.reproduces(np.array(q), t, tol))
+        if best is not None:
+            return np.array(best)
     raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_why_no_solution(dh, t, sd, lo, hi, chain, tol)}")
 
 
@@ -727,7 +827,7 @@ def ur_ik_line(
         raise PlanningError("ur_ik_line: seed, lower and upper must each have 6 values")
     lo, hi = lo_arr.tolist(), hi_arr.tolist()
     w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
-    chain = _Chain(dh)
+    chain = _chain(dh)
     n = len(poses)
     targets12 = poses[:, :3].reshape(-1, 12)
     targets = targets12.tolist()
@@ -805,8 +905,7 @@ def _unverified_walk(
 
 def _reproduces(chain: _Chain, q: list[float], t: Sequence[float], tol: float) -> bool:
     """Whether the flange at ``q`` (rad) is within ``tol`` m and ``tol`` rad of the 12-float target ``t``."""
-    dp, dr = chain.error(q, t)
-    return dp <= tol and dr <= tol
+    return chain.reproduces(np.array(q), t, tol)
 
 def _flange_errors(dh: DH, q: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(position error m, rotation error rad) ``(n,)`` each of the flange at ``q (n, 6)`` rad against ``poses
@@ -857,317 +956,3 @@ def _why_no_solution(
     )
 
 
-
-# --------------------------------------------------------------------------- #
-# The closed form for many poses at once (straight lines: ur_ik_line)
-# --------------------------------------------------------------------------- #
-
-#: Branch index ``b = 4 s + 2 w + e`` of :func:`_branches_many`: shoulder pan ``s`` (``phi + dphi``, ``phi -
-#: dphi``), wrist ``w`` (up, down), elbow ``e`` (``q3 = +acos``, ``-acos``): the order :func:`_branches` lists them.
-_SHOULDER_OF_BRANCH = np.arange(8) // 4
-_WRIST_OF_BRANCH = (np.arange(8) // 2) % 2
-_ELBOW_OF_BRANCH = np.arange(8) % 2
-#: Passes of the chained selection (see :func:`_nearest_chain`) before the rest is taken one pose per pass.
-_CHAIN_PASSES = 6
-#: Most poses of a straight line solved in one vectorised run (see :func:`ur_ik_line`).
-_LINE_CHUNK = 256
-#: Fewest poses :func:`_unverified_walk` solves vectorised: below this a pose-by-pose walk is cheaper (measured
-#: on the UR3e: 0.7 vs 1.1 ms at 30 poses, 1.2 vs 1.3 at 60, 2.0 vs 1.7 at 120, 14 vs 8 at 1000).
-_VECTORISED_WALK_POSES = 96
-
-
-def _branches_many(k: tuple[float, ...], t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every branch of the closed form for ``n`` poses at once: the steps of :func:`_branches` in numpy.
-
-    ``t`` ``(n, 12)``: row-major flange targets (m). Returns ``(q (n, 8, 6) rad, unwrapped, in the order of
-    :data:`_SHOULDER_OF_BRANCH`; exists (n, 8) bool; scalar (n,) bool)``. ``exists`` is False where the wrist is
-    inside the base cylinder or the elbow cannot reach (those ``q`` are garbage). ``scalar`` marks poses near the
-    wrist singularity (``|sin q5| < _WRIST_NEAR_SINGULAR``), where ``q6`` depends on the seed and may be nudged:
-    their branches are not computed here (the caller takes :func:`_nearest_solution` for them). Each expression
-    is :func:`_branches`' in the same order, so the angles agree with it to the last bit or two (numpy's and
-    libm's transcendental functions may round differently).
-    """
-    d1, a2, a3, d4, d5, d6, a2a3_sq, two_a2a3 = k
-    n = len(t)
-    xx, yx, zx, px, xy, yy, zy, py, xz, yz, zz, pz = (t[:, i : i + 1] for i in range(12))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        # step 1: the shoulder pans (n, 2)
-        p5x = px - d6 * zx
-        p5y = py - d6 * zy
-        r = np.sqrt(p5x * p5x + p5y * p5y)
-        ratio = d4 / r
-        shoulder_ok = (r != 0.0) & (-1.0 - _CLIP_TOL <= ratio) & (ratio <= 1.0 + _CLIP_TOL)
-        phi = np.arctan2(p5y, p5x) + _HALF_PI
-        dphi = np.arccos(np.clip(ratio, -1.0, 1.0))
-        q1 = np.concatenate([phi + dphi, phi - dphi], axis=1)
-        c1, s1 = np.cos(q1), np.sin(q1)
-        # steps 2 and 3: the wrists (n, 2 shoulders, 2 wrists)
-        xz1 = xx * s1 - xy * c1
-        yz1 = yx * s1 - yy * c1
-        zz1 = zx * s1 - zy * c1
-        s5abs = np.sqrt(xz1 * xz1 + yz1 * yz1)
-        q5 = np.stack([np.arctan2(s5abs, zz1), np.arctan2(-s5abs, zz1)], axis=2)
-        q6 = np.stack([np.arctan2(-yz1, xz1), np.arctan2(yz1, -xz1)], axis=2)
-        scalar = (s5abs < _WRIST_NEAR_SINGULAR).any(axis=1) & shoulder_ok[:, 0]
-        # step 4: the elbow of each (shoulder, wrist)
-        C1, S1 = c1[:, :, None], s1[:, :, None]
-        P5x, P5y = p5x[:, :, None], p5y[:, :, None]
-        XX, YX, ZX, XY, YY, ZY, XZ, YZ, ZZ, PZ = (v[:, :, None] for v in (xx, yx, zx, xy, yy, zy, xz, yz, zz, pz))
-        c6, s6 = np.cos(q6), np.sin(q6)
-        z4x = -(s6 * XX + c6 * YX)
-        z4y = -(s6 * XY + c6 * YY)
-        z4z = -(s6 * XZ + c6 * YZ)
-        X = (P5x - d5 * z4x) * C1 + (P5y - d5 * z4y) * S1
-        Y = PZ - d6 * ZZ - d5 * z4z - d1
-        c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
-        elbow_ok = (-1.0 - _CLIP_TOL <= c3) & (c3 <= 1.0 + _CLIP_TOL)
-        c3 = np.clip(c3, -1.0, 1.0)
-        c5, s5 = np.cos(q5), np.sin(q5)
-        x4x = c5 * (c6 * XX - s6 * YX) - s5 * ZX
-        x4y = c5 * (c6 * XY - s6 * YY) - s5 * ZY
-        x4z = c5 * (c6 * XZ - s6 * YZ) - s5 * ZZ
-        base = np.arctan2(Y, X)
-        q234 = np.arctan2(x4z, x4x * C1 + x4y * S1)
-        t3 = np.arccos(c3)
-        # the two elbows (n, 2, 2, 2)
-        q3 = np.stack([t3, -t3], axis=3)
-        q2 = base[..., None] - np.arctan2(a3 * np.sin(q3), a2 + a3 * c3[..., None])
-        q4 = q234[..., None] - q2 - q3
-    q = np.empty((n, 2, 2, 2, 6))
-    q[..., 0] = q1[:, :, None, None]
-    q[..., 1], q[..., 2], q[..., 3] = q2, q3, q4
-    q[..., 4], q[..., 5] = q5[..., None], q6[..., None]
-    exists = np.broadcast_to((shoulder_ok[:, :, None] & elbow_ok)[..., None], (n, 2, 2, 2))
-    return q.reshape(n, 8, 6), exists.reshape(n, 8) & ~scalar[:, None], scalar
-
-
-def _nearest_equivalents(x: np.ndarray, seed: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_nearest_equivalent` elementwise: ``(x + 2 pi n within [lo, hi] nearest to seed, whether one fits)``.
-
-    The same operations in the same order (``np.round`` rounds half to even, as ``round``), so bit-identical.
-    """
-    v = x + np.round((seed - x) / _TWO_PI) * _TWO_PI
-    inside = (lo <= v) & (v <= hi)
-    if inside.all():  # the common case
-        return v, inside
-    with np.errstate(invalid="ignore"):
-        n_min = np.ceil((lo - _LIMIT_SLACK - x) / _TWO_PI)
-        n_max = np.floor((hi + _LIMIT_SLACK - x) / _TWO_PI)
-        fits = n_min <= n_max
-        shifted = x + np.where(v > hi, n_max, n_min) * _TWO_PI
-        shifted = np.where(shifted > hi, hi, np.where(shifted < lo, lo, shifted))
-    return np.where(inside, v, shifted), inside | fits
-
-
-def _select_nearest(
-    q: np.ndarray, exists: np.ndarray, seeds: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """For each pose, :func:`_nearest_solution`'s choice among its branches ``q (m, 8, 6)`` (``exists (m, 8)``)
-    for the seed ``seeds (m, 6)`` (unit weights, no verification): ``(solution (m, 6) rad, found (m,))``.
-
-    The cost of a branch is summed in the order the branch-and-bound search adds it (``q1``, ``q5``, ``q6``,
-    ``q3``, ``q2``, ``q4``), so it is the same float; the search returns the first branch of least cost in its
-    order (shoulders and then wrists by increasing partial cost, a later one only when strictly cheaper; elbow
-    ``+acos`` before ``-acos``), and so does the tie-break here. Rows not found are NaN.
-    """
-    m = len(q)
-    v, fits = _nearest_equivalents(q, seeds[:, None, :], lo, hi)
-    d = v - seeds[:, None, :]
-    c = d * d
-    cost1 = c[:, :, 0]
-    cost56 = cost1 + c[:, :, 4] + c[:, :, 5]
-    total = cost56 + c[:, :, 2] + c[:, :, 1] + c[:, :, 3]
-    ok = exists & fits.all(axis=2)
-    total = np.where(ok, total, np.inf)
-    # the search order: a shoulder is listed when its q1 fits, a wrist when its q5 and q6 fit
-    shoulder_listed = fits[:, (0, 4), 0]  # (m, 2)
-    swap_shoulders = shoulder_listed.all(axis=1) & (cost1[:, 4] < cost1[:, 0])
-    wrist_listed = fits[:, (0, 2, 4, 6)][:, :, (4, 5)].all(axis=2).reshape(m, 2, 2)
-    wrist_cost = cost56[:, (0, 2, 4, 6)].reshape(m, 2, 2)
-    swap_wrists = wrist_listed.all(axis=2) & (wrist_cost[:, :, 1] < wrist_cost[:, :, 0])  # (m, 2 shoulders)
-    rank = (
-        4 * (_SHOULDER_OF_BRANCH ^ swap_shoulders[:, None])
-        + 2 * (_WRIST_OF_BRANCH ^ swap_wrists[:, _SHOULDER_OF_BRANCH])
-        + _ELBOW_OF_BRANCH
-    )
-    least = total.min(axis=1)
-    found = np.isfinite(least)
-    pick = np.argmin(np.where(total == least[:, None], rank, 8), axis=1)
-    out = v[np.arange(m), pick]
-    out[~found] = np.nan
-    return out, found
-
-
-def _nearest_chain(
-    q: np.ndarray, exists: np.ndarray, seed: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, int]:
-    """The nearest branch of each pose seeded by the previous pose's choice (the first by ``seed``):
-    ``(solutions (m, 6) rad, m)``, ``m`` the first pose with no branch within the limits, or one that
-    :func:`_branches_many` leaves to :func:`_nearest_solution` (``n`` if none).
-
-    The choice of pose ``i`` depends on that of ``i - 1``. Rather than a Python step per pose, every pose is
-    solved at once for guessed seeds (the previous pass's choices, shifted by one pose), and again until the
-    seeds reproduce themselves: then each row is exactly what the pose-by-pose walk chooses. A pass fixes at
-    least the first pose whose seed was wrong; along a smooth line the second pass confirms the first. After
-    :data:`_CHAIN_PASSES` passes the rest is finished a pose per pass (the same result, only slower).
-    """
-    n = len(q)
-    seeds = np.empty((n, 6))
-    seeds[:] = seed
-    out = np.empty((n, 6))
-    done = 0  # seeds[:done + 1] are the walk's own
-    passes = 0
-    while done < n:
-        passes += 1
-        stop = n if passes <= _CHAIN_PASSES else done + 1
-        sol, found = _select_nearest(q[done:stop], exists[done:stop], seeds[done:stop], lo, hi)
-        out[done:stop] = sol
-        # the first pose past `done` whose guessed seed is not the choice before it (NaN never equals)
-        wrong = np.flatnonzero((seeds[done + 1 : stop] != sol[:-1]).any(axis=1))
-        good_to = done + 1 + int(wrong[0]) if len(wrong) else stop
-        missing = np.flatnonzero(~found[: good_to - done])
-        if len(missing):
-            return out[: done + int(missing[0])], done + int(missing[0])
-        seeds[good_to:stop] = sol[good_to - done - 1 : stop - done - 1]
-        if good_to < n and stop == good_to:
-            seeds[good_to] = sol[-1]
-        done = good_to
-    return out, n
-
-
-# --------------------------------------------------------------------------- #
-# Numeric IK (Pinocchio, damped least squares)
-# --------------------------------------------------------------------------- #
-
-
-def _parse_target(target: Any) -> tuple[np.ndarray, np.ndarray | None]:
-    """(position (3,) m, rotation (3, 3) or None for position-only)."""
-    if isinstance(target, pin.SE3):
-        return np.array(target.translation, dtype=float), np.array(target.rotation, dtype=float)
-    if isinstance(target, tuple) and len(target) == 2:
-        pos, rot = target
-        pos = np.asarray(pos, dtype=float).reshape(3)
-        return pos, None if rot is None else np.asarray(rot, dtype=float).reshape(3, 3)
-    arr = np.asarray(target, dtype=float)
-    if arr.shape == (4, 4):
-        return arr[:3, 3].copy(), arr[:3, :3].copy()
-    if arr.shape == (3,):
-        return arr.copy(), None
-    raise PlanningError(
-        f"numeric_ik: target must be a pin.SE3, a 4x4 transform, a 3-vector (position only) "
-        f"or (position, rotation-or-None), got shape {arr.shape}"
-    )
-
-
-def numeric_ik(
-    model: Any,
-    data: Any,
-    frame_id: int | str,
-    target: Any,
-    seed: Any,
-    lower: Any = None,
-    upper: Any = None,
-    *,
-    max_iter: int = 100,
-    tol: float = 1e-10,
-    damping: float = 1e-10,
-    restarts: int = 20,
-    max_step: float = 0.5,
-    rng: int | np.random.Generator = 0,
-) -> np.ndarray:
-    """Damped-least-squares IK on a Pinocchio model (any serial arm).
-
-    Solves ``oMf(q) = target`` for the frame ``frame_id`` (a frame id, or a link name).
-    ``target``: a ``pin.SE3`` or ``(4, 4)`` transform (full pose), a ``(3,)``
-    position, or ``(position, rotation)`` where ``rotation=None`` means
-    position-only. ``seed``: ``(nq,)`` rad. ``lower``/``upper``: ``(nq,)``
-    position limits (default: the model's); every iterate is clipped to them.
-
-    Iteration (full pose): with ``iMd = oMf⁻¹ · target`` the error is
-    ``e = log6(iMd)`` (local frame, m and rad), the Jacobian ``J = -Jlog6(iMd⁻¹) · J_f``
-    where ``J_f`` is the LOCAL frame Jacobian, and the step is
-    ``dq = -Jᵀ (J Jᵀ + λ I)⁻¹ e`` with ``λ = damping + |e|²·1e-3``, scaled so
-    that no joint moves more than ``max_step`` rad, applied with
-    ``pin.integrate``. Position-only uses ``e = p* - p`` and the translational
-    rows rotated to the base frame. Converged when the position error ≤ ``tol``
-    m and the rotation error ≤ ``tol`` rad; otherwise up to ``restarts`` more
-    attempts from random configurations within the limits (deterministic
-    ``rng``). Returns ``(nq,)``; raises :class:`PlanningError` with the best
-    residual (m, rad) if nothing converged.
-    """
-    if isinstance(frame_id, str):
-        if not model.existFrame(frame_id, pin.FrameType.BODY):
-            raise RobotModelError(
-                f"numeric_ik: no link {frame_id!r} in model {model.name!r} (pass a frame id for other frame types)"
-            )
-        fid = model.getFrameId(frame_id, pin.FrameType.BODY)
-    else:
-        fid = int(frame_id)
-    if fid < 0 or fid >= model.nframes:
-        raise RobotModelError(f"numeric_ik: no frame {frame_id!r} in model {model.name!r}")
-    p_des, R_des = _parse_target(target)
-    oMdes = pin.SE3(R_des, p_des) if R_des is not None else None
-    lo = np.asarray(model.lowerPositionLimit if lower is None else lower, dtype=float)
-    hi = np.asarray(model.upperPositionLimit if upper is None else upper, dtype=float)
-    clip = model.nq == model.nv
-    gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-    eye = np.eye(6 if oMdes is not None else 3)
-
-    def attempt(q: np.ndarray) -> tuple[np.ndarray, float, float]:
-        best_q, best = q, (math.inf, math.inf)
-        for _ in range(max_iter):
-            pin.framesForwardKinematics(model, data, q)
-            oMf = data.oMf[fid]
-            if oMdes is None:
-                err = p_des - oMf.translation
-                dp, dr = float(np.linalg.norm(err)), 0.0
-            else:
-                iMd = oMf.actInv(oMdes)
-                err = pin.log6(iMd).vector
-                dp = float(np.linalg.norm(oMf.translation - p_des))
-                dr = float(np.linalg.norm(err[3:]))
-            if dp + dr < best[0] + best[1]:
-                best_q, best = q, (dp, dr)
-            if dp <= tol and dr <= tol:
-                break
-            Jf = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
-            lam = damping + 1e-3 * float(err @ err)
-            if oMdes is None:
-                J = oMf.rotation @ Jf[:3]
-                dq = J.T @ np.linalg.solve(J @ J.T + lam * eye, err)
-            else:
-                J = -pin.Jlog6(iMd.inverse()) @ Jf
-                dq = -J.T @ np.linalg.solve(J @ J.T + lam * eye, err)
-            big = float(np.abs(dq).max())
-            if big > max_step:
-                dq *= max_step / big
-            q = pin.integrate(model, q, dq)
-            if clip:
-                q = np.clip(q, lo, hi)
-        return best_q, best[0], best[1]
-
-    q0 = np.asarray(seed, dtype=float).reshape(model.nq)
-    if clip:
-        q0 = np.clip(q0, lo, hi)
-    best = (q0, math.inf, math.inf)
-    for k in range(restarts + 1):
-        if k == 0:
-            start = q0
-        elif clip:
-            rlo = np.where(np.isfinite(lo), lo, -_PI)
-            rhi = np.where(np.isfinite(hi), hi, _PI)
-            start = gen.uniform(rlo, rhi)
-        else:
-            start = pin.randomConfiguration(model)
-        q, dp, dr = attempt(start)
-        if dp + dr < best[1] + best[2]:
-            best = (q, dp, dr)
-        if dp <= tol and dr <= tol:
-            return np.array(q, dtype=float)
-    _, dp, dr = best
-    what = "position" if oMdes is None else "pose"
-    raise PlanningError(
-        f"numeric IK did not converge to the {what} target ({p_des[0]:.3f}, {p_des[1]:.3f}, "
-        f"{p_des[2]:.3f}) m for frame {model.frames[fid].name!r} after {restarts + 1} attempts: "
-        f"best residual {dp:.3g} m, {dr:.3g} rad (tolerance {tol:g})"
-    )

@@ -9,8 +9,9 @@ Conventions
   "Fingers straight down" is the rotation ``Rz(yaw) @ Rx(pi)``.
 * Collision geometry: each ``<cylinder>`` collision element of the URDF is read
   as the segment of a **capsule** of the same radius (URDF has no capsule
-  primitive), a ``<sphere>`` as a capsule of zero length; a ``<mesh>`` or
-  ``<box>`` is refused with a :class:`RobotModelError` naming the link. The two
+  primitive), a ``<sphere>`` as a capsule of zero length; :meth:`Robot.from_urdf`
+  encloses a vendor file's ``<mesh>`` and ``<box>`` geometry in fitted capsules
+  (:mod:`robocritics.robot.fit`, :mod:`robocritics.robot.vendor`). The two
   finger capsules are declared at full opening and slide along the tcp y axis
   with the gripper opening.
 * ``continuous`` joints are read as revolute joints limited to +-2 pi rad (one
@@ -31,6 +32,7 @@ multiply-adds; the capsule endpoints come from the same pass
 
 from __future__ import annotations
 
+import copy
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -44,7 +46,7 @@ import pinocchio as pin
 from ..errors import PlanningError, RobotModelError
 from ..trajectory import RobotLimits
 
-__all__ = ["Robot", "Capsule", "fingers_down", "DH_TOLERANCE_M"]
+__all__ = ["Robot", "Capsule", "fingers_down", "DH_TOLERANCE_M", "default_robot", "default_workspace"]
 
 
 def fingers_down(yaw_rad: float = 0.0) -> np.ndarray:
@@ -205,9 +207,12 @@ class Robot:
         home: np.ndarray | None = None,
         self_pairs: list[tuple[str, str]] | None = None,
         fixed_links: tuple[str, ...] = ("base_link", "shoulder_link"),
+        urdf_root: ET.Element | None = None,
     ):
         self.urdf_path = Path(urdf_path)
-        self.model = _load_model(self.urdf_path)
+        if urdf_root is None:
+            urdf_root = _read_checked(self.urdf_path)
+        self.model = _load_model(self.urdf_path, urdf_root)
         if self.model.nq != self.model.nv:
             raise RobotModelError(f"{self.urdf_path}: spherical, planar or floating joints are not supported")
         self.name = name or self.model.name
@@ -228,7 +233,7 @@ class Robot:
         self.jerk_limits = _read_only(jerk_limits if jerk_limits is not None else 10.0 * self.acceleration_limits)
         self.tcp_frame = tcp_frame
         self._tcp_frame_id = self._body_frame_id(tcp_frame, "the TCP")
-        self._parse_urdf_extras()
+        self._parse_urdf_extras(urdf_root)
         self.fixed_links = tuple(fixed_links)
         self._build_fk_tables()
         if dh is not None:
@@ -236,7 +241,7 @@ class Robot:
         self._set_reach(reach_m)
         self.home_q = home if home is not None else np.clip(np.zeros(self.n), self.lower, self.upper)
         self.self_pairs: tuple[tuple[str, str], ...] = (
-            self._default_self_pairs() if self_pairs is None else tuple((str(a), str(b)) for a, b in self_pairs)
+            self._default_self_pairs(None) if self_pairs is None else tuple((str(a), str(b)) for a, b in self_pairs)
         )
 
     # --- construction -----------------------------------------------------------------
@@ -288,17 +293,59 @@ class Robot:
         return _bundled(name).copy()
 
     @classmethod
-    def from_urdf(cls, path: str | Path, tcp_frame: str = "tcp", **kwargs) -> "Robot":
-        """Load another arm from a URDF that follows the contract in docs/robots.md.
+    def from_urdf(
+        cls,
+        path: str | Path,
+        tcp_frame: str = "tcp",
+        *,
+        tool=None,
+        tip: str | None = None,
+        base_pose=None,
+        home_q=None,
+        reach_m: float | None = None,
+        fixed_links=None,
+        joint_limits: dict | None = None,
+        name: str | None = None,
+        package_paths=(),
+        **kwargs,
+    ) -> "Robot":
+        """Load an arm from a URDF as its vendor ships it (docs/robots.md, "Bring your own arm").
 
-        ``tcp_frame``: the TCP link (+z the finger direction). Keyword arguments as for the
-        constructor: ``dh=`` (a standard-DH table, cross-checked against the URDF's ``tool0``;
-        turns on closed-form IK, otherwise Pinocchio damped least squares), ``reach_m=`` (default
-        the stretched-out chain from the shoulder), ``home=``, ``acceleration_limits=``,
-        ``jerk_limits=``, ``self_pairs=``, ``fixed_links=``. Raises :class:`RobotModelError`
-        naming what in the file breaks the contract.
+        Meshes (STL, DAE, OBJ; ``package://``, ``file://`` or relative paths, searched in the file's own package,
+        its directory, ``package_paths`` and ``ROS_PACKAGE_PATH``) and boxes are enclosed by fitted capsules
+        (:mod:`robocritics.robot.fit`, with a tested error bound); foreign-namespace attributes are ignored.
+
+        ``tool``: a bundled tool name (:data:`robocritics.robot.tools.TOOLS`: ``"robotiq_2f85"``,
+        ``"robotiq_hande"``, ``"franka_hand"``, ``"none"``), a tool URDF path, or None: the file's own
+        robocritics ``<gripper>`` if it has one, else ``"none"``. ``tip``: the flange link the tool mounts on
+        (default: inferred; required where the chain branches, e.g. a vendor hand's finger joints).
+        ``base_pose``: where the base stands in the world (4x4, or ``(x, y, z[, roll, pitch, yaw])`` m, rad).
+        ``home_q`` (rad), ``reach_m`` (m), ``fixed_links`` (links whose table distance is not reported):
+        inferred unless given (a collision-free home inside the limits; the farthest sampled flange distance
+        from the shoulder; the links whose height no joint changes). ``joint_limits``: ``{joint: (lower,
+        upper)}`` or ``(lower, upper, velocity)`` overrides (rad or m, rad/s or m/s), applied before the
+        file's limits are checked. Other keywords as for the constructor (``dh=``, ``acceleration_limits=``,
+        ``jerk_limits=``, ``self_pairs=``; ``home=`` is ``home_q``). Raises :class:`RobotModelError` naming
+        the element, joint or link and the line.
         """
-        return cls(path, tcp_frame=tcp_frame, **kwargs)
+        from .vendor import arm_tree, infer
+
+        path = Path(path)
+        home_q = kwargs.pop("home", home_q)
+        tree, facts = arm_tree(
+            path, tool=tool, tip=tip, base_pose=base_pose, joint_limits=joint_limits,
+            package_paths=tuple(Path(p) for p in package_paths), name=name, tcp_frame=tcp_frame,
+        )
+        self_pairs = kwargs.pop("self_pairs", None)
+        robot = cls(path, tcp_frame=tcp_frame, name=name or tree.get("name"), reach_m=1.0,
+                    urdf_root=tree, self_pairs=self_pairs or [], **kwargs)
+        robot.tip_frame = facts["tip"]
+        robot.tool_name = facts["tool"]
+        robot.capsule_slack_m = _read_only([facts["slack_m"].get(c.name, 0.0) for c in robot.capsules])
+        infer(robot, tip=facts["tip"], reach_m=reach_m, home_q=home_q, fixed_links=fixed_links)
+        if self_pairs is not None:
+            robot.self_pairs = tuple((str(a), str(b)) for a, b in self_pairs)
+        return robot
 
     def copy(self) -> "Robot":
         """An independent robot: the immutable facts are shared, Pinocchio ``data`` is new."""
@@ -336,14 +383,17 @@ class Robot:
                 )
         return vector
 
-    def _parse_urdf_extras(self) -> None:
-        root = ET.parse(self.urdf_path).getroot()
+    def _parse_urdf_extras(self, root: ET.Element) -> None:
+        """Capsules (numbers already checked by :func:`~robocritics.robot.urdf.check_numbers`) and the gripper."""
         capsules: list[Capsule] = []
         gripper = root.find("gripper")
         finger_links = gripper.get("fingers", "").split() if gripper is not None else []
         self.max_opening_m = float(gripper.get("max_opening", "0.085")) if gripper is not None else 0.0
+        if not (math.isfinite(self.max_opening_m) and 0 <= self.max_opening_m <= 1.0):
+            raise RobotModelError(f"{self.urdf_path}: <gripper max_opening> must be 0-1 m, got {self.max_opening_m!r}")
         self.finger_links = tuple(finger_links)
-        gripper_links = {"gripper_body", *finger_links}
+        # the gripper's links are the tool's (its <gripper links=...>); robocritics' own files name them
+        gripper_links = set(gripper.get("links", "gripper_body").split()) | set(finger_links) if gripper is not None else set()
         for link in root.findall("link"):
             lname = link.get("name")
             for k, col in enumerate(link.findall("collision")):
@@ -353,9 +403,9 @@ class Robot:
                     shapes = [g.tag for g in col.findall("geometry/*")] or ["no geometry"]
                     detail = "".join(f" filename={g.get('filename')!r}" for g in col.findall("geometry/mesh"))
                     raise RobotModelError(
-                        f"{self.urdf_path}: link {lname!r} has a <{shapes[0]}>{detail} collision; robocritics "
-                        "needs capsules: give each link <cylinder> collisions (read as capsules) or <sphere>s "
-                        "(see docs/robots.md, 'Collision geometry')"
+                        f"{self.urdf_path}: link {lname!r} has a <{shapes[0]}>{detail} collision; a robocritics "
+                        "model file needs capsules (<cylinder>s and <sphere>s): load the vendor file with "
+                        "Robot.from_urdf, which fits capsules to meshes (see docs/robots.md)"
                     )
                 origin = col.find("origin")
                 xyz = np.array([float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()])
@@ -376,7 +426,7 @@ class Robot:
                 )
         if not capsules:
             raise RobotModelError(
-                f"{self.urdf_path}: no <cylinder> or <sphere> collision elements (read as capsules) found; "
+                f"{self.urdf_path}: no collision geometry (<cylinder>, <sphere>, <box> or <mesh>) on the arm's links; "
                 "see docs/robots.md, 'Collision geometry'"
             )
         self.capsules = tuple(capsules)
@@ -455,14 +505,14 @@ class Robot:
     @property
     def workspace(self):
         """The default allowed workspace for this robot: a :class:`~robocritics.scene.Workspace` sphere of
-        radius ``reach_m`` around the shoulder (for the UR3e exactly the scene default)."""
+        radius ``reach_m`` around the shoulder (for the UR3e exactly :func:`default_workspace`)."""
         from ..scene import Workspace
 
         return Workspace(center=tuple(float(v) for v in self.shoulder_m), radius_m=self.reach_m)
 
     def scene_for(self, scene):
         """``scene`` with this robot's :attr:`workspace` unless the scene gives its own ``workspace``."""
-        if "workspace" in scene.model_fields_set:
+        if scene.workspace is not None:
             return scene
         return scene.model_copy(update={"workspace": self.workspace})
 
@@ -502,6 +552,24 @@ class Robot:
 
     def _forward_static(self, q: np.ndarray) -> np.ndarray:
         return self.forward(q[None, :])[0]
+
+    @cached_property
+    def kinematic_hash(self) -> str:
+        """A hash of what the joint angles mean: the flange pose (``tool0``, else the tip the tool mounts on,
+        else the TCP) in the base frame at four fixed configurations (clipped to the limits), rounded to 1 um
+        and 1 urad. Two models with the same chain and base convention share it whatever their names and link
+        frames; a ROS-convention UR (base turned 180 deg) or other lengths do not. The deploy gate keys on it."""
+        import hashlib
+
+        flange = "tool0" if "tool0" in self._frame_index else getattr(self, "tip_frame", None) or self.tcp_frame
+        index = self._frame_index[flange]
+        pattern = np.array([0.0, 0.3, -1.2, 1.1, -0.7, 0.9, 0.4, -0.5, 0.8])
+        probes = [np.zeros(self.n)] + [np.roll(pattern, k)[: self.n] * (1 + 0.5 * k) for k in range(3)]
+        h = hashlib.sha256(f"{self.n}:".encode())
+        for q in probes:
+            pose = self._forward_static(np.clip(q, self.lower, self.upper))[index]
+            h.update(np.round(pose[:3, :4], 6).astype("<f8").tobytes() + b";")
+        return h.hexdigest()[:16]
 
     # --- limits ---------------------------------------------------------------------
 
@@ -637,9 +705,9 @@ class Robot:
     def trajectory(self, q: np.ndarray, time: np.ndarray, scene, **kwargs):
         """The :class:`~robocritics.trajectory.Trajectory` of joint samples ``q`` at ``time`` in ``scene``.
 
-        See :func:`robocritics.robot.trace.build_trajectory` for the optional arguments.
+        See :func:`robocritics.planning.trace.build_trajectory` for the optional arguments.
         """
-        from .trace import build_trajectory
+        from ..planning.trace import build_trajectory
 
         return build_trajectory(self, scene, q, time, **kwargs)
 
@@ -660,7 +728,9 @@ class Robot:
 
         ``orientation`` is a 3x3 rotation of the tcp frame (default: fingers straight
         down, turned by ``yaw_rad``). Among all solutions within the joint limits
-        the one nearest ``seed`` (default: the home pose) is returned. UR arms use
+        the one nearest ``seed`` (default: the home pose) is returned. An arm with fewer than six joints
+        cannot choose the yaw as well: with the default orientation its fingers point down and the yaw is
+        what its wrist allows (:func:`~robocritics.robot.ik_numeric.pointing_ik`). UR arms use
         closed-form IK (all 8 branches); others Pinocchio damped least squares.
         Raises :class:`PlanningError` naming the target and why.
         """
@@ -677,7 +747,12 @@ class Robot:
             if self.dh is not None and self.tcp_in_flange is not None:
                 flange = target @ self._flange_in_tcp
                 return _ik.ur_ik(self.dh, flange, seed, self.lower, self.upper)
-            return _ik.numeric_ik(self.model, self.data, self._tcp_frame_id, target, seed, self.lower, self.upper)
+            from .ik_numeric import numeric_ik, pointing_ik
+
+            if orientation is None and self.n < 6:
+                # fewer than six joints cannot also choose the yaw: fingers down, turned as the wrist allows
+                return pointing_ik(self.model, self.data, self._tcp_frame_id, p, R[:, 2], seed, self.lower, self.upper)
+            return numeric_ik(self.model, self.data, self._tcp_frame_id, target, seed, self.lower, self.upper)
         except PlanningError as exc:
             pose = "with the fingers down" if orientation is None else "in the requested orientation"
             raise PlanningError(
@@ -722,23 +797,25 @@ class Robot:
 
     # --- self-collision pairs ---------------------------------------------------------
 
-    def _default_self_pairs(self) -> tuple[tuple[str, str], ...]:
+    def _default_self_pairs(self, q: np.ndarray | None) -> tuple[tuple[str, str], ...]:
         """Capsule pairs checked for pinch points.
 
         Adjacent links (sharing a joint) are never pairs. Beyond that we drop the
         pairs that are close *by construction*: those closer than
-        ``_SAME_HOUSING_GAP_M`` (0.06 m) in the zero configuration with the links
+        ``_SAME_HOUSING_GAP_M`` (0.06 m) at ``q`` (default: zeros clipped to the limits;
+        a URDF loaded with :meth:`from_urdf` uses its home pose) with the links
         stretched out, i.e. parts of one housing (the compact UR wrist, base and
         shoulder column). What remains are non-adjacent arm links and arm links
         against the gripper, the pairs that can close on a hand.
         """
-        from .proximity import capsule_capsule
+        from ..geometry.kernels import capsule_capsule
 
         parent_of = {}
         for f in self.model.frames:
             if f.type == pin.FrameType.BODY:
                 parent_of[f.name] = f.parentJoint
-        frames = self.forward(np.zeros((1, self.n)))
+        q = np.clip(np.zeros(self.n), self.lower, self.upper) if q is None else np.asarray(q, float)
+        frames = self.forward(q[None, :])
         p0, p1 = self.capsule_segments(frames)
         candidates = []
         C = len(self.capsules)
@@ -788,30 +865,50 @@ def _panda() -> Robot:
     return robot
 
 
-def _load_model(path: Path):
-    """The Pinocchio model of the URDF at ``path``; ``continuous`` joints read as revolute +-2 pi rad."""
+def _read_checked(path: Path) -> ET.Element:
+    """The root of the URDF at ``path``, read within robocritics' bounds with every number checked."""
+    from .urdf import check_numbers, read_urdf
+
+    doc = read_urdf(path)
+    check_numbers(doc)
+    return doc.root
+
+
+def _load_model(path: Path, root: ET.Element):
+    """The Pinocchio model of the URDF tree ``root``; ``continuous`` joints read as revolute +-2 pi rad."""
+    root = copy.deepcopy(root)
+    for joint in [j for j in root.iter("joint") if j.get("type") == "continuous"]:
+        # a continuous joint has no position limits; Pinocchio would model it as (cos, sin), which a
+        # planner over joint angles cannot use, and one turn either way is all any plan needs
+        joint.set("type", "revolute")
+        limit = joint.find("limit")
+        if limit is None:
+            raise RobotModelError(f"{path}: continuous joint {joint.get('name')!r} needs <limit velocity=... effort=...>")
+        limit.set("lower", repr(-CONTINUOUS_LIMIT_RAD))
+        limit.set("upper", repr(CONTINUOUS_LIMIT_RAD))
+    for element in [e for e in root if e.tag not in ("link", "joint")]:
+        root.remove(element)  # robocritics' own elements (<gripper>), transmissions, plugins: not Pinocchio's
     try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError) as exc:
-        raise RobotModelError(f"cannot load URDF {str(path)!r}: {exc}") from None
-    continuous = [j for j in root.iter("joint") if j.get("type") == "continuous"]
-    try:
-        if not continuous:
-            return pin.buildModelFromUrdf(str(path))
-        for joint in continuous:
-            # a continuous joint has no position limits; Pinocchio would model it as (cos, sin), which a
-            # planner over joint angles cannot use, and one turn either way is all any plan needs
-            joint.set("type", "revolute")
-            limit = joint.find("limit")
-            if limit is None:
-                raise RobotModelError(
-                    f"{path}: continuous joint {joint.get('name')!r} needs <limit velocity=... effort=...>"
-                )
-            limit.set("lower", repr(-CONTINUOUS_LIMIT_RAD))
-            limit.set("upper", repr(CONTINUOUS_LIMIT_RAD))
         return pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
-    except (RuntimeError, ValueError, OSError) as exc:
+    except (RuntimeError, ValueError, OSError, MemoryError) as exc:
         raise RobotModelError(f"cannot load URDF {str(path)!r}: {exc}") from None
+
+
+def default_robot() -> Robot:
+    """The arm a run uses when none is given: :data:`robocritics.robot.arms.DEFAULT_ARM` (the UR3e), a fresh copy."""
+    from .arms import DEFAULT_ARM
+
+    return _bundled(DEFAULT_ARM.name).copy()
+
+
+def default_workspace():
+    """The allowed workspace of a scene that gives none, judged without a robot: the reach sphere of
+    :data:`~robocritics.robot.arms.DEFAULT_ARM` around its shoulder (what ``default_robot().workspace`` is,
+    without loading the model)."""
+    from ..scene import Workspace
+    from .arms import DEFAULT_ARM
+
+    return Workspace(center=(0.0, 0.0, DEFAULT_ARM.dh.d1), radius_m=DEFAULT_ARM.reach_m)
 
 
 def _bundled(name: str) -> Robot:

@@ -8,7 +8,7 @@ the interactive web interface.
 """
 
 from .html import Replay, assets, replay_html, write_replay_html
-from .replay import MAX_FRAME_RATE_HZ, REPLAY_FORMAT, closest_points, replay_data
+from .replay import MAX_FRAME_RATE_HZ, REPLAY_FORMAT, replay_data
 
 __all__ = [
     "replay_data",
@@ -16,7 +16,6 @@ __all__ = [
     "write_replay_html",
     "Replay",
     "assets",
-    "closest_points",
     "REPLAY_FORMAT",
     "MAX_FRAME_RATE_HZ",
 ]

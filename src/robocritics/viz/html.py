@@ -16,11 +16,10 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .replay import replay_data
+from .replay import Run, replay_data
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..report import Report
-    from ..simulate import Execution
+    from ..critic.report import Report
 
 __all__ = ["assets", "replay_html", "write_replay_html", "Replay", "script_json"]
 
@@ -72,18 +71,18 @@ window.replay = RoboReplay.mount(document.getElementById("replay"),
 """
 
 
-def _replay_page(execution: Execution, report: Report | None, title: str | None, *, embedded: bool) -> str:
+def _replay_page(execution: Run, report: Report | None, title: str | None, *, embedded: bool) -> str:
     data = replay_data(execution, report, title=title)
     report_html = report._repr_html_() if report is not None else ""
     return _page(data, data["title"], report_html, embedded=embedded)
 
 
-def replay_html(execution: Execution, report: Report | None = None, *, title: str | None = None) -> str:
+def replay_html(execution: Run, report: Report | None = None, *, title: str | None = None) -> str:
     """One self-contained HTML page: the 3-D replay with its timeline and verdicts, then the report table."""
     return _replay_page(execution, report, title, embedded=False)
 
 
-def write_replay_html(path: str | Path, execution: Execution, report: Report | None = None, *, title: str | None = None) -> Path:
+def write_replay_html(path: str | Path, execution: Run, report: Report | None = None, *, title: str | None = None) -> Path:
     """Write :func:`replay_html` to ``path`` (UTF-8); returns the path."""
     return _write(path, replay_html(execution, report, title=title))
 
@@ -101,7 +100,7 @@ class Replay:
     ``execution.show(report)`` returns one; ``Replay(...).html`` is the page itself.
     """
 
-    def __init__(self, execution: Execution, report: Report | None = None, *, title: str | None = None,
+    def __init__(self, execution: Run, report: Report | None = None, *, title: str | None = None,
                  height_px: int = 760):  # fmt: skip
         self.html = _replay_page(execution, report, title, embedded=True)
         self.height_px = int(height_px)

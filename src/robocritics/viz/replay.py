@@ -1,7 +1,7 @@
 """One simulated run as replay data: what the 3-D replay (``static/replay.js``) draws, as plain JSON.
 
-:func:`replay_data` turns an :class:`~robocritics.simulate.Execution` (and the
-:class:`~robocritics.report.Report` of its critics) into a JSON-serialisable dict
+:func:`replay_data` turns an :class:`~robocritics.execution.Execution` (and the
+:class:`~robocritics.critic.report.Report` of its critics) into a JSON-serialisable dict
 that the replay component renders in a browser, the same for the studio, a
 notebook and an offline HTML file:
 
@@ -13,7 +13,7 @@ notebook and an offline HTML file:
   collision capsule (fingers included, so the gripper opens and closes), and
   each capsule's radius [m];
 * the scene: table and container boxes (static), objects with their shape, size
-  [m] and colour, and per frame the pose of every object the program moved
+  [m] and colour (a mesh fixture with its triangles, at most :data:`MAX_SHOWN_TRIANGLES`), and per frame the pose of every object the program moved
   (carried objects move with the gripper); the people in the cell as the capsules
   of their ISO/TS 15066 body regions (static; :mod:`robocritics.humans`);
 * provenance: per frame the program step, and the steps' skills and source lines;
@@ -35,12 +35,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._arrays import unique_values
+from ..geometry.pairs import capsule_pose, closest_points
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..report import Report
-    from ..simulate import Execution
+    from ..critic.report import Report
 
-__all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ", "closest_points"]
+__all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ"]
+
+#: The run a replay draws: an :class:`~robocritics.execution.Execution`. Not imported, not even for type hints:
+#: ``Execution.show`` imports this package, and the import would close a cycle.
+Run = Any
 
 #: Version tag of the replay data, checked by ``replay.js``.
 REPLAY_FORMAT = "robocritics-replay/1"
@@ -61,6 +65,33 @@ _FLAG_COLOURS = {"OK": "#2e9d4a", "WARNING": "#e0a100", "ERROR": "#d33a2c"}
 def _f32(array: np.ndarray) -> dict[str, Any]:
     a = np.ascontiguousarray(array, dtype="<f4")
     return {"dtype": "float32", "shape": list(a.shape), "data": base64.b64encode(a.tobytes()).decode("ascii")}
+
+
+MAX_SHOWN_TRIANGLES = 20_000
+"""Most triangles of one mesh object sent to the browser (float32, 36 bytes each): larger meshes are decimated."""
+
+
+def shown_triangles(vertices: np.ndarray, triangles: np.ndarray, limit: int = MAX_SHOWN_TRIANGLES) -> np.ndarray:
+    """The corners ``(F', 3, 3)`` (m, the mesh's frame) of at most ``limit`` triangles showing the mesh: all of
+    them if few enough, else vertex clustering (vertices snapped to a grid whose cell doubles until the
+    triangles left, those with three distinct corners, are few enough: the outline stays, small detail goes)."""
+    corners = vertices[triangles]
+    extent = float(np.ptp(vertices, axis=0).max()) or 1.0
+    cell = extent / 512
+    while len(corners) > limit:
+        snapped = np.round(vertices / cell).astype(np.int64)
+        _, ids = np.unique(snapped, axis=0, return_inverse=True)
+        ids = ids.reshape(-1)
+        keys = ids[triangles]
+        keep = (keys[:, 0] != keys[:, 1]) & (keys[:, 1] != keys[:, 2]) & (keys[:, 0] != keys[:, 2])
+        centres = np.zeros((ids.max() + 1, 3))
+        np.add.at(centres, ids, vertices)
+        centres /= np.bincount(ids)[:, None]
+        # one triangle per distinct corner set (clustering folds neighbours onto each other)
+        unique_keys = np.unique(np.sort(keys[keep], axis=1), axis=0)
+        corners = centres[unique_keys]
+        cell *= 2
+    return corners
 
 
 def _colour(attributes: dict, index: int) -> str:
@@ -84,44 +115,7 @@ def _frame_samples(time_s: np.ndarray, keep: list[int]) -> np.ndarray:
     return unique_values(picked[(picked >= 0) & (picked < T)])  # (np.unique would load numpy.ma)
 
 
-def closest_points(a_kind: str, a_size, a_pose, b_kind: str, b_size, b_pose) -> tuple[np.ndarray, np.ndarray, float]:
-    """Closest points (m, base frame) between two shapes and their distance [m], with coal.
-
-    Kinds: ``"capsule"`` (size ``(radius, length)``, axis z of its pose), ``"box"``
-    (extents), ``"cylinder"`` (radius, height), ``"sphere"`` (radius). Poses are 4x4.
-    The distance is negative on penetration (coal's signed distance); the points
-    are then the witness points of the penetration.
-    """
-    import coal
-
-    from ..robot.proximity import _coal_geometry
-
-    def transform(pose):
-        pose = np.asarray(pose, float)
-        return coal.Transform3s(pose[:3, :3].copy(), pose[:3, 3].copy())
-
-    request, result = coal.DistanceRequest(), coal.DistanceResult()
-    request.enable_signed_distance = True
-    distance = coal.distance(_coal_geometry(a_kind, a_size), transform(a_pose), _coal_geometry(b_kind, b_size), transform(b_pose),
-                             request, result)  # fmt: skip
-    return np.array(result.getNearestPoint1()), np.array(result.getNearestPoint2()), float(distance)
-
-
-def _capsule_pose(p0: np.ndarray, p1: np.ndarray) -> tuple[np.ndarray, float]:
-    """A pose whose z axis runs along ``p0 -> p1``, centred between them, and the segment length [m]."""
-    axis = p1 - p0
-    length = float(np.linalg.norm(axis))
-    z = axis / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
-    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    pose = np.eye(4)
-    pose[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-    pose[:3, 3] = (p0 + p1) / 2
-    return pose, length
-
-
-def _segment(execution: Execution, pair_name: str, sample: int) -> list[list[float]] | None:
+def _segment(execution: Run, pair_name: str, sample: int) -> list[list[float]] | None:
     """The closest-points segment of proximity pair ``pair_name`` at ``sample`` (m, base frame), or None."""
     trajectory, robot = execution.trajectory, execution.robot
     pair = next((p for p in trajectory.pairs if p.name == pair_name), None)
@@ -133,11 +127,11 @@ def _segment(execution: Execution, pair_name: str, sample: int) -> list[list[flo
     def shapes_of(name: str) -> list[tuple[str, Any, np.ndarray]]:
         if name in capsule_index:
             i = capsule_index[name]
-            pose, length = _capsule_pose(p0[0, i], p1[0, i])
+            pose, length = capsule_pose(p0[0, i], p1[0, i])
             return [("capsule", (robot.capsule_radii[i], length), pose)]
         moved = execution.object_poses.get(name)
         return [
-            (s.kind, s.size, s.pose if moved is None else moved[sample])
+            (s.kind, s.size if s.mesh is None else s.mesh, s.pose if moved is None else moved[sample])
             for s in execution.scene.shapes()
             if s.owner == name
         ]
@@ -159,7 +153,7 @@ def _finite(x: float | None) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
 
-def _verdicts(execution: Execution, report: Report, time_s: np.ndarray) -> list[dict[str, Any]]:
+def _verdicts(execution: Run, report: Report, time_s: np.ndarray) -> list[dict[str, Any]]:
     out = []
     for v in report.verdicts:
         ev = v.evidence
@@ -227,7 +221,7 @@ def _keep_samples(report: Report | None) -> list[int]:
     return keep
 
 
-def replay_data(execution: Execution, report: Report | None = None, *, title: str | None = None) -> dict[str, Any]:
+def replay_data(execution: Run, report: Report | None = None, *, title: str | None = None) -> dict[str, Any]:
     """The replay of ``execution`` (with the verdicts of ``report``, if given) as a JSON-serialisable dict.
 
     See the module docstring for what it holds; ``robocritics.viz.replay_html``
@@ -237,6 +231,7 @@ def replay_data(execution: Execution, report: Report | None = None, *, title: st
     if not all(hasattr(execution, a) for a in ("trajectory", "robot", "scene", "object_poses")):
         raise TypeError(f"replay_data() needs the Execution that simulate() returns, got {type(execution).__name__}")
     trajectory, robot, scene = execution.trajectory, execution.robot, execution.scene
+    workspace = scene.workspace or robot.workspace  # a scene without one follows its robot
     time_all = np.asarray(trajectory.time, float)
     frames = _frame_samples(time_all, _keep_samples(report))
     p0, p1 = robot.capsule_segments(trajectory.frames[frames])
@@ -252,6 +247,8 @@ def replay_data(execution: Execution, report: Report | None = None, *, title: st
             "colour": _colour(o.attributes, i),
             "pose": _pose12(shape.pose),
         }
+        if shape.mesh is not None:
+            entry["triangles"] = _f32(shown_triangles(*shape.mesh).reshape(-1, 9))
         if o.id in execution.object_poses:
             entry["poses"] = _f32(execution.object_poses[o.id][frames][:, :3, :4].reshape(len(frames), 12))
         objects.append(entry)
@@ -283,7 +280,7 @@ def replay_data(execution: Execution, report: Report | None = None, *, title: st
         "objects": objects,
         "boxes": boxes,
         "humans": _humans(scene),
-        "workspace": {"center": list(scene.workspace.center), "radius_m": float(scene.workspace.radius_m)},
+        "workspace": {"center": list(workspace.center), "radius_m": float(workspace.radius_m)},
         "verdicts": [],
         "score_text": None,
     }

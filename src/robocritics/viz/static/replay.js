@@ -43,7 +43,14 @@
   }
 
   function objectGeometry(o) {
-    if (o.shape === "box") return new THREE.BoxGeometry(o.size[0], o.size[1], o.size[2]);
+    if (o.shape === "mesh" && o.triangles) {
+      // a fixture from CAD: its triangles (m, its own frame; decimated to a bound by replay_data)
+      const g = new THREE.BufferGeometry();
+      g.setAttribute("position", new THREE.BufferAttribute(decode(o.triangles).values, 3));
+      g.computeVertexNormals();
+      return g;
+    }
+    if (o.shape === "box" || o.shape === "mesh") return new THREE.BoxGeometry(o.size[0], o.size[1], o.size[2]);
     if (o.shape === "sphere") return new THREE.SphereGeometry(o.size[0], 24, 16);
     // cylinder: three.js cylinders run along y; ours along z
     const g = new THREE.CylinderGeometry(o.size[0], o.size[0], o.size[1], 28);
@@ -294,6 +301,8 @@
       }
     }
     this.element.dataset.people = String((data.humans || []).length);
+    // mesh fixtures drawn from their triangles (a test reads it, as it reads the people)
+    this.element.dataset.meshes = String(data.objects.filter((o) => o.shape === "mesh" && o.triangles).length);
 
     this.capsuleMeshes = [];
     const first = this.ends;

@@ -19,7 +19,7 @@
     return h;
   };
   const state = {critics: [], enabled: new Set(), revision: null, replay: null, busy: false, chat: null,
-    deploy: null, server: null, known: 0, deployShown: null, chatVersion: -1, live: null, approvalId: null};
+    deploy: null, motion: null, server: null, known: 0, deployShown: null, chatVersion: -1, live: null, approvalId: null};
 
   async function api(path, body) {
     const init = body === undefined ? {headers: headers()} : {method: "POST", headers: headers(), body: JSON.stringify(body)};
@@ -68,7 +68,8 @@
   function verdictLine(v) {
     const flag = v.flag === "error" ? "Error" : "Warning";
     const message = /[.!?)]$/.test(v.message.trim()) ? v.message.trim() : v.message.trim() + ".";
-    return `${flag} [${v.critic}]: ${message}` + (v.hint ? " Hint: " + v.hint : "");
+    const at = !v.lines.length && v.window ? ` (at ${v.window[0].toFixed(2)}-${v.window[1].toFixed(2)} s)` : "";
+    return `${flag} [${v.critic}]${at}: ${message}` + (v.hint ? " Hint: " + v.hint : "");
   }
 
   // --- editor with line numbers and flagged lines ---------------------------------------------------
@@ -90,6 +91,7 @@
   // --- critics panel ----------------------------------------------------------------------------------
   function fixBlocked(v) {
     const r = state.revision, j = job();
+    if (state.motion) return "Fix disabled: " + state.motion.why;  // imported motion (docs/studio.md)
     if (!v || v.flag === "ok") return "nothing to fix";
     if (j) return "a " + j.kind + " is running";
     if (state.busy) return "busy";
@@ -171,8 +173,9 @@
     const failing = r && r.verdicts.some((v) => v.flag !== "ok");
     const waiting = j && j.approval;
     $("run").disabled = state.busy || (!!j && !waiting);
-    $("run").title = j && !waiting ? "a " + j.kind + " is running" : waiting ? "Run cancels the turn waiting for approval" : "";
-    const fixWhy = !r ? "Run the program first" : !failing ? "every critic passed" : fixBlocked(r.verdicts.find((v) => v.flag !== "ok"));
+    $("run").title = j && !waiting ? "a " + j.kind + " is running" : waiting ? "Run cancels the turn waiting for approval"
+      : state.motion && state.motion.kind === "recording" ? "read and judge the recording again" : "";
+    const fixWhy = state.motion ? fixBlocked(null) : !r ? "Run the program first" : !failing ? "every critic passed" : fixBlocked(r.verdicts.find((v) => v.flag !== "ok"));
     $("fix-all").disabled = !!fixWhy;
     $("fix-all").title = fixWhy || (state.chat ? "apply the critics' own repairs (no LLM is configured)" : "");
     const why = deployBlocked();
@@ -214,6 +217,7 @@
     document.body.dataset.job = j ? j.kind : "";
     const turn = j && j.kind !== "deploy" && j.kind !== "run";
     $("chat-status").textContent = turn ? j.kind + ": " + (j.status || "working") + "…"
+      : state.motion ? "Chat and Fix are disabled: " + state.motion.why + "."
       : state.chat ? "Chat is disabled: " + state.chat + ". Fix applies the critics' own repairs." : "";
   }
 
@@ -235,7 +239,7 @@
     const body = lines.length ? lines.join("\n") : (r.feedback || "All selected critics passed.");
     term(`# revision ${r.index} (${r.kind})` + (r.duration_s ? `, simulated in ${r.duration_s.toFixed(2)} s` : "") + "\n" + body + "\n", true);
     state.replay.load(r.replay || null);
-    $("replay-note").textContent = r.replay ? "" : r.compact ? "— not kept for old revisions: Run it again to replay" : "— no motion: the program did not run";
+    $("replay-note").textContent = r.replay ? (state.motion ? "— " + state.motion.name : "") : r.compact ? "— not kept for old revisions: Run it again to replay" : "— no motion: the program did not run";
     renderCritics();
     if (state.server) renderHistory(state.server.revisions);
     updateButtons();
@@ -251,7 +255,7 @@
       show(r);
       await poll();  // the history lists the new revision before the page says the Run is done
       document.body.dataset.lastRun = String(r.index);
-      $("editor-status").textContent = "";
+      $("editor-status").textContent = state.motionLabel || "";
     } catch (e) {
       term("run refused: " + e.message + "\n");
       $("editor-status").textContent = "run refused";
@@ -414,6 +418,13 @@
     state.enabled = new Set(s.selected);
     state.chat = s.chat;
     state.deploy = s.deploy;
+    state.motion = s.motion;  // a URScript file or a recording, not a program (Fix, chat and Deploy off)
+    if (s.motion) {
+      $("editor").readOnly = s.motion.kind === "recording";
+      state.motionLabel = s.motion.kind === "recording" ? s.motion.name + " (recording, read-only)" : s.motion.name + " (URScript)";
+      $("editor-status").textContent = state.motionLabel;
+      $("chat-input").title = s.motion.why;
+    }
     state.server = s;
     state.deployShown = s.last_deploy ? s.last_deploy.job : null;
     $("editor").value = s.program;

@@ -23,7 +23,9 @@ def verdict_rows(report) -> list[dict[str, Any]]:
     if report is None:
         return []
     return [{"critic": v.critic, "flag": v.flag.value.lower(), "message": v.message, "hint": v.hint,
-             "lines": list(v.evidence.lines)} for v in report.verdicts]
+             "lines": list(v.evidence.lines),
+             "window": None if v.evidence.time_window_s is None else [round(t, 3) for t in v.evidence.time_window_s]}
+            for v in report.verdicts]
 
 
 class Revision:

@@ -28,6 +28,7 @@ from ...errors import RoboCriticsError
 from .common import (APPROVAL_TIMEOUT_S, CANCELLED_TURN_WAIT_S, CHAT_ENTRY_CHARS, CHAT_LOG_ENTRIES, MAX_BODY_BYTES,
                      MAX_CHAT_CHARS, MAX_PROGRAM_CHARS, StudioBusy, StudioError, is_loopback)
 from .jobs import Busy, Cancelled, Job, JobBoard
+from .imported import IMPORTED_DEPLOY, imported_motion, recording_summary
 from .revisions import FULL_REVISIONS, MAX_REVISIONS, Revision
 
 __all__ = ["Studio", "StudioError", "StudioBusy", "is_loopback", "MAX_BODY_BYTES", "MAX_PROGRAM_CHARS",
@@ -45,18 +46,28 @@ class Studio:
     critics=None, goals=None, timeout_s=60, run_program=False, approval_timeout_s=APPROVAL_TIMEOUT_S)``:
     ``scene`` a :class:`~robocritics.scene.Scene` (or its name/path); ``program`` the editor's first text
     (``run_program``: Run it as soon as the studio starts); ``model`` a
-    :class:`~robocritics.llm.client.ChatModel` for chat and Fix (None: chat disabled, the page says why; Fix
+    :class:`~robocritics.llm.protocol.ChatModel` for chat and Fix (None: chat disabled, the page says why; Fix
     applies the critics' own repairs only); ``deploy`` ``{"host", "rtde_port", "dashboard_port",
     "secondary_port"}`` of a UR controller (None: Deploy disabled); ``critics`` the critics run (default: all
     installed); ``timeout_s`` the wall-clock bound of one simulation, s; ``approval_timeout_s`` how long a
     revision waits for Approve/Reject before it counts as rejected, s.
+
+    ``motion``: the path of motion from another tool (:mod:`robocritics.formats`) to judge instead of a program:
+    a URScript file (its text is the editor's, Run checks the edited script; the critics name its lines) or a
+    recording (ur_rtde or generic CSV, JointTrajectory JSON, MoveIt YAML, rosbag2: the editor shows a read-only
+    summary whose findings name times). Both are read and run in the worker's limited child. Fix and chat are off
+    for them (the repairs and the model write the skill API, not URScript, and a recording has no program), and
+    so is Deploy (:data:`IMPORTED_DEPLOY`). ``motion_options``: the options of
+    :meth:`~.worker.Evaluator.evaluate_motion` (a script's installation: ``tcp``, ``payload_kg``, ``start_q``,
+    ``gripper_io``, ``passes``; a rosbag's ``topic``).
     """
 
     def __init__(self, scene, program: str | None = None, *, host: str = "127.0.0.1", port: int = 0,
                  token: str | None = None, model=None, deploy: dict[str, Any] | None = None, critics=None,
-                 goals=None, timeout_s: float = 60.0, run_program: bool = False,
+                 goals=None, timeout_s: float = 60.0, run_program: bool = False, robot=None,
                  approval_timeout_s: float = APPROVAL_TIMEOUT_S,
-                 no_model_reason: str = "no LLM endpoint is configured (start the studio with --base-url and --model)"):
+                 no_model_reason: str = "no LLM endpoint is configured (start the studio with --base-url and --model)",
+                 motion=None, motion_options: dict[str, Any] | None = None):
         from ...goals import parse_goals
         from ...scene import Scene
 
@@ -72,8 +83,15 @@ class Studio:
         self.deploy_target = dict(deploy) if deploy else None
         self.critics = list(critics) if critics else None
         self.goals = parse_goals(goals, self.scene)  # a bad goal (GoalError) fails here, before serving
+        self.motion = imported_motion(motion, bool(self.goals)) if motion is not None else None
+        self.motion_options = dict(motion_options or {})
+        if self.motion is not None and self.motion["kind"] == "urscript" and not self.program:
+            self.program = self.motion.pop("text")
+        if self.motion is not None:
+            self.motion.pop("text", None)
         self.timeout_s = float(timeout_s)
         self.run_program = bool(run_program)
+        self.robot = robot  # None: the UR3e (Robot.from_urdf for a vendor arm; docs/robots.md)
         self.revisions: list[Revision] = []
         self.chat_log: list[dict[str, str]] = []
         self.chat_version = 0  # entries ever said (the log keeps the last CHAT_LOG_ENTRIES)
@@ -87,7 +105,7 @@ class Studio:
         self._turn_job: Job | None = None
         self._attempt_revision: dict[int, int] = {}  # Loop attempt index -> revision number
         self._selected: list[str] | None = None
-        from ...plugins import get_critics
+        from ...critic.plugins import get_critics
 
         self._installed: list[str] = list(get_critics())  # the critics ticked on the page of the running turn
         self._server = None
@@ -103,7 +121,8 @@ class Studio:
         self._thread = threading.Thread(target=self._server.serve_forever, name="robocritics-studio", daemon=True)
         self._thread.start()
         # Warm the worker (imports, robot model) now, so the first Run does not pay for it; Run --program.
-        first = self._initial_run if self.run_program and self.program.strip() else (lambda: self.evaluator)
+        first = (self._initial_run if self.run_program and (self.program.strip() or self.motion)
+                 else (lambda: self.evaluator))
         threading.Thread(target=first, name="robocritics-studio-warm", daemon=True).start()
         return self
 
@@ -173,7 +192,7 @@ class Studio:
             if self._evaluator is None:
                 from .worker import Evaluator
 
-                self._evaluator = Evaluator(self.scene, critics=self.critics, goals=self.goals,
+                self._evaluator = Evaluator(self.scene, self.robot, critics=self.critics, goals=self.goals,
                                             timeout_s=self.timeout_s)
             return self._evaluator
 
@@ -194,8 +213,10 @@ class Studio:
             "critics": self.installed_critics(),
             "selected": self.critics or self.installed_critics(),
             "goals": [str(g) for g in self.goals],
-            "chat": None if self.model is not None else self.no_model_reason,
-            "deploy": None if self.deploy_target else "no UR controller is configured (--deploy-host)",
+            "chat": self.motion["why"] if self.motion else None if self.model is not None else self.no_model_reason,
+            "deploy": IMPORTED_DEPLOY if self.motion else None if self.deploy_target else
+            "no UR controller is configured (--deploy-host)",
+            "motion": None if self.motion is None else {k: self.motion[k] for k in ("kind", "name", "why")},
             "revisions": revisions,
             "max_program_chars": MAX_PROGRAM_CHARS,
             "full_revisions": FULL_REVISIONS,
@@ -272,7 +293,12 @@ class Studio:
         from ...errors import ProgramError
         from .worker import EvaluatorError, _rebuild
 
-        evaluation = self.evaluator.evaluate(program)
+        if self.motion is None:
+            evaluation = self.evaluator.evaluate(program)
+        elif self.motion["kind"] == "urscript":
+            evaluation = self.evaluator.evaluate_motion("urscript", program, self.motion["name"], **self.motion_options)
+        else:
+            evaluation = self.evaluator.evaluate_motion("recording", self.motion["path"], **self.motion_options)
         if evaluation.error is None:
             return dict(execution=evaluation.execution, full_report=evaluation.report, error=None,
                         duration_s=evaluation.duration_s)
@@ -290,9 +316,12 @@ class Studio:
         """Simulate and critique ``program`` (every critic; ``critics`` are the ones scored and shown ticked);
         record and return the revision. A Run while a turn waits for its approval cancels that turn."""
         job = self._begin("run")
-        job.status = "simulating"
+        job.status = "simulating" if self.motion is None else f"reading {self.motion['name']}"
         try:
-            revision = self._add("run", program, selected=critics, **self.check(program))
+            result = self.check(program)
+            if self.motion is not None and self.motion["kind"] == "recording":  # the editor shows what was read
+                program = recording_summary(self.motion["name"], result["execution"], result["full_report"])
+            revision = self._add("run", program, selected=critics, **result)
         finally:
             self.jobs.end(job)
         self._adopt(revision)
@@ -304,7 +333,8 @@ class Studio:
         from ...llm.loop import Loop
 
         if self._loop is None:
-            self._loop = Loop(self.model, self.scene, critics=self.critics, goals=self.goals, approve=self._approve,
+            self._loop = Loop(self.model, self.scene, robot=self.robot, critics=self.critics, goals=self.goals,
+                              approve=self._approve,
                               simulate=self._loop_simulate, repairs=self._loop_repair,
                               on_attempt=self._on_attempt)
         self._loop.automation = automation
@@ -393,6 +423,8 @@ class Studio:
                  selected: list[str] | None = None) -> Iterator[dict[str, Any]]:
         """Start one chat or Fix turn in a thread; return its events (text so far, revisions, done/error) as they
         come. Without a model, Fix applies the critics' own repairs (chat raises StudioError at once)."""
+        if self.motion is not None:
+            raise StudioError(self.motion["why"])
         if self.model is None and action == "chat":
             raise StudioError(self.no_model_reason)
         kind = "chat" if action == "chat" else ("fix" if self.model is not None else "repair")
@@ -542,6 +574,8 @@ class Studio:
         Refused (StudioError) when no controller is configured, the editor's ``program`` differs from the
         revision's, the revision's run is no longer kept, any critic (selected or not) gives an Error, or another
         job runs. Progress and the result are in :meth:`state` (``job``, ``last_deploy``)."""
+        if self.motion is not None:
+            raise StudioError(IMPORTED_DEPLOY)
         if not self.deploy_target:
             raise StudioError("no UR controller is configured (start the studio with --deploy-host)")
         try:

@@ -1,6 +1,6 @@
 """Check programs for the studio in one warm, resource-limited child process.
 
-The studio runs :func:`~robocritics.simulate.simulate` and
+The studio runs :func:`~robocritics.pipeline.simulate` and
 :func:`~robocritics.critic.critique` on programs an LLM (or a user) wrote. The
 sandbox bounds what a program can do, but planning and critiquing a motion
 still costs memory and CPU, and a bug in a native library (Pinocchio, coal) can
@@ -43,10 +43,10 @@ from ...child import MAX_JOBS_PER_CHILD, Child, cpu_seconds, limit_address_space
 from ...errors import CriticError, PlanningError, ProgramError, RoboCriticsError, SceneError, TrajectoryError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ...report import Report
+    from ...critic.report import Report
     from ...robot.model import Robot
     from ...scene import Scene
-    from ...simulate import Execution
+    from ...execution import Execution
 
 __all__ = [
     "DEFAULT_CPU_S",
@@ -127,6 +127,10 @@ def _error_dict(exc: BaseException) -> dict[str, Any]:
 def _rebuild(error: Mapping[str, Any]) -> RoboCriticsError:
     """The typed error an :attr:`Evaluation.error` describes (the Loop's runtime feedback reads its fields)."""
     kind, message, line = error["type"], error["message"], int(error.get("line") or 0)
+    if kind in ("URScriptError", "UnsupportedURScript"):  # URScript has lines, no columns
+        from ...formats.urscript import URScriptError
+
+        return URScriptError(message, line)
     if kind == "ProgramError":
         return ProgramError(message, line, int(error.get("col") or 0))
     if kind == "MotionBudgetError" or kind == "PlanningError":
@@ -142,18 +146,20 @@ def _rebuild(error: Mapping[str, Any]) -> RoboCriticsError:
 
 
 def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_bytes) -> None:
-    """The child's main loop: set the limits, warm up, then answer ``(kind, program, critics, params, cpu_s)`` jobs.
+    """The child's main loop: set the limits, warm up, then answer ``(kind, program, critics, params, cpu_s, motion)``
+    jobs.
 
-    ``kind`` is ``"check"`` (simulate and critique) or ``"repair"`` (:func:`robocritics.repair.repair`, whose
-    every re-simulation then runs under this process's limits too).
+    ``kind`` is ``"check"`` (simulate and critique), ``"repair"`` (:func:`robocritics.repair.repair`, whose
+    every re-simulation then runs under this process's limits too), ``"urscript"`` or ``"recording"`` (motion
+    from another tool, :func:`_imported`).
     """
     limit_address_space(memory_bytes)
     try:
         from ...critic import critique
-        from ...robot.model import Robot
-        from ...simulate import simulate
+        from ...pipeline import check, simulate
+        from ...robot.model import default_robot
 
-        robot = robot if robot is not None else Robot.ur3e()
+        robot = robot if robot is not None else default_robot()
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which raises it typed
         conn.send(("failed", f"{type(exc).__name__}: {exc}"))
         return
@@ -169,7 +175,7 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
             job = conn.recv()
         except EOFError:
             return
-        kind, program, job_critics, job_params, cpu_s = job
+        kind, program, job_critics, job_params, cpu_s, motion = job
         used = time.process_time()
         soft = math.ceil(used + cpu_s + CPU_BACKSTOP_S)
         resource.setrlimit(resource.RLIMIT_CPU, (soft if hard == resource.RLIM_INFINITY else min(soft, hard), hard))
@@ -181,9 +187,15 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
                 repaired = repair(program, scene, goal=goals or None, critics=job_critics, robot=robot,
                                   params=job_params or None)  # fmt: skip
                 execution, report = repaired.execution, repaired.report
+            elif kind in ("urscript", "recording"):  # motion from another tool: no goals (it names no grasps)
+                execution = _imported(kind, program, motion, scene, robot)
+                report = critique(execution, scene, job_critics, job_params)
             else:
-                execution = simulate(program, scene, robot, **rate)
-                report = critique(execution, scene, job_critics, job_params, goals=goals)
+                checked = check(program, scene, robot=robot, goals=goals, critics=job_critics, params=job_params,
+                                **rate)  # fmt: skip
+                if checked.error is not None:  # the program did not run: the parent rebuilds this error, typed
+                    raise checked.error
+                execution, report = checked
             conn.send(("done", execution, report, None, time.process_time() - used, repaired))
         except MemoryError:
             _out_of_memory(conn, time.process_time() - used)
@@ -194,6 +206,24 @@ def _serve(conn, scene, robot, critics, params, goals, sample_rate_hz, memory_by
                 conn.send(("done", None, None, _error_dict(exc), time.process_time() - used, None))
             except MemoryError:
                 _out_of_memory(conn, time.process_time() - used)
+
+
+def _imported(kind: str, program: str, motion: dict, scene, robot):
+    """The Execution of a URScript ``program`` (its text) or of the recording at path ``program``, read and
+    bounded by :mod:`robocritics.formats` in this limited process. ``motion``: ``name`` (the file's) and the
+    keyword options of :func:`~robocritics.formats.load_motion` (``passes``, ``tcp``, ``payload_kg``,
+    ``start_q``, ``gripper_io`` for a script; ``topic`` for a rosbag)."""
+    options = {k: v for k, v in motion.items() if v is not None}
+    if kind == "urscript":
+        from ...formats.urscript import ArmOptions, run_urscript
+
+        arm = ArmOptions(**{k: (tuple(v) if k in ("tcp", "start_q") else v) for k, v in options.items()
+                            if k in ("tcp", "payload_kg", "start_q", "gripper_io")})
+        return run_urscript(program, robot, scene, arm, passes=int(options.get("passes", 1)),
+                            name=options.get("name") or "script")
+    from ...formats import load_motion
+
+    return load_motion(program, robot, scene, topic=options.get("topic"))
 
 
 def _out_of_memory(conn, cpu_s: float) -> None:
@@ -211,7 +241,7 @@ class Evaluator:
     """Simulate and critique programs in one warm child process with memory, CPU and time limits.
 
     ``scene``, ``robot`` (default the UR3e, loaded in the child), ``critics``, ``params`` and
-    ``sample_rate_hz`` (Hz) are as in :func:`~robocritics.simulate.simulate` and
+    ``sample_rate_hz`` (Hz) are as in :func:`~robocritics.pipeline.simulate` and
     :func:`~robocritics.critic.critique`; ``critics``/``params`` are checked here and are the
     defaults for :meth:`evaluate`. ``goals`` are task goals (``"green_apple in white_box"``, checked here
     against the scene: a bad one raises GoalError) that ``task_outcome`` checks on every job's final scene,
@@ -359,7 +389,20 @@ class Evaluator:
         """
         return self._job("check", program, critics, params)
 
-    def _job(self, kind: str, program: str, critics, params) -> Evaluation:
+    def evaluate_motion(self, kind: str, program: str, name: str = "", **options) -> Evaluation:
+        """Like :meth:`evaluate` for motion from another tool (:mod:`robocritics.formats`): ``kind``
+        ``"urscript"`` with ``program`` the script's text and ``name`` its file's, or ``"recording"`` with
+        ``program`` the path of a recording (ur_rtde or generic CSV, JointTrajectory JSON, MoveIt YAML, rosbag2),
+        read in the child under its limits. ``options``: ``passes``, ``tcp``, ``payload_kg``, ``start_q``,
+        ``gripper_io`` (a script), ``topic`` (a rosbag), as :func:`~robocritics.formats.load_motion` takes them."""
+        if kind not in ("urscript", "recording"):
+            raise ValueError(f"kind must be 'urscript' or 'recording', got {kind!r}")
+        unknown = set(options) - {"passes", "tcp", "payload_kg", "start_q", "gripper_io", "topic"}
+        if unknown:
+            raise TypeError(f"evaluate_motion: unknown option(s) {', '.join(sorted(unknown))}")
+        return self._job(kind, program, None, None, {"name": name, **options})
+
+    def _job(self, kind: str, program: str, critics, params, motion: dict | None = None) -> Evaluation:
         from ...critic import select_critics
 
         if not isinstance(program, str):
@@ -381,7 +424,7 @@ class Evaluator:
                 if self._child is None:  # close() in another thread killed it after the check above
                     raise EvaluatorError("the Evaluator was closed during the check")
                 self._await_ready()
-                self._run(evaluation, (kind, program, job_critics, job_params, self.cpu_s))
+                self._run(evaluation, (kind, program, job_critics, job_params, self.cpu_s, motion or {}))
                 self._jobs_done += 1
                 if self._jobs_done >= self.max_jobs and not self._closed:  # bound any native leak
                     self._stop()
@@ -424,6 +467,12 @@ class Evaluator:
             raise self._death("during the check") from None
         finally:
             evaluation.duration_s = time.monotonic() - started
+        if evaluation.duration_s > self.timeout_s:
+            # the answer came after the deadline, between two looks (this thread was not scheduled on a loaded
+            # host): a job is judged by when it ended, not by when it was last looked at
+            raise EvaluatorError(
+                f"the check took longer than its timeout of {self.timeout_s:g} s (timeout_s)", "timeout_s", self.timeout_s
+            )
         if answer[0] == "memory":
             evaluation.cpu_s = float(answer[1])
             raise EvaluatorError(

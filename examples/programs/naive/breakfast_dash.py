@@ -1,0 +1,28 @@
+# Breakfast: throw the fork away, then put the cupcake and the apple on the plate.
+# goals: fork in trash_bin; apple on plate; cupcake on plate
+set_speed(1.0)
+rotate_gripper(1.5708)
+move_to(fork.x, fork.y, 0.25)
+move_down(0.229)
+close_gripper()
+move_up(0.2)
+move_to(trash_bin.x, trash_bin.y, 0.25)
+open_gripper()
+rotate_gripper(0)
+
+move_to(cupcake.x, cupcake.y, 0.3)
+move_down(0.199)
+close_gripper()
+move_up(0.2)
+move_to(plate.x, plate.y - 0.06, 0.25)
+move_down(0.209)
+open_gripper()
+
+move_to(apple.x, apple.y, 0.3)
+move_down(0.259)
+close_gripper()
+move_up(0.2)
+move_to(plate.x, plate.y + 0.06, 0.25)
+move_down(0.199)
+open_gripper()
+home()

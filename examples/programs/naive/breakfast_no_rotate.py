@@ -1,0 +1,26 @@
+# Preparing breakfast: the fork goes to the trash bin, the cupcake and the apple onto the plate.
+# goals: fork in trash_bin; cupcake on plate; apple on plate
+lib.set_speed(1)
+lib.move_above(fork, 0.12)
+lib.move_linear(fork.x, fork.y, fork.z)
+lib.close_gripper()
+lib.move_linear(fork.x, fork.y, 0.12)
+lib.move_above(trash_bin, 0.1)
+lib.open_gripper()
+
+lib.move_above(cupcake, 0.12)
+lib.move_linear(cupcake.x, cupcake.y, cupcake.z)
+lib.close_gripper()
+lib.move_linear(cupcake.x, cupcake.y, 0.2)
+lib.move_to(plate.x, plate.y - 0.06, 0.2)
+lib.move_linear(plate.x, plate.y - 0.06, plate.top + 0.03)
+lib.open_gripper()
+
+lib.move_above(apple, 0.12)
+lib.move_linear(apple.x, apple.y, apple.z)
+lib.close_gripper()
+lib.move_linear(apple.x, apple.y, 0.2)
+lib.move_to(plate.x, plate.y + 0.06, 0.2)
+lib.move_linear(plate.x, plate.y + 0.06, plate.top + 0.04)
+lib.open_gripper()
+lib.home()

@@ -1,0 +1,27 @@
+# Breakfast: fork to the trash, cupcake and apple on the plate; approach everything from high above.
+# goals: fork in trash_bin; cupcake on plate; apple on plate
+rotate_gripper(1.5708)
+move_to(fork.x, fork.y, 0.6)
+move_linear(fork.x, fork.y, fork.z)
+close_gripper()
+move_up(0.2)
+move_to(trash_bin.x, trash_bin.y, 0.15)
+open_gripper()
+rotate_gripper(0)
+
+move_to(cupcake.x, cupcake.y, 0.6)
+move_linear(cupcake.x, cupcake.y, cupcake.z)
+close_gripper()
+move_up(0.15)
+move_to(plate.x, plate.y - 0.06, 0.1)
+move_down(0.058)
+open_gripper()
+
+move_to(apple.x, apple.y, 0.6)
+move_linear(apple.x, apple.y, apple.z)
+close_gripper()
+move_up(0.15)
+move_to(plate.x, plate.y + 0.06, 0.1)
+move_down(0.048)
+open_gripper()
+home()

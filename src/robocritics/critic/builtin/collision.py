@@ -1,0 +1,291 @@
+r"""Collision critic (RoboCritics paper §3.1.2; CoFrame).
+
+Maths and units
+---------------
+Reads the trajectory's **environment** proximity pairs: ``d_{t,k}`` (m) is
+the signed distance between robot part / carried object ``a_k`` and scene
+entity ``b_k`` at sample ``t`` (``<= 0``: touching or penetrating). Some
+contacts are the task itself and are excluded, per sample:
+
+* pairs whose ``a`` side is the gripper (``group_a == "gripper"``) or the
+  carried object (``"attached"``) and whose ``b_entity`` is listed in
+  ``steps[step[t]].contacts`` (the grasp target during its grasp, the surface
+  or container an object is set down on or into);
+* the gripper (or the carried object) against the object attached at ``t``
+  (``attached[t]``).
+
+An intended contact is *touching*, never a penetration: it is excluded only
+while ``d_{t,k} > -contact_tolerance_m`` (3 mm). Deeper, it counts like any
+other pair, so a carried object pushed into what it is set down on (or into
+an object that merely lies where the move ends) is an Error wherever the
+move ends.
+
+A carried-object pair (``group_a == "attached"``, ``a`` = the object's id)
+only counts while that object is the one held (``attached[t] == a``): before
+the grasp and after the release the object rests in the scene, and its contact
+with what it rests on is not the robot's.
+
+Arm links against anything always count. With ``D_t = min_k d_{t,k}`` over the
+counted pairs:
+
+* ERROR if ``min_t D_t <= penetration_m`` (0 m: touching or penetration);
+* WARNING if ``min_t D_t < d_warn_m`` (0.05 m, CoFrame's default safety margin);
+* OK otherwise.
+
+The message names the robot part and the object, the time and the program
+line; the hint proposes ``avoid_collision(<object>)`` from the paper's skill API.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from ..._arrays import min_over_columns, run_starts
+from ..hookspecs import hookimpl  # not `from .. import`: the root imports the repairs, which import this module
+from .. import CriticParams, Flag, ParamNames, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
+
+__all__ = ["CollisionCritic", "register_critics", "Counted", "counted_distances"]
+
+
+class Params(CriticParams):
+    d_warn_m: float = Field(
+        0.05, gt=0, description="warning when a counted pair comes closer than this, m (source: CoFrame default, 5 cm)"
+    )
+    penetration_m: float = Field(
+        0.0, le=0, description="error when a counted pair's signed distance is at or below this, m (0 = any contact)"
+    )
+    ignore_pairs: ParamNames = Field((), description="names of proximity pairs never to count (e.g. a mount plate)")
+    contact_tolerance_m: float = Field(
+        0.003,
+        ge=0,
+        description="an intended contact (grasp, set-down, stacking) is excused only while it overlaps by less than "
+        "this, m; deeper it is a collision (source: this project: the modelled spheres, cylinders and finger "
+        "boxes only approximate compliant objects and finger pads; the careful examples touch within 1e-15 m)",
+    )
+
+    @model_validator(mode="after")
+    def _order(self) -> "Params":
+        if self.penetration_m >= self.d_warn_m:
+            raise ValueError(f"penetration_m ({self.penetration_m}) must be below d_warn_m ({self.d_warn_m})")
+        return self
+
+
+def _run_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Run-length code a 1-D array: (run id per element, value of each run). No per-sample Python."""
+    starts = run_starts(values)
+    ids = np.zeros(len(values), dtype=np.intp)
+    ids[starts[1:]] = 1
+    return np.cumsum(ids), values[starts]
+
+
+class Counted:
+    """Which proximity pairs count for the collision critic, per sample.
+
+    ``columns (K,)`` selects the environment pairs (minus ignored ones);
+    ``gcols`` are those whose a-side is the gripper or a carried object, and
+    ``intended (T, len(gcols))`` marks, per sample, which of them do not count
+    there: intended contacts while they overlap by less than ``contact_tolerance_m``
+    (m; deeper, they count), and carried-object pairs of an object that is not
+    held at that sample (None when that never happens). Built from per-step and
+    per-attachment tables indexed by sample: no loop over samples.
+    """
+
+    def __init__(self, trajectory, ignore_pairs=(), contact_tolerance_m: float = Params().contact_tolerance_m):
+        pairs = trajectory.pairs
+        self.columns = np.array([p.kind == "environment" and p.name not in ignore_pairs for p in pairs], dtype=bool)
+        self.gcols = np.flatnonzero(
+            self.columns & np.array([p.group_a in ("gripper", "attached") for p in pairs], dtype=bool)
+        )
+        self.intended: np.ndarray | None = None
+        if self.gcols.size == 0:
+            return
+        entities = [pairs[k].b_entity for k in self.gcols]
+        carriers = [pairs[k].a if pairs[k].group_a == "attached" else None for k in self.gcols]
+        # contacts allowed by each program step: an (S, Kg) table; a step names a few contacts, so mark the
+        # columns of each named entity (not a test of every entity against every step's contacts)
+        table = None
+        if trajectory.steps:
+            columns_of: dict[str, list[int]] = {}
+            for j, e in enumerate(entities):
+                if e != "":
+                    columns_of.setdefault(e, []).append(j)
+            table = np.zeros((len(trajectory.steps), len(entities)), dtype=bool)
+            for i, s in enumerate(trajectory.steps):
+                for e in s.contacts:
+                    table[i, columns_of.get(e, [])] = True
+            if not table.any():
+                table = None
+        # the object held at t: run-length code `attached` (it changes a few times per program), then per
+        # run: the gripper against the held object is an intended contact, and a carried-object pair only
+        # exists while that object is the one held
+        run, held = _run_ids(trajectory.attached)
+        holding = np.array([[h != "" and e == h for e in entities] for h in held.tolist()], dtype=bool)
+        absent = np.array([[c is not None and c != h for c in carriers] for h in held.tolist()], dtype=bool)
+        # per sample, the row of its (step, run): both contact tables combined into one small (S R, Kg) table
+        # first, so the (T, Kg) mask is one gather (two gathers and their `or` cost 2x)
+        contact = None
+        if table is not None:
+            contact = (table[:, None, :] | holding[None, :, :]).reshape(-1, len(entities))
+            contact = contact[trajectory.step * len(held) + run]
+        elif holding.any():
+            contact = holding[run]
+        excluded = None
+        if contact is not None:
+            # an intended contact is touching, not a penetration: deeper than the tolerance it counts
+            excluded = contact & (trajectory.proximity[:, self.gcols] > -contact_tolerance_m)
+        if absent.any():
+            excluded = absent[run] if excluded is None else excluded | absent[run]
+        self.intended = excluded
+
+    def row_mask(self, rows) -> np.ndarray:
+        """``(len(rows), K)`` (or ``(K,)`` for one row) mask of the pairs that count at ``rows``."""
+        if self.intended is None:
+            return self.columns
+        rows = np.asarray(rows)
+        mask = np.empty(rows.shape + self.columns.shape, dtype=bool)
+        mask[...] = self.columns
+        mask[..., self.gcols] = ~self.intended[rows]
+        return mask
+
+    def closest(self, P: np.ndarray) -> np.ndarray:
+        """``(T,)`` closest counted distance per sample, m (+inf where nothing counts).
+
+        The counted columns are gathered (as rows of ``P.T``: :func:`robocritics._arrays.min_over_columns`) and
+        reduced by a plain minimum: a masked ``where=`` reduction over ``(T, K)`` is about 4x slower.
+        """
+        always = self.columns.copy()
+        if self.intended is not None:
+            always[self.gcols] = False
+        out = min_over_columns(P, np.flatnonzero(always))
+        if self.intended is not None:
+            gripper = P.T[self.gcols]  # (Kg, T), a copy
+            np.putmask(gripper, self.intended.T, np.inf)
+            np.minimum(out, gripper.min(axis=0), out=out)
+        return out
+
+
+def counted_distances(trajectory, ignore_pairs=(), contact_tolerance_m: float = Params().contact_tolerance_m) -> np.ndarray:
+    """``(T, K)`` proximity, m, with every pair that does not count (self pairs, ignored pairs,
+    intended contacts shallower than ``contact_tolerance_m``) set to +inf. For tests and plots; the critic
+    avoids this copy."""
+    counted = Counted(trajectory, ignore_pairs, contact_tolerance_m)
+    return np.where(counted.row_mask(np.arange(len(trajectory))), trajectory.proximity, np.inf)
+
+
+def _part(pair) -> str:
+    return f"the carried {pair.a}" if pair.group_a == "attached" else f"the {pair.a}"
+
+
+def _thing(pair) -> str:
+    return pair.b_entity or pair.b
+
+
+class CollisionCritic:
+    name = "collision"
+    description = "Distance between the robot (and what it carries) and the scene, excluding intended contacts."
+    Params = Params
+
+    def check(self, execution, params: Params) -> Verdict:
+        trajectory, scene = execution.trajectory, execution.scene
+        time = trajectory.time
+        P = trajectory.proximity
+        counted = Counted(trajectory, params.ignore_pairs, params.contact_tolerance_m)
+        if not counted.columns.any():
+            return threshold_verdict(
+                self.name,
+                None,
+                Flag.OK,
+                message="The trajectory has no robot-environment proximity pairs to check.",
+                threshold=params.d_warn_m,
+                unit="m",
+            )
+        per_sample = counted.closest(P)  # D_t, without copying the (T, K) proximity
+        wt = int(np.argmin(per_sample))
+        worst = float(per_sample[wt])
+        pairs = trajectory.pairs
+        signal = make_signal(
+            time,
+            np.where(np.isfinite(per_sample), per_sample, np.nan),
+            label="closest robot-environment distance (intended contacts excluded)",
+            unit="m",
+            warning=params.d_warn_m,
+            error=params.penetration_m,
+            worse="below",
+        )
+        if not np.isfinite(worst):
+            return threshold_verdict(
+                self.name,
+                None,
+                Flag.OK,
+                message="Every robot-environment contact in this trajectory is intended (grasps and set-downs).",
+                threshold=params.d_warn_m,
+                unit="m",
+                signal=signal,
+            )
+
+        wk = int(np.argmin(np.where(counted.row_mask(wt), P[wt], np.inf)))
+        wp = pairs[wk]
+        details = {"closest_pair": wp.name, "closest_distance_m": worst}
+        verdict = partial(
+            threshold_verdict, self.name, trajectory, worst=wt, value=worst, unit="m", signal=signal, details=details
+        )
+        hint = (
+            f"you can consider using avoid_collision({_thing(wp)}) or moving through a higher or farther waypoint"
+            "{during}."
+        )
+
+        def involved(threshold: float, strict: bool) -> tuple[np.ndarray, list[str], list[str]]:
+            mask = per_sample < threshold if strict else per_sample <= threshold
+            rows = np.flatnonzero(mask)
+            sub = np.where(counted.row_mask(rows), P[rows], np.inf)
+            hit = (sub < threshold) if strict else (sub <= threshold)
+            col_hit = np.flatnonzero(hit.any(axis=0))
+            links = list(dict.fromkeys(pairs[k].a for k in col_hit))
+            objects = list(dict.fromkeys(_thing(pairs[k]) for k in col_hit))
+            return mask, links, objects
+
+        if worst <= params.penetration_m:
+            mask, links, objects = involved(params.penetration_m, strict=False)
+            depth = -worst
+            what = "penetrates" if depth >= 0.0005 else "touches"
+            extra = f" by {fmt_length(depth)}" if depth >= 0.0005 else ""
+            others = [o for o in objects if o != _thing(wp)]
+            also = f" It also hits {', '.join(others)}." if others else ""
+            return verdict(
+                Flag.ERROR,
+                mask,
+                links=links,
+                objects=objects,
+                threshold=params.penetration_m,
+                message=f"Collision: {_part(wp)} {what} the {_thing(wp)}{extra} at {time[wt]:.2f} s "
+                f"(sample {wt}).{also}",
+                hint=f"To avoid the collision, {hint}",
+            )
+        if worst < params.d_warn_m:
+            mask, links, objects = involved(params.d_warn_m, strict=True)
+            return verdict(
+                Flag.WARNING,
+                mask,
+                links=links,
+                objects=objects,
+                threshold=params.d_warn_m,
+                message=f"{_part(wp).capitalize()} comes within {fmt_length(worst)} of the {_thing(wp)} at {time[wt]:.2f} s, "
+                f"closer than the {fmt_length(params.d_warn_m)} safety margin.",
+                hint=f"To keep a safe distance, {hint}",
+            )
+        return verdict(
+            Flag.OK,
+            links=[wp.a],
+            objects=[_thing(wp)],
+            threshold=params.d_warn_m,
+            message=f"The robot keeps at least {fmt_length(worst)} from the scene outside intended contacts "
+            f"(margin {fmt_value(params.d_warn_m)} m).",
+        )
+
+
+@hookimpl
+def register_critics(register):
+    register(CollisionCritic())

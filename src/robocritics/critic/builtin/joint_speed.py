@@ -1,0 +1,242 @@
+r"""Joint speed critic (RoboCritics paper, Algorithm 1).
+
+Maths and units
+---------------
+For every frame ``l`` (link reference point: the frame origin ``p_{t,l}``, m,
+in the base frame) and every sample ``t >= 1`` on the **physical** time axis
+``tau`` (s)::
+
+    v_{t,l} = || p_{t,l} - p_{t-1,l} || / (tau_t - tau_{t-1})        [m/s]
+
+i.e. the paper's per-sample-pair linear speed, a proxy for joint speed that
+the operator can see (it is what hurts when it hits). We also check the
+angular joint speeds against the robot's own limits::
+
+    w_{t,j} = | q_{t,j} - q_{t-1,j} | / (tau_t - tau_{t-1})           [rad/s]
+
+Flags
+-----
+* ERROR if any ``v_{t,l} > max_speed_m_s`` (1.5 m/s: the UR e-series default
+  safety configuration, normal mode, limits TCP and elbow speed to 1.5 m/s), or
+  any ``w_{t,j} > (1 + joint_limit_tolerance) * limit_j`` (limits from the
+  robot model, e.g. UR3e pi rad/s base/shoulder/elbow, 2 pi rad/s wrists; the
+  1 % tolerance absorbs finite-difference error);
+* WARNING if any ``v_{t,l} > warn_speed_m_s`` (1 m/s: the "recommended value"
+  of the paper's joint-speed feedback);
+* OK otherwise.
+
+Speeds are assigned to the sample they arrive at (``t``), so the evidence's
+samples, program lines and skills are those of the motion that reached the
+speed. Because speeds are displacement over elapsed time, the verdict does not
+depend on the sampling rate (a motion sampled at 125 Hz or 500 Hz gives the
+same speeds up to discretisation of its peaks).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from ..hookspecs import hookimpl
+from ..._arrays import row_any, row_max, squared_norms
+from .. import CriticParams, Flag, ParamNames, Verdict, fmt_value, make_signal, threshold_verdict
+
+__all__ = ["JointSpeedCritic", "register_critics", "link_speeds"]
+
+HINT = (
+    "To minimize joint speed, you can consider reducing the speed of the robot{during}. "
+    "This potentially increases the cycle time of the program."
+)
+
+
+class Params(CriticParams):
+    warn_speed_m_s: float = Field(
+        1.0,
+        gt=0,
+        description="recommended maximum linear speed of any link reference point, m/s "
+        "(source: RoboCritics paper, joint-speed feedback 'recommended value of 1 m/s')",
+    )
+    max_speed_m_s: float = Field(
+        1.5,
+        gt=0,
+        description="maximum allowed linear speed of any link reference point, m/s "
+        "(source: UR e-series default safety configuration, normal mode TCP and elbow speed limit 1.5 m/s)",
+    )
+    joint_limit_tolerance: float = Field(
+        0.01,
+        ge=0,
+        le=1,
+        description="fraction by which an angular joint speed may exceed the robot's joint velocity limit "
+        "before it is an error, to absorb finite-difference error (0.01 = 1 %)",
+    )
+    frames: ParamNames = Field(
+        (), description="names of the frames whose origins are checked; empty = every frame of the trajectory"
+    )
+
+    @model_validator(mode="after")
+    def _order(self) -> "Params":
+        if self.warn_speed_m_s > self.max_speed_m_s:
+            raise ValueError(
+                f"warn_speed_m_s ({self.warn_speed_m_s}) must not exceed max_speed_m_s ({self.max_speed_m_s})"
+            )
+        return self
+
+
+def link_speeds(positions: np.ndarray, time: np.ndarray) -> np.ndarray:
+    """``(T-1, L)`` linear speeds, m/s, of ``positions (T, L, 3)`` m over ``time (T,)`` s.
+
+    Row ``i`` is the speed reached at sample ``i + 1``: ``|p_{i+1} - p_i| / (tau_{i+1} - tau_i)``.
+    """
+    p = np.ascontiguousarray(positions)  # contiguous: faster to difference than a strided view (no copy if already)
+    step = p[1:] - p[:-1]  # (T-1, L, 3) m
+    speed = squared_norms(step)
+    np.sqrt(speed, out=speed)
+    speed /= np.diff(time)[:, None]
+    return speed
+
+
+def _selected_frames(trajectory, frames) -> tuple[tuple[str, ...], np.ndarray]:
+    """The names and positions ``(T, L, 3)`` (m) of the frames ``frames`` names, or of every frame."""
+    if not frames:
+        return trajectory.frame_names, trajectory.positions  # shared with the other critics
+    sel = [trajectory.frame_index(n) for n in frames]
+    return tuple(trajectory.frame_names[i] for i in sel), trajectory.positions[:, sel]
+
+
+def _joint_speeds(q: np.ndarray, time: np.ndarray, limits: np.ndarray, tolerance: float):
+    """Joint speeds ``w (T-1, n)`` rad/s, the (interval, joint) of the highest fraction of its limit, that
+    fraction, where a joint is over its limit by more than ``tolerance`` ``(T-1, n)``, and which intervals
+    have one ``(T-1,)``."""
+    w = np.abs(np.diff(q, axis=0)) / np.diff(time)[:, None]  # (T-1, n) rad/s
+    if not w.shape[1]:
+        return w, (0, 0), 0.0, np.zeros(w.shape, dtype=bool), np.zeros(w.shape[0], dtype=bool)
+    ratio = w / limits  # (T-1, n)
+    ji, jj = divmod(int(np.argmax(ratio)), ratio.shape[1])
+    over_joint = ratio > 1.0 + tolerance  # (T-1, n)
+    return w, (ji, jj), float(ratio[ji, jj]), over_joint, row_any(over_joint)
+
+
+def _sample_values(per_interval: np.ndarray, first=0.0) -> np.ndarray:
+    """Per-sample values ``(T,)`` from per-interval ones ``(T-1,)``: interval i ends at sample i + 1; sample 0 is
+    ``first``."""
+    out = np.empty(len(per_interval) + 1, dtype=per_interval.dtype)
+    out[0] = first
+    out[1:] = per_interval
+    return out
+
+
+def _links_over(v: np.ndarray, names: tuple[str, ...], threshold: float) -> list[str]:
+    """The links whose speed ``v (T-1, L)`` passes ``threshold`` (m/s) at some sample."""
+    return [names[i] for i in np.flatnonzero((v > threshold).any(axis=0))]
+
+
+class JointSpeedCritic:
+    name = "joint_speed"
+    description = "Linear speed of every link (paper Algorithm 1) and angular joint speed against the robot's limits."
+    Params = Params
+
+    def check(self, execution, params: Params) -> Verdict:
+        trajectory = execution.trajectory
+        T = len(trajectory)
+        names, positions = _selected_frames(trajectory, params.frames)
+        time = trajectory.time
+        limits = np.asarray(trajectory.limits.velocity_rad_s, dtype=float)
+        if T < 2 or positions.shape[1] == 0:
+            return threshold_verdict(
+                self.name,
+                trajectory,
+                Flag.OK,
+                worst=0,
+                message="Nothing to check: the trajectory has a single sample or no frames.",
+                value=0.0,
+                threshold=params.warn_speed_m_s,
+                unit="m/s",
+            )
+
+        # --- measure: all samples at once --------------------------------------
+        v = link_speeds(positions, time)  # (T-1, L), speed reached at sample t = i + 1
+        vmax = row_max(v)  # (T-1,) fastest link per sample
+        wi = int(np.argmax(vmax))
+        wl = int(np.argmax(v[wi]))
+        worst_v = float(v[wi, wl])
+        w, (ji, jj), worst_ratio, over_joint, over_joint_rows = _joint_speeds(
+            trajectory.q, time, limits, params.joint_limit_tolerance
+        )
+
+        over_max = vmax > params.max_speed_m_s
+        over_warn = vmax > params.warn_speed_m_s
+        err_lin, err_joint, warn = bool(over_max.any()), bool(over_joint_rows.any()), bool(over_warn.any())
+
+        signal = make_signal(time, _sample_values(vmax), label="fastest link speed", unit="m/s",
+                             warning=params.warn_speed_m_s, error=params.max_speed_m_s)  # fmt: skip
+        details = {
+            "max_link_speed_m_s": worst_v,
+            "fastest_link": names[wl],
+            "max_joint_speed_fraction_of_limit": worst_ratio,
+            "fastest_joint": trajectory.limits.joint_names[jj] if w.shape[1] else "",
+        }
+
+        verdict = partial(threshold_verdict, self.name, trajectory, unit="m/s", signal=signal, details=details)
+
+        if err_lin or err_joint:
+            rows = over_max | over_joint_rows
+            links = _links_over(v, names, params.max_speed_m_s) if err_lin else []
+            joints_over = []
+            if err_joint:
+                jover = over_joint.any(axis=0)
+                joints_over = [trajectory.limits.joint_names[i] for i in np.flatnonzero(jover)]
+            details["joints_over_limit"] = joints_over
+            sentences = []
+            if err_lin:
+                sentences.append(
+                    f"Joint speed is higher than the robot's maximum allowed speed of {fmt_value(params.max_speed_m_s)} m/s "
+                    f"({worst_v:.2f} m/s at the {names[wl]} at {time[wi + 1]:.2f} s)."
+                )
+            if err_joint:
+                sentences.append(
+                    f"The {trajectory.limits.joint_names[jj]} turns at {w[ji, jj]:.2f} rad/s, above its limit of "
+                    f"{limits[jj]:.2f} rad/s (at {time[ji + 1]:.2f} s)."
+                )
+            if err_lin:
+                value, threshold, unit = worst_v, params.max_speed_m_s, "m/s"
+            else:
+                value, threshold, unit = float(w[ji, jj]), float(limits[jj]), "rad/s"
+            return verdict(
+                Flag.ERROR,
+                _sample_values(rows, False),
+                worst=(wi if err_lin else ji) + 1,
+                links=links,
+                value=value,
+                threshold=threshold,
+                unit=unit,
+                message=" ".join(sentences),
+                hint=HINT,
+            )
+        if warn:
+            return verdict(
+                Flag.WARNING,
+                _sample_values(over_warn, False),
+                worst=wi + 1,
+                links=_links_over(v, names, params.warn_speed_m_s),
+                value=worst_v,
+                threshold=params.warn_speed_m_s,
+                message=f"Joint speed is higher than the recommended value of {fmt_value(params.warn_speed_m_s)} m/s "
+                f"({worst_v:.2f} m/s at the {names[wl]} at {time[wi + 1]:.2f} s).",
+                hint=HINT,
+            )
+        return verdict(
+            Flag.OK,
+            worst=wi + 1,
+            links=[names[wl]],
+            value=worst_v,
+            threshold=params.warn_speed_m_s,
+            message=f"Joint speed stays below the recommended value of {fmt_value(params.warn_speed_m_s)} m/s "
+            f"(at most {worst_v:.2f} m/s, at the {names[wl]}).",
+        )
+
+
+@hookimpl
+def register_critics(register):
+    register(JointSpeedCritic())

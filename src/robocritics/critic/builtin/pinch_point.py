@@ -1,0 +1,118 @@
+r"""Pinch point critic (RoboCritics paper §3.1.2; CoFrame).
+
+Risk: two parts of the robot closing on each other with a hand in between.
+
+Maths and units
+---------------
+Reads **only** the trajectory's ``kind == "self"`` proximity pairs, which the
+robot model limits to non-adjacent arm links and arm-vs-gripper pairs (CoFrame's
+careful version; the authors' prototype fired on any proximity value, which
+this critic does not: environment pairs never count here). With ``d_{t,k}``
+the distance (m) of self pair ``k`` at sample ``t`` and
+``D = min_{t,k} d_{t,k}``:
+
+* ERROR if ``D < d_min_m`` (0.025 m, CoFrame);
+* WARNING if ``d_min_m <= D < d_max_m`` (0.06 m, CoFrame);
+* OK otherwise.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from ..hookspecs import hookimpl
+from .. import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
+
+__all__ = ["PinchPointCritic", "register_critics"]
+
+
+class Params(CriticParams):
+    d_min_m: float = Field(0.025, ge=0, description="error below this self distance, m (source: CoFrame default, 2.5 cm)")
+    d_max_m: float = Field(0.06, gt=0, description="warning below this self distance, m (source: CoFrame default, 6 cm)")
+
+    @model_validator(mode="after")
+    def _order(self) -> "Params":
+        if self.d_min_m > self.d_max_m:
+            raise ValueError(f"d_min_m ({self.d_min_m}) must not exceed d_max_m ({self.d_max_m})")
+        return self
+
+
+class PinchPointCritic:
+    name = "pinch_point"
+    description = "Closest approach between non-adjacent robot links and between arm and gripper."
+    Params = Params
+
+    def check(self, execution, params: Params) -> Verdict:
+        trajectory = execution.trajectory
+        time = trajectory.time
+        pairs = trajectory.pairs
+        columns = trajectory.pair_mask(kind="self")  # (K,) only self pairs ever count
+        if not columns.any():
+            return threshold_verdict(
+                self.name,
+                None,
+                Flag.OK,
+                message="The trajectory has no robot self-proximity pairs to check.",
+                threshold=params.d_max_m,
+                unit="m",
+            )
+        P = trajectory.proximity
+        # (T,): the self columns gathered, then a plain row minimum (4x faster than a masked `where=` reduction)
+        per_sample = P[:, np.flatnonzero(columns)].min(axis=1)
+        wt = int(np.argmin(per_sample))
+        worst = float(per_sample[wt])
+        wk = int(np.argmin(np.where(columns, P[wt], np.inf)))
+        wp = pairs[wk]
+        signal = make_signal(
+            time,
+            per_sample,
+            label="closest distance between robot parts (self pairs)",
+            unit="m",
+            warning=params.d_max_m,
+            error=params.d_min_m,
+            worse="below",
+        )
+        details = {"closest_pair": wp.name, "closest_distance_m": worst}
+        verdict = partial(
+            threshold_verdict, self.name, trajectory, worst=wt, value=worst, unit="m", signal=signal, details=details
+        )
+
+        def involved(threshold: float):
+            mask = per_sample < threshold
+            rows = np.flatnonzero(mask)
+            hit = np.where(columns, P[rows], np.inf) < threshold
+            col_hit = np.flatnonzero(hit.any(axis=0))
+            links = list(dict.fromkeys(n for k in col_hit for n in (pairs[k].a, pairs[k].b)))
+            return mask, links
+
+        if worst <= 0:
+            where = f"the {wp.a} and the {wp.b} touch (overlap {fmt_length(-worst)}) at {time[wt]:.2f} s"
+        else:
+            where = f"the {wp.a} and the {wp.b} come within {fmt_length(worst)} of each other at {time[wt]:.2f} s"
+        for flag, threshold in ((Flag.ERROR, params.d_min_m), (Flag.WARNING, params.d_max_m)):
+            if worst < threshold:
+                mask, links = involved(threshold)
+                return verdict(
+                    flag,
+                    mask,
+                    links=links,
+                    threshold=threshold,
+                    message=f"Pinch point: {where}, closer than {fmt_length(threshold)}.",
+                    hint="To avoid pinch points, you can consider keeping the arm more open, for example by moving "
+                    "through a higher or farther waypoint{during}.",
+                )
+        return verdict(
+            Flag.OK,
+            links=[wp.a, wp.b],
+            threshold=params.d_max_m,
+            message=f"No pinch points: robot parts stay at least {fmt_length(worst)} apart "
+            f"(closest: the {wp.a} and the {wp.b}).",
+        )
+
+
+@hookimpl
+def register_critics(register):
+    register(PinchPointCritic())

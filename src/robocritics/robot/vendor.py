@@ -1,0 +1,395 @@
+"""A vendor URDF, as shipped, turned into the arm robocritics plans with (see :meth:`Robot.from_urdf`).
+
+:func:`arm_tree` reads the file (:mod:`.urdf`: bounded, every number checked), keeps the serial chain from the
+root to the tip (and the fixed parts hanging off it), replaces each link's collision geometry by capsules
+(its cylinders and spheres as they are, its meshes and boxes by fitted capsules, :mod:`.fit`), mounts the
+base where ``base_pose`` says in the world and the tool on the tip. The result is a URDF tree in
+robocritics' own contract (capsule cylinders, a ``tcp`` link, a ``<gripper>`` element), which the
+:class:`~robocritics.robot.model.Robot` constructor reads like a bundled file.
+
+:func:`infer` then settles what the file does not say: the links whose height never changes (they stand on the
+table by construction), the reach (the farthest the flange gets from the shoulder over sampled
+configurations, the way makers publish reach), and a home pose inside the limits and free of collision.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import RobotModelError
+from . import urdf as _urdf
+from .fit import FittedCapsule, Mesh, box_mesh, fit_capsules, load_mesh
+from .tools import Tool, tool_named, _cylinder
+
+__all__ = ["arm_tree", "infer", "base_pose_matrix", "REACH_SAMPLES"]
+
+#: Configurations sampled to find the reach and a home pose (seeded, so every load gives the same).
+REACH_SAMPLES = 4096
+
+
+def base_pose_matrix(base_pose) -> np.ndarray:
+    """``base_pose`` as a 4x4 transform: a 4x4 matrix, or ``(x, y, z)`` m, or ``(x, y, z, roll, pitch, yaw)``
+    m and rad (URDF's fixed-axis roll-pitch-yaw)."""
+    import pinocchio as pin
+
+    try:
+        values = np.array(base_pose, dtype=float)
+    except (TypeError, ValueError):
+        raise RobotModelError(f"base_pose must be a 4x4 transform or (x, y, z[, roll, pitch, yaw]), got {base_pose!r}") from None
+    if not np.isfinite(values).all():
+        raise RobotModelError(f"base_pose must be finite, got {values.tolist()}")
+    pose = np.eye(4)
+    if values.shape == (4, 4):
+        R = values[:3, :3]
+        if not (np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0 and np.allclose(values[3], (0, 0, 0, 1))):
+            raise RobotModelError("base_pose: the 4x4 matrix is not a rigid transform (rotation and translation)")
+        pose[:] = values
+    elif values.shape in ((3,), (6,)):
+        pose[:3, 3] = values[:3]
+        if values.shape == (6,):
+            pose[:3, :3] = pin.rpy.rpyToMatrix(*values[3:])
+    else:
+        raise RobotModelError(f"base_pose must be a 4x4 transform or (x, y, z[, roll, pitch, yaw]), got shape {values.shape}")
+    if np.abs(pose[:3, 3]).max() > 100.0:
+        raise RobotModelError(f"base_pose puts the base {np.abs(pose[:3, 3]).max():.1f} m away; at most 100 m")
+    return pose
+
+
+def arm_tree(
+    path: Path,
+    *,
+    tool: str | Path | Tool | None,
+    tip: str | None,
+    base_pose,
+    joint_limits: dict | None,
+    package_paths: tuple[Path, ...] = (),
+    name: str | None = None,
+    tcp_frame: str = "tcp",
+) -> tuple[ET.Element, dict]:
+    """The contract URDF tree of the vendor file at ``path`` and facts about it (``tip``, ``tool``,
+    ``slack_m`` per capsule name). Raises :class:`RobotModelError` naming element, link or joint and line."""
+    doc = _urdf.read_urdf(path)
+    _override_limits(doc, joint_limits or {})
+    _urdf.check_numbers(doc)
+    tree = _urdf.kinematic_tree(doc)
+    # a file in robocritics' own contract (a <gripper> element, or its own TCP link) keeps its tool
+    contract = tool is None and (doc.root.find("gripper") is not None or tcp_frame in tree.links)
+    joints, tip = _urdf.chain(tree, tip)
+    keep = [tree.root] + [j.find("child").get("link") for j in joints]
+    kept_joints = list(joints)
+    # fixed parts hanging off the chain (covers, sensors, a contract file's gripper) come along unless they move
+    todo = list(keep)
+    while todo:
+        link = todo.pop()
+        for joint in tree.children.get(link, ()):
+            child = joint.find("child").get("link")
+            if child in keep or joint in kept_joints:
+                continue
+            if link == tip and not contract:
+                continue  # the tool replaces whatever the vendor hung on the flange
+            if joint.get("type") == "fixed" and not tree.subtree_moves(child):
+                keep.append(child)
+                kept_joints.append(joint)
+                todo.append(child)
+    out = ET.Element("robot", name=name or doc.root.get("name") or path.stem)
+    slack: dict[str, float] = {}
+    root_name = tree.root
+    if base_pose is not None:
+        import pinocchio as pin
+
+        pose = base_pose_matrix(base_pose)
+        if "world" in tree.links:
+            raise RobotModelError(f"{path}: base_pose= mounts the arm on a 'world' link, and the file has its own")
+        out.append(ET.Element("link", name="world"))
+        mount = ET.SubElement(out, "joint", name="base_mount", type="fixed")
+        ET.SubElement(mount, "parent", link="world")
+        ET.SubElement(mount, "child", link=root_name)
+        ET.SubElement(mount, "origin", xyz=" ".join(repr(float(v)) for v in pose[:3, 3]),
+                      rpy=" ".join(repr(float(v)) for v in pin.rpy.matrixToRpy(pose[:3, :3])))
+    for link_name in keep:
+        out.append(_capsule_link(doc, tree.links[link_name], package_paths, slack))
+    for joint in kept_joints:
+        out.append(_clean_joint(joint))
+    if contract:
+        if doc.root.find("gripper") is not None:
+            out.append(doc.root.find("gripper"))
+        return out, {"tip": tip, "tool": "(the file's own)", "slack_m": slack}
+    tool_obj = _tool(tool, path, package_paths)
+    if isinstance(tool_obj, Tool):
+        out.extend(tool_obj.elements(tip))
+        tool_name = tool_obj.name
+    else:  # a tool URDF: its tree mounted on the tip
+        tool_tree, tool_name = tool_obj
+        taken = {e.get("name") for e in out if e.tag in ("link", "joint")}
+        for element in tool_tree:
+            if element.tag == "joint" and element.get("name") == "tool_mount":
+                element.find("parent").set("link", tip)
+            if element.tag in ("link", "joint") and element.get("name") in taken:
+                raise RobotModelError(f"tool {tool_name}: its {element.tag} {element.get('name')!r} has the name of one of the arm's")
+            out.append(element)
+    return out, {"tip": tip, "tool": tool_name, "slack_m": slack}
+
+
+def _tool(tool, path: Path, package_paths) -> Tool | tuple[list[ET.Element], str]:
+    if tool is None:
+        return tool_named("none")
+    if isinstance(tool, Tool):
+        return tool
+    text = str(tool)
+    if not text.lower().endswith(".urdf"):
+        return tool_named(text)
+    tool_path = Path(text)
+    doc = _urdf.read_urdf(tool_path)
+    _urdf.check_numbers(doc)
+    tree = _urdf.kinematic_tree(doc)
+    if any(j.get("type") != "fixed" for j in tree.joints.values()):
+        moving = next(j for j in tree.joints.values() if j.get("type") != "fixed")
+        raise doc.error(moving, f"tool joint {moving.get('name')!r} is {moving.get('type')}; a tool's joints are fixed "
+                                "(the fingers' opening is the <gripper> element's)")
+    if "tcp" not in tree.links:
+        raise doc.error(doc.root, "a tool needs a link named 'tcp' (+z the finger direction, fingers closing along y)")
+    gripper = doc.root.find("gripper")
+    elements: list[ET.Element] = []
+    slack: dict[str, float] = {}
+    for link in tree.links.values():
+        elements.append(_capsule_link(doc, link, package_paths, slack))
+    for joint in tree.joints.values():
+        elements.append(_clean_joint(joint))
+    mount = ET.Element("joint", name="tool_mount", type="fixed")
+    ET.SubElement(mount, "parent", link="__TIP__")
+    ET.SubElement(mount, "child", link=tree.root)
+    elements.append(mount)
+    links = " ".join(tree.links)
+    if gripper is None:
+        elements.append(ET.Element("gripper", name=tool_path.stem, max_opening="0", tcp="tcp", fingers="", links=links))
+    else:
+        fingers = gripper.get("fingers", "").split()
+        for finger in fingers:
+            if finger not in tree.links:
+                raise doc.error(gripper, f"<gripper fingers=...> names {finger!r}, not a link of the tool")
+        if len(fingers) not in (0, 2):
+            raise doc.error(gripper, "<gripper fingers=...> names two finger links (or none)")
+        opening = _urdf.floats(doc, gripper, "max_opening", 1, "the tool's <gripper>", default=(0.0,), bound=1.0)[0]
+        if opening < 0:
+            raise doc.error(gripper, "<gripper max_opening> must not be negative")
+        elements.append(ET.Element("gripper", name=gripper.get("name", tool_path.stem), max_opening=repr(opening),
+                                   tcp="tcp", fingers=" ".join(fingers), links=links))
+    return elements, tool_path.stem
+
+
+def _override_limits(doc: _urdf.UrdfDocument, joint_limits: dict) -> None:
+    """Write ``joint_limits`` (``{joint: (lower, upper)}`` rad or m, or ``(lower, upper, velocity)`` with the speed
+    limit in rad/s or m/s) into the file's ``<limit>`` elements before they are checked: a file that ships a
+    zero speed limit (rtb-data's Puma560) loads with the speeds given here."""
+    moving = {j.get("name"): j for j in doc.root.findall("joint") if j.get("type") in _urdf.MOVING_JOINT_TYPES}
+    for name, values in joint_limits.items():
+        if name not in moving:
+            raise RobotModelError(f"joint_limits names {name!r}, not a moving joint of {doc.path.name} "
+                                  f"({', '.join(list(moving)[:20])})")
+        try:
+            numbers = [float(v) for v in values]
+        except (TypeError, ValueError):
+            numbers = []
+        if len(numbers) not in (2, 3) or not all(math.isfinite(v) for v in numbers) or numbers[0] > numbers[1] \
+                or max(abs(numbers[0]), abs(numbers[1])) > 100 or (len(numbers) == 3 and not 0 < numbers[2] <= 1e6):
+            raise RobotModelError(f"joint_limits[{name!r}] = {values!r}: give (lower, upper) rad or m, lower <= upper, "
+                                  "at most 100 in size, or (lower, upper, velocity) with a positive speed limit")
+        joint = moving[name]
+        limit = joint.find("limit")
+        if limit is None:
+            limit = ET.SubElement(joint, "limit", effort="0")
+        limit.set("lower", repr(numbers[0]))
+        limit.set("upper", repr(numbers[1]))
+        if len(numbers) == 3:
+            limit.set("velocity", repr(numbers[2]))
+        if joint.get("type") == "continuous":
+            joint.set("type", "revolute")
+
+
+def _clean_joint(joint: ET.Element) -> ET.Element:
+    """The joint with only what Pinocchio and robocritics read (no transmissions, no foreign attributes)."""
+    out = ET.Element("joint", name=joint.get("name"), type=joint.get("type"))
+    for tag in ("parent", "child"):
+        ET.SubElement(out, tag, link=joint.find(tag).get("link"))
+    origin = joint.find("origin")
+    if origin is not None:
+        ET.SubElement(out, "origin", xyz=origin.get("xyz", "0 0 0"), rpy=origin.get("rpy", "0 0 0"))
+    axis = joint.find("axis")
+    if axis is not None:
+        ET.SubElement(out, "axis", xyz=axis.get("xyz", "1 0 0"))
+    limit = joint.find("limit")
+    if limit is not None:
+        attrs = {k: limit.get(k) for k in ("lower", "upper", "velocity", "effort") if limit.get(k) is not None}
+        attrs.setdefault("effort", "0")
+        ET.SubElement(out, "limit", **attrs)
+    return out
+
+
+def _capsule_link(doc: _urdf.UrdfDocument, link: ET.Element, package_paths, slack: dict[str, float]) -> ET.Element:
+    """The link with its collision geometry as capsules: cylinders, capsules and spheres as they are, meshes
+    and boxes (all of them together, in the link frame) enclosed by fitted capsules."""
+    import pinocchio as pin
+
+    name = link.get("name")
+    owner = f"link {name!r}"
+    out = ET.Element("link", name=name)
+    meshes: list[Mesh] = []
+    for collision in link.findall("collision"):
+        origin = collision.find("origin")
+        xyz = _urdf.floats(doc, origin, "xyz", 3, owner, default=(0, 0, 0)) if origin is not None else (0, 0, 0)
+        rpy = _urdf.floats(doc, origin, "rpy", 3, owner, default=(0, 0, 0), bound=100.0) if origin is not None else (0, 0, 0)
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = pin.rpy.rpyToMatrix(*rpy), xyz
+        shape = collision.find("geometry")[0]
+        if shape.tag in ("cylinder", "capsule", "sphere"):
+            clean = ET.SubElement(out, "collision")
+            ET.SubElement(clean, "origin", xyz=" ".join(map(repr, map(float, xyz))), rpy=" ".join(map(repr, map(float, rpy))))
+            geometry = ET.SubElement(clean, "geometry")
+            attrs = {"radius": shape.get("radius")}
+            if shape.tag != "sphere":
+                attrs["length"] = shape.get("length")
+            ET.SubElement(geometry, "sphere" if shape.tag == "sphere" else "cylinder", **attrs)
+        elif shape.tag == "box":
+            meshes.append(box_mesh(_urdf.floats(doc, shape, "size", 3, owner)).transformed(pose))
+        else:
+            file = _urdf.resolve_mesh(doc, shape, owner, package_paths)
+            scale = _urdf.floats(doc, shape, "scale", 3, owner, default=(1.0, 1.0, 1.0))
+            try:
+                meshes.append(_cached_mesh(file, scale).transformed(pose))
+            except RobotModelError as exc:
+                raise doc.error(shape, f"<mesh> of {owner}: {exc}") from None
+    if meshes:
+        fitted: list[FittedCapsule] = fit_capsules(Mesh.union(meshes))
+        k = len(out.findall("collision"))
+        for i, capsule in enumerate(fitted):
+            out.append(_cylinder(capsule.p0, capsule.p1, capsule.radius_m))
+            slack[f"{name}#{k + i}" if k + i else name] = capsule.slack_m
+    return out
+
+
+_MESHES: dict[tuple, Mesh] = {}
+
+
+def _cached_mesh(file: Path, scale) -> Mesh:
+    """:func:`load_mesh`, once per file, size, modification time and scale in a process."""
+    stat = file.stat()
+    key = (str(file.resolve()), stat.st_size, stat.st_mtime_ns, tuple(scale))
+    mesh = _MESHES.get(key)
+    if mesh is None:
+        if len(_MESHES) > 256:
+            _MESHES.clear()
+        mesh = _MESHES[key] = load_mesh(file, scale)
+    return mesh
+
+
+# --- what the file does not say ---------------------------------------------------------------------------
+
+
+def height_invariant_links(robot) -> tuple[str, ...]:
+    """Links whose height never changes: every moving joint above them turns about the world's vertical (and
+    all joints above those do too). Their distance to the table is constant, so it is not reported."""
+    import pinocchio as pin
+
+    model = robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, np.clip(np.zeros(model.nq), robot.lower, robot.upper))
+    invariant = [True] * model.njoints
+    for j in range(1, model.njoints):
+        kind, axis = robot._joint_motion[j]
+        world_axis = data.oMi[j].rotation @ (axis / np.linalg.norm(axis))
+        invariant[j] = invariant[model.parents[j]] and kind == "revolute" and abs(abs(world_axis[2]) - 1.0) < 1e-9
+    return tuple(f.name for f in model.frames if f.type == pin.FrameType.BODY and invariant[f.parentJoint]
+                 and f.name != "universe")
+
+
+def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links) -> None:
+    """Set ``robot``'s fixed links, reach and home (each unless given), and its pinch pairs at the home pose."""
+    from ..geometry.kernels import capsule_capsule
+
+    robot.fixed_links = tuple(fixed_links) if fixed_links is not None else height_invariant_links(robot)
+    rng = np.random.default_rng(0)
+    samples = rng.uniform(robot.lower, robot.upper, size=(REACH_SAMPLES, robot.n))
+    frames, p0, p1 = robot.forward_with_capsules(samples)
+    tip_index = robot.frame_names.index(tip)
+    flange = frames[:, tip_index, :3, 3]
+    if reach_m is None:
+        reach_m = float(np.linalg.norm(flange - robot.shoulder_m, axis=1).max())
+        if not reach_m > 0:
+            raise RobotModelError(f"{robot.urdf_path}: the flange {tip!r} does not move away from the shoulder")
+    robot.reach_m = float(reach_m)
+    # a capsule whose lowest point keeps its height (a housing centred on a horizontal shoulder axis) stands
+    # where the file put it: its table distance is as constant as a fixed link's
+    lowest = np.minimum(p0[..., 2], p1[..., 2]) - robot.capsule_radii
+    steady = np.ptp(lowest, axis=0) < 1e-3
+    robot.table_fixed_capsules = tuple(name for name, still in zip(robot.capsule_names, steady) if still)
+    structural = _structural_pairs(robot, p0, p1, capsule_capsule)
+    if home_q is None:
+        home_q = _home(robot, samples, frames, p0, p1, capsule_capsule, structural)
+    robot.home_q = home_q
+    robot.self_pairs = tuple(pair for pair in robot._default_self_pairs(robot.home_q) if pair not in structural)
+
+
+def _structural_pairs(robot, p0, p1, capsule_capsule) -> set[tuple[str, str]]:
+    """Capsule pairs of non-adjacent links that touch in at least half the sampled configurations: parts of one
+    housing (a fitted capsule around a joint's housing reaches into the next link but one), not pinch points."""
+    names = robot.capsule_names
+    out = set()
+    for a, b in robot._default_self_pairs(None) + _close_pairs(robot):
+        i, j = names.index(a), names.index(b)
+        d = capsule_capsule(p0[:, i], p1[:, i], robot.capsule_radii[i], p0[:, j], p1[:, j], robot.capsule_radii[j])
+        if np.mean(d <= 0.0) >= 0.5:
+            out.add((a, b))
+    return out
+
+
+def _close_pairs(robot) -> tuple[tuple[str, str], ...]:
+    """Every capsule pair the default filter may drop at q = 0 but that the home pose might keep."""
+    import pinocchio as pin
+
+    parent_of = {f.name: f.parentJoint for f in robot.model.frames if f.type == pin.FrameType.BODY}
+    out = []
+    caps = robot.capsules
+    for i in range(len(caps)):
+        for j in range(i + 1, len(caps)):
+            if caps[i].group == "gripper" and caps[j].group == "gripper":
+                continue
+            ji, jj = parent_of[caps[i].frame], parent_of[caps[j].frame]
+            if ji == jj or robot.model.parents[ji] == jj or robot.model.parents[jj] == ji:
+                continue
+            out.append((caps[i].name, caps[j].name))
+    return tuple(out)
+
+
+def _home(robot, samples, frames, p0, p1, capsule_capsule, structural) -> np.ndarray:
+    """The sampled configuration that is free of collision (no capsule pair of non-adjacent links touching,
+    no moving capsule touching the table), keeps away from the joint limits, and puts the TCP in front
+    of the shoulder at half the reach with the fingers down; refined by IK to that point when it can be."""
+    tcp = frames[:, robot.tcp_index]
+    movable = np.array([c.frame not in robot.fixed_links and c.name not in robot.table_fixed_capsules for c in robot.capsules])
+    lowest = np.minimum(p0[..., 2], p1[..., 2]) - robot.capsule_radii
+    clearance = lowest[:, movable].min(axis=1) if movable.any() else np.full(len(samples), np.inf)
+    names = robot.capsule_names
+    for a, b in robot._default_self_pairs(None):
+        if (a, b) in structural:
+            continue
+        i, j = names.index(a), names.index(b)
+        d = capsule_capsule(p0[:, i], p1[:, i], robot.capsule_radii[i], p0[:, j], p1[:, j], robot.capsule_radii[j])
+        clearance = np.minimum(clearance, d)
+    span = np.maximum(robot.upper - robot.lower, 1e-9)
+    margin = np.min(np.minimum(samples - robot.lower, robot.upper - samples) / span, axis=1)
+    target = robot.shoulder_m + np.array([0.5 * robot.reach_m, 0.0, -robot.shoulder_m[2] + 0.5 * robot.reach_m])
+    down = -tcp[:, :3, 2] @ np.array([0.0, 0.0, 1.0])
+    score = -np.linalg.norm(tcp[:, :3, 3] - target, axis=1) / robot.reach_m + 0.5 * down + margin
+    if (clearance > 0).any():
+        score[clearance <= 0] = -np.inf
+    else:  # nothing sampled is clear: the least colliding one (the critics will say where it touches)
+        score = clearance
+    seed = samples[int(np.argmax(score))]
+    try:
+        return robot.ik(target, seed=seed)
+    except Exception:  # the sampled pose itself is a valid home; the refinement is a nicety
+        return seed

@@ -1,0 +1,163 @@
+"""The closed-form UR IK's fast paths against their plain references.
+
+- ``ur_ik`` (branch-and-bound over the closed form, steps written out) against the plain search: every branch of
+  :func:`robocritics.robot.ik._branches` evaluated, each joint moved to its seed-nearest equivalent within the
+  limits, the FK-verified branch of least weighted cost taken.
+- ``ur_ik_all`` against its previous implementation (kept here verbatim as the reference).
+- ``_Chain.reproduces`` (its error sums written out) against ``_Chain.error``, at the tolerance boundary.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from robocritics.errors import PlanningError
+from robocritics.robot.ik import (
+    _DUPLICATE_TOL,
+    _VERIFY_TOL,
+    UR3E_DH,
+    _branches,
+    _Chain,
+    _nearest_equivalent,
+    _wrap,
+    dh_forward,
+    ur_ik,
+    ur_ik_all,
+)
+
+TWO_PI = 2.0 * math.pi
+SAME_RAD = 1e-12  # the brief: bit-identical, or this close
+# joint values that put the arm at or near a wrist, elbow or shoulder-pan special case, mixed with any angle
+special = st.sampled_from([0.0, 1e-13, -1e-9, 1e-7, math.pi, -math.pi, math.pi - 1e-12, 0.5 * math.pi])
+angle = st.one_of(st.floats(-math.pi, math.pi, allow_nan=False), special)
+joints = st.lists(angle, min_size=6, max_size=6).map(np.array)
+
+
+def plain_nearest(dh, T, seed, lower, upper, weights, tol=_VERIFY_TOL):
+    """The plain search: all branches, each joint's equivalent within the limits nearest the seed, the least
+    ``sum w_i (q_i - seed_i)²`` (summed in the fast search's order: q1, q5, q6, q3, q2, q4) among the branches
+    whose FK reproduces ``T``; ``(cost, q)`` or None."""
+    t = T[:3].ravel().tolist()
+    chain = _Chain(dh)
+    best = None
+    for b in _branches(dh._ur, t, float(seed[5])):
+        v = [_nearest_equivalent(b[j], seed[j], lower[j], upper[j]) for j in range(6)]
+        if any(x is None for x in v):
+            continue
+        cost = 0.0
+        for j in (0, 4, 5, 2, 1, 3):
+            cost += weights[j] * (v[j] - seed[j]) * (v[j] - seed[j])
+        dp, dr = chain.error(v, t)
+        if dp <= tol and dr <= tol and (best is None or cost < best[0]):
+            best = (cost, np.array(v))
+    return best
+
+
+def previous_ur_ik_all(dh, T, q6_singular=0.0):
+    """``ur_ik_all`` as it was before the written-out duplicate test and FK check (the reference)."""
+    t = T[:3].ravel().tolist()
+    chain = _Chain(dh)
+    sols = []
+    for b in _branches(dh._ur, t, q6_singular):
+        w = [_wrap(x) for x in b]
+        if any(max(abs(_wrap(u - v)) for u, v in zip(w, s)) < _DUPLICATE_TOL for s in sols):
+            continue
+        dp, dr = chain.error(w, t)
+        if dp <= _VERIFY_TOL and dr <= _VERIFY_TOL:
+            sols.append(w)
+    return np.array(sols, dtype=float).reshape(-1, 6)
+
+
+def assert_same_choice(got, expected, seed, weights):
+    """``got`` is the reference's choice to 1e-12 rad, or (a tie between branches) another branch of the same
+    least cost."""
+    if expected is None:
+        assert got is None
+        return
+    assert got is not None
+    cost_expected, q_expected = expected
+    if np.max(np.abs(got - q_expected)) <= SAME_RAD:
+        return
+    cost_got = sum(weights[j] * (got[j] - seed[j]) ** 2 for j in (0, 4, 5, 2, 1, 3))
+    assert cost_got == pytest.approx(cost_expected, rel=1e-12, abs=1e-24), (got, q_expected)
+
+
+def solve(T, seed, lower, upper, weights):
+    try:
+        return ur_ik(UR3E_DH, T, seed, lower, upper, weights=weights)
+    except PlanningError:
+        return None
+
+
+@settings(max_examples=1500, deadline=None)
+@given(
+    q=joints,
+    noise=st.lists(st.floats(-0.4, 0.4), min_size=6, max_size=6).map(np.array),
+    far_seed=st.one_of(st.none(), joints),
+)
+def test_ur_ik_is_the_plain_search_with_the_ur3e_limits(q, noise, far_seed):
+    """A seed near the pose's own joints (the planner's case) or anywhere (another branch wins)."""
+    lower, upper = np.full(6, -TWO_PI), np.full(6, TWO_PI)
+    seed = np.clip(q + noise if far_seed is None else far_seed, lower, upper)
+    T = dh_forward(UR3E_DH, q)
+    ones = np.ones(6)
+    assert_same_choice(solve(T, seed, lower, upper, None), plain_nearest(UR3E_DH, T, seed, lower, upper, ones), seed, ones)
+
+
+@settings(max_examples=1000, deadline=None)
+@given(
+    q=joints,
+    seed=joints,
+    centre=st.lists(st.floats(-3.0, 3.0), min_size=6, max_size=6).map(np.array),
+    width=st.lists(st.floats(0.3, 7.0), min_size=6, max_size=6).map(np.array),
+    weights=st.lists(st.floats(0.01, 100.0), min_size=6, max_size=6).map(np.array),
+)
+def test_ur_ik_is_the_plain_search_with_tight_limits_and_weights(q, seed, centre, width, weights):
+    """Limits that rule out branches and equivalents, and weights that change which branch is nearest."""
+    lower, upper = centre - 0.5 * width, centre + 0.5 * width
+    seed = np.clip(seed, lower, upper)
+    T = dh_forward(UR3E_DH, q)
+    got = solve(T, seed, lower, upper, weights)
+    assert_same_choice(got, plain_nearest(UR3E_DH, T, seed, lower, upper, weights), seed, weights)
+
+
+@settings(max_examples=1500, deadline=None)
+@given(q=joints, q6=st.one_of(st.just(0.0), st.floats(-math.pi, math.pi)))
+def test_ur_ik_all_is_the_previous_implementation(q, q6):
+    T = dh_forward(UR3E_DH, q)
+    got = ur_ik_all(UR3E_DH, T, q6_singular=q6)
+    expected = previous_ur_ik_all(UR3E_DH, T, q6)
+    assert got.shape == expected.shape
+    assert np.array_equal(got, expected)  # bit for bit: the same floats, the same order
+
+
+@settings(max_examples=500, deadline=None)
+@given(q=joints, dq=st.lists(st.floats(-1e-8, 1e-8), min_size=6, max_size=6).map(np.array), pick=st.integers(0, 3))
+def test_reproduces_is_error_within_tol_at_the_boundary(q, dq, pick):
+    """``reproduces`` decides as ``error`` does, with the tolerance set to the error itself and the floats on
+    either side of it (the written-out sums must be the same floats)."""
+    chain = _Chain(UR3E_DH)
+    t = dh_forward(UR3E_DH, q)[:3].ravel().tolist()
+    dp, dr = chain.error((q + dq).tolist(), t)
+    base = (dp, dr, max(dp, dr), min(dp, dr))[pick]
+    for tol in (np.nextafter(base, 0.0), base, np.nextafter(base, 1.0)):
+        assert chain.reproduces(q + dq, t, float(tol)) == (dp <= tol and dr <= tol)
+
+
+def test_the_nearest_of_several_candidates_is_found_when_the_seed_is_between_branches():
+    """A seed half-way between two branches of the same pose: both are candidates, the plain search decides."""
+    q = np.array([0.3, -1.2, 1.4, -0.9, 1.1, 0.4])
+    T = dh_forward(UR3E_DH, q)
+    branches = ur_ik_all(UR3E_DH, T)
+    assert len(branches) == 8
+    lower, upper, ones = np.full(6, -TWO_PI), np.full(6, TWO_PI), np.ones(6)
+    for a in branches:
+        for b in branches:
+            seed = 0.5 * (a + b)
+            got = ur_ik(UR3E_DH, T, seed, lower, upper)
+            assert_same_choice(got, plain_nearest(UR3E_DH, T, seed, lower, upper, ones), seed, ones)
