@@ -100,8 +100,7 @@ def test_a_threshold_that_is_not_a_number_is_refused_not_converted(value, tmp_pa
 
 
 def test_the_same_threshold_as_a_number_still_counts():
-    from robocritics.critic import resolve_params
-    from robocritics.plugins import get_critics
+    from robocritics.critic import get_critics, resolve_params
 
     critic = get_critics()["joint_speed"]
     assert resolve_params(critic, {"warn_speed_m_s": 1}).warn_speed_m_s == 1.0
