@@ -97,6 +97,7 @@ try:
 except ImportError:  # run from a checkout without installing
     sys.path.insert(0, str(ROOT / "src"))
 
+from robocritics._files import OutputFileError, check_output_path, open_regular, write_file_atomically  # noqa: E402
 from robocritics.errors import LLMError, RoboCriticsError  # noqa: E402
 from robocritics.llm.providers.openai_compatible import OpenAICompatible  # noqa: E402
 from robocritics.llm.limits import DEFAULT_MAX_TOKENS  # noqa: E402
@@ -626,6 +627,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.max_attempts < 1 or args.repeats < 1:
         print("ablation: --max-attempts and --repeats must be at least 1", file=sys.stderr)
         return 2
+    for option, path in (("--json", args.json), ("--results", args.results or (None if args.selftest else DEFAULT_RESULTS))):
+        try:  # before any run: a link, directory or FIFO at the name is refused (the project's safe writer)
+            if path is not None:
+                check_output_path(path, option)
+        except OutputFileError as exc:
+            print(f"ablation: {exc}", file=sys.stderr)
+            return 2
 
     server = None
     if args.selftest:
@@ -754,7 +762,7 @@ def main(argv: list[str] | None = None) -> int:
     if results_path is not None:
         print(f"Results (one JSON line per cell, resumable): {results_path}")
     if args.json:
-        Path(args.json).write_text(json.dumps([asdict(r) for r in results], indent=2))
+        write_file_atomically(args.json, json.dumps([asdict(r) for r in results], indent=2), "--json")
         print(f"Results written to {args.json}")
     if interrupted:
         kept = f"; they are in {results_path}: run the same command to resume" if results_path else ""
@@ -795,7 +803,7 @@ def _repairs_main(args: argparse.Namespace, tasks: list[str], base_url: str, mod
     print()
     print(f"Reproduce: {_reproduce(args, model_name, base_url)}")
     if args.json:
-        Path(args.json).write_text(json.dumps([asdict(r) for r in results], indent=2))
+        write_file_atomically(args.json, json.dumps([asdict(r) for r in results], indent=2), "--json")
         print(f"Results written to {args.json}")
     if failed:
         print(f"ablation: {failed} run(s) ended with an LLM error", file=sys.stderr)
@@ -809,8 +817,8 @@ def _repairs_main(args: argparse.Namespace, tasks: list[str], base_url: str, mod
 def append_result(path: Path, result: Result, config: dict) -> None:
     """Append one cell to the JSON-lines file ``path``, flushed and synced before returning."""
     line = json.dumps({"config": config, **asdict(result)}, allow_nan=False) + "\n"
-    with open(path, "a", encoding="utf-8") as f:
-        f.write(line)
+    with open_regular(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, "results file") as f:  # never through a link
+        f.write(line.encode("utf-8"))
         f.flush()
         os.fsync(f.fileno())
 

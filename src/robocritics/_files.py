@@ -219,12 +219,12 @@ def open_new_stream(path: str | os.PathLike[str], what: str = "output") -> Binar
 
 
 def open_regular(path: str | os.PathLike[str], flags: int, what: str = "output") -> BinaryIO:
-    """The existing regular file ``path`` opened with ``os.open`` ``flags`` (``O_RDWR``, ``O_WRONLY | O_APPEND``) as a
-    binary file; a symbolic link (``O_NOFOLLOW``), FIFO (opened non-blocking, so nothing waits for a writer),
+    """The existing regular file ``path`` (or a new one, with ``O_CREAT`` in ``flags``) opened with ``os.open``
+    ``flags`` (``O_RDWR``, ``O_WRONLY | O_APPEND``) as a binary file; a symbolic link (``O_NOFOLLOW``), FIFO (opened non-blocking, so nothing waits for a writer),
     directory or device is an :class:`OutputFileError`."""
     shown = _shown(path)
     try:
-        fd = os.open(path, flags | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
+        fd = os.open(path, flags | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC, 0o666)  # the mode if O_CREAT
     except OSError as exc:
         if exc.errno == errno.ELOOP:
             raise OutputFileError(f"{what} {shown} is a symbolic link; robocritics does not write through links: "

@@ -49,6 +49,20 @@ def one_line(text: object, limit: int = ONE_LINE_CHARS) -> str:
     return safe_text(" ".join(str(text).split()), limit)
 
 
+PRINTED_CHARS = 200_000
+"""Most characters :func:`terminal_text` prints (a report, a diff, an LLM's reply are a few thousand)."""
+
+
+def terminal_text(text: object, limit: int = PRINTED_CHARS) -> str:
+    """Lines for stdout that may quote outside text (a report quoting a scene or a program, the diff of a program,
+    an LLM's reply): newlines and tabs kept, every other control character and escape sequence shown as an escape
+    (:func:`robocritics._text.safe_text`), so what is printed can neither clear the screen, set the window title
+    nor forge a line of ours; cut after ``limit`` characters with a note."""
+    from .._text import safe_text
+
+    return safe_text(text, limit, newlines=True)
+
+
 MAX_INPUT_BYTES = 1_000_000
 """Largest program or params file [bytes]: ten times the sandbox's longest program (100,000 characters), so an
 over-long program still gets the sandbox's own error, and a mistaken path (a log, an image) a short one."""
@@ -106,8 +120,19 @@ _MAX_CRITIC_NAME_CHARS = 100
 """Longest critic name ``--critics`` accepts (so an unknown one is quoted briefly in the error)."""
 
 
+def file_name(text: str) -> str:
+    """A file argument (``--html``, ``-o``, ``--params``, ``--memory``): not empty. An empty value was read as
+    "not given": ``--html=`` wrote nothing and exited 0, ``--params=`` ran with the defaults."""
+    if not text:
+        raise argparse.ArgumentTypeError("the file name is empty")
+    return text
+
+
 def critic_names(text: str) -> str:
-    """A ``--critics`` value: comma-separated names, each at most :data:`_MAX_CRITIC_NAME_CHARS` characters."""
+    """A ``--critics`` value: comma-separated names, each at most :data:`_MAX_CRITIC_NAME_CHARS` characters, at
+    least one (an empty value ran every critic as if the option were not given)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("no critic named; give names separated by commas, e.g. joint_speed,collision")
     for name in text.split(","):
         if len(name.strip()) > _MAX_CRITIC_NAME_CHARS:
             raise argparse.ArgumentTypeError(
@@ -149,7 +174,7 @@ def host(text: str) -> str:
     problem = ""
     if not name:
         problem = "is empty"
-    elif len(name) > 253 or any(c.isspace() or c in "\x00/" for c in name):
+    elif len(name) > 253 or any(c.isspace() or not c.isprintable() or c == "/" for c in name):
         problem = "is not a host name"
     else:
         try:
@@ -240,6 +265,7 @@ def add_critic_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--params",
         metavar="FILE",
+        type=file_name,
         help='JSON file of threshold overrides, e.g. {"joint_speed": {"warn_speed_m_s": 0.8}}',
     )
 

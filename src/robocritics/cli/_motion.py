@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ._common import UsageError, bounded_float, check_output, load_params, one_line, positive_int, scene_for
+from ._common import UsageError, bounded_float, check_output, load_params, one_line, positive_int, scene_for, terminal_text
 
 __all__ = ["add_motion_options", "check_motion", "numbers"]
 
@@ -87,11 +87,11 @@ def check_motion(args: argparse.Namespace) -> int:
         raise  # outside the subset: bad input (exit 2), one line naming the construct and its line
     except (ProgramError, PlanningError) as exc:
         report = runtime_report(exc)
-        print(report.to_json() if args.json else report.to_text())
+        print(report.to_json() if args.json else terminal_text(report.to_text()))  # it may quote the file
         print(f"robocritics: error: {type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
         return 1
     report = check(execution, critics=critics, params=params, goals=goals).report
-    print(report.to_json() if args.json else report.to_text())
+    print(report.to_json() if args.json else terminal_text(report.to_text()))  # it may quote the file
     if args.html:
         from .._files import OutputFileError, write_file_atomically
         from ..viz import replay_html

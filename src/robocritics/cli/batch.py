@@ -14,7 +14,17 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TextIO
 
-from ._common import UsageError, add_robot_options, bounded_float, one_line, positive_int, robot_for, shown_path, subcommand
+from ._common import (
+    UsageError,
+    add_robot_options,
+    bounded_float,
+    file_name,
+    one_line,
+    positive_int,
+    robot_for,
+    shown_path,
+    subcommand,
+)
 
 #: Longest input line, bytes: a program is at most 100,000 characters and a scene is bounded; a longer
 #: line is an error row, not read whole.
@@ -33,7 +43,7 @@ def _build_batch(sub) -> None:
         "rows included: they are results), 2 bad usage, 130 interrupted by Ctrl-C or SIGTERM (rerun with --resume).",
     )
     p.add_argument("input", metavar="IN.jsonl", help="input rows, one JSON object per line")
-    p.add_argument("-o", "--output", metavar="OUT.jsonl", required=True,
+    p.add_argument("-o", "--output", metavar="OUT.jsonl", required=True, type=file_name,
                    help="output rows (JSON lines; Parquet when the name ends in .parquet, which needs pyarrow; "
                    "- for standard output)")  # fmt: skip
     add_robot_options(p)  # one arm for every row (a row's scene that names another arm is an error row)

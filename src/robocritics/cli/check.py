@@ -10,6 +10,7 @@ from ._common import (
     add_robot_options,
     add_goal_option,
     check_output,
+    file_name,
     load_params,
     one_line,
     read_text,
@@ -17,6 +18,7 @@ from ._common import (
     sample_rate,
     scene_for,
     subcommand,
+    terminal_text,
 )
 
 
@@ -52,6 +54,7 @@ def _build_check(sub) -> None:
     p.add_argument(
         "--html",
         metavar="OUT.html",
+        type=file_name,
         help="also write the 3-D replay with its critic timeline and the report to one self-contained HTML file "
         "(no external URLs: it opens from file:// with no server)",
     )
@@ -110,7 +113,7 @@ def _check(args: argparse.Namespace) -> int:
     robot = robot_for(args, scene)
     execution, report = check(source, scene, goals=goals, critics=critics, params=params, robot=robot,
                               sample_rate_hz=args.rate)  # fmt: skip
-    print(report.to_json() if args.json else report.to_text())
+    print(report.to_json() if args.json else terminal_text(report.to_text()))  # it quotes the program
     if execution is None:  # the program did not run: its error, as before, beside the report
         verdict = report.verdicts[0]
         print(f"robocritics: error: {verdict.details['error']}: {one_line(verdict.details['text'])}", file=sys.stderr)

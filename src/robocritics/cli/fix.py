@@ -10,11 +10,14 @@ from ._common import (
     add_goal_option,
     add_robot_options,
     check_output,
+    file_name,
     load_params,
+    one_line,
     read_text,
     robot_for,
     scene_for,
     subcommand,
+    terminal_text,
 )
 
 
@@ -39,7 +42,7 @@ def _build_fix(sub) -> None:
     add_critic_options(p)
     add_goal_option(p)
     add_robot_options(p)
-    p.add_argument("-o", "--output", metavar="OUT.py", help="write the repaired program here")
+    p.add_argument("-o", "--output", metavar="OUT.py", type=file_name, help="write the repaired program here")
     p.set_defaults(func=_cmd_fix)
 
 
@@ -55,14 +58,14 @@ def _cmd_fix(args: argparse.Namespace) -> int:
     result = repair(
         source, scene, goal=args.goals or None, critics=critics, robot=robot_for(args, scene), params=load_params(args.params)
     )
-    print(result.diff or "(no change)")
+    print(terminal_text(result.diff) or "(no change)")  # the diff quotes the program's lines
     for change in result.changes:
-        print(f"changed: {change}")
-    print(result.report.to_text())
+        print(f"changed: {one_line(change)}")
+    print(terminal_text(result.report.to_text()))
     left = [v for v in result.report.verdicts if v.flag.name != "OK"]
     for verdict in left:
-        print(f"left: {verdict.critic} {verdict.flag.name}: {verdict.message}")
-    print(result.summary())
+        print(f"left: {verdict.critic} {verdict.flag.name}: {one_line(verdict.message)}")
+    print(terminal_text(result.summary()))
     if args.output:
         try:
             write_file_atomically(args.output, result.program, "-o")

@@ -56,6 +56,7 @@ from ._common import (
     add_goal_option,
     add_llm_options,
     add_robot_options,
+    file_name,
     llm_api_key,
     llm_client,
     load_params,
@@ -63,6 +64,7 @@ from ._common import (
     positive_int,
     robot_for,
     subcommand,
+    terminal_text,
 )
 from ..errors import LLMError, RoboCriticsError
 
@@ -114,7 +116,7 @@ def add_run_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     add_critic_options(p)
     add_goal_option(p)
     add_robot_options(p)
-    p.add_argument("--memory", metavar="FILE", help="interaction memory (SQLite file, created if missing)")
+    p.add_argument("--memory", metavar="FILE", type=file_name, help="interaction memory (SQLite file, created if missing)")
     p.add_argument(
         "--embedded-rules",
         action="store_true",
@@ -187,10 +189,12 @@ def _temperature(text: str) -> float:
 
 
 def _say(out: TextIO, text: object = "", *, flush: bool = False) -> None:
-    """Print ``text`` cleaned of lone surrogates, and still print it on a stream that cannot encode all of it."""
+    """Print ``text`` cleaned of lone surrogates and with the escape sequences of the model's reply (or of any
+    outside text) shown as escapes (:func:`terminal_text`), and still print it on a stream that cannot encode all
+    of it."""
     from ..llm.limits import clean_text
 
-    line = clean_text(str(text))
+    line = terminal_text(clean_text(str(text)))
     try:
         print(line, file=out, flush=flush)
     except UnicodeEncodeError:

@@ -24,6 +24,7 @@ from ._common import (
     add_goal_option,
     add_llm_options,
     add_robot_options,
+    file_name,
     host,
     llm_api_key,
     llm_client,
@@ -49,9 +50,9 @@ def _build_studio(sub) -> None:
         "needs --token. Exit status: 0 after Ctrl-C, 2 bad input.",
     )
     p.add_argument("--scene", metavar="NAME|PATH", help="scene name or JSON file (default as for `check`)")
-    p.add_argument("--program", metavar="FILE", help="program file to open in the editor and Run; a URScript file or "
-                   "a recording (ur_rtde or generic CSV, JointTrajectory JSON, MoveIt YAML, rosbag2) is judged and "
-                   "replayed (docs/formats.md)")
+    p.add_argument("--program", metavar="FILE", type=file_name, help="program file to open in the editor and Run; a "
+                   "URScript file or a recording (ur_rtde or generic CSV, JointTrajectory JSON, MoveIt YAML, rosbag2) "
+                   "is judged and replayed (docs/formats.md)")
     add_goal_option(p)
     add_motion_options(p)
     add_robot_options(p)

@@ -43,7 +43,16 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Annotated, Any, Iterable, Mapping, Protocol, Union, runtime_checkable
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StringConstraints, ValidationError
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+)
 
 
 from .._suggest import did_you_mean
@@ -157,6 +166,16 @@ class CriticParams(BaseModel):
     finite (a NaN threshold compares False with everything and would pass every check)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _a_number_is_a_number(cls, value: Any, info: ValidationInfo) -> Any:
+        """A number field takes a number: pydantic's lax mode would read ``true`` as 1 m/s and ``"0.5"`` as 0.5
+        without a word (a params file's mistake silently becomes a threshold)."""
+        field = cls.model_fields.get(info.field_name or "")
+        if field is not None and field.annotation in (float, int) and isinstance(value, (bool, str)):
+            raise ValueError("Input should be a valid number, not true/false or text")
+        return value
 
 
 #: Most names one list parameter holds (frames, proximity pairs): a robot has tens of frames and a scene a few hundred

@@ -45,10 +45,16 @@ class BadRequest(ValueError):
     """The request body is not what the route takes (HTTP 400)."""
 
 
+#: Largest id or revision number a request may name: an id of 4,000 digits was quoted whole in the answer.
+MAX_ID = 10**12
+
+
 def _int(body: dict[str, Any], key: str) -> int:
     value = body.get(key)
     if isinstance(value, bool) or not isinstance(value, int):
         raise BadRequest(f"{key} must be an integer, got {type(value).__name__}")
+    if not 0 <= value <= MAX_ID:
+        raise BadRequest(f"{key} must be an integer from 0 to {MAX_ID:,}")
     return value
 
 
@@ -178,7 +184,7 @@ class _Handler(BaseHTTPRequestHandler):
         elif path.startswith("/api/revision/"):
             name = path.rsplit("/", 1)[1]
             try:
-                index = len(self.studio.revisions) if name == "latest" else int(name)
+                index = self.studio.next_index - 1 if name == "latest" else int(name)
                 revision = self.studio.revision(index)
             except (ValueError, LookupError):
                 self._refuse(404, f"no revision {name[:40]!r}")

@@ -9,10 +9,13 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["FULL_REVISIONS", "Revision", "verdict_rows"]
+__all__ = ["FULL_REVISIONS", "MAX_REVISIONS", "Revision", "verdict_rows"]
 
 #: Revisions kept with their whole run (trajectory, report); older ones keep only what the history shows.
 FULL_REVISIONS = 3
+#: Revisions kept at all (the history lists them; numbers go on): a compact one still holds its program (up to
+#: 200,000 characters) and verdict texts, ~0.2 MB, so a studio Run 10,000 times grew by 2 GB (issue 22, round 3).
+MAX_REVISIONS = 200
 
 
 def verdict_rows(report) -> list[dict[str, Any]]:

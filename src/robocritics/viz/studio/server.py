@@ -29,7 +29,7 @@ from .common import (APPROVAL_TIMEOUT_S, CANCELLED_TURN_WAIT_S, CHAT_ENTRY_CHARS
                      MAX_CHAT_CHARS, MAX_PROGRAM_CHARS, StudioBusy, StudioError, is_loopback)
 from .jobs import Busy, Cancelled, Job, JobBoard
 from .imported import IMPORTED_DEPLOY, imported_motion, recording_summary
-from .revisions import FULL_REVISIONS, Revision
+from .revisions import FULL_REVISIONS, MAX_REVISIONS, Revision
 
 __all__ = ["Studio", "StudioError", "StudioBusy", "is_loopback", "MAX_BODY_BYTES", "MAX_PROGRAM_CHARS",
            "APPROVAL_TIMEOUT_S", "MAX_CHAT_CHARS"]
@@ -226,11 +226,18 @@ class Studio:
             "last_deploy": self.last_deploy,
         }
 
+    @property
+    def next_index(self) -> int:
+        """The number the next revision gets (the first ones are forgotten past MAX_REVISIONS; numbers go on)."""
+        return self.revisions[-1].index + 1 if self.revisions else 1
+
     def revision(self, index: int) -> Revision:
         with self._lock:
-            if not 0 < index <= len(self.revisions):
-                raise LookupError(f"there is no revision {index}")
-            return self.revisions[index - 1]
+            first = self.revisions[0].index if self.revisions else 1
+            if not first <= index < self.next_index:
+                forgotten = f" (only the last {MAX_REVISIONS} are kept)" if 0 < index < first else ""
+                raise LookupError(f"there is no revision {index}{forgotten}")
+            return self.revisions[index - first]
 
     def _say(self, role: str, text: str) -> None:
         """Add to the chat every page shows (``role``: user, assistant or note)."""
@@ -247,9 +254,10 @@ class Studio:
         if full_report is not None and selected is not None:
             shown = _subset(full_report, set(selected) | {"runtime", "task_outcome"})
         with self._lock:
-            revision = Revision(len(self.revisions) + 1, kind, program, execution=execution, report=shown,
+            revision = Revision(self.next_index, kind, program, execution=execution, report=shown,
                                 error=error, diff=diff, duration_s=duration_s, deploy_report=full_report)
             self.revisions.append(revision)
+            del self.revisions[:-MAX_REVISIONS]
             for old in self.revisions[:-FULL_REVISIONS]:
                 if not old.compact:
                     old.compact_away()
@@ -265,6 +273,10 @@ class Studio:
         for attempt in loop.attempts[:-FULL_REVISIONS]:
             if attempt is not loop.current:
                 attempt.execution = None
+        for attempt in loop.attempts[:-MAX_REVISIONS]:  # as old as the revisions forgotten: their reports too
+            if attempt is not loop.current:
+                attempt.report = None
+                self._attempt_revision.pop(attempt.index, None)
 
     # --- Run -------------------------------------------------------------------------------------------
 
@@ -359,7 +371,7 @@ class Studio:
     def _title(self, diff: str) -> tuple[str, str]:
         """The diff with the studio's revision numbers in its header (the Loop numbers its attempts)."""
         lines = diff.split("\n")
-        nxt = len(self.revisions) + 1
+        nxt = self.next_index
         repairs = "(critic repairs)" in "".join(lines[:2])
         current = self._loop.current if self._loop is not None else None
         base = self._attempt_revision.get(current.index) if current is not None else None
@@ -445,10 +457,14 @@ class Studio:
         return self._events(job, thread)
 
     def _shown(self, index: int | None) -> Revision | None:
-        with self._lock:
-            if index and 0 < index <= len(self.revisions):
-                return self.revisions[index - 1]
-            return self.revisions[-1] if self.revisions else None
+        """Revision ``index`` (StudioError if there is none: a Fix of #7 must not fix another), else the latest."""
+        if index is None:
+            with self._lock:
+                return self.revisions[-1] if self.revisions else None
+        try:
+            return self.revision(index)
+        except LookupError as exc:
+            raise StudioError(str(exc)) from None
 
     def _turn(self, job: Job, work) -> None:
         try:
@@ -510,7 +526,7 @@ class Studio:
                               "they can place in the program); for the rest, connect an LLM (--base-url, --model) or "
                               "edit the program.")
             return
-        new = f"#{len(self.revisions) + 1} (critic repairs)"
+        new = f"#{self.next_index} (critic repairs)"
         diff = unified_diff(shown.program, program, f"#{shown.index}", new)
         if automation != "auto" and not self.jobs.ask(job, program, diff, f"{new} from #{shown.index}"):
             reason = job.approval.reason if job.approval is not None else "rejected"
