@@ -267,3 +267,14 @@ def test_a_long_lived_studio_stays_bounded_after_many_runs():
     assert result["revisions"] == MAX_REVISIONS and result["last"] == MAX_REVISIONS + 550
     # 500 more Runs unbounded would add ~95 MB (0.19 MB each); bounded, only allocator noise
     assert after - before < 30 * 1024, f"the studio grew by {(after - before) / 1024:.0f} MB over 500 Runs"
+
+
+def test_a_huge_joint_angle_is_shown_short_not_in_310_digits():
+    from robocritics import Robot
+    from robocritics.errors import RobotModelError
+
+    with pytest.raises(RobotModelError) as raised:
+        Robot.ur3e().joint_vector([1e308, 0, 0, 0, 0, 0], "start_q")
+    assert "= 1e+308 rad is outside its limits" in str(raised.value) and len(str(raised.value)) < 200
+    with pytest.raises(RobotModelError, match=r"= 7\.0000 rad is outside"):
+        Robot.ur3e().joint_vector([7, 0, 0, 0, 0, 0], "start_q")

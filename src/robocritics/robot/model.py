@@ -377,8 +377,9 @@ class Robot:
             raise error(f"{what} must be {self.n} joint angles in rad, got {vector.size}")
         for j, (v, lo, hi) in enumerate(zip(vector, self.lower, self.upper)):
             if not (math.isfinite(v) and lo - LIMIT_TOLERANCE_RAD <= v <= hi + LIMIT_TOLERANCE_RAD):
+                shown = f"{v:.4f}" if abs(v) < 1e6 else f"{v:.4g}"  # 1e308 from a controller: not 310 digits
                 raise error(
-                    f"{what} joint {j} ({self.joint_names[j]}) = {v:.4f} rad is outside its limits "
+                    f"{what} joint {j} ({self.joint_names[j]}) = {shown} rad is outside its limits "
                     f"[{lo:.4f}, {hi:.4f}] rad"
                 )
         return vector
