@@ -168,6 +168,19 @@ def test_a_mesh_fixture_loads_relative_to_its_scene_file_and_round_trips(cell, m
     assert "fixture (CAD mesh, not graspable)" in describe_scene(scene)
 
 
+def test_a_mesh_fixture_takes_the_issues_yaw_key_as_a_turn_about_z(tmp_path):
+    write_stl(tmp_path / "jig.stl", jig_corners())
+    yaw = 0.7
+    (_, jig) = Scene.load(_scene_with(tmp_path, yaw=yaw)).objects
+    c, s = np.cos(yaw), np.sin(yaw)  # the turn written out, not through rpy_matrix
+    corners = jig_corners().reshape(-1, 3) * 0.001
+    expected = corners @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + [0.3, 0.0, 0.0]
+    assert jig.rpy == (0.0, 0.0, yaw)
+    gaps = np.linalg.norm(jig.placed_vertices()[:, None] - expected[None], axis=-1)
+    assert gaps.min(axis=1).max() < 1e-7 and gaps.min(axis=0).max() < 1e-7  # the same corners, both ways
+    assert Scene.model_validate_json(Scene.load(_scene_with(tmp_path, yaw=yaw)).to_json()).objects[1] == jig
+
+
 def test_the_arm_near_and_through_the_jig_is_measured_exactly_and_flagged(cell):
     scene = Scene.load(cell)
     program = "move_to(0.27, 0.0, 0.15)\nmove_to(0.27, 0.0, 0.07)\nmove_down(0.06)\nhome()\n"
@@ -271,6 +284,10 @@ HOSTILE = {
     "graspable": ({"graspable": True}, None, "objects[1].graspable", "fixture"),
     "a size of its own": ({"size": [1, 1, 1]}, None, "objects[1].size", "comes from its file"),
     "a file on a box": ({"shape": "box", "size": [0.1, 0.1, 0.1]}, None, "objects[1].file", "only a shape 'mesh'"),
+    "yaw and rpy": ({"yaw": 0.3, "rpy": [0, 0, 0.3]}, None, "objects[1].yaw", "not both"),
+    "yaw as text": ({"yaw": "0.3"}, None, "objects[1].yaw", "not a number"),
+    "yaw of NaN": ({"yaw": float("nan")}, None, "objects[1].yaw", "not a finite number"),
+    "yaw past a turn": ({"yaw": 7.0}, None, "objects[1].yaw", "out of range"),
 }
 
 

@@ -10,7 +10,8 @@ fixed x, y, z axes) orients it. Sizes are full extents in metres:
 * ``mesh``: a fixture from CAD, ``{"shape": "mesh", "file": "jig.stl", "scale": 0.001}``: the triangles of an
   STL, DAE or OBJ file (read with coal's loader, :func:`robocritics.robot.fit.load_mesh`; a DAE with a DOCTYPE
   is refused), ``file`` relative to the scene file (to the working directory for a scene not read from a file),
-  ``scale`` the file's unit in metres. ``position`` and ``rpy`` place the file's origin (not a centre);
+  ``scale`` the file's unit in metres. ``position`` and ``rpy`` (or ``yaw``, rad about z, instead of ``rpy``)
+  place the file's origin (not a centre);
   ``size`` is derived (the scaled mesh's bounding-box extents). A mesh object is a fixture: never graspable.
   The file is bounded (:data:`MAX_MESH_FILE_BYTES`, :data:`MAX_MESH_TRIANGLES`, finite vertices, the placed
   mesh within :data:`MAX_COORD_M`).
@@ -426,6 +427,13 @@ class SceneObject(_Model):
                     raise ValueError(f"{key}: only a shape 'mesh' object has a {key}")
             return data
         data = dict(data)
+        if "yaw" in data:  # the (and a container's) spelling of a turn about z
+            if "rpy" in data:
+                raise ValueError("yaw: give either yaw (rad about z) or rpy, not both")
+            try:
+                data["rpy"] = (0.0, 0.0, _number(data.pop("yaw"), kind="angle"))
+            except ValueError as exc:
+                raise ValueError(f"yaw: {exc}") from None
         if data.get("graspable", False) is not False:
             raise ValueError("graspable: a mesh object is a fixture; robocritics does not grasp meshes")
         data["graspable"] = False
