@@ -385,6 +385,12 @@ def test_a_scene_that_names_a_bundled_arm_is_run_on_it(tmp_path, capsys):
     (["--tool", "robotiq_2f85"], "--tool and --tip need --robot PATH.urdf"),
     (["--robot", "ur5e", "--tool", "robotiq_2f85"], "carries its own gripper"),
     (["--robot", "kuka"], "not a bundled arm"),
+    (["--base-pose", "0,0,0.1,0,0,0"], "--base-pose needs --robot PATH.urdf"),
+    (["--robot", "ur5e", "--base-pose", "0,0,0.1,0,0,0"], "--base-pose is for --robot PATH.urdf"),
+    (["--robot", "arm.urdf", "--base-pose", "0,0,nan,0,0,0"], "every number must be finite"),
+    (["--robot", "arm.urdf", "--base-pose", "0,0,inf,0,0,0"], "every number must be finite"),
+    (["--robot", "arm.urdf", "--base-pose", "0,0,0.1"], "is not six numbers"),
+    (["--robot", "arm.urdf", "--base-pose", "0,0,0.1,0,0,x"], "is not six numbers"),
 ])
 def test_robot_options_refuse_what_they_cannot_do(tmp_path, capsys, argv, message):
     from robocritics import cli
@@ -393,6 +399,33 @@ def test_robot_options_refuse_what_they_cannot_do(tmp_path, capsys, argv, messag
     program.write_text(_PICK)
     assert cli.main(["check", str(program), *argv]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_base_pose_stands_a_urdf_arm_where_it_says_through_the_cli(tmp_path, capsys):
+    """``--base-pose`` reaches ``Robot.from_urdf(base_pose=...)``: the CLI's report is the library's for the
+    same pose, and a raised, turned base measures differently from one at the origin."""
+    import json
+
+    from robocritics import cli
+    from robocritics.pipeline import check
+    from robocritics.scene import Scene
+
+    urdf = Path(__file__).resolve().parents[1] / "src" / "robocritics" / "robot" / "models" / "ur3e.urdf"
+    program = tmp_path / "p.py"
+    program.write_text("lib.home()\n")
+    pose = (0.02, -0.01, 0.05, 0.0, 0.0, 0.4)
+
+    def cli_report(*extra):
+        assert cli.main(["check", str(program), "--json", "--robot", str(urdf), *extra]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    moved = cli_report("--base-pose", ",".join(map(str, pose)))
+    at_origin = cli_report()
+    _, library = check("lib.home()\n", Scene(), robot=Robot.from_urdf(urdf, base_pose=pose))
+    assert moved["verdicts"][1]["critic"] == library.verdicts[1].critic == "collision"
+    assert moved["verdicts"][1]["value"] == pytest.approx(library.verdicts[1].value, rel=1e-9)
+    assert moved["trajectory_hash"] == library.trajectory_hash != at_origin["trajectory_hash"]
+    assert abs(moved["verdicts"][1]["value"] - at_origin["verdicts"][1]["value"]) > 1e-3
 
 
 @pytest.mark.parametrize("command", ["fix", "deploy", "batch", "studio", "run"])

@@ -380,8 +380,23 @@ def llm_client(args: argparse.Namespace, api_key: str | None, *, embedding_model
 BUNDLED_ROBOTS = ("ur3e", "ur5e", "ur10e", "ur16e", "panda")
 
 
+def base_pose(text: str) -> tuple[float, ...]:
+    """``x,y,z,roll,pitch,yaw``: where a URDF arm's base stands in the world (m, rad; finite)."""
+    parts = text.split(",")
+    if len(parts) != 6:
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not six numbers x,y,z,roll,pitch,yaw (m, rad)")
+    try:
+        values = tuple(float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not six numbers x,y,z,roll,pitch,yaw (m, rad)") from None
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{shown(text)}: every number must be finite")
+    return values
+
+
 def add_robot_options(p: argparse.ArgumentParser) -> None:
-    """``--robot NAME|PATH.urdf``, ``--tool NAME|PATH.urdf`` and ``--tip LINK`` (see :func:`robot_for`)."""
+    """``--robot NAME|PATH.urdf``, ``--tool NAME|PATH.urdf``, ``--tip LINK`` and ``--base-pose`` (see
+    :func:`robot_for`)."""
     p.add_argument(
         "--robot",
         metavar="NAME|PATH.urdf",
@@ -395,23 +410,33 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
         "default: the file's own robocritics gripper, else none",
     )
     p.add_argument("--tip", metavar="LINK", help="the URDF arm's flange link (needed where its chain branches)")
+    p.add_argument(
+        "--base-pose",
+        type=base_pose,
+        metavar="X,Y,Z,ROLL,PITCH,YAW",
+        help="where a URDF arm's base stands in the scene (m, rad; pedestal, wall, ceiling); default: at the origin",
+    )
 
 
 def robot_for(args: argparse.Namespace, scene):
     """The robot of ``--robot``/``--tool``/``--tip``, else the bundled arm the scene names (``"robot"``), else None
     (the default UR3e). A URDF's errors are :class:`~robocritics.errors.RobotModelError` naming file and line."""
     name = getattr(args, "robot", None) or scene.robot or None
-    tool, tip = getattr(args, "tool", None), getattr(args, "tip", None)
+    tool, tip, pose = getattr(args, "tool", None), getattr(args, "tip", None), getattr(args, "base_pose", None)
     if name is None:
         if tool or tip:
             raise UsageError("--tool and --tip need --robot PATH.urdf (the bundled arms carry their own gripper)")
+        if pose is not None:
+            raise UsageError("--base-pose needs --robot PATH.urdf (the bundled arms stand at the origin)")
         return None  # the default arm, loaded where the work is done (a batch parent never needs Pinocchio)
     from ..robot.model import Robot
 
     if name in BUNDLED_ROBOTS and not name.endswith(".urdf"):
         if tool or tip:
             raise UsageError(f"--robot {name} carries its own gripper; --tool and --tip are for --robot PATH.urdf")
+        if pose is not None:
+            raise UsageError(f"--robot {name} stands at the origin; --base-pose is for --robot PATH.urdf")
         return Robot.panda() if name == "panda" else Robot.ur(name)
     if not name.lower().endswith(".urdf"):
         raise UsageError(f"--robot {shown(name)}: not a bundled arm ({', '.join(BUNDLED_ROBOTS)}) nor a .urdf file")
-    return Robot.from_urdf(name, tool=tool, tip=tip)
+    return Robot.from_urdf(name, tool=tool, tip=tip, base_pose=pose)
