@@ -72,6 +72,39 @@ def test_rows_equal_in_process_simulate_and_critique(engine):
     assert out["sorting_careful"]["score"] == 10.0 and out["sorting_naive"]["score"] < 10.0
 
 
+def test_a_row_names_its_bundled_arm(engine):
+    """A row's ``"robot"`` runs it on that bundled arm: the row equals in-process simulate and critique on it,
+    a scene made for the UR5e runs on the row that names it and is an error row on the default UR3e, and a
+    name that is not a bundled arm is a RowError naming the field."""
+    from robocritics import Robot
+
+    made_for_ur5e = {**json.loads(Scene.builtin("sorting").model_dump_json()), "robot": "ur5e"}
+    rows = [
+        {"id": "ur5e", "scene": "sorting", "program": SHORT, "robot": "ur5e"},
+        {"id": "panda", "scene": "sorting", "program": SHORT, "robot": "panda"},
+        {"id": "scene-ur5e", "scene": made_for_ur5e, "program": SHORT, "robot": "ur5e"},
+        {"id": "scene-ur5e-default", "scene": made_for_ur5e, "program": SHORT},
+        {"id": "kuka", "scene": "sorting", "program": SHORT, "robot": "kuka"},
+        {"id": "urdf", "scene": "sorting", "program": SHORT, "robot": "arm.urdf"},
+        {"id": "number", "scene": "sorting", "program": SHORT, "robot": 5},
+        {"id": "list", "scene": "sorting", "program": SHORT, "robot": ["ur5e"]},
+    ]
+    out = _by_id(evaluate(rows, engine))
+    for name in ("ur5e", "panda"):
+        execution = simulate(SHORT, Scene.builtin("sorting"), robot=Robot.panda() if name == "panda" else Robot.ur(name))
+        report = critique(execution)
+        assert out[name]["error"] is None, out[name]["error"]
+        assert (out[name]["score"], out[name]["samples"]) == (report.score, report.samples)
+        assert out[name]["flags"] == {v.critic: v.flag.value for v in report.verdicts}
+    on_ur3e = critique(simulate(SHORT, Scene.builtin("sorting")))
+    assert on_ur3e.samples not in (out["ur5e"]["samples"], out["panda"]["samples"])  # not the default arm's run
+    assert out["scene-ur5e"]["error"] is None
+    assert out["scene-ur5e-default"]["error"]["type"] == "SceneError"
+    for key in ("kuka", "urdf", "number", "list"):
+        assert out[key]["error"]["type"] == "RowError", key
+        assert "'robot' must be a bundled arm's name (ur3e, ur5e, ur10e, ur16e, panda)" in out[key]["error"]["message"]
+
+
 def test_goals_critics_params_and_inline_scene(engine):
     scene = json.loads(Scene.builtin("sorting").model_dump_json())
     rows = [

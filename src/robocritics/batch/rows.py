@@ -1,6 +1,6 @@
 """Batch rows: checking an input row, evaluating one in-process, and the output row.
 
-An input row is a mapping ``{"id", "scene", "program", "goal"?, "critics"?, "params"?}``:
+An input row is a mapping ``{"id", "scene", "program", "goal"?, "critics"?, "params"?, "robot"?}``:
 
 * ``id`` — a non-empty string or an integer, unique within the batch;
 * ``scene`` — a built-in scene name (``"sorting"``), a scene JSON file path, or an inline scene object;
@@ -8,7 +8,9 @@ An input row is a mapping ``{"id", "scene", "program", "goal"?, "critics"?, "par
 * ``goal`` — optional: a goal string (``"green_apple in white_box"``) or a list of them, checked by the
   ``task_outcome`` critic on the final scene;
 * ``critics`` — optional: critic names (a list or a comma-separated string), default every installed critic;
-* ``params`` — optional: ``{critic: {field: value}}`` thresholds.
+* ``params`` — optional: ``{critic: {field: value}}`` thresholds;
+* ``robot`` — optional: a bundled arm's name (``"ur5e"``; :func:`bundled_arm_names`) that runs this row,
+  instead of the batch's robot (a URDF arm is one robot for the whole batch: ``evaluate(robot=...)``).
 
 An output row is ``{"id", "score", "flags", "passed", "duration_s", "samples", "error"}``: ``score`` the
 0-10 program quality index (None on error), ``flags`` ``{critic: "OK"|"WARNING"|"ERROR"}``, ``passed``
@@ -29,11 +31,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["Job", "RowError", "check_row", "error_row", "evaluate_job", "SceneCache", "OUTPUT_KEYS", "MAX_MESSAGE_CHARS"]
+__all__ = [
+    "Job", "RowError", "bundled_arm_names", "check_row", "error_row", "evaluate_job", "SceneCache", "OUTPUT_KEYS",
+    "MAX_MESSAGE_CHARS",
+]  # fmt: skip
 
 #: The keys of every output row, in this order.
 OUTPUT_KEYS = ("id", "score", "flags", "passed", "duration_s", "samples", "error")
-_INPUT_KEYS = {"id", "scene", "program", "goal", "critics", "params"}
+_INPUT_KEYS = {"id", "scene", "program", "goal", "critics", "params", "robot"}
 #: Longest id accepted, characters (ids are echoed in every output row).
 MAX_ID_CHARS = 200
 #: Most digits of an integer id (as a JSON reader parses them; a 64-bit integer has 19 or 20).
@@ -59,6 +64,27 @@ class Job:
     goals: tuple[str, ...] | None = None
     critics: tuple[str, ...] | None = None
     params: dict | None = None
+    robot: str | None = None
+
+
+def bundled_arm_names() -> tuple[str, ...]:
+    """The arms a row's ``"robot"`` may name: the bundled UR e-series arms and the Panda."""
+    from ..robot.arms import ARMS, PANDA
+
+    return (*ARMS, PANDA.name)
+
+
+#: The bundled arms a worker has loaded for rows that name one, by name (loaded once per worker process).
+_ROW_ROBOTS: dict[str, Any] = {}
+
+
+def _row_robot(name: str):
+    robot = _ROW_ROBOTS.get(name)
+    if robot is None:
+        from ..robot.model import Robot
+
+        robot = _ROW_ROBOTS[name] = Robot.panda() if name == "panda" else Robot.ur(name)
+    return robot
 
 
 def _bounded(message: str) -> str:
@@ -162,6 +188,10 @@ def check_row(row: Any) -> Job:
         raise RowError(f"'scene' must be a scene name, a scene file path or a scene object, got {type(scene).__name__}")
     if not isinstance(row["program"], str):
         raise RowError(f"'program' must be the program's source text (a string), got {type(row['program']).__name__}")
+    robot = row.get("robot")
+    if robot is not None and (not isinstance(robot, str) or robot not in bundled_arm_names()):
+        shown = json.dumps(robot)[:60] if isinstance(robot, (str, int, float, bool)) else type(robot).__name__
+        raise RowError(f"'robot' must be a bundled arm's name ({', '.join(bundled_arm_names())}), got {shown}")
     params = row.get("params")
     if params is not None and not (isinstance(params, Mapping) and all(isinstance(v, Mapping) for v in params.values())):
         raise RowError("'params' must be an object {critic: {field: value}}")
@@ -172,6 +202,7 @@ def check_row(row: Any) -> Job:
         goals=None if row.get("goal") in (None, []) else _strings(row["goal"], "goal"),  # []: no goals
         critics=None if row.get("critics") is None else _strings(row["critics"], "critics"),
         params=None if params is None else {str(k): dict(v) for k, v in params.items()},
+        robot=robot,
     )
     for field, value in (("scene", job.scene), ("params", job.params)):
         if isinstance(value, dict):
@@ -234,6 +265,7 @@ def evaluate_job(job: Job, robot, scenes: SceneCache, sample_rate_hz: float = 12
     started = time.perf_counter()
     try:
         scene = scenes.get(job.scene)
+        robot = _row_robot(job.robot) if job.robot else robot
         checked = check(job.program, scene, robot=robot, sample_rate_hz=sample_rate_hz, params=job.params,
                         critics=list(job.critics) if job.critics else None,
                         goals=list(job.goals) if job.goals else None)  # fmt: skip

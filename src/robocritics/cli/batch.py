@@ -46,7 +46,7 @@ def _build_batch(sub) -> None:
     p.add_argument("-o", "--output", metavar="OUT.jsonl", required=True, type=file_name,
                    help="output rows (JSON lines; Parquet when the name ends in .parquet, which needs pyarrow; "
                    "- for standard output)")  # fmt: skip
-    add_robot_options(p)  # one arm for every row (a row's scene that names another arm is an error row)
+    add_robot_options(p)  # the rows' arm, unless a row names a bundled one ("robot"); a scene made for another is an error row
     p.add_argument("--engine", choices=("local", "ray"), default="local",
                    help="local: worker processes on this machine (default); ray: Ray actors (robocritics[ray])")  # fmt: skip
     p.add_argument("--workers", type=positive_int, metavar="N",
