@@ -69,9 +69,9 @@ class Job:
 
 def bundled_arm_names() -> tuple[str, ...]:
     """The arms a row's ``"robot"`` may name: the bundled UR e-series arms and the Panda."""
-    from ..robot.arms import ARMS, PANDA
+    from ..robot.arms import BUNDLED_ARM_NAMES
 
-    return (*ARMS, PANDA.name)
+    return BUNDLED_ARM_NAMES
 
 
 #: The bundled arms a worker has loaded for rows that name one, by name (loaded once per worker process).
@@ -83,7 +83,7 @@ def _row_robot(name: str):
     if robot is None:
         from ..robot.model import Robot
 
-        robot = _ROW_ROBOTS[name] = Robot.panda() if name == "panda" else Robot.ur(name)
+        robot = _ROW_ROBOTS[name] = Robot.bundled(name)
     return robot
 
 

@@ -15,6 +15,7 @@ from typing import Callable
 
 from .._files import read_bounded_text
 from ..errors import RoboCriticsError
+from ..robot.arms import BUNDLED_ARM_NAMES
 
 Builder = Callable[["argparse._SubParsersAction"], None]
 
@@ -377,7 +378,6 @@ def llm_client(args: argparse.Namespace, api_key: str | None, *, embedding_model
 
 
 #: The arms ``--robot NAME`` names (the bundled models).
-BUNDLED_ROBOTS = ("ur3e", "ur5e", "ur10e", "ur16e", "panda")
 
 
 def base_pose(text: str) -> tuple[float, ...]:
@@ -400,7 +400,7 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--robot",
         metavar="NAME|PATH.urdf",
-        help=f"the arm: a bundled one ({', '.join(BUNDLED_ROBOTS)}) or a vendor URDF file, loaded as shipped (meshes "
+        help=f"the arm: a bundled one ({', '.join(BUNDLED_ARM_NAMES)}) or a vendor URDF file, loaded as shipped (meshes "
         "enclosed by fitted capsules; docs/robots.md); default: the scene's \"robot\", else ur3e",
     )
     p.add_argument(
@@ -431,12 +431,12 @@ def robot_for(args: argparse.Namespace, scene):
         return None  # the default arm, loaded where the work is done (a batch parent never needs Pinocchio)
     from ..robot.model import Robot
 
-    if name in BUNDLED_ROBOTS and not name.endswith(".urdf"):
+    if name in BUNDLED_ARM_NAMES and not name.endswith(".urdf"):
         if tool or tip:
             raise UsageError(f"--robot {name} carries its own gripper; --tool and --tip are for --robot PATH.urdf")
         if pose is not None:
             raise UsageError(f"--robot {name} stands at the origin; --base-pose is for --robot PATH.urdf")
-        return Robot.panda() if name == "panda" else Robot.ur(name)
+        return Robot.bundled(name)
     if not name.lower().endswith(".urdf"):
-        raise UsageError(f"--robot {shown(name)}: not a bundled arm ({', '.join(BUNDLED_ROBOTS)}) nor a .urdf file")
+        raise UsageError(f"--robot {shown(name)}: not a bundled arm ({', '.join(BUNDLED_ARM_NAMES)}) nor a .urdf file")
     return Robot.from_urdf(name, tool=tool, tip=tip, base_pose=pose)

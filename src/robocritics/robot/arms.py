@@ -361,3 +361,6 @@ PANDA = ArmSpec(
     },
 )
 """The Franka Emika Panda (7 joints) with the Franka Hand; not a UR, so not in :data:`ARMS`."""
+
+#: Every bundled arm's name: what ``--robot NAME``, a batch row's ``"robot"`` and :meth:`Robot.bundled` take.
+BUNDLED_ARM_NAMES: tuple[str, ...] = (*ARMS, PANDA.name)

@@ -282,6 +282,11 @@ class Robot:
         return _bundled("panda").copy()
 
     @classmethod
+    def bundled(cls, name: str) -> "Robot":
+        """A bundled arm by name (:data:`~robocritics.robot.arms.BUNDLED_ARM_NAMES`): a UR e-series arm or the Panda."""
+        return cls.panda() if name == "panda" else cls.ur(name)
+
+    @classmethod
     def ur(cls, name: str) -> "Robot":
         """A bundled UR e-series arm by name: ``"ur3e"``, ``"ur5e"``, ``"ur10e"`` or ``"ur16e"``."""
         from .arms import ARMS
