@@ -118,6 +118,27 @@ def fk_cpu_ms(samples: int = 20000) -> float:
     return 1000 * min(times)
 
 
+def expose_entry_points(tree: Path) -> None:
+    """Make tree ``tree``'s own critic entry points visible on its ``src`` path.
+
+    The virtual environment's installed robocritics names this checkout's critic modules, which an older tree
+    lays out differently (c045a0b: ``robocritics.critics.*``); its plugin loader skips those by name. A
+    ``.dist-info`` beside the older tree's package, made from that tree's ``pyproject.toml``, registers its
+    critics the way its own install would.
+    """
+    import tomllib
+
+    dist = tree / "src" / "robocritics_before-0.dist-info"
+    if dist.exists():
+        return
+    project = tomllib.loads((tree / "pyproject.toml").read_text())["project"]
+    entry_points = project["entry-points"]["robocritics"]
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: robocritics-before\nVersion: 0\n")
+    lines = "".join(f"{name} = {module}\n" for name, module in entry_points.items())
+    (dist / "entry_points.txt").write_text("[robocritics]\n" + lines)
+
+
 def measure(src: Path | None, repeats: int, runs: int) -> dict[str, float]:
     """Run the measurements in a child interpreter on source tree ``src`` (None: this checkout)."""
     env = dict(os.environ)
@@ -158,6 +179,7 @@ def main() -> None:
         subprocess.run(["tar", "-x", "-C", scratch.name], input=archive, check=True)
         before_src = Path(scratch.name)
         before_name = f"commit {BEFORE_COMMIT}"
+    expose_entry_points(before_src)
     repeats = int(args[0]) if args else 15
     runs = int(args[1]) if len(args) > 1 else 7
     # rounds alternate the trees, and each number is the least over rounds: other load on the machine only
