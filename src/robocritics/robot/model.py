@@ -32,7 +32,6 @@ multiply-adds; the capsule endpoints come from the same pass
 
 from __future__ import annotations
 
-import copy
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -41,10 +40,18 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 from ..errors import PlanningError, RobotModelError
 from ..trajectory import RobotLimits
+from .kinematic_tables import (
+    CONTINUOUS_LIMIT_RAD,  # noqa: F401 - re-exported: where it lived before
+    KinematicTables,
+    pinocchio_frame_pose,
+    pinocchio_rpy,
+    pinocchio_urdf,
+    rotation_angle,
+    stored_tables,
+)
 
 __all__ = ["Robot", "Capsule", "fingers_down", "DH_TOLERANCE_M", "default_robot", "default_workspace"]
 
@@ -68,8 +75,19 @@ class Capsule:
     radius_m: float
 
 
-def _rpy(r: float, p: float, y: float) -> np.ndarray:
-    return pin.rpy.rpyToMatrix(r, p, y)
+class _PinocchioModel:
+    """The Pinocchio model of one URDF text, built on first use and shared by the copies of a robot."""
+
+    __slots__ = ("text", "path", "_model")
+
+    def __init__(self, text: str, path: Path, model=None):
+        self.text, self.path, self._model = text, path, model
+
+    @property
+    def model(self):
+        if self._model is None:
+            self._model = _build_model(self.text, self.path)
+        return self._model
 
 
 def _read_only(values) -> np.ndarray:
@@ -85,9 +103,6 @@ LIMIT_TOLERANCE_RAD = 1e-9
 #: Largest flange position difference [m] (and rotation difference [rad]) between a URDF and the ``dh=``
 #: given with it, over the check configurations, before the robot is refused.
 DH_TOLERANCE_M = 1e-6
-
-#: Limits of a URDF ``continuous`` joint, read as revolute [rad].
-CONTINUOUS_LIMIT_RAD = 2 * math.pi
 
 # Capsule pairs closer than this (m) with the arm stretched out (q = 0) are parts of one
 # housing (the compact UR wrist, base and shoulder column), not a pinch point to check.
@@ -192,6 +207,9 @@ class Robot:
     assign a new one (``robot.home_q = q``, checked against the limits); that
     changes this robot only. The Pinocchio ``model`` is shared between copies
     and must be treated as read-only; ``data`` is each robot's own scratch space.
+    Both are made on first use: kinematics run on the tables Pinocchio reads from
+    the URDF (:mod:`robocritics.robot.kinematic_tables`; for a bundled arm their
+    stored copy), so a check with a bundled arm does not load Pinocchio.
     """
 
     def __init__(
@@ -208,21 +226,27 @@ class Robot:
         self_pairs: list[tuple[str, str]] | None = None,
         fixed_links: tuple[str, ...] = ("base_link", "shoulder_link"),
         urdf_root: ET.Element | None = None,
+        stored_tables_file=None,
     ):
+        # stored_tables_file: a bundled arm's stored copy of what Pinocchio reads from this URDF
+        # (robocritics.robot.kinematic_tables), used only if it was written from this very text
         self.urdf_path = Path(urdf_path)
         if urdf_root is None:
             urdf_root = _read_checked(self.urdf_path)
-        self.model = _load_model(self.urdf_path, urdf_root)
-        if self.model.nq != self.model.nv:
-            raise RobotModelError(f"{self.urdf_path}: spherical, planar or floating joints are not supported")
-        self.name = name or self.model.name
-        self.data = self.model.createData()
+        text = pinocchio_urdf(self.urdf_path, urdf_root)
+        tables = None if stored_tables_file is None else stored_tables(stored_tables_file, text)
+        model = None
+        if tables is None:
+            model = _build_model(text, self.urdf_path)
+            tables = KinematicTables.of_model(model, self.urdf_path)
+        self._pinocchio = _PinocchioModel(text, self.urdf_path, model)
+        self.name = name or tables.name
         self.dh = dh
-        self.n = self.model.nq
-        self.joint_names = tuple(self.model.names[1:])
-        self.lower = _read_only(self.model.lowerPositionLimit)
-        self.upper = _read_only(self.model.upperPositionLimit)
-        self.velocity_limits = _read_only(self.model.velocityLimit)
+        self.joint_names = tables.joint_names
+        self.n = len(self.joint_names)
+        self.lower = _read_only(tables.lower)
+        self.upper = _read_only(tables.upper)
+        self.velocity_limits = _read_only(tables.velocity)
         if np.any(self.velocity_limits <= 0):
             raise RobotModelError(f"{self.urdf_path}: every joint needs a positive <limit velocity=...>")
         # URDF has no acceleration or jerk limits. Unless given (robot/arms.py has the UR3e's):
@@ -232,10 +256,12 @@ class Robot:
         )
         self.jerk_limits = _read_only(jerk_limits if jerk_limits is not None else 10.0 * self.acceleration_limits)
         self.tcp_frame = tcp_frame
-        self._tcp_frame_id = self._body_frame_id(tcp_frame, "the TCP")
+        self.frame_names = tables.frame_names
+        self._frame_index = {n: i for i, n in enumerate(self.frame_names)}
+        self._check_link(tcp_frame, "the TCP")
         self._parse_urdf_extras(urdf_root)
         self.fixed_links = tuple(fixed_links)
-        self._build_fk_tables()
+        self._build_fk_tables(tables)
         if dh is not None:
             self._check_dh(dh)
         self._set_reach(reach_m)
@@ -353,11 +379,32 @@ class Robot:
         return robot
 
     def copy(self) -> "Robot":
-        """An independent robot: the immutable facts are shared, Pinocchio ``data`` is new."""
+        """An independent robot: the immutable facts (and the Pinocchio model) are shared, Pinocchio ``data``
+        is its own."""
         other = object.__new__(Robot)
         other.__dict__.update(self.__dict__)
-        other.data = self.model.createData()
+        other.__dict__.pop("_data", None)
         return other
+
+    @property
+    def model(self):
+        """The Pinocchio model of the URDF (read-only; shared by copies), built on first use."""
+        return self._pinocchio.model
+
+    @property
+    def data(self):
+        """This robot's own Pinocchio ``data`` (scratch space for :attr:`model`), made on first use."""
+        data = self.__dict__.get("_data")
+        if data is None:
+            data = self.__dict__["_data"] = self.model.createData()
+        return data
+
+    @property
+    def _tcp_frame_id(self) -> int:
+        """Pinocchio's id of the TCP link in :attr:`model`."""
+        import pinocchio as pin
+
+        return int(self.model.getFrameId(self.tcp_frame, pin.FrameType.BODY))
 
     @property
     def home_q(self) -> np.ndarray:
@@ -416,7 +463,7 @@ class Robot:
                 origin = col.find("origin")
                 xyz = np.array([float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()])
                 rpy = [float(v) for v in (origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split()]
-                axis = _rpy(*rpy)[:, 2]
+                axis = pinocchio_rpy(*rpy)[:, 2]
                 half = float(cyl.get("length")) / 2 if cyl is not None else 0.0
                 shape = cyl if cyl is not None else sphere
                 suffix = f"#{k}" if k else ""
@@ -437,30 +484,20 @@ class Robot:
             )
         self.capsules = tuple(capsules)
 
-    def _build_fk_tables(self) -> None:
-        model = self.model
-        self._joint_placements = [np.array(model.jointPlacements[j].homogeneous) for j in range(model.njoints)]
-        self._joint_parents = [int(model.parents[j]) for j in range(model.njoints)]
-        self._joint_motion: list[tuple[str, np.ndarray]] = [("fixed", np.zeros(3))]
-        for j in range(1, model.njoints):
-            short = model.joints[j].shortname()
-            if short in ("JointModelRX", "JointModelRY", "JointModelRZ"):
-                axis = np.eye(3)["XYZ".index(short[-1])]
-                self._joint_motion.append(("revolute", axis))
-            elif short == "JointModelRevoluteUnaligned":
-                self._joint_motion.append(("revolute", np.array(model.joints[j].extract().axis)))
-            elif short in ("JointModelPX", "JointModelPY", "JointModelPZ"):
-                self._joint_motion.append(("prismatic", np.eye(3)["XYZ".index(short[-1])]))
-            elif short == "JointModelPrismaticUnaligned":
-                self._joint_motion.append(("prismatic", np.array(model.joints[j].extract().axis)))
-            else:
-                raise RobotModelError(f"{self.urdf_path}: joint {model.names[j]!r} of type {short} is not supported")
-        body_frames = [f for f in model.frames if f.type == pin.FrameType.BODY and f.name != "universe"]
-        self.frame_names = tuple(f.name for f in body_frames)
-        self._frame_parent = np.array([f.parentJoint for f in body_frames])
-        self._frame_placement = np.array([f.placement.homogeneous for f in body_frames])
-        self._frame_index = {n: i for i, n in enumerate(self.frame_names)}
+    def _build_fk_tables(self, tables: KinematicTables) -> None:
+        self._joint_placements = tables.joint_placements
+        self._joint_parents = tables.joint_parents
+        self._joint_motion: list[tuple[str, np.ndarray]] = tables.joint_motion
+        self._frame_parent = tables.frame_parents
+        self._frame_placement = tables.frame_placements
         self.tcp_index = self._frame_index[self.tcp_frame]
+        # the TCP pose of one configuration in Pinocchio's own arithmetic, without Pinocchio, when every joint
+        # from the base to the TCP revolves about its z axis (every bundled arm; see pinocchio_frame_pose)
+        chain, j = [], int(self._frame_parent[self.tcp_index])
+        while j > 0:
+            chain.append(self._joint_motion[j])
+            j = self._joint_parents[j]
+        self._tcp_chain_about_z = all(kind == "revolute" and axis.tolist() == [0.0, 0.0, 1.0] for kind, axis in chain)
         tcp_in_flange = None
         if "tool0" in self._frame_index:
             fk = self._forward_static(np.zeros(self.n))
@@ -477,25 +514,23 @@ class Robot:
             [(1.0 if c.frame == self.finger_links[0] else -1.0) if c.frame in self.finger_links else 0.0 for c in self.capsules]
         )
 
-    def _body_frame_id(self, name: str, role: str) -> int:
-        """Pinocchio's id of the link ``name`` (``role`` says what it is for in the error)."""
-        if not self.model.existFrame(name, pin.FrameType.BODY):
-            raise RobotModelError(
-                f"{self.urdf_path}: no link {name!r} for {role}; links are "
-                + ", ".join(f.name for f in self.model.frames if f.type == pin.FrameType.BODY)
-            )
-        return int(self.model.getFrameId(name, pin.FrameType.BODY))
+    def _check_link(self, name: str, role: str) -> int:
+        """The index in :attr:`frame_names` of the link ``name`` (``role`` says what it is for in the error)."""
+        if name not in self._frame_index:
+            raise RobotModelError(f"{self.urdf_path}: no link {name!r} for {role}; links are " + ", ".join(self.frame_names))
+        return self._frame_index[name]
 
     def _set_reach(self, reach_m: float | None) -> None:
         """``shoulder_m``: the origin of the second joint at q = 0 (on the base axis for UR-like arms);
         ``reach_m``: given, else the TCP's distance from it along the stretched-out chain (an upper bound)."""
         frames = self.forward(np.zeros(self.n))
-        joint_origins = [None] * self.model.njoints
-        for j in range(1, self.model.njoints):
+        njoints = len(self._joint_placements)
+        joint_origins = [None] * njoints
+        for j in range(1, njoints):
             parent = self._joint_parents[j]
             base = np.eye(4) if parent == 0 else joint_origins[parent]
             joint_origins[j] = base @ self._joint_placements[j]  # q = 0: no joint motion
-        shoulder = joint_origins[min(2, self.model.njoints - 1)][:3, 3]
+        shoulder = joint_origins[min(2, njoints - 1)][:3, 3]
         self.shoulder_m = _read_only(shoulder)
         if reach_m is None:
             # stretched out: the sum of the joint-to-joint steps from the shoulder to the TCP
@@ -528,7 +563,7 @@ class Robot:
         base 180 deg about z) would otherwise get IK solutions for the wrong arm."""
         from .ik import dh_forward
 
-        flange = self._body_frame_id("tool0", "the flange that dh= describes")
+        flange = self._check_link("tool0", "the flange that dh= describes")
         if self.n != 6:
             raise RobotModelError(f"{self.urdf_path}: dh= describes 6 joints, the URDF has {self.n}")
         # zero, home-like and two off-axis configurations: each length and each twist shows in one of them
@@ -540,12 +575,11 @@ class Robot:
         ])
         checks = np.clip(checks, self.lower, self.upper)
         worst_m, worst_rad, worst_q = 0.0, 0.0, checks[0]
-        for q in checks:
-            pin.framesForwardKinematics(self.model, self.data, q)
-            urdf = self.data.oMf[flange].homogeneous
+        # the URDF's flange from the tables Pinocchio read (the FK that tests/test_fk_fast.py checks against it)
+        for q, urdf in zip(checks, self.forward(checks)[:, flange]):
             table = dh_forward(dh, q)
             dp = float(np.linalg.norm(urdf[:3, 3] - table[:3, 3]))
-            dr = float(np.linalg.norm(pin.log3(urdf[:3, :3].T @ table[:3, :3])))
+            dr = rotation_angle(urdf[:3, :3].T @ table[:3, :3])
             if max(dp, dr) > max(worst_m, worst_rad):
                 worst_m, worst_rad, worst_q = dp, dr, q
         if worst_m > DH_TOLERANCE_M or worst_rad > DH_TOLERANCE_M:
@@ -634,7 +668,7 @@ class Robot:
             raise RobotModelError(f"q must have shape (T, {self.n}), got {q.shape}")
         T = q.shape[0]
         joints: list[tuple[_Columns, np.ndarray | None]] = [(_IDENTITY_COLUMNS, None)]
-        for j in range(1, self.model.njoints):
+        for j in range(1, len(self._joint_placements)):
             kind, axis = self._joint_motion[j]
             columns, origin = joints[self._joint_parents[j]]
             M = self._joint_placements[j]
@@ -686,7 +720,15 @@ class Robot:
         """TCP pose(s) ``(4, 4)`` or ``(T, 4, 4)`` for ``q``."""
         q = np.asarray(q, dtype=float)
         if q.shape == (self.n,):
-            # one configuration: Pinocchio directly, far cheaper than the batched path
+            # one configuration: Pinocchio's own products (far cheaper than the batched path), without loading it
+            # where its arithmetic is replicated bit for bit
+            if self._tcp_chain_about_z:
+                frame = self.tcp_index
+                return pinocchio_frame_pose(
+                    self._joint_placements, self._joint_parents, int(self._frame_parent[frame]), self._frame_placement[frame], q
+                )
+            import pinocchio as pin
+
             pin.forwardKinematics(self.model, self.data, q)
             return pin.updateFramePlacement(self.model, self.data, self._tcp_frame_id).homogeneous.copy()
         frames = self.forward(q)
@@ -816,10 +858,8 @@ class Robot:
         """
         from ..geometry.kernels import capsule_capsule
 
-        parent_of = {}
-        for f in self.model.frames:
-            if f.type == pin.FrameType.BODY:
-                parent_of[f.name] = f.parentJoint
+        parent_of = dict(zip(self.frame_names, self._frame_parent.tolist()))
+        parents = self._joint_parents
         q = np.clip(np.zeros(self.n), self.lower, self.upper) if q is None else np.asarray(q, float)
         frames = self.forward(q[None, :])
         p0, p1 = self.capsule_segments(frames)
@@ -831,7 +871,7 @@ class Robot:
                 if ci.group == "gripper" and cj.group == "gripper":
                     continue
                 ji, jj = parent_of[ci.frame], parent_of[cj.frame]
-                if ji == jj or self.model.parents[ji] == jj or self.model.parents[jj] == ji:
+                if ji == jj or parents[ji] == jj or parents[jj] == ji:
                     continue
                 candidates.append((i, j))
         if not candidates:
@@ -853,9 +893,10 @@ _BUNDLED: dict[str, Robot] = {}
 def _panda() -> Robot:
     from .arms import PANDA, UR3E
 
-    path = resources.files("robocritics.robot") / "models" / "panda.urdf"
+    models = resources.files("robocritics.robot") / "models"
     robot = Robot(
-        str(path),
+        str(models / "panda.urdf"),
+        stored_tables_file=models / "panda.tables.json",
         tcp_frame="tcp",
         name=PANDA.name,
         reach_m=PANDA.reach_m,
@@ -880,22 +921,13 @@ def _read_checked(path: Path) -> ET.Element:
     return doc.root
 
 
-def _load_model(path: Path, root: ET.Element):
-    """The Pinocchio model of the URDF tree ``root``; ``continuous`` joints read as revolute +-2 pi rad."""
-    root = copy.deepcopy(root)
-    for joint in [j for j in root.iter("joint") if j.get("type") == "continuous"]:
-        # a continuous joint has no position limits; Pinocchio would model it as (cos, sin), which a
-        # planner over joint angles cannot use, and one turn either way is all any plan needs
-        joint.set("type", "revolute")
-        limit = joint.find("limit")
-        if limit is None:
-            raise RobotModelError(f"{path}: continuous joint {joint.get('name')!r} needs <limit velocity=... effort=...>")
-        limit.set("lower", repr(-CONTINUOUS_LIMIT_RAD))
-        limit.set("upper", repr(CONTINUOUS_LIMIT_RAD))
-    for element in [e for e in root if e.tag not in ("link", "joint")]:
-        root.remove(element)  # robocritics' own elements (<gripper>), transmissions, plugins: not Pinocchio's
+def _build_model(text: str, path: Path):
+    """The Pinocchio model of the URDF ``text`` (:func:`~robocritics.robot.kinematic_tables.pinocchio_urdf` of
+    the file at ``path``)."""
+    import pinocchio as pin
+
     try:
-        return pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
+        return pin.buildModelFromXML(text)
     except (RuntimeError, ValueError, OSError, MemoryError) as exc:
         raise RobotModelError(f"cannot load URDF {str(path)!r}: {exc}") from None
 
@@ -927,9 +959,10 @@ def _bundled(name: str) -> Robot:
         from .ik import ur_reach
 
         spec = ARMS[name]
-        path = resources.files("robocritics.robot") / "models" / f"{name}.urdf"
+        models = resources.files("robocritics.robot") / "models"
         robot = Robot(
-            str(path),
+            str(models / f"{name}.urdf"),
+            stored_tables_file=models / f"{name}.tables.json",
             tcp_frame="tcp",
             name=spec.name,
             dh=spec.dh,
