@@ -36,8 +36,8 @@ import numpy as np
 from ..errors import RobotModelError
 
 __all__ = [
-    "KinematicTables", "pinocchio_urdf", "urdf_digest", "stored_tables", "write_bundled", "pinocchio_rpy",
-    "pinocchio_frame_pose", "rotation_angle", "CONTINUOUS_LIMIT_RAD",
+    "KinematicTables", "PinocchioModel", "build_model", "pinocchio_urdf", "urdf_digest", "stored_tables",
+    "write_bundled", "pinocchio_rpy", "pinocchio_frame_pose", "rotation_angle", "CONTINUOUS_LIMIT_RAD",
 ]  # fmt: skip
 
 #: Limits of a URDF ``continuous`` joint, read as revolute [rad].
@@ -147,6 +147,31 @@ def pinocchio_urdf(path: Path | str, root: ET.Element) -> str:
     for element in [e for e in root if e.tag not in ("link", "joint")]:
         root.remove(element)  # robocritics' own elements (<gripper>), transmissions, plugins: not Pinocchio's
     return ET.tostring(root, encoding="unicode")
+
+
+def build_model(text: str, path: Path):
+    """The Pinocchio model of the URDF ``text`` (:func:`pinocchio_urdf` of the file at ``path``)."""
+    import pinocchio as pin
+
+    try:
+        return pin.buildModelFromXML(text)
+    except (RuntimeError, ValueError, OSError, MemoryError) as exc:
+        raise RobotModelError(f"cannot load URDF {str(path)!r}: {exc}") from None
+
+
+class PinocchioModel:
+    """The Pinocchio model of one URDF text, built on first use and shared by the copies of a robot."""
+
+    __slots__ = ("text", "path", "_model")
+
+    def __init__(self, text: str, path: Path, model=None):
+        self.text, self.path, self._model = text, path, model
+
+    @property
+    def model(self):
+        if self._model is None:
+            self._model = build_model(self.text, self.path)
+        return self._model
 
 
 def urdf_digest(text: str) -> str:

@@ -46,6 +46,8 @@ from ..trajectory import RobotLimits
 from .kinematic_tables import (
     CONTINUOUS_LIMIT_RAD,  # noqa: F401 - re-exported: where it lived before
     KinematicTables,
+    PinocchioModel,
+    build_model,
     pinocchio_frame_pose,
     pinocchio_rpy,
     pinocchio_urdf,
@@ -73,21 +75,6 @@ class Capsule:
     p0: tuple[float, float, float]
     p1: tuple[float, float, float]
     radius_m: float
-
-
-class _PinocchioModel:
-    """The Pinocchio model of one URDF text, built on first use and shared by the copies of a robot."""
-
-    __slots__ = ("text", "path", "_model")
-
-    def __init__(self, text: str, path: Path, model=None):
-        self.text, self.path, self._model = text, path, model
-
-    @property
-    def model(self):
-        if self._model is None:
-            self._model = _build_model(self.text, self.path)
-        return self._model
 
 
 def _read_only(values) -> np.ndarray:
@@ -237,9 +224,9 @@ class Robot:
         tables = None if stored_tables_file is None else stored_tables(stored_tables_file, text)
         model = None
         if tables is None:
-            model = _build_model(text, self.urdf_path)
+            model = build_model(text, self.urdf_path)
             tables = KinematicTables.of_model(model, self.urdf_path)
-        self._pinocchio = _PinocchioModel(text, self.urdf_path, model)
+        self._pinocchio = PinocchioModel(text, self.urdf_path, model)
         self.name = name or tables.name
         self.dh = dh
         self.joint_names = tables.joint_names
@@ -574,12 +561,26 @@ class Robot:
             [1.0, 0.8, 0.5, 1.5, 2.0, -1.0],
         ])
         checks = np.clip(checks, self.lower, self.upper)
+        # accepted on the tables Pinocchio read (the FK tests/test_fk_fast.py checks against it; a tolerance of
+        # 1e-6 m and rad is far above their difference from Pinocchio's); a refusal names the configuration that
+        # Pinocchio's own FK and log3 find worst, as it always has
+        frames = self.forward(checks)[:, flange]
+        tables = [dh_forward(dh, q) for q in checks]
+        if all(
+            np.linalg.norm(urdf[:3, 3] - table[:3, 3]) <= DH_TOLERANCE_M
+            and rotation_angle(urdf[:3, :3].T @ table[:3, :3]) <= DH_TOLERANCE_M
+            for urdf, table in zip(frames, tables)
+        ):
+            return
+        import pinocchio as pin
+
         worst_m, worst_rad, worst_q = 0.0, 0.0, checks[0]
-        # the URDF's flange from the tables Pinocchio read (the FK that tests/test_fk_fast.py checks against it)
-        for q, urdf in zip(checks, self.forward(checks)[:, flange]):
-            table = dh_forward(dh, q)
+        flange_id = int(self.model.getFrameId("tool0", pin.FrameType.BODY))
+        for q, table in zip(checks, tables):
+            pin.framesForwardKinematics(self.model, self.data, q)
+            urdf = self.data.oMf[flange_id].homogeneous
             dp = float(np.linalg.norm(urdf[:3, 3] - table[:3, 3]))
-            dr = rotation_angle(urdf[:3, :3].T @ table[:3, :3])
+            dr = float(np.linalg.norm(pin.log3(urdf[:3, :3].T @ table[:3, :3])))
             if max(dp, dr) > max(worst_m, worst_rad):
                 worst_m, worst_rad, worst_q = dp, dr, q
         if worst_m > DH_TOLERANCE_M or worst_rad > DH_TOLERANCE_M:
@@ -919,17 +920,6 @@ def _read_checked(path: Path) -> ET.Element:
     doc = read_urdf(path)
     check_numbers(doc)
     return doc.root
-
-
-def _build_model(text: str, path: Path):
-    """The Pinocchio model of the URDF ``text`` (:func:`~robocritics.robot.kinematic_tables.pinocchio_urdf` of
-    the file at ``path``)."""
-    import pinocchio as pin
-
-    try:
-        return pin.buildModelFromXML(text)
-    except (RuntimeError, ValueError, OSError, MemoryError) as exc:
-        raise RobotModelError(f"cannot load URDF {str(path)!r}: {exc}") from None
 
 
 def default_robot() -> Robot:

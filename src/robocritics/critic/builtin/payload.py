@@ -22,7 +22,6 @@ message says so. On demand: requested when any object of the scene states its ``
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 from pydantic import Field
 
 from ..hookspecs import hookimpl
@@ -68,6 +67,8 @@ def _held_levers(execution, frame: str) -> dict[str, np.ndarray]:
 
 def joint_torques(execution) -> np.ndarray:
     """``(T, n)`` joint torques (N m) of the motion by RNEA, with each held object's ``mass_kg`` on the last link."""
+    import pinocchio as pin  # here: a check that does not run this on-demand critic need not load Pinocchio
+
     trajectory, robot = execution.trajectory, execution.robot
     model = robot.model
     last = model.njoints - 1
@@ -94,6 +95,8 @@ def joint_torques(execution) -> np.ndarray:
 
 def _link_of_joint(robot, joint: int) -> str:
     """The link (frame) the URDF attaches to joint ``joint``: the body frame whose parent frame is the joint."""
+    import pinocchio as pin  # here: a check that does not run this on-demand critic need not load Pinocchio
+
     model = robot.model
     for f in model.frames:
         if f.type == pin.FrameType.BODY and f.parentJoint == joint and model.frames[f.parentFrame].name == model.names[joint]:
@@ -103,6 +106,8 @@ def _link_of_joint(robot, joint: int) -> str:
 
 def _tool_cog(robot) -> tuple[np.ndarray, np.ndarray]:
     """``(lever, flange)``: the tool's centre of gravity and the flange's position in the last joint's frame, m."""
+    import pinocchio as pin  # here: a check that does not run this on-demand critic need not load Pinocchio
+
     model = robot.model
     last = model.njoints - 1
     total, moment = 0.0, np.zeros(3)
