@@ -90,6 +90,16 @@ class DH:
             and self.a[2] != 0.0
         )
 
+    def flange_pose(self, q) -> list[list[float]]:
+        """``T_06(q) = A_1(q_1) ... A_6(q_6)`` (the module docstring's convention) as four rows of four floats: the
+        flange pose in the base frame (m) at joint angles ``q`` (6, rad). The plain product, on Python floats."""
+        T = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+        for theta, d, a, alpha in zip(q, self.d, self.a, self.alpha):
+            ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
+            A = [[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0.0, sa, ca, d], [0.0, 0.0, 0.0, 1.0]]
+            T = [[sum(T[i][k] * A[k][j] for k in range(4)) for j in range(4)] for i in range(4)]
+        return T
+
     def __hash__(self) -> int:
         # IK caches per-arm models keyed by the DH set; hash the 19 fields once, not per lookup
         return self._hash

@@ -196,17 +196,21 @@ def _quaternion(angle: float, axis: int) -> tuple[float, float, float, float]:
     """Eigen's quaternion ``(x, y, z, w)`` of the rotation by ``angle`` rad about the unit axis ``axis`` (0-2)."""
     half = 0.5 * angle
     s = math.sin(half)
-    return (s if axis == 0 else 0.0, s if axis == 1 else 0.0, s if axis == 2 else 0.0, math.cos(half))
+    # sin(half) times the unit axis, as Eigen does: s * 0.0 is -0.0 for a negative s
+    x, y, z = (s * (1.0 if k == axis else 0.0) for k in range(3))
+    return (x, y, z, math.cos(half))
 
 
 def _quaternion_product(a, b) -> tuple[float, float, float, float]:
+    """The quaternion product ``a b`` (each ``(x, y, z, w)``) as Eigen's SSE2 kernel for doubles groups its sums
+    (``quat_product`` in Eigen's Geometry_SIMD.h): the textbook order gives other signs of zero."""
     ax, ay, az, aw = a
     bx, by, bz, bw = b
     return (
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by + ay * bw + az * bx - ax * bz,
-        aw * bz + az * bw + ax * by - ay * bx,
-        aw * bw - ax * bx - ay * by - az * bz,
+        (aw * bx + ay * bz) - (az * by - ax * bw),
+        (aw * by + ay * bw) + (az * bx - ax * bz),
+        (aw * bz - ay * bx) + (az * bw + ax * by),
+        (aw * bw - ay * by) - (az * bz + ax * bx),
     )
 
 

@@ -548,8 +548,6 @@ class Robot:
         """Refuse ``dh`` unless the URDF's ``tool0`` is the DH flange (within ``DH_TOLERANCE_M``) at a
         spread of configurations: a URDF in another base convention (ROS's UR description turns the
         base 180 deg about z) would otherwise get IK solutions for the wrong arm."""
-        from .ik import dh_forward
-
         flange = self._check_link("tool0", "the flange that dh= describes")
         if self.n != 6:
             raise RobotModelError(f"{self.urdf_path}: dh= describes 6 joints, the URDF has {self.n}")
@@ -565,18 +563,20 @@ class Robot:
         # 1e-6 m and rad is far above their difference from Pinocchio's); a refusal names the configuration that
         # Pinocchio's own FK and log3 find worst, as it always has
         frames = self.forward(checks)[:, flange]
-        tables = [dh_forward(dh, q) for q in checks]
         if all(
             np.linalg.norm(urdf[:3, 3] - table[:3, 3]) <= DH_TOLERANCE_M
             and rotation_angle(urdf[:3, :3].T @ table[:3, :3]) <= DH_TOLERANCE_M
-            for urdf, table in zip(frames, tables)
+            for urdf, table in zip(frames, (np.array(dh.flange_pose(q)) for q in checks))
         ):
             return
         import pinocchio as pin
 
+        from .ik import dh_forward
+
         worst_m, worst_rad, worst_q = 0.0, 0.0, checks[0]
         flange_id = int(self.model.getFrameId("tool0", pin.FrameType.BODY))
-        for q, table in zip(checks, tables):
+        for q in checks:
+            table = dh_forward(dh, q)
             pin.framesForwardKinematics(self.model, self.data, q)
             urdf = self.data.oMf[flange_id].homogeneous
             dp = float(np.linalg.norm(urdf[:3, 3] - table[:3, 3]))
