@@ -690,10 +690,12 @@ class Scene(_Model):
 
     name: Name = "scene"
     description: Text = ""
-    objects: Annotated[list[SceneObject], BeforeValidator(_entities)] = Field(default_factory=list)
-    containers: Annotated[list[Container], BeforeValidator(_entities)] = Field(default_factory=list)
+    # `lambda: []`, not `list`: pydantic reads a default factory's signature, and a builtin's costs a
+    # tokenizer regex compiled once per process (~3 ms of a cold `robocritics check`; tests/test_lazy_imports.py)
+    objects: Annotated[list[SceneObject], BeforeValidator(_entities)] = Field(default_factory=lambda: [])
+    containers: Annotated[list[Container], BeforeValidator(_entities)] = Field(default_factory=lambda: [])
     humans: Annotated[list[Human], BeforeValidator(_entities)] = Field(
-        default_factory=list, description="people in the cell (robocritics.humans builds their body model)"
+        default_factory=lambda: [], description="people in the cell (robocritics.humans builds their body model)"
     )
     table: Table = Field(default_factory=Table)
     workspace: Optional[Workspace] = Field(None, description="the allowed workspace; None: the robot's reach")

@@ -84,12 +84,14 @@ class Evidence(_Model):
     first_sample: int | None = None
     worst_sample: int | None = None
     last_sample: int | None = None
-    sample_ranges: list[tuple[int, int]] = Field(default_factory=list)
+    # `lambda: []`, not `list`: pydantic reads a default factory's signature, and a builtin's costs a
+    # tokenizer regex compiled once per process (~3 ms of a cold `robocritics check`; tests/test_lazy_imports.py)
+    sample_ranges: list[tuple[int, int]] = Field(default_factory=lambda: [])
     samples_flagged: int = 0
-    links: list[str] = Field(default_factory=list)
-    objects: list[str] = Field(default_factory=list)
-    lines: list[int] = Field(default_factory=list)
-    skills: list[str] = Field(default_factory=list)
+    links: list[str] = Field(default_factory=lambda: [])
+    objects: list[str] = Field(default_factory=lambda: [])
+    lines: list[int] = Field(default_factory=lambda: [])
+    skills: list[str] = Field(default_factory=lambda: [])
 
 
 class Signal(_Model):

@@ -9,9 +9,9 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from ..errors import TrajectoryError
-from .files import Recording, read_csv, read_joint_trajectory_json, read_moveit_yaml
 
 if TYPE_CHECKING:  # pragma: no cover
+    from .files import Recording
     from ..robot.model import Robot, default_robot
     from ..scene import Scene
     from ..execution import Execution
@@ -88,6 +88,9 @@ def load_motion(
             rate_hz=rate_hz,
         )
         return run_urscript(text, robot, scene, options, passes=passes, name=p.name)
+    from .files import read_csv, read_joint_trajectory_json, read_moveit_yaml  # here: a program's check needs
+    # only motion_kind() of this module
+
     reader = {"csv": read_csv, "jointtrajectory": read_joint_trajectory_json, "moveit": read_moveit_yaml}[kind]
     label = {"csv": "CSV", "jointtrajectory": "JointTrajectory JSON", "moveit": "MoveIt trajectory"}[kind]
     recording = reader(text, f"{p.name}")
