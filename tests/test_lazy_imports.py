@@ -22,7 +22,8 @@ NOT_ON_THE_PATH = ("scipy", "httpx", "httpcore", "viser", "ray", "pyarrow", "sql
                    "robocritics.deploy", "robocritics.llm", "robocritics.viz", "robocritics.batch", "robocritics.repair.",
                    "robocritics.testing", "robocritics.robot.vendor", "robocritics.robot.fit",
                    "robocritics.robot.ik_numeric", "robocritics.geometry.meshes", "robocritics.formats.urscript",
-                   "robocritics.formats.rosbag", "robocritics.formats.export", "robocritics.formats.files")  # fmt: skip
+                   "robocritics.formats.rosbag", "robocritics.formats.export", "robocritics.formats.files",
+                   "robocritics.humans")  # fmt: skip
 
 
 def loaded_after(code: str) -> set[str]:

@@ -30,7 +30,6 @@ from pydantic import Field
 
 from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
-from ...humans import BODY_REGIONS, LIMITS_SOURCE, scene_bodies, transient_speed_limit
 from .cobot import nothing_to_judge, carried_mass, part_body_distances, part_speeds, robot_masses, robot_parts, slow_flagged_moves
 
 __all__ = ["ContactSpeedCritic", "register_critics", "contact_speeds"]
@@ -63,6 +62,8 @@ def requested(execution) -> bool:
 def contact_speeds(execution, params: Params):
     """Per person: ``(body, speed (T, P, K) m/s, limit (T, K) m/s, parts)``: contact speed of each part on each
     body capsule (0 when not closing in within ``near_m``) and the region's limit at each sample."""
+    from ...humans import BODY_REGIONS, scene_bodies, transient_speed_limit  # here: the critic is on demand
+
     trajectory, robot = execution.trajectory, execution.robot
     parts = robot_parts(execution)
     speed = part_speeds(parts, trajectory.time)  # (T, P)
@@ -93,6 +94,8 @@ class ContactSpeedCritic:
         return requested(execution)
 
     def check(self, execution, params: Params) -> Verdict:
+        from ...humans import BODY_REGIONS, LIMITS_SOURCE  # here: the critic is on demand (people in the scene)
+
         trajectory = execution.trajectory
         nothing = nothing_to_judge(NAME, execution, "shapes and masses")
         if nothing is not None:

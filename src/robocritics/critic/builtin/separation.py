@@ -33,7 +33,6 @@ from pydantic import Field
 
 from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
-from ...humans import scene_bodies
 from ...robot.arms import ARMS, UR3E
 from .cobot import nothing_to_judge, part_body_nearest, part_speeds, robot_parts, slow_flagged_moves
 from .contact_speed import requested
@@ -96,6 +95,8 @@ class SeparationCritic:
         return requested(execution)
 
     def check(self, execution, params: Params) -> Verdict:
+        from ...humans import scene_bodies  # here: the critic is on demand (people in the scene)
+
         trajectory = execution.trajectory
         nothing = nothing_to_judge(NAME, execution, "shapes")
         if nothing is not None:
