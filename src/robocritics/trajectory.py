@@ -54,9 +54,9 @@ __all__ = ["Pair", "Step", "RobotLimits", "State", "Trajectory", "Chunk", "CHUNK
 #: compactly. 16,384 samples are 33 s at 500 Hz, 131 s at 125 Hz (every bundled program is one chunk); building
 #: one chunk's frames and proximity takes some 120 MB with 14 scene shapes.
 CHUNK_SAMPLES = 16_384
-#: Chunks start at multiples of this many samples: the proximity kernel bounds blocks of 32 samples, so a chunk's
-#: rows are those of the whole motion bit for bit.
-CHUNK_ALIGN = 32
+#: Chunks start at multiples of this many samples: the proximity kernel bounds blocks of 32 samples and the
+#: space-usage critic's hull thins blocks of 64, so a chunk's rows and reductions are the whole motion's bit for bit.
+CHUNK_ALIGN = 64
 
 PairKind = Literal["self", "environment"]
 

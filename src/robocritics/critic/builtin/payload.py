@@ -51,19 +51,26 @@ def allowed_payload_kg(rated_kg: float, full_offset_m: float, offset_m: np.ndarr
 
 
 def _held_levers(execution, frame: str) -> dict[str, np.ndarray]:
-    """Centre of each held object in the frame ``frame`` (m), averaged over the samples it is held."""
+    """Centre of each held object in the frame ``frame`` (m), averaged over the samples it is held (read chunk by
+    chunk: a long run's frames are made a chunk at a time)."""
     trajectory = execution.trajectory
     index = trajectory.frame_index(frame)
-    out = {}
-    for obj_id, poses in (getattr(execution, "object_poses", {}) or {}).items():
-        held = trajectory.attached == obj_id
-        if not held.any():
-            continue
-        f = trajectory.frames[held, index]  # (H, 4, 4)
-        centre = np.asarray(poses, dtype=float)[held, :3, 3]
-        local = np.einsum("hji,hj->hi", f[:, :3, :3], centre - f[:, :3, 3])  # R^T (c - t)
-        out[obj_id] = local.mean(axis=0)
-    return out
+    poses_of = getattr(execution, "object_poses", {}) or {}
+    held_ids = [o for o in poses_of if (trajectory.attached == o).any()]
+    if not held_ids:
+        return {}
+    locals_: dict[str, list[np.ndarray]] = {o: [] for o in held_ids}
+    for chunk, window in execution.chunks():
+        own = chunk.own
+        attached = chunk.trajectory.attached[own]
+        for obj_id in held_ids:
+            held = attached == obj_id
+            if not held.any():
+                continue
+            f = chunk.trajectory.frames[own][held, index]  # (H, 4, 4)
+            centre = np.asarray(window.object_poses[obj_id], dtype=float)[own][held, :3, 3]
+            locals_[obj_id].append(np.einsum("hji,hj->hi", f[:, :3, :3], centre - f[:, :3, 3]))  # R^T (c - t)
+    return {o: np.concatenate(parts).mean(axis=0) for o, parts in locals_.items()}
 
 
 def joint_torques(execution) -> np.ndarray:
