@@ -164,7 +164,8 @@ def simulate(
             poses.setflags(write=False)
     final_scene = scene.model_copy(update={"objects": [planner.world.objects[o.id] for o in scene.objects]})
     return Execution(
-        trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.world.resting_on), dict(object_poses)
+        trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.world.resting_on),
+        object_poses if isinstance(object_poses, MovedPoses) else dict(object_poses),
     )
 
 
