@@ -47,6 +47,12 @@ class MovedPoses(Mapping):
             raise KeyError(obj_id)
         return self.trajectory.object_poses()[obj_id]
 
+    def at(self, obj_id: str, samples) -> "np.ndarray":
+        """``(n, 4, 4)`` poses of ``obj_id`` at sample indices ``samples`` only (a replay's decimated samples)."""
+        import numpy as np
+
+        return self.trajectory.geometry.poses_at(obj_id, np.asarray(samples, dtype=np.int64))
+
     def __iter__(self):
         return iter(self.trajectory.geometry.schedules)
 

@@ -291,6 +291,14 @@ class Trajectory:
         frames, proximity, poses = self._computed(lo, hi)
         return self._sliced(lo, hi, frames, proximity), poses
 
+    def frames_at(self, samples) -> np.ndarray:
+        """``(len(samples), L, 4, 4)`` link poses at sample indices ``samples`` (a compact trajectory computes
+        only those: forward kinematics is per sample, so they are the rows of :attr:`frames`)."""
+        samples = np.asarray(samples, dtype=np.int64)
+        if self.geometry is None:
+            return self._frames[samples]
+        return self.geometry.frames_at(samples)
+
     def object_poses(self, start: int = 0, stop: int | None = None) -> dict[str, np.ndarray]:
         """``{object id: (n, 4, 4)}`` poses of the objects the motion moves at samples ``start..stop-1`` of a
         compact trajectory (a stored one keeps none: see :attr:`robocritics.execution.Execution.object_poses`)."""

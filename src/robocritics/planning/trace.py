@@ -205,6 +205,15 @@ class PoseSchedule:
         self.rest = np.asarray(rest, float)
         self.paints = paints
 
+    def at(self, samples: np.ndarray, tcp: np.ndarray) -> np.ndarray:
+        """``(n, 4, 4)`` poses, m, at sample indices ``samples``; ``tcp`` the TCP poses there."""
+        out = np.broadcast_to(self.rest, (len(samples), 4, 4)).copy()
+        for first, last, kind, data in self.paints:
+            m = (samples >= first) & (samples < last)
+            if m.any():
+                out[m] = data if kind == "fixed" else tcp[m] @ data
+        return out
+
     def poses(self, lo: int, hi: int, tcp: np.ndarray) -> np.ndarray:
         """``(hi - lo, 4, 4)`` poses, m, of samples ``lo..hi-1``; ``tcp`` the TCP poses of those samples."""
         out = np.broadcast_to(self.rest, (hi - lo, 4, 4)).copy()
@@ -270,6 +279,15 @@ class ChunkGeometry:
     @property
     def pairs(self) -> list[Pair]:
         return self.distances.pairs
+
+    def frames_at(self, samples: np.ndarray) -> np.ndarray:
+        """``(n, L, 4, 4)`` link poses at sample indices ``samples`` (forward kinematics of those samples only)."""
+        return self.robot.forward_with_capsules(self.q[samples], self.opening[samples])[0]
+
+    def poses_at(self, obj_id: str, samples: np.ndarray) -> np.ndarray:
+        """``(n, 4, 4)`` poses of moving object ``obj_id`` at sample indices ``samples``."""
+        tcp = self.frames_at(samples)[:, self.robot.tcp_index]
+        return self.schedules[obj_id].at(samples, tcp)
 
     def compute(self, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """``(frames (n, L, 4, 4), proximity (n, K) m, {object id: poses (n, 4, 4)})`` of samples ``lo..hi-1``."""

@@ -121,7 +121,7 @@ def _segment(execution: Run, pair_name: str, sample: int) -> list[list[float]] |
     pair = next((p for p in trajectory.pairs if p.name == pair_name), None)
     if pair is None:
         return None
-    p0, p1 = robot.capsule_segments(trajectory.frames[sample : sample + 1])
+    p0, p1 = robot.capsule_segments(trajectory.frames_at([sample]))
     capsule_index = {name: i for i, name in enumerate(robot.capsule_names)}
 
     def shapes_of(name: str) -> list[tuple[str, Any, np.ndarray]]:
@@ -129,9 +129,9 @@ def _segment(execution: Run, pair_name: str, sample: int) -> list[list[float]] |
             i = capsule_index[name]
             pose, length = capsule_pose(p0[0, i], p1[0, i])
             return [("capsule", (robot.capsule_radii[i], length), pose)]
-        moved = execution.object_poses.get(name)
+        moved = name in execution.object_poses or None
         return [
-            (s.kind, s.size if s.mesh is None else s.mesh, s.pose if moved is None else moved[sample])
+            (s.kind, s.size if s.mesh is None else s.mesh, s.pose if moved is None else _poses_at(execution, name, [sample])[0])
             for s in execution.scene.shapes()
             if s.owner == name
         ]
@@ -234,7 +234,7 @@ def replay_data(execution: Run, report: Report | None = None, *, title: str | No
     workspace = scene.workspace or robot.workspace  # a scene without one follows its robot
     time_all = np.asarray(trajectory.time, float)
     frames = _frame_samples(time_all, _keep_samples(report))
-    p0, p1 = robot.capsule_segments(trajectory.frames[frames])
+    p0, p1 = robot.capsule_segments(trajectory.frames_at(frames))  # only the shown samples (a long run's too)
     capsule_ends = np.concatenate([p0, p1], axis=2)  # (F, C, 6)
 
     objects = []
@@ -250,7 +250,7 @@ def replay_data(execution: Run, report: Report | None = None, *, title: str | No
         if shape.mesh is not None:
             entry["triangles"] = _f32(shown_triangles(*shape.mesh).reshape(-1, 9))
         if o.id in execution.object_poses:
-            entry["poses"] = _f32(execution.object_poses[o.id][frames][:, :3, :4].reshape(len(frames), 12))
+            entry["poses"] = _f32(_poses_at(execution, o.id, frames)[:, :3, :4].reshape(len(frames), 12))
         objects.append(entry)
     boxes = []
     for c in scene.containers:
@@ -289,3 +289,10 @@ def replay_data(execution: Run, report: Report | None = None, *, title: str | No
         data["score_text"] = report.score_text
         data["summary"] = report.summary()
     return data
+
+
+def _poses_at(execution: Run, obj_id: str, samples) -> np.ndarray:
+    """``(n, 4, 4)`` poses of moving object ``obj_id`` at ``samples``, without a long run's whole ``(T, 4, 4)``."""
+    poses = execution.object_poses
+    at = getattr(poses, "at", None)
+    return at(obj_id, samples) if at is not None else np.asarray(poses[obj_id])[np.asarray(samples)]
