@@ -97,8 +97,8 @@ def simulate(
     :class:`ProgramError` for a program the sandbox rejects and
     :class:`PlanningError` (with the program line) for a motion that cannot be
     planned, such as an unreachable target, a speed below 1 % or a sample rate
-    out of range. A motion beyond the budget of ``settings`` (5 min, 75,000
-    samples, 400 MB by default; see :class:`PlannerSettings`) raises
+    out of range. A motion beyond the budget of ``settings`` (1,000,000 samples, 1 GB estimated, 100,000
+    IK solutions by default; see :class:`PlannerSettings`; a long motion is stored compactly) raises
     :class:`MotionBudgetError`, a PlanningError, before its samples are made.
     """
     from .program.plan import Plan
