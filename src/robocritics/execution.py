@@ -87,11 +87,16 @@ class Execution:
         return self.trajectory.duration_s
 
     def chunks(self, size: int | None = None) -> Iterator[tuple["Chunk", "Execution"]]:
-        """The run chunk by chunk (:meth:`robocritics.trajectory.Trajectory.chunks`, ``size`` samples each, default
-        :data:`~robocritics.trajectory.CHUNK_SAMPLES`): each chunk with the run restricted to its samples (its
-        trajectory and the moving objects' poses there). A run of one chunk is itself."""
-        from .trajectory import CHUNK_SAMPLES
+        """The run chunk by chunk (:meth:`robocritics.trajectory.Trajectory.chunks`, ``size`` samples each): each
+        chunk with the run restricted to its samples (its trajectory and the moving objects' poses there). A run of
+        one chunk is itself. By default a compact trajectory comes in chunks of
+        :data:`~robocritics.trajectory.CHUNK_SAMPLES` and a stored one in one chunk (its arrays are all in memory
+        already: slicing them would only cost copies)."""
+        from .trajectory import CHUNK_SAMPLES, Chunk
 
+        if size is None and not self.trajectory.compact:
+            yield Chunk(0, len(self.trajectory), 0, self.trajectory, {}), self
+            return
         for chunk in self.trajectory.chunks(size or CHUNK_SAMPLES):
             if chunk.trajectory is self.trajectory:
                 yield chunk, self
