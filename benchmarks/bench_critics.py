@@ -12,7 +12,8 @@ Targets: all five critics together (``critique``) in <= 50 ms median, and
 >= 20x faster than the references.
 
 ``--before-src DIR`` instead measures ``critique()`` of the five critics (CPU time, least of the repeats, one
-BLAS thread) on the same 30k-sample trajectory in two fresh children: one on the source tree ``DIR`` (e.g. commit
+BLAS thread, glibc malloc tunables: each tree's ``robocritics.child.WORKER_ENV``, as a batch worker runs) on the
+same 30k-sample trajectory in two fresh children: one on the source tree ``DIR`` (e.g. commit
 c045a0b extracted with ``git archive c045a0b | tar -x -C DIR``; its own ``tests/synth.py`` builds the trajectory and
 its own critic entry points are made visible, as ``bench_pipeline.py`` does) and one on this checkout, and prints
 both and their ratio (issue 28's target: >= 3x cheaper than c045a0b).
@@ -59,14 +60,14 @@ print(json.dumps({"cpu_ms": 1000 * min(cpu), "samples": len(traj), "flags": [v.f
 def before_after(before: Path, duration: float, rate: float, repeats: int) -> int:
     """critique() CPU of tree ``before`` and of this checkout, each in fresh children (three rounds, least)."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
-    from bench_pipeline import expose_entry_points
+    from bench_pipeline import expose_entry_points, worker_env
 
     expose_entry_points(before)
     results: dict[str, list[dict]] = {"before": [], "after": []}
     for _ in range(3):  # alternate the trees: the machine's load changes
         for name, tree in (("before", before), ("after", ROOT)):
-            env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-            env["PYTHONPATH"] = str(tree / "src")
+            env = dict(os.environ, PYTHONPATH=str(tree / "src"))
+            env.update(worker_env(tree))  # the tree's own worker environment: one BLAS thread, malloc tunables
             done = subprocess.run(
                 [sys.executable, "-c", CHILD, str(tree), str(duration), str(rate), str(repeats)],
                 env=env, cwd=tree, capture_output=True, text=True, check=True,
@@ -75,7 +76,8 @@ def before_after(before: Path, duration: float, rate: float, repeats: int) -> in
     b = min(r["cpu_ms"] for r in results["before"])
     a = min(r["cpu_ms"] for r in results["after"])
     samples = results["after"][0]["samples"]
-    print(f"critique() of the five critics, {samples:,} samples; CPU ms, least of {repeats} x 3 rounds, 1 BLAS thread\n")
+    print(f"critique() of the five critics, {samples:,} samples; CPU ms, least of {repeats} x 3 rounds, each tree's "
+          "worker environment (robocritics.child.WORKER_ENV: one BLAS thread, glibc malloc tunables)\n")
     print(f"{'tree':<40} {'CPU ms':>8}  flags")
     print(f"{'before: ' + str(before):<40} {b:>8.2f}  {' '.join(results['before'][0]['flags'])}")
     print(f"{'after: this checkout':<40} {a:>8.2f}  {' '.join(results['after'][0]['flags'])}")
