@@ -365,9 +365,16 @@ class Trajectory:
 
     @property
     def states(self) -> Iterator[State]:
-        """Per-sample (J, F, P, tau) views, for readers of the paper."""
-        for t in range(len(self)):
-            yield State(t, self.q[t], self.frames[t], self.proximity[t], float(self.time[t]))
+        """Per-sample (J, F, P, tau) views, for readers of the paper (a compact trajectory's made chunk by chunk)."""
+        if self.geometry is None:
+            for t in range(len(self)):
+                yield State(t, self.q[t], self._frames[t], self._proximity[t], float(self.time[t]))
+            return
+        for chunk in self.chunks(halo=0):
+            piece = chunk.trajectory
+            for i in range(len(piece)):
+                t = chunk.lo + i
+                yield State(t, self.q[t], piece.frames[i], piece.proximity[i], float(self.time[t]))
 
     # --- serialisation -------------------------------------------------------------
 
