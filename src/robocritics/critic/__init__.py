@@ -67,6 +67,7 @@ from .plugins import (
     unregister,
     validate_critic,
 )
+from .chunked import Reduction, judge_in_chunks
 from .report import ALL_PASSED, BUILTIN_CRITICS, Report, format_score, signal_svg
 from .verdict import (
     MAX_SIGNAL_POINTS,
@@ -132,6 +133,8 @@ __all__ = [
     "fmt_length",
     "runs",
     "signal_svg",
+    "Reduction",
+    "judge_in_chunks",
 ]
 
 
@@ -151,7 +154,12 @@ class Critic(Protocol):
       ``check(trajectory, scene, params)`` is still accepted: the two are told apart by the number of
       parameters (:func:`takes_execution`);
     * optionally ``requested(execution) -> bool``: an on-demand critic, run when the run asks for it (or when
-      named) rather than by default.
+      named) rather than by default;
+    * optionally ``reduction(execution, params) -> Reduction``: the same judgement fed chunk by chunk
+      (:mod:`robocritics.critic.chunked`), so a long run (a compact trajectory, whose frames and proximity are made
+      a chunk at a time) is judged in the memory of one chunk; :func:`critique` then feeds every such critic in
+      one pass over the chunks. The built-in critics do; a critic without it reads the whole arrays
+      (``trajectory.frames`` of a compact trajectory builds them: 1.5 kB a sample).
     """
 
     name: str
