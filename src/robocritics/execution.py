@@ -53,6 +53,9 @@ class MovedPoses(Mapping):
 
         return self.trajectory.geometry.poses_at(obj_id, np.asarray(samples, dtype=np.int64))
 
+    def __contains__(self, obj_id) -> bool:  # without computing the poses (Mapping's would read them)
+        return obj_id in self.trajectory.geometry.schedules
+
     def __iter__(self):
         return iter(self.trajectory.geometry.schedules)
 
