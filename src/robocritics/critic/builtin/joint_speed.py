@@ -157,12 +157,24 @@ class _Speeds:
         # the intervals ending at the chunk's own samples (the first sample of the run ends none)
         first = max(chunk.start, 1)
         rows = slice(first - chunk.lo - 1, chunk.stop - chunk.lo - 1)
-        v = link_speeds(positions, window.time)[rows]  # (n, L)
-        vmax = row_max(v)
+        p = np.ascontiguousarray(positions)
+        squared = squared_norms(p[1:] - p[:-1])[rows]  # (n, L) squared steps, m^2
+        dt = np.diff(window.time)[rows]
+        # the fastest link per sample: sqrt and division by dt > 0 keep the order of the squared steps, so
+        # sqrt(max |step|^2) / dt is max(|step| / dt) bit for bit, without a speed per link
+        vmax = np.sqrt(row_max(squared)) / dt
+
+        def speeds(r):  # link_speeds of rows r, as it computes them: sqrt, then / dt
+            v = np.sqrt(squared[r])
+            v /= dt[r] if np.ndim(r) == 0 else dt[r][:, None]
+            return v
+
         self.vmax.put(first - 1, vmax)
-        self.fastest.offer(first - 1, vmax, lambda i: v[i].copy())
-        self.over_max.add(v > self.params.max_speed_m_s)
-        self.over_warn.add(v > self.params.warn_speed_m_s)
+        self.fastest.offer(first - 1, vmax, speeds)
+        for hits, threshold in ((self.over_max, self.params.max_speed_m_s), (self.over_warn, self.params.warn_speed_m_s)):
+            over = np.flatnonzero(vmax > threshold)
+            if over.size:
+                hits.add(speeds(over) > threshold)
 
     def verdict(self) -> Verdict:
         params, trajectory, names = self.params, self.trajectory, self.names
