@@ -235,10 +235,10 @@ class PlannerSettings:
     """Planner constants (SI units), each with the reason for its default.
 
     The motion budget (``max_*``) limits the work of one check, not the length of the program: ``max_samples``
-    samples (33 min of motion at 500 Hz, 2.2 h at 125 Hz; simulating and judging costs some 15 us of CPU a
+    samples (33 min of motion at 500 Hz, 2.2 h at 125 Hz; simulating and judging costs some 10 us of CPU a
     sample), ``max_ik_solves`` IK solutions and ``max_trajectory_bytes`` of estimated peak memory. A motion of
     more than :data:`~robocritics.trajectory.CHUNK_SAMPLES` samples is stored compactly and simulated and judged
-    chunk by chunk, so its memory grows by some 0.3 kB a sample (:func:`trajectory_bytes`), not 7 kB: a 30-minute
+    chunk by chunk, so its memory grows by some 0.2-0.4 kB a sample (:func:`trajectory_bytes`), not 7 kB: a 30-minute
     program at 500 Hz takes well under 1.5 GB (``benchmarks/bench_long.py``). ``max_motion_s`` bounds the
     duration for callers who want that (24 h by default: at the allowed rates, >= 25 Hz, ``max_samples`` binds first).
     """
@@ -259,7 +259,7 @@ class PlannerSettings:
     # the motion budget (checked before any sample is made; see the module docstring). It bounds the work of a
     # check (the samples made, simulated and judged; the IK solved) and its memory, not how long the motion lasts
     max_motion_s: float = 86_400.0  # 24 h: never binds before max_samples at the allowed rates (>= 25 Hz)
-    max_samples: int = 1_000_000  # samples simulated and judged: 33 min at 500 Hz, 2.2 h at 125 Hz (~15 us each)
+    max_samples: int = 1_000_000  # samples simulated and judged: 33 min at 500 Hz, 2.2 h at 125 Hz (~10 us each)
     max_trajectory_bytes: int = 1_000_000_000  # estimated peak memory of simulating and judging (1 GB; see above)
     max_ik_solves: int = 100_000  # IK solutions planning may use (~12 us each): 500 m of straight lines
 
