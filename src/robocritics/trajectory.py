@@ -54,8 +54,9 @@ __all__ = ["Pair", "Step", "RobotLimits", "State", "Trajectory", "Chunk", "CHUNK
 #: compactly. 16,384 samples are 33 s at 500 Hz, 131 s at 125 Hz (every bundled program is one chunk); building
 #: one chunk's frames and proximity takes some 120 MB with 14 scene shapes.
 CHUNK_SAMPLES = 16_384
-#: Chunks start at multiples of this many samples: the proximity kernel bounds blocks of 32 samples and the
-#: space-usage critic's hull thins blocks of 64, so a chunk's rows and reductions are the whole motion's bit for bit.
+#: Chunks start at multiples of this many samples: the space-usage critic's hull thins blocks of 64 samples and the
+#: proximity kernel bounds blocks of 32, so a chunk's reductions are the whole motion's bit for bit (and its
+#: proximity is wherever exact: see :class:`robocritics.planning.trace.ChunkGeometry`).
 CHUNK_ALIGN = 64
 
 PairKind = Literal["self", "environment"]
@@ -250,7 +251,8 @@ class Trajectory:
 
     def _computed(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """Frames, proximity and moving objects' poses of samples ``start..stop-1`` of a compact trajectory,
-        computed a chunk at a time on the chunk grid (:data:`CHUNK_ALIGN`), so the rows are the whole motion's."""
+        computed a chunk at a time on the chunk grid (:data:`CHUNK_ALIGN`): frames and poses are the whole motion's
+        rows bit for bit, proximity wherever it is exact (:class:`~robocritics.planning.trace.ChunkGeometry`)."""
         cuts = {start, stop}
         if start % CHUNK_ALIGN:  # a halo sample before a chunk: computed apart, so the chunk starts on the grid
             cuts.add(min(stop, start - start % CHUNK_ALIGN + CHUNK_ALIGN))

@@ -263,10 +263,12 @@ class ChunkGeometry:
 
     What a compact :class:`~robocritics.trajectory.Trajectory` (:func:`build_compact_trajectory`) keeps instead
     of its ``(T, L, 4, 4)`` frames and ``(T, K)`` proximity: the robot, the scene's distance kernel and the
-    objects' :class:`PoseSchedule`. :meth:`compute` of samples ``[lo, hi)`` gives the rows
-    :func:`build_trajectory` computes for the whole motion, bit for bit, when ``lo`` is a multiple of
-    :data:`~robocritics.trajectory.CHUNK_ALIGN` (the proximity kernel bounds blocks of 32 samples; the
-    trajectory's chunks start at such samples).
+    objects' :class:`PoseSchedule`. :meth:`compute` of samples ``[lo, hi)`` gives the frames and object poses
+    :func:`build_trajectory` computes for the whole motion bit for bit, and the same proximity wherever it is
+    exact (up to :data:`EXACT_WITHIN_M` and the arm's closest distance at each sample: every value a critic
+    reads); beyond, a far pair's value is a lower bound above both either way, but which one depends on the
+    kernel's blocks of 32 samples and on how many samples it is given (the chunks of 16,384 samples that start
+    on multiples of :data:`~robocritics.trajectory.CHUNK_ALIGN` give the whole motion's bounds too).
     """
 
     def __init__(self, robot, scene: Scene, q: np.ndarray, opening: np.ndarray, attached: np.ndarray,
