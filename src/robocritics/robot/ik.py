@@ -51,9 +51,14 @@ has rotation ``R = [x_6 y_6 z_6]`` and position ``p``):
    ``q4 = atan2(x_4 · y_1, x_4 · x_1) - q2 - q3``.
 
 That gives up to 2 × 2 × 2 = 8 solutions. Every one is checked by forward
-kinematics (Pinocchio on the URDF of the DH chain, :func:`dh_forward`) before it
-is returned. :func:`ur_ik_all` lists the branches; :func:`ur_ik` searches the same
-steps branch-and-bound for the one nearest a seed configuration.
+kinematics before it is returned: the closed-form FK of :mod:`robocritics.robot.ur_fk`
+(Pinocchio's on the URDF of the DH chain, :func:`dh_forward`, to rounding; a third of its
+CPU from Python), or, for a branch no step of which was clipped, nudged or clamped, of a
+target whose rotation is orthonormal, the certificate that the closed form is then exact
+(:func:`_certified`; ``tests/test_ik_nearest.py`` checks it against Pinocchio at the
+singularities). :func:`ur_ik_all` lists the branches; :func:`ur_ik` searches the same
+steps branch-and-bound for the one nearest a seed configuration
+(:mod:`robocritics.robot.ik_nearest`).
 
 For arms that are not UR-like, :func:`~robocritics.robot.ik_numeric.numeric_ik` runs a damped-least-squares
 (Levenberg-Marquardt) iteration on a Pinocchio model with random restarts.
@@ -63,7 +68,7 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -188,19 +193,6 @@ class _Chain:
     def error(self, q: Sequence[float], t: Sequence[float]) -> tuple[float, float]:
         """(position error m, rotation error rad) of the flange at ``q`` against the 12-float target ``t``."""
         return _pose_error(self.pose(q).homogeneous[:3].ravel().tolist(), t)
-
-    def reproduces(self, q: np.ndarray, t: Sequence[float], tol: float) -> bool:
-        """Whether the flange at ``q`` ((6,) float array, rad) is within ``tol`` m and ``tol`` rad of the 12-float
-        target ``t``: :meth:`error` within ``tol``, its sums written out (the same floats, half the time)."""
-        pin.forwardKinematics(self.model, self.data, q)
-        f = pin.updateFramePlacement(self.model, self.data, self.flange).homogeneous.ravel().tolist()
-        # ``** 2`` as in _pose_error: libm's pow may round x ** 2 differently from x * x
-        if not math.sqrt((f[3] - t[3]) ** 2 + (f[7] - t[7]) ** 2 + (f[11] - t[11]) ** 2) <= tol:
-            return False
-        e0, e1, e2, e4, e5, e6 = f[0] - t[0], f[1] - t[1], f[2] - t[2], f[4] - t[4], f[5] - t[5], f[6] - t[6]
-        e8, e9, e10 = f[8] - t[8], f[9] - t[9], f[10] - t[10]
-        sq = 0.0 + e0 * e0 + e1 * e1 + e2 * e2 + e4 * e4 + e5 * e5 + e6 * e6 + e8 * e8 + e9 * e9 + e10 * e10
-        return math.sqrt(0.5 * sq) <= tol
 
 
 def _chain(dh: DH) -> _Chain:
@@ -506,7 +498,8 @@ def ur_ik(
 
     Arguments: ``flange_pose`` ``(4, 4)`` pose of ``tool0`` in the base frame (m);
     ``seed``, ``lower``, ``upper`` ``(6,)`` rad. Returns ``(6,)`` rad, verified
-    by forward kinematics to within ``tol`` m and ``tol`` rad.
+    by forward kinematics (or certified exact, for ``tol`` at least ``_CERTIFIED_ERROR``) to within
+    ``tol`` m and ``tol`` rad.
 
     Raises :class:`PlanningError` naming the target position and the reason:
     out of reach (with the distance from the shoulder and the arm's reach), too
@@ -598,16 +591,19 @@ def ur_ik_line(
     targets12 = poses[:, :3].reshape(-1, 12)
     targets = targets12.tolist()
     # First the nearest branches unverified, each seeded by the previous, up to the first pose without a
-    # solution; then one vectorised FK check of them all: rows it puts within tol / 2 (the FKs agree to ~1e-15)
-    # are what ur_ik's own check accepts, so they stand; from the first other row on, ur_ik's steps exactly
-    # (check per pose, the verified search if needed).
-    fast, m = _unverified_walk(k, targets12, targets, seed_arr, lo_arr, hi_arr)
+    # solution; the leading rows _certified stand (they reproduce their poses to rounding, within tol / 2); then
+    # one vectorised FK check of the rest: rows it puts within tol / 2 (the FKs agree to ~1e-15) are what
+    # ur_ik's own check accepts, so they stand; from the first other row on, ur_ik's steps exactly (check per
+    # pose, the verified search if needed).
+    fast, m, certified = _unverified_walk(k, targets12, targets, seed_arr, lo_arr, hi_arr, 0.5 * tol >= _CERTIFIED_ERROR)
     good = m
-    if m:
-        dp, dr = _flange_errors(dh, fast[:m], poses[:m])
+    if certified < m:
+        dp, dr = _flange_errors(dh, fast[certified:m], poses[certified:m])
         bad = np.flatnonzero(~((dp <= 0.5 * tol) & (dr <= 0.5 * tol)))
         if len(bad):
-            good = int(bad[0])
+            good = certified + int(bad[0])
+    if good == n:
+        return fast, None
     out = fast[:good].tolist()
     sd_list = out[-1] if out else seed_arr.tolist()
     for t in targets[good:]:
@@ -625,29 +621,39 @@ def ur_ik_line(
 
 
 def _unverified_walk(
-    k: tuple[float, ...], targets12: np.ndarray, targets: list[list[float]], seed: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, int]:
+    k: tuple[float, ...], targets12: np.ndarray, targets: list[list[float]], seed: np.ndarray, lo: np.ndarray,
+    hi: np.ndarray, certify: bool,
+) -> tuple[np.ndarray, int, int]:
     """:func:`_nearest_solution` (unit weights, unverified) at each of the 12-float targets ``targets12 (n, 12)``
     (``targets`` as lists) in turn, seeded by the previous one's result (the first by ``seed``):
-    ``(solutions (m, 6) rad, m)``, ``m`` the first target without a solution (``n`` if none).
+    ``(solutions (m, 6) rad, m, c)``, ``m`` the first target without a solution (``n`` if none), ``c`` how many
+    leading solutions are exact branches of :func:`_certified` targets (0 unless ``certify``).
 
     Up to :data:`_VECTORISED_WALK_POSES` poses, pose by pose; longer walks solve the branches of all poses at once
-    (:func:`_branches_many`, :func:`_nearest_chain`, in runs of at most :data:`_LINE_CHUNK` poses), which costs
-    a fixed ~0.9 ms of numpy calls and then half the time per pose; a pose the chain leaves out (the wrist
-    singularity, no branch within the limits) goes to :func:`_nearest_solution`.
+    (:func:`_branches_many`, :func:`_nearest_chain`, in runs of at most :data:`_LINE_CHUNK` poses; none
+    certified), which costs a fixed ~0.9 ms of numpy calls and then half the time per pose; a pose the chain
+    leaves out (the wrist singularity, no branch within the limits) goes to :func:`_nearest_solution`.
     """
     n = len(targets)
     w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
     lo_list, hi_list = lo.tolist(), hi.tolist()
-    fast = np.empty((n, 6))
     if n < _VECTORISED_WALK_POSES:
         sd = seed.tolist()
-        for m, t in enumerate(targets):
-            best = _nearest_solution(k, t, sd, lo_list, hi_list, w)
-            if best is None:
-                return fast[:m], m
-            fast[m] = sd = best
-        return fast, n
+        rows = []
+        certified = 0
+        for t in targets:
+            found = _nearest_search(k, t, sd, lo_list, hi_list, w)
+            if found is None:
+                break
+            sd = found[1]
+            rows.append(sd)
+            if certify:
+                if found[2] and _certified(t):
+                    certified += 1
+                else:
+                    certify = False
+        return np.array(rows, dtype=float).reshape(-1, 6), len(rows), certified
+    fast = np.empty((n, 6))
     branches, exists, _ = _branches_many(k, targets12)
     m = 0
     sd = seed
@@ -666,7 +672,7 @@ def _unverified_walk(
         fast[m] = best
         sd = fast[m]
         m += 1
-    return fast[:m], m
+    return fast[:m], m, 0
 
 
 

@@ -55,7 +55,8 @@ def ur_pose_errors(k: Sequence[float], q: Sequence[float], t: Sequence[float]) -
     (row-major top rows of a pose): ``|p - p_t|`` and ``||R - R_t||_F / sqrt(2)`` (``2 sin(theta / 2)`` for a
     rotation by ``theta`` between them), as :func:`robocritics.robot.ik._pose_error`."""
     f = ur_flange_pose12(k, q)
-    dp = math.sqrt((f[3] - t[3]) ** 2 + (f[7] - t[7]) ** 2 + (f[11] - t[11]) ** 2)
+    e3, e7, e11 = f[3] - t[3], f[7] - t[7], f[11] - t[11]
+    dp = math.sqrt(e3 * e3 + e7 * e7 + e11 * e11)
     e0, e1, e2, e4, e5, e6 = f[0] - t[0], f[1] - t[1], f[2] - t[2], f[4] - t[4], f[5] - t[5], f[6] - t[6]
     e8, e9, e10 = f[8] - t[8], f[9] - t[9], f[10] - t[10]
     sq = 0.0 + e0 * e0 + e1 * e1 + e2 * e2 + e4 * e4 + e5 * e5 + e6 * e6 + e8 * e8 + e9 * e9 + e10 * e10
