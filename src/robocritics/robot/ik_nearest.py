@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from math import acos, atan2, cos, sin, sqrt  # names, not attributes: one lookup less per call in the search
 
 from .ik_many import _CLIP_TOL, _HALF_PI, _LIMIT_SLACK, _PI, _TWO_PI, _WRIST_NEAR_SINGULAR, _WRIST_SINGULAR
 
@@ -103,6 +104,19 @@ def _singular_q6(
     return math.atan2(-(ux * x6p[0] + uy * x6p[1]), -(ux * y6p[0] + uy * y6p[1]))
 
 
+def _off_seed(x: float, seed: float, lo: float, hi: float, w: float, cost: float) -> tuple[float | None, float, bool]:
+    """For an angle ``x`` more than pi from ``seed`` or outside ``[lo, hi]``: ``(v, cost + w (v - seed)², exact)``
+    with ``v`` :func:`_nearest_equivalent` (None and cost inf if none fits) and ``exact`` whether ``v`` was not
+    clamped onto a limit (``_LIMIT_SLACK``); the slow path of the search, out of its way."""
+    v = x + round((seed - x) / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
+    if lo <= v <= hi:
+        return v, cost + w * (v - seed) * (v - seed), True
+    v = _nearest_equivalent(x, seed, lo, hi)
+    if v is None:
+        return None, math.inf, False
+    return v, cost + w * (v - seed) * (v - seed), not (v == lo or v == hi)  # on a limit: perhaps clamped
+
+
 def _nearest_solution(
     k: tuple[float, ...],
     t: Sequence[float],
@@ -140,7 +154,7 @@ def _nearest_search(
     # step 1 (_shoulder_pans)
     p5x = t[3] - d6 * t[2]
     p5y = t[7] - d6 * t[6]
-    r = math.sqrt(p5x * p5x + p5y * p5y)
+    r = sqrt(p5x * p5x + p5y * p5y)
     if r == 0.0:
         return None
     ratio = k[3] / r
@@ -149,8 +163,8 @@ def _nearest_search(
         if not -1.0 - _CLIP_TOL <= ratio <= 1.0 + _CLIP_TOL:
             return None
         ratio = 1.0 if ratio > 1.0 else -1.0
-    phi = math.atan2(p5y, p5x) + _HALF_PI
-    dphi = math.acos(ratio)
+    phi = atan2(p5y, p5x) + _HALF_PI
+    dphi = acos(ratio)
     s0, l0, h0, w0 = sd[0], lo[0], hi[0], w[0]
     inf = math.inf
     qa = phi + dphi
@@ -159,23 +173,15 @@ def _nearest_search(
     if -_PI < d < _PI and l0 <= qa <= h0:  # the seed-nearest equivalent, within the limits
         va, ca = qa, w0 * d * d  # (v - s)² = d²: the same float
     else:
-        va = qa + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-        if not l0 <= va <= h0:
-            va = _nearest_equivalent(qa, s0, l0, h0)
-            if va == l0 or va == h0:  # perhaps clamped onto the limit
-                ea = False
-        ca = inf if va is None else w0 * (va - s0) * (va - s0)
+        va, ca, exact_v = _off_seed(qa, s0, l0, h0, w0, 0.0)
+        ea = ea and exact_v
     qb = phi - dphi
     d = s0 - qb
     if -_PI < d < _PI and l0 <= qb <= h0:
         vb, cb = qb, w0 * d * d
     else:
-        vb = qb + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-        if not l0 <= vb <= h0:
-            vb = _nearest_equivalent(qb, s0, l0, h0)
-            if vb == l0 or vb == h0:  # perhaps clamped onto the limit
-                eb = False
-        cb = inf if vb is None else w0 * (vb - s0) * (vb - s0)
+        vb, cb, exact_v = _off_seed(qb, s0, l0, h0, w0, 0.0)
+        eb = eb and exact_v
     if cb < ca:
         qa, va, ca, ea, qb, vb, cb, eb = qb, vb, cb, eb, qa, va, ca, ea
     if ca == inf:
@@ -200,11 +206,11 @@ def _nearest_wrists(
     win (its ``q5`` cost alone is a lower bound). Near the wrist singularity (``|sin q5| <
     _WRIST_NEAR_SINGULAR``) the elbow step may nudge ``q6``, so its cost is left to :func:`_nearest_elbow`."""
     xx, yx, zx, _, xy, yy, zy, _, _, _, _, _ = t
-    c1, s1 = math.cos(q1), math.sin(q1)
+    c1, s1 = cos(q1), sin(q1)
     xz1 = xx * s1 - xy * c1  # z1 = (s1, -c1, 0) in flange axes: cos q6 sin q5
     yz1 = yx * s1 - yy * c1  # -sin q6 sin q5
     zz1 = zx * s1 - zy * c1  # cos q5
-    s5abs = math.sqrt(xz1 * xz1 + yz1 * yz1)
+    s5abs = sqrt(xz1 * xz1 + yz1 * yz1)
     _, _, _, _, s4, s5 = sd
     _, _, _, _, l4, l5 = lo
     _, _, _, _, h4, h5 = hi
@@ -215,44 +221,32 @@ def _nearest_wrists(
         exact = False
     singular = s5abs < _WRIST_SINGULAR  # q6 is the seed's
     # the wrist up, with its q6
-    q5u = math.atan2(s5abs, zz1)
-    q6u = s5 if singular else math.atan2(-yz1, xz1)
+    q5u = atan2(s5abs, zz1)
+    q6u = s5 if singular else atan2(-yz1, xz1)
     eu = exact
     d = s4 - q5u
     if -_PI < d < _PI and l4 <= q5u <= h4:  # the seed-nearest equivalent, within the limits
         v5u, cu = q5u, cost1 + w4 * d * d  # (v - s)² = d²: the same float
     else:
-        v5u = q5u + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-        if not l4 <= v5u <= h4:
-            v5u = _nearest_equivalent(q5u, s4, l4, h4)
-            if v5u == l4 or v5u == h4:  # perhaps clamped onto the limit
-                eu = False
-        cu = inf if v5u is None else cost1 + w4 * (v5u - s4) * (v5u - s4)
+        v5u, cu, exact_v = _off_seed(q5u, s4, l4, h4, w4, cost1)
+        eu = eu and exact_v
     v6u = None
     if not free and v5u is not None:
         d = s5 - q6u
         if -_PI < d < _PI and l5 <= q6u <= h5:
             v6u, cu = q6u, cu + w5 * d * d
         else:
-            v6u = q6u + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-            if not l5 <= v6u <= h5:
-                v6u = _nearest_equivalent(q6u, s5, l5, h5)
-                if v6u == l5 or v6u == h5:  # perhaps clamped onto the limit
-                    eu = False
-            cu = inf if v6u is None else cu + w5 * (v6u - s5) * (v6u - s5)
+            v6u, cu, exact_v = _off_seed(q6u, s5, l5, h5, w5, cu)
+            eu = eu and exact_v
     # the wrist down: q5 first (a lower bound on its cost)
-    q5d = math.atan2(-s5abs, zz1)
+    q5d = atan2(-s5abs, zz1)
     ed = exact
     d = s4 - q5d
     if -_PI < d < _PI and l4 <= q5d <= h4:
         v5d, cd = q5d, cost1 + w4 * d * d
     else:
-        v5d = q5d + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-        if not l4 <= v5d <= h4:
-            v5d = _nearest_equivalent(q5d, s4, l4, h4)
-            if v5d == l4 or v5d == h4:  # perhaps clamped onto the limit
-                ed = False
-        cd = inf if v5d is None else cost1 + w4 * (v5d - s4) * (v5d - s4)
+        v5d, cd, exact_v = _off_seed(q5d, s4, l4, h4, w4, cost1)
+        ed = ed and exact_v
     found = None
     up_done = cu <= cd  # then the wrist up is the cheaper whatever the wrist down's q6 costs: it goes first
     if up_done:
@@ -263,19 +257,15 @@ def _nearest_wrists(
             best = found[0]
         if cd >= best:
             return found
-    q6d = s5 if singular else math.atan2(yz1, -xz1)
+    q6d = s5 if singular else atan2(yz1, -xz1)
     v6d = None
     if not free and v5d is not None:
         d = s5 - q6d
         if -_PI < d < _PI and l5 <= q6d <= h5:
             v6d, cd = q6d, cd + w5 * d * d
         else:
-            v6d = q6d + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-            if not l5 <= v6d <= h5:
-                v6d = _nearest_equivalent(q6d, s5, l5, h5)
-                if v6d == l5 or v6d == h5:  # perhaps clamped onto the limit
-                    ed = False
-            cd = inf if v6d is None else cd + w5 * (v6d - s5) * (v6d - s5)
+            v6d, cd, exact_v = _off_seed(q6d, s5, l5, h5, w5, cd)
+            ed = ed and exact_v
     if not up_done and not cd < cu:  # the wrist up first after all
         if cu >= best:
             return None
@@ -308,8 +298,7 @@ def _nearest_elbow(
     d1, a2, a3, _, d5, d6, a2a3_sq, two_a2a3 = k
     xx, yx, zx, _, xy, yy, zy, _, xz, yz, zz, pz = t
     # _elbow and _wrist1_planar
-    c6 = math.cos(q6)
-    s6 = math.sin(q6)
+    c6, s6 = cos(q6), sin(q6)
     z4x = -(s6 * xx + c6 * yx)
     z4y = -(s6 * xy + c6 * yy)
     z4z = -(s6 * xz + c6 * yz)
@@ -322,8 +311,7 @@ def _nearest_elbow(
             nudged = _singular_q6(k, t, c1, s1, p5x, p5y, q6, c3 > 1.0)
             if nudged is not None:
                 q6 = nudged
-                c6 = math.cos(q6)
-                s6 = math.sin(q6)
+                c6, s6 = cos(q6), sin(q6)
                 X, Y = _wrist1_planar(k, t, c1, s1, p5x, p5y, q6)
                 c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
         if not -1.0 <= c3 <= 1.0:
@@ -344,56 +332,42 @@ def _nearest_elbow(
     _, h1, h2, h3, _, _ = hi
     _, w1, w2, w3, _, _ = w
     # the two elbows (q3 = +acos, -acos), the one nearer the seed in q3 first: the other then rarely gets further
-    t3 = math.acos(c3)
-    inf = math.inf
+    t3 = acos(c3)
     d = s2 - t3
     ep = em = exact
     if -_PI < d < _PI and l2 <= t3 <= h2:  # the seed-nearest equivalent, within the limits
         v3p, cp = t3, cost56 + w2 * d * d  # (v - s)² = d²: the same float
     else:
-        v3p = t3 + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-        if not l2 <= v3p <= h2:
-            v3p = _nearest_equivalent(t3, s2, l2, h2)
-            if v3p == l2 or v3p == h2:  # perhaps clamped onto the limit
-                ep = False
-        cp = inf if v3p is None else cost56 + w2 * (v3p - s2) * (v3p - s2)
+        v3p, cp, exact_v = _off_seed(t3, s2, l2, h2, w2, cost56)
+        ep = ep and exact_v
     d = s2 - (-t3)
     if -_PI < d < _PI and l2 <= -t3 <= h2:  # the seed-nearest equivalent, within the limits
         v3m, cm = -t3, cost56 + w2 * d * d  # (v - s)² = d²: the same float
     else:
-        v3m = -t3 + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-        if not l2 <= v3m <= h2:
-            v3m = _nearest_equivalent(-t3, s2, l2, h2)
-            if v3m == l2 or v3m == h2:  # perhaps clamped onto the limit
-                em = False
-        cm = inf if v3m is None else cost56 + w2 * (v3m - s2) * (v3m - s2)
+        v3m, cm, exact_v = _off_seed(-t3, s2, l2, h2, w2, cost56)
+        em = em and exact_v
     if cp >= best and cm >= best:
         return None
-    c5 = math.cos(q5)
-    s5_ = math.sin(q5)
+    c5, s5_ = cos(q5), sin(q5)
     # x4 = c5 x5 - s5 z6 with x5 = c6 x6 - s6 y6
     x4x = c5 * (c6 * xx - s6 * yx) - s5_ * zx
     x4y = c5 * (c6 * xy - s6 * yy) - s5_ * zy
     x4z = c5 * (c6 * xz - s6 * yz) - s5_ * zz
-    base = math.atan2(Y, X)
-    q234 = math.atan2(x4z, x4x * c1 + x4y * s1)
+    base = atan2(Y, X)
+    q234 = atan2(x4z, x4x * c1 + x4y * s1)
     found = None
     for cost3, q3, v3, e3 in ((cm, -t3, v3m, em), (cp, t3, v3p, ep)) if cm < cp else ((cp, t3, v3p, ep), (cm, -t3, v3m, em)):
         if cost3 >= best:
             break
-        q2 = base - math.atan2(a3 * math.sin(q3), a2 + a3 * c3)  # _shoulder_lift
+        q2 = base - atan2(a3 * sin(q3), a2 + a3 * c3)  # _shoulder_lift
         d = s1_ - q2
         if -_PI < d < _PI and l1 <= q2 <= h1:  # the seed-nearest equivalent, within the limits
             v2, cost2 = q2, cost3 + w1 * d * d  # (v - s)² = d²: the same float
         else:
-            v2 = q2 + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-            if not l1 <= v2 <= h1:
-                v2 = _nearest_equivalent(q2, s1_, l1, h1)
-                if v2 == l1 or v2 == h1:  # perhaps clamped onto the limit
-                    e3 = False
+            v2, cost2, exact_v = _off_seed(q2, s1_, l1, h1, w1, cost3)
             if v2 is None:
                 continue
-            cost2 = cost3 + w1 * (v2 - s1_) * (v2 - s1_)
+            e3 = e3 and exact_v
         if cost2 >= best:
             continue
         q4 = q234 - q2 - q3
@@ -401,14 +375,10 @@ def _nearest_elbow(
         if -_PI < d < _PI and l3 <= q4 <= h3:
             v4, cost = q4, cost2 + w3 * d * d
         else:
-            v4 = q4 + round(d / _TWO_PI) * _TWO_PI  # _nearest_equivalent's common case
-            if not l3 <= v4 <= h3:
-                v4 = _nearest_equivalent(q4, s3, l3, h3)
-                if v4 == l3 or v4 == h3:  # perhaps clamped onto the limit
-                    e3 = False
+            v4, cost, exact_v = _off_seed(q4, s3, l3, h3, w3, cost2)
             if v4 is None:
                 continue
-            cost = cost2 + w3 * (v4 - s3) * (v4 - s3)
+            e3 = e3 and exact_v
         if cost < best:
             q = [v1, v2, v3, v4, v5, v6]
             if verify is None or verify(q):
