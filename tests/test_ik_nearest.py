@@ -26,6 +26,7 @@ from robocritics.robot.ik import (
     _branches,
     _certified,
     _Chain,
+    _flagged_branches,
     _nearest_equivalent,
     _nearest_search,
     _wrap,
@@ -178,6 +179,24 @@ def test_a_certified_branch_reproduces_its_target(q, shoulder, noise, far_seed, 
         return
     dp, dr = _Chain(UR3E_DH).error(found[1], t)
     assert dp <= _CERTIFIED_ERROR and dr <= _CERTIFIED_ERROR, (dp, dr)
+
+
+@settings(max_examples=800, deadline=None)
+@given(q=joints, shoulder=st.sampled_from([None, 0.0, 1e-12, -1e-9]), q6=st.floats(-math.pi, math.pi))
+def test_every_exact_branch_of_a_certified_target_reproduces_it(q, shoulder, q6):
+    """The certificate ur_ik_all relies on: each branch _flagged_branches calls exact, of a _certified target,
+    reproduces it within _CERTIFIED_ERROR (Pinocchio), at the special angles and the shoulder singularity."""
+    if shoulder is not None:
+        q = shoulder_singular(q)
+        q[1] += shoulder
+    t = dh_forward(UR3E_DH, q)[:3].ravel().tolist()
+    if not _certified(t):
+        return
+    chain = _Chain(UR3E_DH)
+    for b, exact in _flagged_branches(UR3E_DH._ur, t, q6):
+        if exact:
+            dp, dr = chain.error(b, t)
+            assert dp <= _CERTIFIED_ERROR and dr <= _CERTIFIED_ERROR, (b, dp, dr)
 
 
 def test_the_certificate_refuses_what_is_not_a_rotation_and_clamped_or_clipped_branches():

@@ -341,11 +341,19 @@ def _shoulder_lift(k: tuple[float, ...], base: float, q3: float, c3: float) -> f
 def _branches(k: tuple[float, ...], t: Sequence[float], q6_free: float) -> list[list[float]]:
     """Every closed-form branch (unwrapped angles, not yet FK-checked, possibly
     duplicated) for the 12-float row-major target ``t``; see the module docstring."""
+    return [b for b, _ in _flagged_branches(k, t, q6_free)]
+
+
+def _flagged_branches(k: tuple[float, ...], t: Sequence[float], q6_free: float) -> list[tuple[list[float], bool]]:
+    """:func:`_branches`, each with whether it is exact as :func:`_nearest_search` means it: no step clipped
+    (``|d4 / r| <= 1``, ``|cos q3| < 1``) and the wrist away from its singularity (``|sin q5| >=
+    _WRIST_NEAR_SINGULAR``, so ``q6`` was neither free nor nudged)."""
     shoulder = _shoulder_pans(k, t)
     if shoulder is None:
         return []
     p5x, p5y, pans = shoulder
-    out: list[list[float]] = []
+    exact_pan = -1.0 <= k[3] / math.sqrt(p5x * p5x + p5y * p5y) <= 1.0  # _shoulder_pans' ratio, not clipped
+    out: list[tuple[list[float], bool]] = []
     for q1 in pans:
         c1, s1 = math.cos(q1), math.sin(q1)
         s5abs, wrists = _wrists(t, c1, s1, q6_free)
@@ -354,10 +362,11 @@ def _branches(k: tuple[float, ...], t: Sequence[float], q6_free: float) -> list[
             if elbow is None:
                 continue
             c3, base, q234, q6 = elbow
+            exact = exact_pan and s5abs >= _WRIST_NEAR_SINGULAR and -1.0 < c3 < 1.0  # +-1: perhaps clipped
             t3 = math.acos(c3)
             for q3 in (t3, -t3):
                 q2 = _shoulder_lift(k, base, q3, c3)
-                out.append([q1, q2, q3, q234 - q2 - q3, q5, q6])
+                out.append(([q1, q2, q3, q234 - q2 - q3, q5, q6], exact))
     return out
 
 
@@ -457,9 +466,10 @@ def _solutions(dh: DH, t: Sequence[float], q6_singular: float) -> list[list[floa
     k = dh._ur
     sols: list[list[float]] = []
     remainder = math.remainder
-    for b in _branches(k, t, q6_singular):
+    certified = _certified(t)  # then an exact branch needs no FK check (see ur_ik)
+    for b, exact in _flagged_branches(k, t, q6_singular):
         w = [x + _TWO_PI if x <= -_PI else x for x in [remainder(x, _TWO_PI) for x in b]]  # _wrap
-        if not _is_duplicate(w, sols) and ur_reproduces(k, w, t, _VERIFY_TOL):
+        if not _is_duplicate(w, sols) and ((exact and certified) or ur_reproduces(k, w, t, _VERIFY_TOL)):
             sols.append(w)
     return sols
 
