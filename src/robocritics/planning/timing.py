@@ -241,7 +241,7 @@ class Profile:
             k[:, dof] = np.searchsorted(starts_arr[8 * dof + 1 : 8 * dof + 8], times, side="right")
         entry = k + 8 * np.arange(dofs)  # (m, dofs): the (dof, phase) entry of each sample, flattened
         dt = times[:, None] - starts_arr[entry]
-        gathered = states[entry]  # (m, dofs, 4)
+        gathered = np.take(states, entry, axis=0)  # (m, dofs, 4)
         p, v, a, j = gathered[..., 0], gathered[..., 1], gathered[..., 2], gathered[..., 3]  # (m, dofs) each
         return p + dt * (v + dt * (a / 2 + dt * j / 6))
 
