@@ -37,8 +37,12 @@ def child(repeats: int, out_path: str) -> None:
 
     from robocritics import Robot, Scene
     from robocritics.errors import SceneError
-    from robocritics.planning.planner import Planner, PlannerSettings
     from robocritics.program.sandbox import run_program
+
+    try:
+        from robocritics.planning.planner import Planner, PlannerSettings
+    except ModuleNotFoundError:  # c045a0b kept the planner in robocritics.robot
+        from robocritics.robot.planner import Planner, PlannerSettings
 
     robot = Robot.ur3e()
     result: dict[str, dict] = {}
