@@ -828,6 +828,6 @@ class Planner:
             q,
             t,
             np.concatenate(self.open_parts),
-            np.repeat(np.array(self.seg_attached, dtype=object), self.seg_lengths).astype(str),
+            np.repeat(np.array(self.seg_attached), self.seg_lengths),  # str ids: a '<U' array, no object detour
             np.repeat(np.array(self.seg_steps, dtype=int), self.seg_lengths),
         )
