@@ -234,6 +234,9 @@ class Robot:
         self.tcp_frame = tcp_frame
         self._tcp_frame_id = self._body_frame_id(tcp_frame, "the TCP")
         self._parse_urdf_extras(urdf_root)
+        # per capsule, the piece of its link's collision mesh it encloses (robot.fit.Mesh, link frame), measured
+        # instead of the capsule near contact (geometry.link_meshes); None: the capsule is the geometry itself
+        self.capsule_meshes: tuple = (None,) * len(self.capsules)
         self.fixed_links = tuple(fixed_links)
         self._build_fk_tables()
         if dh is not None:
@@ -347,6 +350,8 @@ class Robot:
         robot.tip_frame = facts["tip"]
         robot.tool_name = facts["tool"]
         robot.capsule_slack_m = _read_only([facts["slack_m"].get(c.name, 0.0) for c in robot.capsules])
+        # a finger's capsule slides with the opening and its link frame does not: fingers stay capsules
+        robot.capsule_meshes = tuple(None if c.frame in robot.finger_links else facts["mesh"].get(c.name) for c in robot.capsules)
         infer(robot, tip=facts["tip"], reach_m=reach_m, home_q=home_q, fixed_links=fixed_links)
         if self_pairs is not None:
             robot.self_pairs = tuple((str(a), str(b)) for a, b in self_pairs)
