@@ -38,18 +38,28 @@ import numpy as np
 from ..scene import Shape
 from .pairs import coal_geometry
 
-__all__ = ["mesh_model", "mesh_ball", "capsule_mesh", "shape_mesh", "is_closed", "winding_numbers", "inside_closed",
+__all__ = ["mesh_model", "mesh_ball", "capsule_mesh", "shape_mesh", "capsule_frames", "is_closed", "winding_numbers", "inside_closed",
            "inscribed_radius"]
 
 #: Point-triangle terms per block of :func:`winding_numbers` (a few MB of temporaries).
 _WINDING_BLOCK = 200_000
 
 
+_MODELS: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, object]] = {}
+
+
 def mesh_model(shape: Shape):
-    """coal's bounding-volume hierarchy of a mesh shape's triangles (in the shape frame)."""
+    """coal's bounding-volume hierarchy of a mesh shape's triangles (in the shape frame), built once per pair of
+    arrays (scene meshes share their file's arrays)."""
     if shape.mesh is None:
         raise ValueError(f"shape {shape.name!r} ({shape.kind}) has no triangles")
-    return coal_geometry("mesh", shape.mesh)
+    vertices, triangles = shape.mesh
+    hit = _MODELS.get((id(vertices), id(triangles)))
+    if hit is None or hit[0] is not vertices or hit[1] is not triangles:
+        if len(_MODELS) > 64:
+            _MODELS.clear()
+        hit = _MODELS[id(vertices), id(triangles)] = (vertices, triangles, coal_geometry("mesh", shape.mesh))
+    return hit[2]
 
 
 def mesh_ball(shape: Shape) -> tuple[np.ndarray, float]:
@@ -170,7 +180,7 @@ def capsule_mesh(p0, p1, radius_m: float, shape: Shape, model=None, cut=None) ->
     new = np.ones(len(at), dtype=bool)
     new[1:] = (ends[1:] != ends[:-1]).any(axis=1)
     firsts = at[new]
-    rotations, centres, lengths = _capsule_frames(p0[firsts], p1[firsts])
+    rotations, centres, lengths = capsule_frames(p0[firsts], p1[firsts])
     values = np.empty(len(firsts))
     transform = coal.Transform3s()
     for n in range(len(firsts)):
@@ -186,7 +196,7 @@ def capsule_mesh(p0, p1, radius_m: float, shape: Shape, model=None, cut=None) ->
     return out
 
 
-def _capsule_frames(p0: np.ndarray, p1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def capsule_frames(p0: np.ndarray, p1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`~robocritics.geometry.pairs.capsule_pose` for ``N`` segments at once: rotations ``(N, 3, 3)`` whose
     z runs along ``p0 -> p1``, the midpoints ``(N, 3)`` and the lengths ``(N,)``, m."""
     axis = p1 - p0
