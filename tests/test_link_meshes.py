@@ -38,7 +38,8 @@ def _box_corners(lo, hi) -> np.ndarray:
 
 
 #: The upper link in its own frame (m): a 0.36 m tube along x and a housing at its end, 24 triangles.
-LINK = np.concatenate([_box_corners((0.0, -0.03, -0.03), (0.36, 0.03, 0.03)), _box_corners((0.30, -0.09, -0.07), (0.42, 0.09, 0.07))])
+LINK_BOXES = [(np.array((0.0, -0.03, -0.03)), np.array((0.36, 0.03, 0.03))), (np.array((0.30, -0.09, -0.07)), np.array((0.42, 0.09, 0.07)))]
+LINK = np.concatenate([_box_corners(lo, hi) for lo, hi in LINK_BOXES])
 
 _URDF = """<?xml version="1.0"?>
 <robot name="mesh_arm">
@@ -85,7 +86,9 @@ def _coal_raw(pose: np.ndarray, shape) -> float:
     model.endModel()
     geometry = {"box": lambda s: coal.Box(*s), "sphere": lambda s: coal.Sphere(s[0]), "cylinder": lambda s: coal.Cylinder(*s)}[shape.kind](shape.size)
     T = lambda P: coal.Transform3s(np.ascontiguousarray(P[:3, :3]), np.ascontiguousarray(P[:3, 3]))  # noqa: E731
-    return coal.distance(model, T(pose), geometry, T(np.asarray(shape.pose)), coal.DistanceRequest(), coal.DistanceResult())
+    request = coal.DistanceRequest()
+    request.gjk_tolerance = 1e-10
+    return coal.distance(model, T(pose), geometry, T(np.asarray(shape.pose)), request, coal.DistanceResult())
 
 
 def _point_triangles(p: np.ndarray, tri: np.ndarray) -> float:
@@ -144,13 +147,22 @@ def test_near_contact_the_link_reads_coal_on_its_raw_mesh_and_the_brute_force_di
     (shape,) = scene.objects[0].shapes()
     pose = arm.forward(np.array([q]))[arm.frame_names.index("upper")]
     exact = _coal_raw(pose, shape)
+    centre = np.linalg.inv(pose)[:3] @ np.append(where, 1.0)  # the object's centre in the link frame
+    if exact > 0 and any(np.all((lo < centre) & (centre < hi)) for lo, hi in LINK_BOXES):
+        # wholly inside the closed link mesh, touching no triangle: coal reads the gap to the surface; the
+        # link reads a penetration, -(gap + 2 rho) with rho the object's inscribed ball
+        exact = -(exact + 2 * {"box": min(dims) / 2, "sphere": dims[0], "cylinder": min(dims[0], dims[1] / 2)}[kind])
     value, capsule = _values(arm, scene, q, "thing")
-    assert capsule <= exact + 1e-9  # the capsules never miss a contact
-    if exact <= MESH_EXACT_WITHIN_M or capsule <= MESH_EXACT_WITHIN_M:
-        assert value == pytest.approx(exact, abs=1e-9)  # refined: the mesh's distance, contact and depth included
-    else:
-        assert capsule - 1e-12 <= value <= exact + 1e-9  # beyond: a lower bound
-    if kind == "sphere" and exact > 0:
+    assert capsule <= max(exact, 0.0) + 1e-9  # the capsules never miss a contact
+    if exact <= 0:
+        # crossing: both negative. coal's depth of a triangle mesh is the first touched triangle's its traversal
+        # meets (not the deepest), so the two depths need not agree (the issue's report says so)
+        assert value < 0
+    elif exact <= MESH_EXACT_WITHIN_M:
+        assert value == pytest.approx(exact, abs=1e-9)  # the mesh's distance
+    else:  # beyond: a lower bound, above the threshold (a threshold test there reads the mesh too)
+        assert MESH_EXACT_WITHIN_M < value <= exact + 1e-9 and capsule - 1e-12 <= value
+    if kind == "sphere" and exact > 0:  # outside: the brute-force distance to the surface
         placed = _link_triangles() @ pose[:3, :3].T + pose[:3, 3]
         assert exact == pytest.approx(_point_triangles(np.array(where), placed) - dims[0], abs=1e-6)
 

@@ -23,7 +23,10 @@ that the last exact value and the motion since cannot prove farther than ``withi
 What is measured (coal, ``coal.distance``): the piece's bounding-volume hierarchy at the link's pose against
 the other side of the pair: a scene primitive (box, cylinder, sphere) at its pose of that sample, a scene mesh
 fixture's hierarchy, a capsule without a mesh (the tool's), or another link's piece (self pairs). Apart: the
-exact distance (coal's GJK tolerance); crossing: coal's depth past the deepest touched triangle (negative).
+exact distance (to :data:`GJK_TOLERANCE`); the least over a link's capsules is then the distance of its whole
+mesh. Crossing: coal's depth past the deepest touched triangle of the link's **whole** mesh (negative; the
+other side's whole mesh too for a self pair), as coal reads the raw mesh: depth does not split over pieces
+(part of a triangle can be shallower than the triangle).
 
 A shape touching no triangle of the other side may still be wholly inside it: coal measures a piece and a
 fixture as surfaces. Where the capsule value is at most 0 (the capsules overlap, so containment is possible:
@@ -53,11 +56,15 @@ from ..scene import Shape
 from .meshes import capsule_frames, inscribed_radius, is_closed, mesh_model, winding_numbers
 from .pairs import coal_geometry
 
-__all__ = ["refine_near_contact", "mesh_parts", "SAME_POSE_M"]
+__all__ = ["refine_near_contact", "mesh_parts", "SAME_POSE_M", "GJK_TOLERANCE"]
 
 #: A piece that moved by at most this much [m] relative to the other side since its last exact value keeps that
 #: value (a self pair whose joints between held still, an arm at rest): below coal's GJK tolerance (1e-6 m).
 SAME_POSE_M = 1e-9
+
+#: coal's GJK tolerance for the exact values: against a cylinder, sphere or capsule they are good to ~1e-10 m
+#: (against boxes and meshes GJK ends on the exact simplex anyway).
+GJK_TOLERANCE = 1e-10
 
 
 @dataclass(frozen=True)
@@ -72,7 +79,8 @@ class _Side:
     solid: tuple[np.ndarray, np.ndarray] | None
     points: np.ndarray
     rho: float
-    solid_piece: np.ndarray | None = None  # a piece's vertices (own frame), for its bounding ball
+    piece: np.ndarray | None = None  # a piece's vertices (own frame), for its bounding ball
+    whole: object = None  # a link's whole mesh (coal), measured instead of the piece where they overlap
 
 
 _CACHE: dict[int, tuple[object, object]] = {}
@@ -106,19 +114,12 @@ def _component_points(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray
 
 
 def mesh_parts(robot) -> list[tuple | None]:
-    """Per capsule of ``robot``: ``(piece vertices, piece triangles, its link's mesh as (vertices, triangles) if
-    closed else None, the piece)`` (link frame), or None for a capsule that is its own geometry."""
+    """Per capsule of ``robot``: ``(piece, link mesh)``, the piece of its link's mesh it encloses and that whole
+    mesh (objects with ``vertices`` and ``triangles``, link frame), or None for a capsule that is its own
+    geometry."""
     pieces = getattr(robot, "capsule_meshes", ())
     links = getattr(robot, "link_meshes", {})
-    out: list[tuple | None] = []
-    for capsule, piece in zip(robot.capsules, pieces):
-        if piece is None:
-            out.append(None)
-            continue
-        whole = links.get(capsule.frame)
-        closed = whole is not None and _cached(whole, lambda w=whole: is_closed(w.vertices, w.triangles))
-        out.append((piece.vertices, piece.triangles, (whole.vertices, whole.triangles) if closed else None, piece))
-    return out
+    return [None if piece is None else (piece, links.get(capsule.frame, piece)) for capsule, piece in zip(robot.capsules, pieces)]
 
 
 def refine_near_contact(
@@ -169,10 +170,13 @@ def refine_near_contact(
 
 
 def _link_side(part: tuple, poses: np.ndarray) -> _Side:
-    vertices, triangles, whole, piece = part
-    geometry = _cached(piece, lambda: coal_geometry("mesh", (vertices, triangles)))
-    points = _cached(triangles, lambda: _component_points(vertices, triangles))
-    return _Side(geometry, poses, whole, points, 0.0, solid_piece=vertices)
+    piece, whole = part
+    geometry = _cached(piece, lambda: coal_geometry("mesh", (piece.vertices, piece.triangles)))
+    whole_geometry = _cached(whole, lambda: coal_geometry("mesh", (whole.vertices, whole.triangles)))
+    closed = _cached(whole.triangles, lambda: is_closed(whole.vertices, whole.triangles))
+    points = _cached(piece.triangles, lambda: _component_points(piece.vertices, piece.triangles))
+    return _Side(geometry, poses, (whole.vertices, whole.triangles) if closed else None, points, 0.0,
+                 piece=piece.vertices, whole=whole_geometry)
 
 
 def _capsule_side(p0: np.ndarray, p1: np.ndarray, radius_m: float) -> _Side:
@@ -219,6 +223,7 @@ def _signed(this: _Side, other: _Side, capsule: np.ndarray, within_m: float) -> 
     travelled = np.cumsum(steps).tolist()
     values = np.empty(n)
     request, result, identity = coal.DistanceRequest(), coal.DistanceResult(), coal.Transform3s()
+    request.gjk_tolerance = GJK_TOLERANCE  # coal's default (1e-6) leaves ~1e-7 m against curved shapes
     last, d_last = -1, -np.inf
     for t in range(n):
         if last >= 0:
@@ -233,6 +238,9 @@ def _signed(this: _Side, other: _Side, capsule: np.ndarray, within_m: float) -> 
         result.clear()
         where = coal.Transform3s(np.ascontiguousarray(relative[t, :3, :3]), np.ascontiguousarray(relative[t, :3, 3]))
         d_last = coal.distance(this.geometry, where, other.geometry, identity, request, result)
+        if d_last < 0:  # crossing: the link's whole triangles (a triangle split between pieces is deeper whole)
+            result.clear()
+            d_last = coal.distance(this.whole, where, other.whole or other.geometry, identity, request, result)
         if d_last > 0 and capsule[t] <= 0.0:  # touching nothing, yet the capsules overlap: inside?
             if _inside(other, this, t):  # the other side within this link's closed mesh
                 d_last = -(d_last + 2.0 * other.rho)
@@ -244,7 +252,7 @@ def _signed(this: _Side, other: _Side, capsule: np.ndarray, within_m: float) -> 
 
 def _ball(side: _Side) -> tuple[np.ndarray, float]:
     """Centre (own frame) and radius (m) of a ball holding a piece's vertices."""
-    vertices = side.solid_piece
+    vertices = side.piece
 
     def make():
         middle = (vertices.max(axis=0) + vertices.min(axis=0)) / 2
