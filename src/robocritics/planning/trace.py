@@ -16,6 +16,11 @@ test up to ``EXACT_WITHIN_M`` is exact, and so is, at every sample, the closest
 distance over any set of environment pairs that includes the arm links' (the
 collision critic's ``D_t``).
 
+A vendor arm's capsules fitted around its link meshes (``Robot.from_urdf``) are measured as their link's own
+mesh wherever the capsule distance is at most :data:`MESH_EXACT_WITHIN_M`
+(:func:`robocritics.geometry.link_meshes.refine_near_contact`): every value up to ``MESH_EXACT_WITHIN_M`` is
+then the mesh's, and a larger one a lower bound of it (the capsule's, at most its ``slack_m`` below).
+
 Objects that the program moves have a pose per sample (``object_poses``):
 at rest, carried with the TCP, at rest again where they were released, so
 distances always use where the object really is.
@@ -31,13 +36,22 @@ from .._arrays import run_starts
 from ..scene import Scene, Shape
 from ..trajectory import Pair, Step, Trajectory
 from ..geometry import proximity as prox
+from ..geometry.link_meshes import refine_near_contact
 
-__all__ = ["build_trajectory", "build_compact_trajectory", "ChunkGeometry", "PoseSchedule", "EXACT_WITHIN_M"]
+__all__ = [
+    "build_trajectory", "build_compact_trajectory", "ChunkGeometry", "PoseSchedule", "EXACT_WITHIN_M",
+    "MESH_EXACT_WITHIN_M",
+]  # fmt: skip
 
 #: Distances (robot capsules and carried objects against the scene) are exact up to this many metres
 #: (twice the collision critic's warning distance) and up to the arm's closest distance at each sample;
 #: larger ones may be a lower bound that is itself larger (:meth:`ProximityKernel.distances`).
 EXACT_WITHIN_M = 0.10
+
+#: A vendor arm's link is measured as its own mesh where its fitted capsule is at most this far [m] from the
+#: other side: the largest threshold of the built-in critics (pinch_point's ``d_max_m``, 6 cm; collision's
+#: ``d_warn_m`` is 5 cm), so every built-in threshold test reads the mesh (tests/test_link_meshes.py checks).
+MESH_EXACT_WITHIN_M = 0.06
 
 
 def _entity_groups(scene: Scene) -> list[tuple[str, str, list[Shape]]]:
@@ -138,7 +152,7 @@ def build_trajectory(
     object_poses = dict(object_poses or {})
     geometry = _Distances(robot, scene, _carried_ids(attached_arr), list(object_poses))
     poses = {oid: np.asarray(pose, float) for oid, pose in object_poses.items()}
-    proximity = geometry.proximity(p0, p1, poses)
+    proximity = geometry.proximity(p0, p1, poses, frames)
     pairs = geometry.pairs
     return Trajectory(
         q=q,
@@ -176,13 +190,21 @@ class _Distances:
         ]
         capsules = [(name, float(r)) for name, r in zip(robot.capsule_names, robot.capsule_radii)]
         self.kernel = prox.ProximityKernel(capsules, scene.shapes(), flat, moving=list(moving)) if flat else None
+        self.flat, self.robot, self.shapes = flat, robot, scene.shapes()
+        # a vendor arm's links near contact are measured as their own meshes (geometry.link_meshes)
+        self.has_meshes = any(piece is not None for piece in getattr(robot, "capsule_meshes", ()))
 
-    def proximity(self, p0: np.ndarray, p1: np.ndarray, poses: Mapping[str, np.ndarray]) -> np.ndarray:
-        """``(T, K)`` m, column-major, of capsule endpoints ``p0``, ``p1`` ``(T, C, 3)`` and moving objects' poses."""
+    def proximity(
+        self, p0: np.ndarray, p1: np.ndarray, poses: Mapping[str, np.ndarray], frames: np.ndarray
+    ) -> np.ndarray:
+        """``(T, K)`` m, column-major, of capsule endpoints ``p0``, ``p1`` ``(T, C, 3)``, moving objects' poses and
+        the link poses ``frames (T, L, 4, 4)`` (which place a vendor arm's link meshes)."""
         if self.kernel is None:
             return np.zeros((p0.shape[0], 0))
         bounds = self.bounds
         by_pair = self.kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=self.arm).T
+        if self.has_meshes:
+            refine_near_contact(by_pair, self.flat, self.robot, frames, p0, p1, self.shapes, poses, MESH_EXACT_WITHIN_M)
         # each reported pair is the least of its consecutive kernel rows (an entity's shapes): every pair's
         # first row in one gather, then the pairs of several rows (containers) folded in row by row
         # (np.minimum.reduceat along axis 0 is 15x slower)
@@ -296,7 +318,7 @@ class ChunkGeometry:
         frames, p0, p1 = self.robot.forward_with_capsules(self.q[lo:hi], self.opening[lo:hi])
         tcp = frames[:, self.robot.tcp_index]
         poses = {oid: s.poses(lo, hi, tcp) for oid, s in self.schedules.items()}
-        return frames, self.distances.proximity(p0, p1, poses), poses
+        return frames, self.distances.proximity(p0, p1, poses, frames), poses
 
 
 def build_compact_trajectory(robot, scene: Scene, q, time, *, gripper_opening_m, attached, step, steps,
