@@ -25,8 +25,9 @@ What is measured
   and 1e-6 rad.
 * Solvers:
   - ``robocritics ur_ik``: closed form searched branch-and-bound for the
-    branch nearest to the seed within the limits, FK-verified (the function
-    the planner calls).
+    branch nearest to the seed within the limits, FK-verified (closed-form FK,
+    or certified exact: no step clipped, a target rotation that is one) (the
+    function the planner calls).
   - ``robocritics ur_ik_all``: all (up to 8) branches, each FK-verified.
   - ``Pinocchio DLS``: ``robocritics.robot.ik_numeric.numeric_ik`` on a Pinocchio model
     built from a URDF generated from the same DH table (tol 1e-10).
@@ -63,7 +64,6 @@ import numpy as np
 import pinocchio as pin
 
 from robocritics.robot.ik import UR3E_DH, dh_forward, dh_urdf, ur_ik, ur_ik_all, ur_ik_line
-from robocritics.robot.ik_numeric import numeric_ik
 
 REPRO = ".venv/bin/python benchmarks/bench_ik.py"
 LOWER = np.full(6, -2.0 * math.pi)
@@ -175,6 +175,9 @@ def bench_ours(poses: np.ndarray, seeds: np.ndarray) -> list[Result]:
 
 
 def bench_pinocchio(poses: np.ndarray, seeds: np.ndarray) -> Result:
+    # imported here: the --before-src child runs this file against an older tree, which may lack the module
+    from robocritics.robot.ik_numeric import numeric_ik
+
     model = pin.buildModelFromXML(dh_urdf(UR3E_DH))
     data = model.createData()
     fid = model.getFrameId("tool0", pin.FrameType.BODY)

@@ -40,7 +40,7 @@ def files(tmp_path):
         "params_bigint.json": '{"joint_speed": {"warn_speed_m_s": ' + "9" * 5000 + "}}",
         "big.py": "# " + "x" * 1_100_000 + "\n",
         "slow.py": "reduce_speed(0.01)\nmove_to(0.3, 0.1, 0.2)\n",
-        "waits.py": "for i in range(200):\n    wait(10)\n",  # 33 min of motion; 200 iterations end fast under load
+        "waits.py": "for i in range(1000):\n    wait(10)\n",  # 2.8 h of motion: over a million samples at 125 Hz
     }
     for name, content in contents.items():
         (tmp_path / name).write_bytes(content if isinstance(content, bytes) else content.encode())
@@ -153,7 +153,7 @@ def test_the_real_command_prints_no_traceback(files, argv, words):
     [
         # legal programs, impossible motions: the planner's typed errors, with the line, as the runtime critic's Error
         (["check", "slow.py"], "ProgramError: line 1, column 1: reduce_speed: percent must be in 1 <= percent <= 100, got 0.01", 1),
-        (["check", "waits.py"], "MotionBudgetError: line 2: wait(seconds=10): the program's motion lasts 33.3 min; the limit is 5 min", 2),
+        (["check", "waits.py"], "MotionBudgetError: line 2: wait(seconds=10): the trajectory needs more than 1,000,000 samples", 2),
     ],
 )
 def test_a_program_that_cannot_run_is_a_runtime_error_report(capsys, monkeypatch, files, argv, words, line):

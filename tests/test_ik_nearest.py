@@ -4,7 +4,8 @@
   :func:`robocritics.robot.ik._branches` evaluated, each joint moved to its seed-nearest equivalent within the
   limits, the FK-verified branch of least weighted cost taken.
 - ``ur_ik_all`` against its previous implementation (kept here verbatim as the reference).
-- ``_Chain.reproduces`` (its error sums written out) against ``_Chain.error``, at the tolerance boundary.
+- The certificate that lets ``ur_ik`` skip the FK check (an exact branch of a target whose rotation is one)
+  against Pinocchio's FK, at the singularities.
 """
 
 from __future__ import annotations
@@ -18,12 +19,16 @@ from hypothesis import strategies as st
 
 from robocritics.errors import PlanningError
 from robocritics.robot.ik import (
+    _CERTIFIED_ERROR,
     _DUPLICATE_TOL,
     _VERIFY_TOL,
     UR3E_DH,
     _branches,
+    _certified,
     _Chain,
+    _flagged_branches,
     _nearest_equivalent,
+    _nearest_search,
     _wrap,
     dh_forward,
     ur_ik,
@@ -136,17 +141,86 @@ def test_ur_ik_all_is_the_previous_implementation(q, q6):
     assert np.array_equal(got, expected)  # bit for bit: the same floats, the same order
 
 
-@settings(max_examples=500, deadline=None)
-@given(q=joints, dq=st.lists(st.floats(-1e-8, 1e-8), min_size=6, max_size=6).map(np.array), pick=st.integers(0, 3))
-def test_reproduces_is_error_within_tol_at_the_boundary(q, dq, pick):
-    """``reproduces`` decides as ``error`` does, with the tolerance set to the error itself and the floats on
-    either side of it (the written-out sums must be the same floats)."""
-    chain = _Chain(UR3E_DH)
+def shoulder_singular(q: np.ndarray, dh=UR3E_DH) -> np.ndarray:
+    """``q`` with ``q2`` moved to put the wrist-2 centre at distance ``d4`` from the base axis (the shoulder
+    singularity: ``a2 cos q2 + a3 cos q23 + d5 sin q234 = 0``, so the two shoulder pans meet)."""
+    _, a2, a3, _, d5, _, _, _ = dh._ur
+    q = q.copy()
+    c3, s3, c34, s34 = math.cos(q[2]), math.sin(q[2]), math.cos(q[2] + q[3]), math.sin(q[2] + q[3])
+    x, y = a2 + a3 * c3 + d5 * s34, -a3 * s3 + d5 * c34  # cos q2 x + sin q2 y = 0
+    q[1] = math.atan2(-x, y)
+    return q
+
+
+@settings(max_examples=1500, deadline=None)
+@given(
+    q=joints,
+    shoulder=st.sampled_from([None, 0.0, 1e-12, -1e-9, 1e-6]),
+    noise=st.lists(st.floats(-0.4, 0.4), min_size=6, max_size=6).map(np.array),
+    far_seed=st.one_of(st.none(), joints),
+    defect=st.one_of(st.just(0.0), st.floats(-1e-12, 1e-12), st.floats(-1e-6, 1e-6)),
+    tight=st.booleans(),
+)
+def test_a_certified_branch_reproduces_its_target(q, shoulder, noise, far_seed, defect, tight):
+    """The certificate that lets ur_ik skip the FK check: an exact branch (nothing clipped, nudged or clamped) of a
+    target whose rotation is one reproduces it within _CERTIFIED_ERROR, measured by Pinocchio, at every
+    singularity (the special angles: wrist, elbow; the shoulder's by construction), for seeds near and far,
+    limits wide and tight, and target rotations a little off orthonormal."""
+    if shoulder is not None:
+        q = shoulder_singular(q)
+        q[1] += shoulder
+    T = dh_forward(UR3E_DH, q)
+    T[:3, :3] *= 1.0 + defect  # no longer a rotation when defect != 0
+    lower, upper = (q - 0.5, q + 0.5) if tight else (np.full(6, -TWO_PI), np.full(6, TWO_PI))
+    seed = np.clip(q + noise if far_seed is None else far_seed, lower, upper)
+    t = T[:3].ravel().tolist()
+    found = _nearest_search(UR3E_DH._ur, t, seed.tolist(), lower.tolist(), upper.tolist(), (1.0,) * 6)
+    if found is None or not found[2] or not _certified(t):
+        return
+    dp, dr = _Chain(UR3E_DH).error(found[1], t)
+    assert dp <= _CERTIFIED_ERROR and dr <= _CERTIFIED_ERROR, (dp, dr)
+
+
+@settings(max_examples=800, deadline=None)
+@given(q=joints, shoulder=st.sampled_from([None, 0.0, 1e-12, -1e-9]), q6=st.floats(-math.pi, math.pi))
+def test_every_exact_branch_of_a_certified_target_reproduces_it(q, shoulder, q6):
+    """The certificate ur_ik_all relies on: each branch _flagged_branches calls exact, of a _certified target,
+    reproduces it within _CERTIFIED_ERROR (Pinocchio), at the special angles and the shoulder singularity."""
+    if shoulder is not None:
+        q = shoulder_singular(q)
+        q[1] += shoulder
     t = dh_forward(UR3E_DH, q)[:3].ravel().tolist()
-    dp, dr = chain.error((q + dq).tolist(), t)
-    base = (dp, dr, max(dp, dr), min(dp, dr))[pick]
-    for tol in (np.nextafter(base, 0.0), base, np.nextafter(base, 1.0)):
-        assert chain.reproduces(q + dq, t, float(tol)) == (dp <= tol and dr <= tol)
+    if not _certified(t):
+        return
+    chain = _Chain(UR3E_DH)
+    for b, exact in _flagged_branches(UR3E_DH._ur, t, q6):
+        if exact:
+            dp, dr = chain.error(b, t)
+            assert dp <= _CERTIFIED_ERROR and dr <= _CERTIFIED_ERROR, (b, dp, dr)
+
+
+def test_the_certificate_refuses_what_is_not_a_rotation_and_clamped_or_clipped_branches():
+    q = np.array([0.3, -1.2, 1.4, -0.9, 1.1, 0.4])
+    T = dh_forward(UR3E_DH, q)
+    t = T[:3].ravel().tolist()
+    wide = [-TWO_PI] * 6, [TWO_PI] * 6
+    assert _certified(t)
+    assert _nearest_search(UR3E_DH._ur, t, q.tolist(), *wide, (1.0,) * 6)[2]
+    scaled = (np.diag([1.0 + 1e-9, 1.0, 1.0, 1.0]) @ T)[:3].ravel().tolist()
+    reflected = (np.diag([1.0, -1.0, 1.0, 1.0]) @ T @ np.diag([1.0, -1.0, 1.0, 1.0]))
+    reflected[:3, 1] *= -1.0  # y6 = -(z6 × x6): a left-handed frame
+    assert not _certified(scaled) and not _certified(reflected[:3].ravel().tolist())
+    # a joint on the limit the solution just overshoots: clamped, not exact
+    lower = np.full(6, -TWO_PI)
+    upper = np.full(6, TWO_PI)
+    upper[2] = q[2] - 0.5e-10
+    found = _nearest_search(UR3E_DH._ur, t, q.tolist(), lower.tolist(), upper.tolist(), (1.0,) * 6)
+    assert found is not None and found[1][2] == upper[2] and not found[2]
+    # the elbow stretched straight, a little beyond: cos q3 clipped
+    straight = dh_forward(UR3E_DH, np.array([0.3, -1.2, 0.0, -0.9, 1.1, 0.4]))
+    straight[:3, 3] *= 1.0 + 1e-10
+    found = _nearest_search(UR3E_DH._ur, straight[:3].ravel().tolist(), q.tolist(), *wide, (1.0,) * 6)
+    assert found is not None and not found[2]
 
 
 def test_the_nearest_of_several_candidates_is_found_when_the_seed_is_between_branches():

@@ -1,4 +1,5 @@
-"""The check path imports only what it uses: no scipy, no HTTP client, no deploy/LLM/replay/batch code.
+"""The check path imports only what it uses: no Pinocchio (a bundled arm's tables are stored, its critics that need
+dynamics run on demand), no scipy, no HTTP client, no deploy/LLM/replay/batch code.
 
 Each case runs in a fresh interpreter (``sys.modules`` of this test process holds everything the suite has
 imported) and prints the modules loaded after the work is done.
@@ -18,10 +19,10 @@ PROGRAM = ROOT / "examples" / "programs" / "sorting_careful.py"
 
 #: Packages and robocritics subpackages that ``robocritics check`` and ``simulate() + critique()`` must not load
 #: (the ``robocritics.repair`` package itself is light and loads with ``robocritics``; its modules are not).
-NOT_ON_THE_PATH = ("scipy", "httpx", "httpcore", "viser", "ray", "pyarrow", "sqlite3", "yaml", "logging",
+NOT_ON_THE_PATH = ("pinocchio", "scipy", "httpx", "httpcore", "viser", "ray", "pyarrow", "sqlite3", "yaml", "logging",
                    "robocritics.deploy", "robocritics.llm", "robocritics.viz", "robocritics.batch", "robocritics.repair.",
                    "robocritics.testing", "robocritics.robot.vendor", "robocritics.robot.fit",
-                   "robocritics.robot.ik_numeric", "robocritics.geometry.meshes", "robocritics.formats.urscript",
+                   "robocritics.robot.ik_numeric", "robocritics.formats.urscript",
                    "robocritics.formats.rosbag", "robocritics.formats.export", "robocritics.formats.files",
                    "robocritics.humans")  # fmt: skip
 

@@ -118,6 +118,9 @@ def test_sampled_positions_are_ruckigs_at_time(start, goal, fraction, nudge):
     for prof in (profile_joint_move(start, goal, LIMITS, fraction), profile_path_1d(0.3, 0.25 * fraction + 0.01, 1.0, 5.0)):
         if prof._traj is None:
             continue
+        # what position() takes without reading it: no brake pre-phase, the end is the goal at rest
+        for p, g in zip(prof._traj.profiles[0], prof.goal):
+            assert p.brake.duration == 0.0 and (p.pf, p.vf, p.af) == (g, 0.0, 0.0)
         ends = np.concatenate([np.cumsum(p.t) for p in prof._traj.profiles[0]])
         times = np.concatenate([np.arange(0.0, prof.duration_s, 1 / 125.0), ends[ends <= prof.duration_s], [prof.duration_s]])
         ours = prof.position(times)

@@ -33,11 +33,15 @@ from robocritics.planning.planner import (
     Planner,
     PlannerSettings,
     plan_approach,
+    trajectory_bytes,
     trajectory_bytes_per_sample,
 )
+from robocritics.trajectory import CHUNK_SAMPLES
 
 SORTING = Scene.builtin("sorting")
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "programs"
+#: A duration budget of 5 min, for the tests of max_motion_s (the default budget bounds samples, not duration).
+FIVE_MINUTES = PlannerSettings(max_motion_s=300.0)
 
 
 def peak_bytes(fn):
@@ -57,11 +61,23 @@ def peak_bytes(fn):
 # --- the issue's cases ------------------------------------------------------------------------
 
 
+def test_the_default_budget_bounds_samples_not_duration():
+    # 2000 waits of 10 s are 5.6 h: the default budget refuses them at the call that passes a million samples
+    # (2.2 h at 125 Hz), before its samples are made; a duration budget is the caller's choice
+    program = run_program("for i in range(2000):\n    wait(10)\n", SORTING, Budget(clock=lambda: 0.0))
+    error, peak = peak_bytes(lambda: simulate(program, SORTING))
+    assert isinstance(error, MotionBudgetError) and error.limit == "max_samples" and error.line == 2, error
+    assert "needs more than 1,000,000 samples" in str(error) and "2.2 h of motion at 125 Hz" in str(error)
+    assert peak < 250e6, peak  # the 1,000,000 samples made: q, time and opening in the planner's parts
+    defaults = PlannerSettings()
+    assert (defaults.max_samples, defaults.max_motion_s) == (1_000_000, 86_400.0)
+
+
 def test_two_thousand_waits_are_refused_with_the_whole_duration_and_little_memory():
     # the sandbox runs on a stopped clock: on a loaded machine its 0.5 s wall-clock budget could end the
     # 2000-iteration loop first, and this test is about the planner's motion budget
     program = run_program("for i in range(2000):\n    wait(10)\n", SORTING, Budget(clock=lambda: 0.0))
-    error, peak = peak_bytes(lambda: simulate(program, SORTING))
+    error, peak = peak_bytes(lambda: simulate(program, SORTING, settings=FIVE_MINUTES))
     assert isinstance(error, MotionBudgetError), error
     assert error.limit == "max_motion_s" and error.line == 2
     assert str(error).startswith(
@@ -92,7 +108,7 @@ def test_the_slowest_speed_plans_and_its_long_motion_is_named():
     # 1 % is allowed; a hundred moves at 1 % are 100 min of motion: refused at the move that passes 5 min,
     # with the whole duration (every move timed, none sampled) and the speed as the hint
     program = "reduce_speed(1)\nfor i in range(50):\n    move_to(0.3, 0.1, 0.2)\n    move_to(0.3, -0.1, 0.2)\n"
-    error, peak = peak_bytes(lambda: simulate(program, SORTING))
+    error, peak = peak_bytes(lambda: simulate(program, SORTING, settings=FIVE_MINUTES))
     assert isinstance(error, MotionBudgetError) and error.limit == "max_motion_s", error
     assert error.line == 3
     text = str(error)
@@ -163,11 +179,20 @@ def test_the_memory_limit_is_checked_before_sampling_and_counts_the_scene():
     assert simulate("wait(3)\n", Scene(), settings=PlannerSettings(max_trajectory_bytes=1_000 * per_sample))
 
 
-def test_the_fastest_rate_and_the_longest_motion_meet_the_memory_limit_first():
-    # 500 Hz: the default memory limit (400 MB estimated) binds before 5 min of motion
+def test_a_long_motion_costs_a_chunk_and_a_compact_sample_each():
+    # beyond a chunk the estimate grows by the compact trajectory's bytes per sample, not the whole build's
+    robot, scene = Robot.ur3e(), crowded_scene()
+    per_sample = trajectory_bytes_per_sample(robot, scene)
+    assert trajectory_bytes(robot, scene, 1000) == 1000 * per_sample
+    n = CHUNK_SAMPLES * 10
+    slope = trajectory_bytes(robot, scene, n + 1000) - trajectory_bytes(robot, scene, n)
+    assert 0 < slope < 1000 * per_sample / 10
+    # a memory limit below the estimate still refuses, before the samples are made
     program = "for i in range(40):\n    wait(10)\n"
-    error, peak = peak_bytes(lambda: simulate(program, SORTING, sample_rate_hz=500))
+    settings = PlannerSettings(max_trajectory_bytes=trajectory_bytes(robot, scene, 100_000))
+    error, peak = peak_bytes(lambda: simulate(program, scene, sample_rate_hz=500, settings=settings))
     assert isinstance(error, MotionBudgetError) and error.limit == "max_trajectory_bytes", error
+    assert f"{CHUNK_SAMPLES:,} at a time" in str(error)
     assert peak < 60e6
 
 
@@ -218,7 +243,7 @@ def test_a_program_far_over_budget_is_timed_within_a_bounded_amount_of_work(monk
         original(self, units)
 
     monkeypatch.setattr(Planner, "count_timing_work", counting)
-    error = pytest.raises(MotionBudgetError, simulate, program, SORTING).value
+    error = pytest.raises(MotionBudgetError, simulate, program, SORTING, settings=FIVE_MINUTES).value
     assert error.limit == "max_motion_s" and error.line in (3, 4)
     assert "the program's motion lasts at least " in str(error)
     assert 300 < sum(seen) <= 300 + max(seen)  # the work that passes 300 units stops the timing
@@ -245,7 +270,7 @@ def test_ik_work_is_capped_before_solving(monkeypatch):
     assert error.limit == "max_ik_solves" and error.line == 3
     assert "needs more than 60 inverse-kinematics solutions by this call (85; straight lines are solved every 5 mm)" in str(error)
     assert 43 <= len(solves) < 60  # the move_to and the first line's 42 grid points; none of the second line's 42
-    assert PlannerSettings().max_ik_solves == 5_000
+    assert PlannerSettings().max_ik_solves == 100_000
 
 
 def test_motion_budget_errors_survive_a_process_boundary():
@@ -319,7 +344,7 @@ def test_budget_checks_hold_in_eight_threads_at_once():
     def one(case):
         program, expected = case
         try:
-            return len(simulate(program, SORTING).trajectory) > 1, expected
+            return len(simulate(program, SORTING, settings=FIVE_MINUTES).trajectory) > 1, expected
         except MotionBudgetError as exc:
             return exc.limit, expected
         except (PlanningError, ProgramError) as exc:
@@ -329,3 +354,12 @@ def test_budget_checks_hold_in_eight_threads_at_once():
         results = list(pool.map(one, programs))
     for got, expected in results:
         assert got == (True if expected is None else expected)
+
+
+def crowded_scene() -> Scene:
+    """The sorting scene with 60 more boxes (as shapes: each box a floor and four walls)."""
+    boxes = [
+        {"id": f"box_{i}", "size": [0.05, 0.05, 0.05], "position": [-0.6 + 0.06 * (i % 20), 0.45 + 0.06 * (i // 20), 0.025]}
+        for i in range(12)
+    ]
+    return SORTING.model_copy(update={"containers": list(SORTING.containers) + [Scene.model_validate({"containers": boxes}).containers[i] for i in range(12)]})

@@ -169,6 +169,25 @@ def test_fitted_capsules_enclose_the_mesh_within_their_slack(point):
         assert nearest.slack_m > 0
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.tuples(*(st.floats(-0.5, 0.7) for _ in range(3))))
+def test_each_fitted_capsule_encloses_its_piece_of_the_mesh_within_its_own_slack(point):
+    """Per capsule, against the piece it encloses (what the exact path measures near contact):
+    d(p, piece) - slack <= d(p, capsule) <= d(p, piece); the pieces together are the mesh."""
+    p = np.array(point)
+    for c in _CAPSULES:
+        d_piece, d_capsule = _mesh_distance(p, c.mesh), _capsule_distance(p, c)
+        assert d_capsule <= d_piece + 1e-9
+        if d_capsule > 0:
+            assert d_piece - d_capsule <= c.slack_m + 1e-9
+    assert min(_mesh_distance(p, c.mesh) for c in _CAPSULES) == pytest.approx(_mesh_distance(p, _MESH), abs=1e-12)
+
+
+def test_every_piece_lies_inside_its_capsule():
+    for c in _CAPSULES:
+        assert max(_capsule_distance(v, c) for v in c.mesh.vertices) <= 1e-9
+
+
 # --- hostile URDFs ------------------------------------------------------------------------------------
 
 _ARM = """<?xml version="1.0"?>

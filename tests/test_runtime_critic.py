@@ -30,7 +30,7 @@ def sorting():
     [
         ("import os\nos.system('true')\n", "ProgramError", 1, "import of 'os' is not allowed"),
         ("home()\nmove_to(2.0, 0.0, 0.1)\n", "PlanningError", 2, "out of reach"),
-        ("home()\nfor i in range(40):\n    wait(10)\n", "MotionBudgetError", 3, "the limit is 5 min"),
+        ("home()\nfor i in range(1000):\n    wait(10)\n", "MotionBudgetError", 3, "needs more than 1,000,000 samples"),
         ("# nothing\n\nx = 1\n", "ProgramError", 3, "made no skill calls"),
     ],
 )

@@ -428,3 +428,97 @@ def test_the_studio_draws_the_jig_and_flags_the_plunge(cell):
         assert driver.execute_script("return document.getElementById('replay').dataset.meshes") == "1"
         save_screenshot(driver, "studio_mesh_jig.png")
         assert not [e for e in severe_console_errors(driver) if "favicon" not in e]
+
+
+# --- inside a closed mesh -------------------------------------------------------------------------------------
+
+PLATE, FENCE = ((0, 0, 0), (120, 80, 20)), ((0, 0, 20), (20, 80, 90))  # the jig's two boxes, mm (jig_corners)
+
+
+def _box_of(p_mm) -> int:
+    """Which of the jig's boxes holds the point (mm, jig frame) strictly inside: 0, 1, or -1 for none."""
+    for i, (lo, hi) in enumerate((PLATE, FENCE)):
+        if all(lo[k] < p_mm[k] < hi[k] for k in range(3)):
+            return i
+    return -1
+
+
+def _jig_shape(folder: Path, corners=None):
+    write_stl(folder / "jig.stl", jig_corners() if corners is None else corners)
+    scene = Scene.model_validate({"objects": [dict(JIG, file=str(folder / "jig.stl"))]})
+    return scene.objects[0].shapes()[0]
+
+
+_MM_POINT = st.one_of(
+    st.tuples(st.floats(2, 118), st.floats(2, 78), st.floats(2, 18)),  # in the plate
+    st.tuples(st.floats(2, 18), st.floats(2, 78), st.floats(22, 88)),  # in the fence
+    st.tuples(st.floats(-10, 130), st.floats(-10, 90), st.floats(-10, 100)),  # anywhere about it
+)
+
+
+def test_the_jig_is_closed_and_its_winding_number_is_its_inside(tmp_path):
+    from robocritics.geometry.meshes import is_closed, winding_numbers
+
+    shape = _jig_shape(tmp_path)
+    vertices, triangles = shape.mesh
+    assert is_closed(vertices, triangles)
+    assert not is_closed(vertices, triangles[2:])  # two triangles off the plate's bottom: an open shell
+    points = np.random.default_rng(5).uniform((-10, -10, -10), (130, 90, 100), size=(400, 3))
+    w = winding_numbers(points * 0.001, vertices[triangles])
+    inside = np.array([_box_of(p) >= 0 for p in points])
+    assert np.allclose(w, inside.astype(float), atol=1e-9)  # 1 inside a shell, 0 outside: integers, off the surface
+
+
+@settings(max_examples=25, deadline=None)
+@given(_MM_POINT, st.tuples(*[st.floats(-25, 25)] * 3), st.floats(0.5, 6.0))
+def test_a_capsule_inside_the_closed_jig_reads_a_penetration_like_a_box_does(tmp_path_factory, start_mm, step_mm, radius_mm):
+    """Wholly inside (both ends in one of the jig's boxes, clear of its faces): -(distance of the segment to the
+    surface + r), the brute-force reference; a ball in a box reads the same in the closed-form kernels."""
+    shape = _jig_shape(tmp_path_factory.mktemp("jig"))
+    a_mm = np.array(start_mm)
+    b_mm = a_mm + np.array(step_mm)
+    pose = np.asarray(shape.pose)
+    a, b = (pose[:3, :3] @ (x * 0.001) + pose[:3, 3] for x in (a_mm, b_mm))
+    r = radius_mm * 0.001
+    value = float(capsule_mesh(a[None], b[None], r, shape)[0])
+    kernel = ProximityKernel([("link", r)], [shape], [("link", "jig")])
+    assert float(kernel.distances(a[None, None], b[None, None])[0, 0]) == value
+    surface = reference_distance(a, b, 0.0, placed_triangles(shape))  # segment to surface (0: crosses it)
+    where = _box_of(a_mm), _box_of(b_mm)
+    if where[0] == where[1] >= 0 and surface > r + 1e-6:
+        assert value == pytest.approx(-(surface + r), abs=1e-6)
+        if not a_mm.tolist() == b_mm.tolist():
+            return
+        # a ball: the box kernel on the same box, placed as the jig places it
+        lo, hi = (np.array(x) * 0.001 for x in (PLATE, FENCE)[where[0]])
+        box_pose = pose.copy()
+        box_pose[:3, 3] = pose[:3, :3] @ ((lo + hi) / 2) + pose[:3, 3]
+        box = scene_module.Shape("b", "b", "box", tuple(hi - lo), box_pose)
+        assert value == pytest.approx(float(ProximityKernel([("link", r)], [box], [("link", "b")]).distances(a[None, None], b[None, None])[0, 0]), abs=1e-9)
+    elif where == (-1, -1) and surface > r + 1e-6:
+        assert value == pytest.approx(surface - r, abs=1e-6)
+    else:
+        assert value <= 1e-6  # crossing the surface
+
+
+def test_an_open_mesh_has_no_inside_a_capsule_behind_it_reads_its_gap(tmp_path):
+    corners = jig_corners()[2:]  # the plate's bottom gone: not closed
+    shape = _jig_shape(tmp_path, corners)
+    pose = np.asarray(shape.pose)
+    a = pose[:3, :3] @ np.array([0.06, 0.04, 0.01]) + pose[:3, 3]  # mid-plate, 1 cm over where its floor was
+    value = float(capsule_mesh(a[None], a[None], 0.002, shape)[0])
+    assert value == pytest.approx(reference_distance(a, a, 0.002, placed_triangles(shape)), abs=1e-6) and value > 0
+
+
+def test_a_carried_ball_inside_the_closed_jig_reads_its_depth(tmp_path):
+    from robocritics.geometry.meshes import shape_mesh
+
+    shape = _jig_shape(tmp_path)
+    pose = np.asarray(shape.pose)
+    ball = scene_module.Shape("ball", "ball", "sphere", (0.004,), np.eye(4))
+    at = np.broadcast_to(np.eye(4), (2, 4, 4)).copy()
+    at[0, :3, 3] = pose[:3, :3] @ np.array([0.06, 0.04, 0.012]) + pose[:3, 3]  # 8 mm under the plate's top
+    at[1, :3, 3] = pose[:3, :3] @ np.array([0.06, 0.04, 0.030]) + pose[:3, 3]  # 10 mm over it
+    values = shape_mesh(ball, shape, at, pose[None])
+    assert values[0] == pytest.approx(-(0.008 + 0.004), abs=1e-9)
+    assert values[1] == pytest.approx(0.010 - 0.004, abs=1e-9)

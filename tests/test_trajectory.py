@@ -161,3 +161,93 @@ def test_finiteness_check_raises_exactly_where_a_value_is_not_finite(values):
             _array("proximity", arr)
     else:  # finite values whose sum overflows (1e308 + 1e308) are still accepted
         assert np.array_equal(_array("proximity", arr), arr)
+
+
+# --- compact trajectories (a long motion's form) ------------------------------------------------------------
+
+CARRY = (
+    "move_above(red_apple_1, 0.1)\nmove_linear(red_apple_1.x, red_apple_1.y, red_apple_1.z)\nclose_gripper()\n"
+    "move_up(0.1)\nmove_to(0.3, -0.1, 0.2)\nopen_gripper()\nmove_up(0.05)\n"
+)
+
+
+@pytest.fixture(scope="module")
+def stored_and_compact():
+    import robocritics.pipeline as pipeline
+
+    scene = Scene.builtin("sorting")
+    stored = simulate(CARRY, scene, sample_rate_hz=500)
+    mp = pytest.MonkeyPatch()
+    mp.setattr(pipeline, "CHUNK_SAMPLES", 0)  # every motion compact
+    try:
+        compact = simulate(CARRY, scene, sample_rate_hz=500)
+    finally:
+        mp.undo()
+    return stored, compact
+
+
+def test_a_compact_trajectory_computes_what_a_stored_one_holds(stored_and_compact):
+    stored, compact = stored_and_compact
+    a, b = stored.trajectory, compact.trajectory
+    assert b.compact and not a.compact and len(a) == len(b) > 1000
+    assert a.content_hash() == b.content_hash() and a.pairs == b.pairs
+    np.testing.assert_array_equal(a.frames, b.frames)
+    np.testing.assert_array_equal(a.proximity, b.proximity)
+    assert list(a.attached) == list(b.attached) and set(b.attached) == {"", "red_apple_1"}
+    np.testing.assert_array_equal(a.positions, b.positions)
+    idx = np.array([0, 7, 500, len(a) - 1])
+    np.testing.assert_array_equal(b.frames_at(idx), a.frames[idx])
+    for oid in stored.object_poses:
+        assert oid in compact.object_poses
+        np.testing.assert_array_equal(compact.object_poses[oid], stored.object_poses[oid])
+        np.testing.assert_array_equal(compact.object_poses.at(oid, idx), stored.object_poses[oid][idx])
+    assert "green_apple" not in compact.object_poses
+
+
+@settings(max_examples=20)
+@given(k=st.integers(1, 40), halo=st.integers(0, 2), a=st.integers(0, 1500), n=st.integers(1, 300))
+def test_chunks_cover_every_sample_once_with_the_whole_runs_rows(stored_and_compact, k, halo, a, n):
+    stored, compact = stored_and_compact
+    whole, b = stored.trajectory, compact.trajectory
+    size = 64 * k
+    seen = np.zeros(len(b), dtype=int)
+    for chunk in b.chunks(size, halo=halo):
+        piece = chunk.trajectory
+        assert chunk.start % 64 == 0 and chunk.lo == max(chunk.start - halo, 0)
+        assert len(piece) == min(chunk.stop + halo, len(b)) - chunk.lo
+        seen[chunk.start : chunk.stop] += 1
+        rows = slice(chunk.lo, chunk.lo + len(piece))
+        np.testing.assert_array_equal(piece.frames, whole.frames[rows])
+        np.testing.assert_array_equal(piece.time, whole.time[rows])
+        # proximity is the whole run's wherever it is exact (up to 0.10 m, planning.trace.EXACT_WITHIN_M, and the
+        # arm's closest distance); beyond, a far pair's value is some lower bound above 0.10 m in both
+        near = whole.proximity[rows] <= 0.10
+        np.testing.assert_array_equal(piece.proximity[near], whole.proximity[rows][near])
+        assert np.all(piece.proximity[~near] > 0.10)
+        arm = [k for k, p in enumerate(whole.pairs) if p.kind == "environment" and p.group_a == "arm"]
+        np.testing.assert_array_equal(piece.proximity[:, arm].min(axis=1), whole.proximity[rows][:, arm].min(axis=1))
+        for oid, poses in chunk.object_poses.items():
+            np.testing.assert_array_equal(poses, stored.object_poses[oid][rows])
+    assert np.all(seen == 1)
+    # any slice: frames exact; proximity exact up to 0.10 m
+    a = min(a, len(b) - 1)
+    piece, ref = b.slice(a, a + n), whole.slice(a, a + n)
+    np.testing.assert_array_equal(piece.frames, ref.frames)
+    near = ref.proximity <= 0.10
+    np.testing.assert_array_equal(piece.proximity[near], ref.proximity[near])
+    assert piece.content_hash() == ref.content_hash()
+
+
+def test_a_compact_trajectory_pickles_and_gives_its_states(stored_and_compact):
+    import pickle
+
+    stored, compact = stored_and_compact
+    back = pickle.loads(pickle.dumps(compact))
+    assert back.trajectory.compact
+    np.testing.assert_array_equal(back.trajectory.proximity, stored.trajectory.proximity)
+    states = list(compact.trajectory.states)
+    assert len(states) == len(stored.trajectory)
+    np.testing.assert_array_equal(states[333].F, stored.trajectory.frames[333])
+    np.testing.assert_array_equal(states[-1].P, stored.trajectory.proximity[-1])
+    with pytest.raises(TrajectoryError, match="multiple of 64"):
+        next(compact.trajectory.chunks(100))

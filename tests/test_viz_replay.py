@@ -229,3 +229,29 @@ def test_the_replay_draws_any_arm_its_capsules_and_its_reach():
     assert f32(data["capsule_ends"]).shape[1] == len(robot.capsules)
     assert data["robot"] == "panda"
     assert data["workspace"]["radius_m"] == pytest.approx(robot.workspace.radius_m)
+
+
+def test_a_long_motion_is_thinned_to_a_bounded_replay_with_its_flagged_windows_whole(monkeypatch):
+    # a long program's replay stays bounded: the sorting run drawn in at most 120 frames keeps its flagged windows
+    # at the full frame rate (every stride-th sample in them) and thins the rest
+    import robocritics.viz.replay as replay
+
+    execution, report = run("sorting_naive")
+    full = frame_samples(execution, replay_data(execution, report))
+    monkeypatch.setattr(replay, "MAX_REPLAY_FRAMES", 120)
+    idx = frame_samples(execution, replay_data(execution, report))
+    windows = [r for v in report.verdicts if v.flag != rc.Flag.OK for r in v.evidence.sample_ranges]
+    in_windows = {s for s in full.tolist() if any(a <= s <= b for a, b in windows)}
+    assert len(in_windows) <= 60 and in_windows <= set(idx.tolist())  # every frame inside a window kept
+    kept = {s for v in report.verdicts for s in (v.evidence.worst_sample, v.evidence.first_sample,
+                                                  v.evidence.last_sample) if s is not None}
+    kept |= {s for v in report.verdicts for r in v.evidence.sample_ranges for s in r}
+    assert kept <= set(idx.tolist())
+    assert len(set(idx.tolist()) - kept) <= 120 + 1 and len(idx) < len(full)  # the regular frames: the budget
+    # an hour at 500 Hz: a bounded number of frames, a flagged minute at the full frame rate
+    monkeypatch.undo()
+    time_s = np.arange(1_800_000) / 500.0
+    frames = replay._frame_samples(time_s, [5, 1_000_000], [(900_000, 930_000)])
+    assert len(frames) <= replay.MAX_REPLAY_FRAMES + 4
+    window = frames[(frames >= 900_000) & (frames <= 930_000)]
+    assert len(window) >= 60 * replay.MAX_FRAME_RATE_HZ and np.diff(window).max() <= 500 / replay.MAX_FRAME_RATE_HZ + 1

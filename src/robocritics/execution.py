@@ -16,8 +16,9 @@ A critic's ``check(execution, params)`` receives this object (see :mod:`robocrit
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Optional
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Iterator, Optional
 
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
@@ -28,9 +29,38 @@ if TYPE_CHECKING:  # pragma: no cover
     from .robot.model import Robot
     from .planning.planner import Event
     from .scene import Scene
-    from .trajectory import Trajectory
+    from .trajectory import Chunk, Trajectory
 
-__all__ = ["Execution"]
+__all__ = ["Execution", "MovedPoses"]
+
+
+class MovedPoses(Mapping):
+    """``{object id: (T, 4, 4)}`` poses of the objects a compact (long) trajectory moves, each computed when read
+    (:meth:`robocritics.trajectory.Trajectory.object_poses`): the ``object_poses`` of a long run, which would
+    take 128 bytes a sample per object as arrays. Chunks of the run (:meth:`Execution.chunks`) carry theirs."""
+
+    def __init__(self, trajectory: "Trajectory"):
+        self.trajectory = trajectory
+
+    def __getitem__(self, obj_id: str) -> "np.ndarray":
+        if obj_id not in self.trajectory.geometry.schedules:
+            raise KeyError(obj_id)
+        return self.trajectory.object_poses()[obj_id]
+
+    def at(self, obj_id: str, samples) -> "np.ndarray":
+        """``(n, 4, 4)`` poses of ``obj_id`` at sample indices ``samples`` only (a replay's decimated samples)."""
+        import numpy as np
+
+        return self.trajectory.geometry.poses_at(obj_id, np.asarray(samples, dtype=np.int64))
+
+    def __contains__(self, obj_id) -> bool:  # without computing the poses (Mapping's would read them)
+        return obj_id in self.trajectory.geometry.schedules
+
+    def __iter__(self):
+        return iter(self.trajectory.geometry.schedules)
+
+    def __len__(self) -> int:
+        return len(self.trajectory.geometry.schedules)
 
 
 @dataclass
@@ -58,6 +88,25 @@ class Execution:
     @property
     def duration_s(self) -> float:
         return self.trajectory.duration_s
+
+    def chunks(self, size: int | None = None) -> Iterator[tuple["Chunk", "Execution"]]:
+        """The run chunk by chunk (:meth:`robocritics.trajectory.Trajectory.chunks`, ``size`` samples each): each
+        chunk with the run restricted to its samples (its trajectory and the moving objects' poses there). A run of
+        one chunk is itself. By default a compact trajectory comes in chunks of
+        :data:`~robocritics.trajectory.CHUNK_SAMPLES` and a stored one in one chunk (its arrays are all in memory
+        already: slicing them would only cost copies)."""
+        from .trajectory import CHUNK_SAMPLES, Chunk
+
+        if size is None and not self.trajectory.compact:
+            yield Chunk(0, len(self.trajectory), 0, self.trajectory, {}), self
+            return
+        for chunk in self.trajectory.chunks(size or CHUNK_SAMPLES):
+            if chunk.trajectory is self.trajectory:
+                yield chunk, self
+                continue
+            lo, hi = chunk.lo, chunk.lo + len(chunk.trajectory)
+            poses = chunk.object_poses or {oid: p[lo:hi] for oid, p in self.object_poses.items()}
+            yield chunk, replace(self, trajectory=chunk.trajectory, object_poses=poses)
 
     def show(self, report: Report | None = None, *, title: str | None = None):
         """The 3-D replay of this run (with ``report``'s verdicts on its timeline), displayed inline in Jupyter.

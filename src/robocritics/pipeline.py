@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Iterable, Iterator, Mapping, Optional
 
 from .errors import CriticError, PlanningError, ProgramError, RobotModelError, RoboCriticsError, SceneError
-from .execution import Execution
+from .execution import Execution, MovedPoses
+from .trajectory import CHUNK_SAMPLES
 
 if TYPE_CHECKING:  # pragma: no cover
     from .critic import Critic
@@ -96,8 +97,8 @@ def simulate(
     :class:`ProgramError` for a program the sandbox rejects and
     :class:`PlanningError` (with the program line) for a motion that cannot be
     planned, such as an unreachable target, a speed below 1 % or a sample rate
-    out of range. A motion beyond the budget of ``settings`` (5 min, 75,000
-    samples, 400 MB by default; see :class:`PlannerSettings`) raises
+    out of range. A motion beyond the budget of ``settings`` (1,000,000 samples, 1 GB estimated, 100,000
+    IK solutions by default; see :class:`PlannerSettings`; a long motion is stored compactly) raises
     :class:`MotionBudgetError`, a PlanningError, before its samples are made.
     """
     from .program.plan import Plan
@@ -135,26 +136,36 @@ def simulate(
         ) if isinstance(program, str) else 1  # fmt: skip
         raise ProgramError("the program made no skill calls, so there is no motion to check", line=first_code_line)
     q, t, opening, attached, step = planner.finish()
-    # frames and capsule endpoints in one FK pass (the endpoints straight from the frames' time series)
-    frames, p0, p1 = robot.forward_with_capsules(q, opening)
-    object_poses = planner.world.object_poses(frames[:, robot.tcp_index])
-    trajectory = robot.trajectory(
-        q=q,
-        time=t,
-        scene=scene,
-        gripper_opening_m=opening,
-        attached=attached,
-        step=step,
-        steps=planner.steps,
-        object_poses=object_poses,
-        frames=frames,
-        segments=(p0, p1),
-    )
+    if len(q) > CHUNK_SAMPLES:  # a long motion: frames, proximity and object poses made chunk by chunk, on demand
+        from .planning.trace import build_compact_trajectory, pose_schedules
+
+        trajectory = build_compact_trajectory(
+            robot, scene, q, t, gripper_opening_m=opening, attached=attached, step=step, steps=planner.steps,
+            schedules=pose_schedules(planner.world, q, opening, robot),
+        )  # fmt: skip
+        object_poses = MovedPoses(trajectory)
+    else:
+        # frames and capsule endpoints in one FK pass (the endpoints straight from the frames' time series)
+        frames, p0, p1 = robot.forward_with_capsules(q, opening)
+        object_poses = planner.world.object_poses(frames[:, robot.tcp_index])
+        trajectory = robot.trajectory(
+            q=q,
+            time=t,
+            scene=scene,
+            gripper_opening_m=opening,
+            attached=attached,
+            step=step,
+            steps=planner.steps,
+            object_poses=object_poses,
+            frames=frames,
+            segments=(p0, p1),
+        )
+        for poses in object_poses.values():
+            poses.setflags(write=False)
     final_scene = scene.model_copy(update={"objects": [planner.world.objects[o.id] for o in scene.objects]})
-    for poses in object_poses.values():
-        poses.setflags(write=False)
     return Execution(
-        trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.world.resting_on), dict(object_poses)
+        trajectory, plan, planner.events, final_scene, scene, robot, dict(planner.world.resting_on),
+        object_poses if isinstance(object_poses, MovedPoses) else dict(object_poses),
     )
 
 

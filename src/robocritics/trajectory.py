@@ -24,6 +24,15 @@ frames and ``K`` proximity pairs holds
 
 Built by :func:`robocritics.robot.model.Robot.trajectory` from joint samples; validated
 on construction; :meth:`Trajectory.to_json` / :meth:`Trajectory.from_json` are lossless.
+
+Long motion
+-----------
+A simulated motion of more than :data:`CHUNK_SAMPLES` samples is *compact*: it stores only ``q``, ``time``,
+``gripper_opening_m``, ``attached`` and ``step`` (about 100 bytes a sample) and computes ``frames`` and
+``proximity`` on demand, chunk by chunk (:meth:`Trajectory.chunks`), from its ``geometry`` (the robot and the
+scene's distance kernel: :class:`robocritics.planning.trace.ChunkGeometry`). ``trajectory.frames`` and
+``trajectory.proximity`` still work on a compact trajectory, but build the whole array (1.5 kB and some 100 bytes a
+sample), as a stored one holds; critics that read :meth:`chunks` need memory for one chunk only.
 """
 
 from __future__ import annotations
@@ -39,7 +48,16 @@ from pydantic import BaseModel, ConfigDict, Field
 from ._arrays import run_starts, unique_values
 from .errors import TrajectoryError
 
-__all__ = ["Pair", "Step", "RobotLimits", "State", "Trajectory"]
+__all__ = ["Pair", "Step", "RobotLimits", "State", "Trajectory", "Chunk", "CHUNK_SAMPLES", "CHUNK_ALIGN"]
+
+#: Samples per chunk of a long motion (:meth:`Trajectory.chunks`): a simulated motion longer than this is stored
+#: compactly. 16,384 samples are 33 s at 500 Hz, 131 s at 125 Hz (every bundled program is one chunk); building
+#: one chunk's frames and proximity takes some 120 MB with 14 scene shapes.
+CHUNK_SAMPLES = 16_384
+#: Chunks start at multiples of this many samples: the space-usage critic's hull thins blocks of 64 samples and the
+#: proximity kernel bounds blocks of 32, so a chunk's reductions are the whole motion's bit for bit (and its
+#: proximity is wherever exact: see :class:`robocritics.planning.trace.ChunkGeometry`).
+CHUNK_ALIGN = 64
 
 PairKind = Literal["self", "environment"]
 
@@ -134,13 +152,18 @@ class Trajectory:
         robot_name: str = "",
         tcp_frame: str = "tcp",
         kinematic_hash: str = "",
+        geometry=None,
     ):
         self.q = _array("q", q, ndim=2)
         T, n = self.q.shape
         self.time = _array("time", time, ndim=1)
-        self.frames = _array("frames", frames, ndim=4)
+        self.geometry = geometry  # computes frames and proximity of a compact trajectory (see the module docstring)
+        if geometry is None:
+            self._frames = _array("frames", frames, ndim=4)
+            self._proximity = _array("proximity", proximity, ndim=2)
+        elif frames is not None or proximity is not None:
+            raise TrajectoryError("a compact trajectory (geometry given) computes its frames and proximity: pass None")
         self.frame_names = tuple(frame_names)
-        self.proximity = _array("proximity", proximity, ndim=2)
         self.pairs = tuple(p if isinstance(p, Pair) else Pair.model_validate(p) for p in pairs)
         self.gripper_opening_m = _array("gripper_opening_m", gripper_opening_m, ndim=1)
         self.attached = np.asarray(attached, dtype=str).reshape(-1)
@@ -151,8 +174,11 @@ class Trajectory:
         self.tcp_frame = str(tcp_frame)
         self.kinematic_hash = str(kinematic_hash)  # Robot.kinematic_hash of the arm it was planned for
         self._validate(T, n)
-        for arr in (self.q, self.time, self.frames, self.proximity, self.gripper_opening_m, self.attached, self.step):
+        for arr in (self.q, self.time, self.gripper_opening_m, self.attached, self.step):
             arr.setflags(write=False)
+        if geometry is None:
+            self._frames.setflags(write=False)
+            self._proximity.setflags(write=False)
 
     def _validate(self, T: int, n: int) -> None:
         if T < 1:
@@ -165,12 +191,14 @@ class Trajectory:
         ):
             if arr.shape[0] != T:
                 raise TrajectoryError(f"{name} has {arr.shape[0]} samples but q has {T}")
-        if self.frames.shape[0] != T or self.frames.shape[2:] != (4, 4):
-            raise TrajectoryError(f"frames must have shape ({T}, L, 4, 4), got {self.frames.shape}")
-        if self.frames.shape[1] != len(self.frame_names):
-            raise TrajectoryError(f"frames hold {self.frames.shape[1]} frames but {len(self.frame_names)} names were given")
-        if self.proximity.shape != (T, len(self.pairs)):
-            raise TrajectoryError(f"proximity must have shape ({T}, {len(self.pairs)}), got {self.proximity.shape}")
+        if self.geometry is None:
+            frames, proximity = self._frames, self._proximity
+            if frames.shape[0] != T or frames.shape[2:] != (4, 4):
+                raise TrajectoryError(f"frames must have shape ({T}, L, 4, 4), got {frames.shape}")
+            if frames.shape[1] != len(self.frame_names):
+                raise TrajectoryError(f"frames hold {frames.shape[1]} frames but {len(self.frame_names)} names were given")
+            if proximity.shape != (T, len(self.pairs)):
+                raise TrajectoryError(f"proximity must have shape ({T}, {len(self.pairs)}), got {proximity.shape}")
         if T > 1:
             dt = np.diff(self.time)
             if np.any(dt <= 0):
@@ -203,9 +231,90 @@ class Trajectory:
             raise TrajectoryError(f"no frame {name!r}; frames are {', '.join(self.frame_names)}") from None
 
     @property
+    def compact(self) -> bool:
+        """Whether frames and proximity are computed on demand (a long motion; see the module docstring)."""
+        return self.geometry is not None
+
+    @property
+    def frames(self) -> np.ndarray:
+        """``(T, L, 4, 4)`` link poses, m, base frame (computed, whole, on every read of a compact trajectory)."""
+        if self.geometry is None:
+            return self._frames
+        return self._computed(0, len(self))[0]
+
+    @property
+    def proximity(self) -> np.ndarray:
+        """``(T, K)`` signed distances, m, of ``pairs`` (computed, whole, on every read of a compact trajectory)."""
+        if self.geometry is None:
+            return self._proximity
+        return self._computed(0, len(self))[1]
+
+    def _computed(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """Frames, proximity and moving objects' poses of samples ``start..stop-1`` of a compact trajectory,
+        computed a chunk at a time on the chunk grid (:data:`CHUNK_ALIGN`): frames and poses are the whole motion's
+        rows bit for bit, proximity wherever it is exact (:class:`~robocritics.planning.trace.ChunkGeometry`)."""
+        cuts = {start, stop}
+        if start % CHUNK_ALIGN:  # a halo sample before a chunk: computed apart, so the chunk starts on the grid
+            cuts.add(min(stop, start - start % CHUNK_ALIGN + CHUNK_ALIGN))
+        cuts.update(range((start // CHUNK_SAMPLES + 1) * CHUNK_SAMPLES, stop, CHUNK_SAMPLES))
+        cuts = sorted(cuts)
+        parts = [self.geometry.compute(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
+        if len(parts) == 1:
+            return parts[0]
+        frames = np.concatenate([f for f, _, _ in parts])
+        proximity = np.asfortranarray(np.concatenate([p for _, p, _ in parts]))
+        poses = {oid: np.concatenate([p[oid] for _, _, p in parts]) for oid in parts[0][2]}
+        return frames, proximity, poses
+
+    def chunks(self, size: int = CHUNK_SAMPLES, halo: int = 1) -> Iterator["Chunk"]:
+        """The motion in consecutive chunks of ``size`` samples (a multiple of :data:`CHUNK_ALIGN`), each with
+        ``halo`` samples of its neighbours on either side (for differences over time).
+
+        A trajectory of at most ``size`` samples is one chunk: itself. Otherwise each :class:`Chunk` holds a
+        trajectory of samples ``lo..hi-1`` (frames and proximity made for it when compact) of which samples
+        ``start..stop-1`` are its own; reductions over the own samples of every chunk see each sample once.
+        """
+        if size < 1 or size % CHUNK_ALIGN:
+            raise TrajectoryError(f"a chunk size is a positive multiple of {CHUNK_ALIGN} samples, got {size}")
+        T = len(self)
+        if T <= size:
+            yield Chunk(0, T, 0, self, {})
+            return
+        for start in range(0, T, size):
+            stop = min(start + size, T)
+            lo, hi = max(start - halo, 0), min(stop + halo, T)
+            piece, poses = self._window(lo, hi)
+            yield Chunk(start, stop, lo, piece, poses)
+
+    def _window(self, lo: int, hi: int) -> tuple["Trajectory", dict[str, np.ndarray]]:
+        """Samples ``lo..hi-1`` as a stored trajectory, and the poses of the moving objects there (compact only)."""
+        if self.geometry is None:
+            return self.slice(lo, hi), {}
+        frames, proximity, poses = self._computed(lo, hi)
+        return self._sliced(lo, hi, frames, proximity), poses
+
+    def frames_at(self, samples) -> np.ndarray:
+        """``(len(samples), L, 4, 4)`` link poses at sample indices ``samples`` (a compact trajectory computes
+        only those: forward kinematics is per sample, so they are the rows of :attr:`frames`)."""
+        samples = np.asarray(samples, dtype=np.int64)
+        if self.geometry is None:
+            return self._frames[samples]
+        return self.geometry.frames_at(samples)
+
+    def object_poses(self, start: int = 0, stop: int | None = None) -> dict[str, np.ndarray]:
+        """``{object id: (n, 4, 4)}`` poses of the objects the motion moves at samples ``start..stop-1`` of a
+        compact trajectory (a stored one keeps none: see :attr:`robocritics.execution.Execution.object_poses`)."""
+        if self.geometry is None:
+            return {}
+        stop = len(self) if stop is None else stop
+        return self._computed(start, stop)[2]
+
+    @property
     def positions(self) -> np.ndarray:
         """``(T, L, 3)`` m: every frame's origin in the base frame (``frames[:, :, :3, 3]``), one contiguous
         read-only copy made on first use and shared by every critic (a strided view is ~3x slower to scan)."""
+        if self.geometry is not None:
+            return np.ascontiguousarray(self.frames[:, :, :3, 3])
         cached = self.__dict__.get("_positions")
         if cached is None:
             cached = np.ascontiguousarray(self.frames[:, :, :3, 3])
@@ -258,9 +367,16 @@ class Trajectory:
 
     @property
     def states(self) -> Iterator[State]:
-        """Per-sample (J, F, P, tau) views, for readers of the paper."""
-        for t in range(len(self)):
-            yield State(t, self.q[t], self.frames[t], self.proximity[t], float(self.time[t]))
+        """Per-sample (J, F, P, tau) views, for readers of the paper (a compact trajectory's made chunk by chunk)."""
+        if self.geometry is None:
+            for t in range(len(self)):
+                yield State(t, self.q[t], self._frames[t], self._proximity[t], float(self.time[t]))
+            return
+        for chunk in self.chunks(halo=0):
+            piece = chunk.trajectory
+            for i in range(len(piece)):
+                t = chunk.lo + i
+                yield State(t, self.q[t], piece.frames[i], piece.proximity[i], float(self.time[t]))
 
     # --- serialisation -------------------------------------------------------------
 
@@ -348,14 +464,22 @@ class Trajectory:
         return h.hexdigest()
 
     def slice(self, start: int, stop: int) -> "Trajectory":
-        """Samples ``start:stop`` as a new trajectory (same pairs, steps, limits)."""
+        """Samples ``start:stop`` as a new trajectory (same pairs, steps, limits), stored whole (a compact
+        trajectory's slice has its frames and proximity computed)."""
+        if self.geometry is not None:
+            start, stop, _ = slice(start, stop).indices(len(self))
+            frames, proximity, _ = self._computed(start, max(stop, start))
+            return self._sliced(start, stop, frames, proximity)
+        return self._sliced(start, stop, self._frames[start:stop], self._proximity[start:stop])
+
+    def _sliced(self, start: int, stop: int, frames: np.ndarray, proximity: np.ndarray) -> "Trajectory":
         sl = slice(start, stop)
         return Trajectory(
             q=self.q[sl],
             time=self.time[sl],
-            frames=self.frames[sl],
+            frames=frames,
             frame_names=self.frame_names,
-            proximity=self.proximity[sl],
+            proximity=proximity,
             pairs=self.pairs,
             gripper_opening_m=self.gripper_opening_m[sl],
             attached=self.attached[sl],
@@ -372,3 +496,21 @@ class Trajectory:
             f"Trajectory({len(self)} samples, {self.q.shape[1]} joints, {self.duration_s:.3f} s, "
             f"{len(self.frame_names)} frames, {len(self.pairs)} pairs, {len(self.steps)} steps)"
         )
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One chunk of a trajectory (:meth:`Trajectory.chunks`): ``trajectory`` holds samples ``lo..lo+len-1`` of
+    the whole, of which ``start..stop-1`` are this chunk's own (the others are its halo); ``object_poses`` are
+    the moving objects' poses over ``trajectory`` (compact trajectories only; empty otherwise)."""
+
+    start: int
+    stop: int
+    lo: int
+    trajectory: Trajectory
+    object_poses: dict
+
+    @property
+    def own(self) -> slice:
+        """The chunk's own rows in ``trajectory``'s arrays."""
+        return slice(self.start - self.lo, self.stop - self.lo)

@@ -67,6 +67,7 @@ from .plugins import (
     unregister,
     validate_critic,
 )
+from .chunked import Reduction, judge_in_chunks
 from .report import ALL_PASSED, BUILTIN_CRITICS, Report, format_score, signal_svg
 from .verdict import (
     MAX_SIGNAL_POINTS,
@@ -132,6 +133,8 @@ __all__ = [
     "fmt_length",
     "runs",
     "signal_svg",
+    "Reduction",
+    "judge_in_chunks",
 ]
 
 
@@ -151,7 +154,12 @@ class Critic(Protocol):
       ``check(trajectory, scene, params)`` is still accepted: the two are told apart by the number of
       parameters (:func:`takes_execution`);
     * optionally ``requested(execution) -> bool``: an on-demand critic, run when the run asks for it (or when
-      named) rather than by default.
+      named) rather than by default;
+    * optionally ``reduction(execution, params) -> Reduction``: the same judgement fed chunk by chunk
+      (:mod:`robocritics.critic.chunked`), so a long run (a compact trajectory, whose frames and proximity are made
+      a chunk at a time) is judged in the memory of one chunk; :func:`critique` then feeds every such critic in
+      one pass over the chunks. The built-in critics do; a critic without it reads the whole arrays
+      (``trajectory.frames`` of a compact trajectory builds them: 1.5 kB a sample).
     """
 
     name: str
@@ -323,10 +331,24 @@ def critique(
     only an Execution has.
     """
     execution = as_execution(run, scene, goals=goals, robot=robot)
+    selected = select_critics(_requested_selection(critics, execution), params)
+    # the critics that reduce over chunks (:mod:`robocritics.critic.chunked`) share one pass over the run's chunks
+    reductions = {
+        i: _guarded(critic, lambda: critic.reduction(execution, p))
+        for i, (critic, p) in enumerate(selected)
+        if callable(getattr(critic, "reduction", None)) and takes_execution(critic)
+    }
+    if reductions:
+        for chunk, window in execution.chunks():
+            for i, reduction in reductions.items():
+                _guarded(selected[i][0], lambda: reduction.add(chunk, window))
     verdicts: list[Verdict] = []
     used: dict[str, dict[str, Any]] = {}
-    for critic, p in select_critics(_requested_selection(critics, execution), params):
-        verdict = _run_critic(critic, execution, p)
+    for i, (critic, p) in enumerate(selected):
+        if i in reductions:
+            verdict = _checked(critic, _guarded(critic, reductions[i].verdict))
+        else:
+            verdict = _run_critic(critic, execution, p)
         verdicts.append(verdict)
         used[critic.name] = p.model_dump(mode="json")
     trajectory = execution.trajectory
@@ -406,17 +428,26 @@ def _asked(critic: Any, execution: "Execution") -> "bool | None":
 
 def _run_critic(critic: Any, execution: "Execution", params: BaseModel) -> Verdict:
     """One critic's verdict on the run, through whichever contract its ``check`` follows."""
+    if takes_execution(critic):
+        verdict = _guarded(critic, lambda: critic.check(execution, params))
+    else:
+        verdict = _guarded(critic, lambda: critic.check(execution.trajectory, execution.scene, params))
+    return _checked(critic, verdict)
+
+
+def _guarded(critic: Any, call: Any) -> Any:
+    """``call()`` of a critic's code, its failure a :class:`CriticError` naming the critic."""
     try:
-        if takes_execution(critic):
-            verdict = critic.check(execution, params)
-        else:
-            verdict = critic.check(execution.trajectory, execution.scene, params)
+        return call()
     except CriticError as exc:
         raise CriticError(f"critic {critic.name!r}: {exc}") from exc
     except RoboCriticsError as exc:
         raise CriticError(f"critic {critic.name!r} cannot judge this trajectory: {exc}") from exc
     except Exception as exc:  # a plugin's bug: say which critic
         raise CriticError(f"critic {critic.name!r} failed: {type(exc).__name__}: {exc}") from exc
+
+
+def _checked(critic: Any, verdict: Any) -> Verdict:
     if not isinstance(verdict, Verdict):
         raise CriticError(f"critic {critic.name!r} returned {type(verdict).__name__}, not a Verdict")
     if verdict.critic != critic.name:

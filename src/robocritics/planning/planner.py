@@ -19,18 +19,22 @@ Each call becomes motion:
 
 The motion budget
 -----------------
-A legal program can still ask for impossible motion (``wait(10)`` two thousand
-times, everything at 1 % speed). Every piece of motion is timed first and
+A legal program can still ask for impossible motion (``wait(10)`` a hundred
+thousand times, everything at 1 % speed). Every piece of motion is timed first and
 checked against the budget of :class:`PlannerSettings` *before* a sample is
-made: the total duration (``max_motion_s``, 5 min), the sample count
-(``max_samples``) and the estimated memory of the trajectory built from them
-(``max_trajectory_bytes``, see :func:`trajectory_bytes_per_sample`); the planning
-work is capped too (``max_ik_solves``, counted before a straight line's grid is
-solved). A limit that is hit raises :class:`MotionBudgetError` naming the program
-line, e.g. ``line 2: wait(seconds=10): the program's motion lasts 5.6 h; the
-limit is 5 min``. Past ``max_motion_s`` the rest of the program is only timed (no
-samples, at most ``_TIMING_WORK`` IK solves and profiles), so the message says
-how long the whole motion would last ("at least ..." when timing stopped early).
+made. The budget bounds the work and memory of a check, not how long the program
+runs: the sample count (``max_samples``, 1,000,000: 33 min at 500 Hz, 2.2 h at
+125 Hz), the estimated peak memory of simulating and judging them
+(``max_trajectory_bytes``, 1 GB, see :func:`trajectory_bytes`: a long motion is
+stored compactly and judged chunk by chunk, so it costs some 0.4 kB a sample) and
+the planning work (``max_ik_solves``, counted before a straight line's grid is
+solved). ``max_motion_s`` (24 h by default, so it never binds first at the allowed
+sample rates) bounds the duration for callers who want that. A limit that is hit
+raises :class:`MotionBudgetError` naming the program line, e.g. ``line 2:
+wait(seconds=10): the trajectory needs more than 1,000,000 samples ...``. Past
+``max_motion_s`` the rest of the program is only timed (no samples, at most
+``_TIMING_WORK`` IK solves and profiles), so the message says how long the whole
+motion would last ("at least ..." when timing stopped early).
 
 Every sample records the index of the step that produced it, and each step its
 source line and its *intended contacts*: the object being grasped or released
@@ -48,7 +52,7 @@ import numpy as np
 from ..errors import PlanningError
 from ..program.plan import Plan, SkillCall
 from ..scene import MAX_COORD_M, Container, Scene, rpy_matrix
-from ..trajectory import Step
+from ..trajectory import CHUNK_SAMPLES, Step
 from ..robot.model import Robot, fingers_down
 from .spline import cubic_spline
 from .world import World
@@ -73,6 +77,7 @@ __all__ = [
     "plan_approach",
     "checked_start_q",
     "trajectory_bytes_per_sample",
+    "trajectory_bytes",
 ]
 
 # Numerical tolerances (the physical choices are in PlannerSettings; joint limits use
@@ -97,6 +102,25 @@ _BYTES_PER_FRAME = 16 * 8  # a 4x4 float64 link pose
 _BYTES_PER_KERNEL_PAIR = 14  # the distance of one (capsule or carried object, shape) pair, with its temporaries (measured with every pair exact: tests/test_motion_budget.py)
 _BYTES_PER_REPORTED_PAIR = 8  # one proximity column (a minimum over an entity's shapes)
 _BYTES_PER_CARRIED_POSE = 2 * 16 * 8  # a carried object's 4x4 pose, and its temporary
+
+
+#: Memory [bytes] a sample costs beyond a chunk (see trajectory_bytes): the planner's parts and their
+#: concatenation (q, time, opening: 2 x 8 (n + 2)), the stored attached ids and steps, and what the critics keep per
+#: sample (their per-sample series, the hull's points) — measured by benchmarks/bench_long.py, rounded up.
+_BYTES_PER_COMPACT_SAMPLE = 400
+
+
+def trajectory_bytes(robot: Robot, scene: Scene, samples: int, carried: int = 0) -> int:
+    """Upper estimate of the peak memory [bytes] of simulating and judging ``samples`` samples: the whole build
+    (:func:`trajectory_bytes_per_sample` each) up to :data:`~robocritics.trajectory.CHUNK_SAMPLES` samples; beyond,
+    one chunk's build and :data:`_BYTES_PER_COMPACT_SAMPLE` per sample (the compact trajectory)."""
+    return _estimate(trajectory_bytes_per_sample(robot, scene, carried), samples)
+
+
+def _estimate(per_sample: int, samples: int) -> int:
+    if samples <= CHUNK_SAMPLES:
+        return samples * per_sample
+    return CHUNK_SAMPLES * per_sample + samples * _BYTES_PER_COMPACT_SAMPLE
 
 
 def trajectory_bytes_per_sample(robot: Robot, scene: Scene, carried: int = 0) -> int:
@@ -208,7 +232,16 @@ def plan_approach(
 
 @dataclass(frozen=True)
 class PlannerSettings:
-    """Planner constants (SI units), each with the reason for its default."""
+    """Planner constants (SI units), each with the reason for its default.
+
+    The motion budget (``max_*``) limits the work of one check, not the length of the program: ``max_samples``
+    samples (33 min of motion at 500 Hz, 2.2 h at 125 Hz; simulating and judging costs some 10 us of CPU a
+    sample), ``max_ik_solves`` IK solutions and ``max_trajectory_bytes`` of estimated peak memory. A motion of
+    more than :data:`~robocritics.trajectory.CHUNK_SAMPLES` samples is stored compactly and simulated and judged
+    chunk by chunk, so its memory grows by some 0.2-0.4 kB a sample (:func:`trajectory_bytes`), not 7 kB: a 30-minute
+    program at 500 Hz takes well under 1.5 GB (``benchmarks/bench_long.py``). ``max_motion_s`` bounds the
+    duration for callers who want that (24 h by default: at the allowed rates, >= 25 Hz, ``max_samples`` binds first).
+    """
 
     linear_speed_mps: float = 1.0  # TCP speed of straight-line moves at speed fraction 1: the UR3e's typical TCP speed
     linear_accel_mps2: float = 4.0  # their TCP acceleration: full speed within 0.25 s
@@ -223,11 +256,12 @@ class PlannerSettings:
     grasp_tip_gap_m: float = 0.01  # how far short of an object's near face the fingertips may stop and still grasp it
     stack_footprint_fraction: float = 0.9  # a released object rests on another if its centre is within this share of the larger radius
     stack_gap_m: float = 0.02  # ...and the other's top is at most this above the released object's bottom
-    # the motion budget (checked before any sample is made; see the module docstring)
-    max_motion_s: float = 300.0  # total motion of one program: 5 min, five times the longest example program's
-    max_samples: int = 75_000  # samples of one trajectory: 10 min at the default 125 Hz, 2.5 min at 500 Hz
-    max_trajectory_bytes: int = 400_000_000  # estimated peak memory of building the trajectory (400 MB)
-    max_ik_solves: int = 5_000  # IK solutions planning may use: 15x the example programs' most (335); 25 m of lines
+    # the motion budget (checked before any sample is made; see the module docstring). It bounds the work of a
+    # check (the samples made, simulated and judged; the IK solved) and its memory, not how long the motion lasts
+    max_motion_s: float = 86_400.0  # 24 h: never binds before max_samples at the allowed rates (>= 25 Hz)
+    max_samples: int = 1_000_000  # samples simulated and judged: 33 min at 500 Hz, 2.2 h at 125 Hz (~10 us each)
+    max_trajectory_bytes: int = 1_000_000_000  # estimated peak memory of simulating and judging (1 GB; see above)
+    max_ik_solves: int = 100_000  # IK solutions planning may use (~12 us each): 500 m of straight lines
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -343,10 +377,12 @@ class Planner:
                 self.scene_counts = (len(self.scene.shapes()), len(self.scene.objects) + len(self.scene.containers) + 1)
             self.bytes_per_sample[carried] = _bytes_per_sample(self.robot, *self.scene_counts, carried)
         per_sample = self.bytes_per_sample[carried]
-        if total_n * per_sample > s.max_trajectory_bytes:
+        estimate = _estimate(per_sample, total_n)
+        if estimate > s.max_trajectory_bytes:
             raise MotionBudgetError(
-                f"{where}building the trajectory would take about {total_n * per_sample / 1e6:,.0f} MB "
-                f"({total_n:,} samples at {per_sample / 1e3:.1f} kB each for {len(self.scene.shapes())} scene shapes); "
+                f"{where}building the trajectory would take about {estimate / 1e6:,.0f} MB "
+                f"({total_n:,} samples at {per_sample / 1e3:.1f} kB each for {len(self.scene.shapes())} scene shapes"
+                f"{'' if total_n <= CHUNK_SAMPLES else f', {CHUNK_SAMPLES:,} at a time'}); "
                 f"the limit is {s.max_trajectory_bytes / 1e6:,.0f} MB (PlannerSettings.max_trajectory_bytes). "
                 "Shorten the motion, sample it more sparsely or simplify the scene.",
                 line,
@@ -792,6 +828,6 @@ class Planner:
             q,
             t,
             np.concatenate(self.open_parts),
-            np.repeat(np.array(self.seg_attached, dtype=object), self.seg_lengths).astype(str),
+            np.repeat(np.array(self.seg_attached), self.seg_lengths),  # str ids: a '<U' array, no object detour
             np.repeat(np.array(self.seg_steps, dtype=int), self.seg_lengths),
         )

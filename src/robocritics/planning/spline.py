@@ -44,25 +44,33 @@ def hermite(x: np.ndarray, y: np.ndarray, slopes: np.ndarray, xs: np.ndarray) ->
     return _hermite(x, y, np.asarray(slopes, dtype=float), xs)
 
 
-def _hermite(x: np.ndarray, y: np.ndarray, slopes: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    """:func:`hermite` for knots already checked by :func:`_check`."""
+def _hermite(
+    x: np.ndarray, y: np.ndarray, slopes: np.ndarray, xs: np.ndarray, h: np.ndarray | None = None, m: np.ndarray | None = None
+) -> np.ndarray:
+    """:func:`hermite` for knots already checked by :func:`_check` (``h``, ``m``: the knot spacing and secants, if
+    the caller has them)."""
     xs = np.asarray(xs, dtype=float)
-    h = np.diff(x)
+    if h is None:
+        h = np.diff(x)
     hr = h.reshape((-1,) + (1,) * (y.ndim - 1))
-    m = np.diff(y, axis=0) / hr
+    if m is None:
+        m = np.diff(y, axis=0) / hr
     t = (slopes[:-1] + slopes[1:] - 2 * m) / hr
     c3 = t / hr
     c2 = (m - slopes[:-1]) / hr - t
-    # the piece of each xs: x_i <= xs < x_{i+1}, the last piece closed, the end pieces extended outward
-    i = np.clip(np.searchsorted(x, xs, side="right") - 1, 0, len(h) - 1)
+    # the piece of each xs: x_i <= xs < x_{i+1}, the last piece closed, the end pieces extended outward (the
+    # count of inner knots at or below xs)
+    i = np.searchsorted(x[1:-1], xs, side="right")
     dt = (xs - x[i]).reshape(xs.shape + (1,) * (y.ndim - 1))
+    # the four coefficients of every piece in one array, so one gather fetches them for every xs
+    c0, c1, c2, c3 = np.take(np.stack([y[:-1], slopes[:-1], c2, c3]), i, axis=1)  # take: a third of [:, i]'s CPU
     # power sums in scipy's PPoly order (not Horner), so the two agree to the last bit or two
     z = dt.copy()
-    out = y[:-1][i] + slopes[:-1][i] * z
+    out = c0 + c1 * z
     z *= dt
-    out += c2[i] * z
+    out += c2 * z
     z *= dt
-    out += c3[i] * z
+    out += c3 * z
     return out
 
 
@@ -87,11 +95,14 @@ def _not_a_knot_system(x: np.ndarray, y: np.ndarray, h: np.ndarray, hr: np.ndarr
     return diag, upper, lower, rhs
 
 
-def _not_a_knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _not_a_knot_slopes(x: np.ndarray, y: np.ndarray, h: np.ndarray | None = None, m: np.ndarray | None = None) -> np.ndarray:
+    """The not-a-knot spline's knot slopes (``h``, ``m``: the knot spacing and secants, if the caller has them)."""
     n = len(x)
-    h = np.diff(x)
+    if h is None:
+        h = np.diff(x)
     hr = h.reshape((-1,) + (1,) * (y.ndim - 1))
-    m = np.diff(y, axis=0) / hr
+    if m is None:
+        m = np.diff(y, axis=0) / hr
     if n == 2:  # one piece: not-a-knot is the straight line
         return np.stack([m[0], m[0]])
     if n == 3:  # both ends' conditions coincide: the parabola through the three points
@@ -110,21 +121,24 @@ def _not_a_knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     for i in range(1, n):
         d = diag_l[i] - lower_l[i] * c[i - 1]
         denom[i], c[i] = d, upper_l[i] / d
+    forward = list(zip(range(1, n), lower_l[1:], denom[1:]))
+    backward = list(zip(range(n - 2, -1, -1), c[-2::-1]))
     columns = rhs.reshape(n, -1).T.tolist()
-    forward, backward = range(1, n), range(n - 2, -1, -1)
     for col in columns:  # solved in place: rhs -> r (forward) -> s (backward)
         prev = col[0] = col[0] / denom[0]
-        for i in forward:
-            prev = col[i] = (col[i] - lower_l[i] * prev) / denom[i]
-        for i in backward:
-            prev = col[i] = col[i] - c[i] * prev
+        for i, low, den in forward:
+            prev = col[i] = (col[i] - low * prev) / den
+        for i, ci in backward:
+            prev = col[i] = col[i] - ci * prev
     return np.array(columns, dtype=float).T.reshape(rhs.shape)
 
 
 def cubic_spline(x: np.ndarray, y: np.ndarray, xs: np.ndarray) -> np.ndarray:
     """The not-a-knot cubic spline through ``(x, y)`` (as scipy's ``CubicSpline(x, y, axis=0)``) at ``xs``."""
     x, y = _check(x, y)
-    return _hermite(x, y, _not_a_knot_slopes(x, y), xs)
+    h = np.diff(x)
+    m = np.diff(y, axis=0) / h.reshape((-1,) + (1,) * (y.ndim - 1))
+    return _hermite(x, y, _not_a_knot_slopes(x, y, h, m), xs, h, m)
 
 
 def _pchip_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from itertools import accumulate
 
 import numpy as np
 from ruckig import InputParameter, Result, Ruckig, RuckigError, Trajectory as RuckigTrajectory
@@ -188,12 +189,14 @@ def sample_times(duration_s: float, sample_rate_hz: float, max_samples: int = MA
 class Profile:
     """A timed rest-to-rest move before sampling: its duration is known, no sample has been made.
 
-    ``position(times)`` gives the ``(m, dofs)`` positions at ``times`` (s from the start).
+    ``position(times)`` gives the ``(m, dofs)`` positions at ``times`` (s from the start); ``goal`` is where the
+    move ends (the target ruckig was given; None for no move).
     """
 
     duration_s: float
     start: np.ndarray = field(repr=False, compare=False)
     _traj: RuckigTrajectory | None = field(default=None, repr=False, compare=False)
+    goal: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def samples_needed(self, sample_rate_hz: float) -> int:
         """Samples :meth:`sample` makes at ``sample_rate_hz`` (the end excluded)."""
@@ -203,34 +206,43 @@ class Profile:
         """Positions ``(m, dofs)`` at ``times`` (s from the start, in ``[0, duration_s]``).
 
         Ruckig's ``at_time`` without a Python call per sample or per DOF: for every (time, DOF) the phase ``k``
-        of the time in that DOF's profile (its cumulative phase ends ``t_sum``) and ``p_k + dt (v_k + dt (a_k / 2 + dt j_k / 6))`` with ``dt`` the
-        time into the phase, the same expression in the same order as ruckig's ``integrate`` (past the last
-        phase: the final state, ``j = 0``). Rest-to-rest moves have no brake pre-phase (asserted).
+        of the time in that DOF's profile (its cumulative phase ends ``t_sum``: ``k`` counts the ends at or before
+        the time, ruckig's ``std::upper_bound``) and ``p_k + dt (v_k + dt (a_k / 2 + dt j_k / 6))`` with ``dt``
+        the time into the phase, the same expression in the same order as ruckig's ``integrate`` (past the last
+        phase: the final state, ``j = 0``). A rest-to-rest move has no brake pre-phase and ends in its target at
+        rest (ruckig's ``pf, vf, af = goal, 0, 0``; ``tests/test_motion.py`` checks both), so only the phase
+        durations, jerks and phase-start states are read from ruckig: each read converts an array.
         """
         if self._traj is None:
             return np.repeat(self.start[None, :], len(times), axis=0)
         times = np.asarray(times, dtype=float)
         profiles = self._traj.profiles[0]
-        if any(prof.brake.duration != 0.0 for prof in profiles):  # never for a move that starts at rest
-            return np.array([self._traj.at_time(float(t))[0] for t in times]).reshape(len(times), -1)
         # per DOF: the 7 phase durations, and the state (p, v, a, j) at each phase start followed by the final
-        # state (constant, j = 0) for times past the last phase: one (4, dofs, 8) table for all DOFs
+        # state (the goal at rest) for times past the last phase: one (dofs * 8, 4) table for all DOFs
         dofs = len(profiles)
-        durations = np.array([prof.t for prof in profiles], dtype=float)  # (dofs, 7)
-        states = np.array(
-            [[*prof.p[:7], prof.pf] for prof in profiles]
-            + [[*prof.v[:7], prof.vf] for prof in profiles]
-            + [[*prof.a[:7], prof.af] for prof in profiles]
-            + [[*prof.j[:7], 0.0] for prof in profiles],
-            dtype=float,
-        ).reshape(4, dofs * 8)
-        t_sum = np.cumsum(durations, axis=1)  # cumulative phase ends
+        goal = self.goal.tolist()
+        starts, ps, vs, accs, js = [], [], [], [], []
+        for prof, g in zip(profiles, goal):
+            starts.append(0.0)
+            starts += accumulate(prof.t)  # np.cumsum's sequential sums: the phase ends
+            ps += prof.p[:7]
+            ps.append(g)
+            vs += prof.v[:7]
+            vs.append(0.0)
+            accs += prof.a[:7]
+            accs.append(0.0)
+            js += prof.j
+            js.append(0.0)
+        states = np.array([ps, vs, accs, js], dtype=float).T  # (dofs * 8, 4): one gather fetches all four
+        starts_arr = np.array(starts)  # (dofs * 8): each DOF's phase starts, then its end
         k = np.empty((len(times), dofs), dtype=np.intp)
-        for dof, ends in enumerate(t_sum):
-            k[:, dof] = np.searchsorted(ends, times, side="right")  # std::upper_bound; 7: past the end
+        for dof in range(dofs):
+            # std::upper_bound in the phase ends (non-decreasing); 7: past the end
+            k[:, dof] = np.searchsorted(starts_arr[8 * dof + 1 : 8 * dof + 8], times, side="right")
         entry = k + 8 * np.arange(dofs)  # (m, dofs): the (dof, phase) entry of each sample, flattened
-        dt = times[:, None] - np.concatenate([np.zeros((dofs, 1)), t_sum], axis=1).ravel()[entry]
-        p, v, a, j = states[:, entry]  # (m, dofs) each
+        dt = times[:, None] - starts_arr[entry]
+        gathered = np.take(states, entry, axis=0)  # (m, dofs, 4)
+        p, v, a, j = gathered[..., 0], gathered[..., 1], gathered[..., 2], gathered[..., 3]  # (m, dofs) each
         return p + dt * (v + dt * (a / 2 + dt * j / 6))
 
     def sample(self, sample_rate_hz: float, max_samples: int = MAX_SEGMENT_SAMPLES) -> Segment:
@@ -261,7 +273,7 @@ def profile_joint_move(start, goal, limits: Limits, speed_fraction: float) -> Pr
     if _allclose(start, goal):
         return Profile(0.0, start)
     traj = _ruckig(start, goal, limits.scaled(speed_fraction))
-    return Profile(float(traj.duration), start, traj)
+    return Profile(float(traj.duration), start, traj, goal)
 
 
 def profile_path_1d(length: float, max_speed: float, max_accel: float, max_jerk: float) -> Profile:
@@ -269,8 +281,9 @@ def profile_path_1d(length: float, max_speed: float, max_accel: float, max_jerk:
     if not length > 0:
         return Profile(0.0, np.zeros(1))
     lim = Limits(np.array([max_speed]), np.array([max_accel]), np.array([max_jerk]))
-    traj = _ruckig(np.zeros(1), np.array([length]), lim)
-    return Profile(float(traj.duration), np.zeros(1), traj)
+    goal = np.array([length])
+    traj = _ruckig(np.zeros(1), goal, lim)
+    return Profile(float(traj.duration), np.zeros(1), traj, goal)
 
 
 def time_joint_move(start, goal, limits: Limits, speed_fraction: float, sample_rate_hz: float) -> Segment:

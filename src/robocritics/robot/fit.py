@@ -7,23 +7,30 @@ capsules, split along the link's long axis where one capsule would be loose.
 
 The error bound
 ---------------
-Every fitted capsule set **encloses** the mesh (each triangle lies inside one capsule: capsules are convex and
-each holds all three corners of its triangles). So for anything ``A`` outside the capsules
+Every fitted capsule **encloses its piece** of the mesh: the triangles clipped to the capsule's slab across the
+link's long axis (:attr:`FittedCapsule.mesh`; the pieces together are the whole mesh, a triangle across a cut
+split between the two sides). Capsules are convex and each holds every corner of its clipped triangles, so for
+anything ``A`` outside a capsule
 
-    d(A, mesh) - slack_m  <=  d(A, capsules)  <=  d(A, mesh)
+    d(A, piece) - slack_m  <=  d(A, capsule)  <=  d(A, piece)
 
-where ``slack_m`` is the largest distance from a point of a capsule's surface to the mesh: the capsule
-distance never misses a contact (it is never larger than the mesh distance) and reports a gap at most
-``slack_m`` smaller than the mesh's. ``slack_m`` is measured on a grid over each capsule's surface
-(:data:`SLACK_GRID_M` apart) with coal's point-to-mesh distance, plus the grid spacing (distance is 1-Lipschitz,
-so between grid points it cannot grow by more). tests/test_robot_meshes.py checks both inequalities with
-hypothesis against a plain point-to-triangle reference.
+where ``slack_m`` is the largest distance from a point of the capsule's surface to its piece (the closest point
+of the capsule to ``A`` is on its surface, and from there the piece is at most ``slack_m`` away). Taking the
+least over a link's capsules, the same holds for the whole mesh with the largest slack: the capsule distance
+never misses a contact (it is never larger than the mesh distance) and reports a gap at most ``slack_m``
+smaller than the mesh's. ``slack_m`` is measured on a grid over each capsule's surface (:data:`SLACK_GRID_M`
+apart) with coal's point-to-mesh distance, plus the grid spacing (distance is 1-Lipschitz, so between grid
+points it cannot grow by more). tests/test_robot_vendor.py checks both inequalities with hypothesis against a
+plain point-to-triangle reference.
+
+Near contact the pieces themselves are measured (:mod:`robocritics.geometry.link_meshes`): the slack then only
+decides which samples are worth the exact work.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -67,12 +74,14 @@ class Mesh:
 
 @dataclass(frozen=True)
 class FittedCapsule:
-    """Segment ``p0``-``p1`` and ``radius_m`` (m, link frame); ``slack_m`` as in the module docstring."""
+    """Segment ``p0``-``p1`` and ``radius_m`` (m, link frame); ``mesh``: the piece of the link's mesh it encloses
+    (link frame); ``slack_m``: the largest distance from its surface to that piece (the module docstring)."""
 
     p0: tuple[float, float, float]
     p1: tuple[float, float, float]
     radius_m: float
     slack_m: float
+    mesh: Mesh | None = field(default=None, compare=False, repr=False)
 
 
 def load_mesh(path: Path, scale=(1.0, 1.0, 1.0), max_triangles: int = MAX_TRIANGLES) -> Mesh:
@@ -232,11 +241,50 @@ def fit_capsules_uncached(mesh: Mesh, max_capsules: int = MAX_CAPSULES_PER_LINK)
         if estimate < best_volume * (1 - SPLIT_GAIN) ** (k - 1 - len(best_cuts)):
             best_volume, best_cuts = estimate, cuts
     pieces = pieces_for(best_cuts, 1)
-    slacks = _slacks(mesh, pieces)
+    bounds = [-np.inf, *best_cuts, np.inf]
+    parts = [_clip_to_slab(mesh, long_axis, a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+    # a slab that only grazes the mesh at a corner holds nothing of area: no capsule for it
+    pieces, parts = zip(*[(piece, part) for piece, part in zip(pieces, parts) if len(part.triangles)])
+    slacks = _slacks(parts, pieces)
     return [
-        FittedCapsule(tuple(float(x) for x in p0), tuple(float(x) for x in p1), float(r), s)
-        for (p0, p1, r), s in zip(pieces, slacks)
+        FittedCapsule(tuple(float(x) for x in p0), tuple(float(x) for x in p1), float(r), s, part)
+        for (p0, p1, r), s, part in zip(pieces, slacks, parts)
     ]
+
+
+def _clip_to_slab(mesh: Mesh, axis: np.ndarray, a: float, b: float) -> Mesh:
+    """The triangles of ``mesh`` clipped to the slab ``a <= vertices @ axis <= b`` (m; either side may be
+    infinite). A triangle across a plane becomes the convex polygon of its corners inside the slab and its
+    edges' crossings of the planes (the very points the slab's capsule was fitted to, by :func:`_crossing`'s
+    formula), as a fan of triangles."""
+    t = mesh.vertices @ axis
+    tt = t[mesh.triangles]
+    inside = ((tt >= a) & (tt <= b)).all(axis=1)
+    outside = (tt < a).all(axis=1) | (tt > b).all(axis=1)
+    kept = [mesh.vertices[mesh.triangles[inside]]]  # (F', 3, 3) corners
+    for tri in mesh.triangles[~inside & ~outside]:
+        corners, ts = mesh.vertices[tri], t[tri]
+        points = [corners[k] for k in range(3) if a <= ts[k] <= b]
+        for i, j in ((0, 1), (1, 2), (2, 0)):
+            for c in (a, b):
+                ti, tj = ts[i] - c, ts[j] - c
+                if math.isfinite(c) and ti * tj < 0:
+                    points.append(corners[i] + ti / (ti - tj) * (corners[j] - corners[i]))
+        if len(points) < 3:
+            continue  # the slab only grazes the triangle at a corner or an edge: nothing of area inside
+        points = np.array(points)
+        u = corners[1] - corners[0]
+        normal = np.cross(u, corners[2] - corners[0])
+        v = np.cross(normal, u)
+        middle = points.mean(axis=0)
+        order = np.argsort(np.arctan2((points - middle) @ v, (points - middle) @ u))
+        ring = points[order]
+        kept.append(np.stack([np.repeat(ring[:1], len(ring) - 2, axis=0), ring[1:-1], ring[2:]], axis=1))
+    corners = np.concatenate(kept).reshape(-1, 3)
+    if not len(corners):
+        return Mesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    vertices, index = np.unique(corners, axis=0, return_inverse=True)
+    return Mesh(vertices, index.reshape(-1, 3).astype(np.int64))
 
 
 def _crossing(vertices: np.ndarray, edges: np.ndarray, axis: np.ndarray, c: float) -> np.ndarray:
@@ -271,24 +319,24 @@ def capsule_surface(p0: np.ndarray, p1: np.ndarray, radius: float, spacing: floa
     return np.concatenate([side.reshape(-1, 3), caps[0].reshape(-1, 3), caps[1].reshape(-1, 3)])
 
 
-def _slacks(mesh: Mesh, capsules) -> list[float]:
-    """Per capsule: the largest distance from its surface to ``mesh`` [m] on a :data:`SLACK_GRID_M` grid,
-    plus the grid spacing (see the module docstring)."""
+def _slacks(parts: list[Mesh], capsules) -> list[float]:
+    """Per capsule: the largest distance from its surface to its piece ``parts[i]`` [m] on a
+    :data:`SLACK_GRID_M` grid, plus the grid spacing (see the module docstring)."""
     import coal
 
-    model = coal.BVHModelOBBRSS()
-    model.beginModel(len(mesh.triangles), len(mesh.vertices))
-    model.addVertices(np.ascontiguousarray(mesh.vertices, dtype=float))
-    model.addTriangles(np.ascontiguousarray(mesh.triangles, dtype=np.int64))
-    model.endModel()
     point = coal.Sphere(1e-12)
     request, identity = coal.DistanceRequest(), coal.Transform3s()
-    vertices = mesh.vertices[np.unique(mesh.triangles)]
-    # any subset of the vertices bounds the distance from above: 2,000 of them keep the matrix below small
-    vertices = vertices[:: max(1, len(vertices) // 2000)]
-    v2 = np.einsum("ij,ij->i", vertices, vertices)
     out = []
-    for p0, p1, r in capsules:
+    for mesh, (p0, p1, r) in zip(parts, capsules):
+        model = coal.BVHModelOBBRSS()
+        model.beginModel(len(mesh.triangles), len(mesh.vertices))
+        model.addVertices(np.ascontiguousarray(mesh.vertices, dtype=float))
+        model.addTriangles(np.ascontiguousarray(mesh.triangles, dtype=np.int64))
+        model.endModel()
+        vertices = mesh.vertices[np.unique(mesh.triangles)]
+        # any subset of the vertices bounds the distance from above: 2,000 of them keep the matrix below small
+        vertices = vertices[:: max(1, len(vertices) // 2000)]
+        v2 = np.einsum("ij,ij->i", vertices, vertices)
         spacing = max(SLACK_GRID_M, 2 * math.pi * r / 48)  # a bounded number of points per ring
         surface = capsule_surface(np.asarray(p0), np.asarray(p1), r, spacing)
         # the distance to the nearest vertex bounds the distance to the mesh from above: visit the surface

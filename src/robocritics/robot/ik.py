@@ -51,9 +51,14 @@ has rotation ``R = [x_6 y_6 z_6]`` and position ``p``):
    ``q4 = atan2(x_4 · y_1, x_4 · x_1) - q2 - q3``.
 
 That gives up to 2 × 2 × 2 = 8 solutions. Every one is checked by forward
-kinematics (Pinocchio on the URDF of the DH chain, :func:`dh_forward`) before it
-is returned. :func:`ur_ik_all` lists the branches; :func:`ur_ik` searches the same
-steps branch-and-bound for the one nearest a seed configuration.
+kinematics before it is returned: the closed-form FK of :mod:`robocritics.robot.ur_fk`
+(Pinocchio's on the URDF of the DH chain, :func:`dh_forward`, to rounding; a third of its
+CPU from Python), or, for a branch no step of which was clipped, nudged or clamped, of a
+target whose rotation is orthonormal, the certificate that the closed form is then exact
+(:func:`_certified`; ``tests/test_ik_nearest.py`` checks it against Pinocchio at the
+singularities). :func:`ur_ik_all` lists the branches; :func:`ur_ik` searches the same
+steps branch-and-bound for the one nearest a seed configuration
+(:mod:`robocritics.robot.ik_nearest`).
 
 For arms that are not UR-like, :func:`~robocritics.robot.ik_numeric.numeric_ik` runs a damped-least-squares
 (Levenberg-Marquardt) iteration on a Pinocchio model with random restarts.
@@ -63,11 +68,10 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from robocritics.errors import PlanningError, RobotModelError
 
@@ -87,6 +91,8 @@ from .ik_many import (
     _branches_many,
     _nearest_chain,
 )
+from .ik_nearest import _nearest_equivalent, _nearest_search, _nearest_solution, _singular_q6, _wrap, _wrist1_planar
+from .ur_fk import ur_reproduces
 
 __all__ = [
     "DH",
@@ -164,6 +170,8 @@ class _Chain:
     __slots__ = ("model", "data", "flange")
 
     def __init__(self, dh: DH):
+        import pinocchio as pin  # here: a check needs this chain only to explain a failed solve (~30-60 ms import)
+
         entry = _CHAIN_MODELS.get(dh)
         if entry is None:
             model = pin.buildModelFromXML(dh_urdf(dh))
@@ -180,25 +188,14 @@ class _Chain:
 
     def pose(self, q) -> Any:
         """Flange placement ``pin.SE3`` for joints ``q`` (6 rad)."""
+        import pinocchio as pin  # loaded by __init__
+
         pin.forwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
         return pin.updateFramePlacement(self.model, self.data, self.flange)
 
     def error(self, q: Sequence[float], t: Sequence[float]) -> tuple[float, float]:
         """(position error m, rotation error rad) of the flange at ``q`` against the 12-float target ``t``."""
         return _pose_error(self.pose(q).homogeneous[:3].ravel().tolist(), t)
-
-    def reproduces(self, q: np.ndarray, t: Sequence[float], tol: float) -> bool:
-        """Whether the flange at ``q`` ((6,) float array, rad) is within ``tol`` m and ``tol`` rad of the 12-float
-        target ``t``: :meth:`error` within ``tol``, its sums written out (the same floats, half the time)."""
-        pin.forwardKinematics(self.model, self.data, q)
-        f = pin.updateFramePlacement(self.model, self.data, self.flange).homogeneous.ravel().tolist()
-        # ``** 2`` as in _pose_error: libm's pow may round x ** 2 differently from x * x
-        if not math.sqrt((f[3] - t[3]) ** 2 + (f[7] - t[7]) ** 2 + (f[11] - t[11]) ** 2) <= tol:
-            return False
-        e0, e1, e2, e4, e5, e6 = f[0] - t[0], f[1] - t[1], f[2] - t[2], f[4] - t[4], f[5] - t[5], f[6] - t[6]
-        e8, e9, e10 = f[8] - t[8], f[9] - t[9], f[10] - t[10]
-        sq = 0.0 + e0 * e0 + e1 * e1 + e2 * e2 + e4 * e4 + e5 * e5 + e6 * e6 + e8 * e8 + e9 * e9 + e10 * e10
-        return math.sqrt(0.5 * sq) <= tol
 
 
 def _chain(dh: DH) -> _Chain:
@@ -250,12 +247,6 @@ def _pose_error(fk: Sequence[float], target: Sequence[float]) -> tuple[float, fl
 # --------------------------------------------------------------------------- #
 
 
-def _wrap(x: float) -> float:
-    """Angle wrapped to (-pi, pi]."""
-    x = math.remainder(x, _TWO_PI)
-    return x + _TWO_PI if x <= -_PI else x
-
-
 def _pose12(pose: Any) -> list[float]:
     """The top 3 rows of a 4x4 homogeneous transform as 12 plain floats."""
     if isinstance(pose, np.ndarray) and pose.shape == (4, 4):
@@ -303,21 +294,6 @@ def _wrists(
         (math.atan2(s5abs, zz1), math.atan2(-yz1, xz1)),
         (math.atan2(-s5abs, zz1), math.atan2(yz1, -xz1)),
     )
-
-
-def _wrist1_planar(
-    k: tuple[float, ...], t: Sequence[float], c1: float, s1: float, p5x: float, p5y: float, q6: float
-) -> tuple[float, float]:
-    """Step 4, first half: the wrist-1 centre ``p4 = p5 - d5 z4`` (``z4 = -(sin q6 x6 + cos q6 y6)``)
-    in the planar coordinates ``(X, Y)`` of frame 1 (m)."""
-    d1, d5, d6 = k[0], k[4], k[5]
-    xx, yx, _, _, xy, yy, _, _, xz, yz, zz, pz = t
-    c6 = math.cos(q6)
-    s6 = math.sin(q6)
-    z4x = -(s6 * xx + c6 * yx)
-    z4y = -(s6 * xy + c6 * yy)
-    z4z = -(s6 * xz + c6 * yz)
-    return (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1, pz - d6 * zz - d5 * z4z - d1
 
 
 def _elbow(
@@ -368,11 +344,19 @@ def _shoulder_lift(k: tuple[float, ...], base: float, q3: float, c3: float) -> f
 def _branches(k: tuple[float, ...], t: Sequence[float], q6_free: float) -> list[list[float]]:
     """Every closed-form branch (unwrapped angles, not yet FK-checked, possibly
     duplicated) for the 12-float row-major target ``t``; see the module docstring."""
+    return [b for b, _ in _flagged_branches(k, t, q6_free)]
+
+
+def _flagged_branches(k: tuple[float, ...], t: Sequence[float], q6_free: float) -> list[tuple[list[float], bool]]:
+    """:func:`_branches`, each with whether it is exact as :func:`_nearest_search` means it: no step clipped
+    (``|d4 / r| <= 1``, ``|cos q3| < 1``) and the wrist away from its singularity (``|sin q5| >=
+    _WRIST_NEAR_SINGULAR``, so ``q6`` was neither free nor nudged)."""
     shoulder = _shoulder_pans(k, t)
     if shoulder is None:
         return []
     p5x, p5y, pans = shoulder
-    out: list[list[float]] = []
+    exact_pan = -1.0 <= k[3] / math.sqrt(p5x * p5x + p5y * p5y) <= 1.0  # _shoulder_pans' ratio, not clipped
+    out: list[tuple[list[float], bool]] = []
     for q1 in pans:
         c1, s1 = math.cos(q1), math.sin(q1)
         s5abs, wrists = _wrists(t, c1, s1, q6_free)
@@ -381,55 +365,12 @@ def _branches(k: tuple[float, ...], t: Sequence[float], q6_free: float) -> list[
             if elbow is None:
                 continue
             c3, base, q234, q6 = elbow
+            exact = exact_pan and s5abs >= _WRIST_NEAR_SINGULAR and -1.0 < c3 < 1.0  # +-1: perhaps clipped
             t3 = math.acos(c3)
             for q3 in (t3, -t3):
                 q2 = _shoulder_lift(k, base, q3, c3)
-                out.append([q1, q2, q3, q234 - q2 - q3, q5, q6])
+                out.append(([q1, q2, q3, q234 - q2 - q3, q5, q6], exact))
     return out
-
-
-def _singular_q6(
-    k: tuple[float, ...],
-    t: Sequence[float],
-    c1: float,
-    s1: float,
-    p5x: float,
-    p5y: float,
-    q6: float,
-    too_far: bool,
-) -> float | None:
-    """At the wrist singularity (flange z parallel to the shoulder axes), the
-    value of ``q6`` nearest to ``q6`` that brings the wrist-1 centre within the
-    elbow's range, or None.
-
-    In the arm plane the wrist-1 centre is ``P4 = P5 - d5 u`` with ``u`` the
-    planar direction of ``z4 = -(sin q6 x6 + cos q6 y6)``; so
-    ``|P4|² = R² + d5² - 2 d5 R cos(psi - theta)`` with ``P5 = R e^{i theta}``,
-    ``u = e^{i psi}``. The elbow reaches ``|P4|² = a2² + a3² ± 2 a2 a3``; the
-    boundary ``psi = theta ± acos((R² + d5² - D²) / (2 d5 R))`` nearest to the
-    current ``psi`` is taken and mapped back to ``q6 = atan2(-u·x6, -u·y6)``.
-    """
-    d1, a2, a3, d4, d5, d6, a2a3_sq, two_a2a3 = k
-    xx, yx, zx, px, xy, yy, zy, py, xz, yz, zz, pz = t
-    PX = p5x * c1 + p5y * s1
-    PY = pz - d6 * zz - d1
-    R = math.hypot(PX, PY)
-    if R == 0.0 or d5 == 0.0:
-        return None
-    D2 = a2a3_sq + (two_a2a3 if too_far else -two_a2a3)
-    cb = (R * R + d5 * d5 - D2) / (2.0 * d5 * R)
-    if not -1.0 - _CLIP_TOL <= cb <= 1.0 + _CLIP_TOL:
-        return None
-    cb = 1.0 if cb > 1.0 else (-1.0 if cb < -1.0 else cb)
-    x6p = (xx * c1 + xy * s1, xz)
-    y6p = (yx * c1 + yy * s1, yz)
-    s6, c6 = math.sin(q6), math.cos(q6)
-    psi0 = math.atan2(-(s6 * x6p[1] + c6 * y6p[1]), -(s6 * x6p[0] + c6 * y6p[0]))
-    theta = math.atan2(PY, PX)
-    beta = math.acos(cb)
-    psi = min((theta + beta, theta - beta), key=lambda a: abs(_wrap(a - psi0)))
-    ux, uy = math.cos(psi), math.sin(psi)
-    return math.atan2(-(ux * x6p[0] + uy * x6p[1]), -(ux * y6p[0] + uy * y6p[1]))
 
 
 _REACH_CACHE: dict[DH, float] = {}
@@ -525,12 +466,13 @@ def ur_ik_all(dh: DH, flange_pose: Any, *, q6_singular: float = 0.0) -> np.ndarr
 
 def _solutions(dh: DH, t: Sequence[float], q6_singular: float) -> list[list[float]]:
     """:func:`ur_ik_all` for the 12-float target ``t``."""
-    chain = _chain(dh)
+    k = dh._ur
     sols: list[list[float]] = []
     remainder = math.remainder
-    for b in _branches(dh._ur, t, q6_singular):
+    certified = _certified(t)  # then an exact branch needs no FK check (see ur_ik)
+    for b, exact in _flagged_branches(k, t, q6_singular):
         w = [x + _TWO_PI if x <= -_PI else x for x in [remainder(x, _TWO_PI) for x in b]]  # _wrap
-        if not _is_duplicate(w, sols) and chain.reproduces(np.array(w), t, _VERIFY_TOL):
+        if not _is_duplicate(w, sols) and ((exact and certified) or ur_reproduces(k, w, t, _VERIFY_TOL)):
             sols.append(w)
     return sols
 
@@ -546,208 +488,6 @@ def _is_duplicate(q: list[float], solutions: list[list[float]]) -> bool:
         else:
             return True
     return False
-
-
-def _nearest_equivalent(x: float, seed: float, lo: float, hi: float) -> float | None:
-    """``x + 2 pi n`` within ``[lo, hi]`` nearest to ``seed`` (clamped into the
-    limits if it is at most ``_LIMIT_SLACK`` outside), or None if none fits."""
-    v = x + round((seed - x) / _TWO_PI) * _TWO_PI
-    if lo <= v <= hi:  # the common case: the seed-nearest equivalent is within the limits
-        return v
-    n_min = math.ceil((lo - _LIMIT_SLACK - x) / _TWO_PI)
-    n_max = math.floor((hi + _LIMIT_SLACK - x) / _TWO_PI)
-    if n_min > n_max:
-        return None
-    v = x + (n_max if v > hi else n_min) * _TWO_PI
-    return hi if v > hi else (lo if v < lo else v)
-
-
-def _nearest_solution(
-    k: tuple[float, ...],
-    t: Sequence[float],
-    sd: Sequence[float],
-    lo: Sequence[float],
-    hi: Sequence[float],
-    w: Sequence[float],
-    verify: Callable[[list[float]], bool] | None = None,
-) -> list[float] | None:
-    """The branch of the closed form with the smallest ``sum w_i (q_i - seed_i)²``
-    within the limits (and, if ``verify`` is given, that passes it), or None.
-
-    The steps of :func:`_branches` (the same expressions, so the same floats), searched branch-and-bound: each
-    angle is moved to its ``2 pi``-equivalent within the limits nearest to the seed as soon as it is known, and a
-    branch is abandoned as soon as its partial cost (shoulder pan, then wrists, then elbow, shoulder lift, wrist
-    1) reaches the best complete one, so the elbow of a branch that cannot win is never computed; shoulders and
-    wrists are tried cheapest first (a branch whose angle has no equivalent within the limits costs inf). At the
-    wrist singularity ``q6`` keeps the seed's. The steps are written out here rather than called, and
-    :func:`_nearest_equivalent`'s common case (the seed-nearest equivalent within the limits) at each use: a
-    call per step or joint was half the time of a solve.
-    """
-    xx, yx, zx, px, xy, yy, zy, py = t[:8]
-    d6 = k[5]
-    # step 1 (_shoulder_pans)
-    p5x = px - d6 * zx
-    p5y = py - d6 * zy
-    r = math.sqrt(p5x * p5x + p5y * p5y)
-    if r == 0.0:
-        return None
-    ratio = k[3] / r
-    if not -1.0 - _CLIP_TOL <= ratio <= 1.0 + _CLIP_TOL:
-        return None
-    ratio = 1.0 if ratio > 1.0 else (-1.0 if ratio < -1.0 else ratio)
-    phi = math.atan2(p5y, p5x) + _HALF_PI
-    dphi = math.acos(ratio)
-    s0, s4, s5 = sd[0], sd[4], sd[5]
-    l0, l4, l5 = lo[0], lo[4], lo[5]
-    h0, h4, h5 = hi[0], hi[4], hi[5]
-    w0, w4, w5 = w[0], w[4], w[5]
-    inf, near, tau = math.inf, _nearest_equivalent, _TWO_PI
-    qa = phi + dphi
-    va = qa + round((s0 - qa) / tau) * tau
-    if not l0 <= va <= h0:
-        va = near(qa, s0, l0, h0)
-    ca = inf if va is None else w0 * (va - s0) * (va - s0)
-    qb = phi - dphi
-    vb = qb + round((s0 - qb) / tau) * tau
-    if not l0 <= vb <= h0:
-        vb = near(qb, s0, l0, h0)
-    cb = inf if vb is None else w0 * (vb - s0) * (vb - s0)
-    shoulders = ((cb, qb, vb), (ca, qa, va)) if cb < ca else ((ca, qa, va), (cb, qb, vb))
-
-    best = inf
-    best_q: list[float] | None = None
-    for cost1, q1, v1 in shoulders:
-        if cost1 >= best:
-            break
-        # steps 2 and 3 (_wrists)
-        c1, s1 = math.cos(q1), math.sin(q1)
-        xz1 = xx * s1 - xy * c1
-        yz1 = yx * s1 - yy * c1
-        zz1 = zx * s1 - zy * c1
-        s5abs = math.sqrt(xz1 * xz1 + yz1 * yz1)
-        if s5abs < _WRIST_SINGULAR:
-            pairs = ((math.atan2(s5abs, zz1), s5), (math.atan2(-s5abs, zz1), s5))
-        else:
-            pairs = ((math.atan2(s5abs, zz1), math.atan2(-yz1, xz1)), (math.atan2(-s5abs, zz1), math.atan2(yz1, -xz1)))
-        q6_final = s5abs >= _WRIST_NEAR_SINGULAR  # else the elbow step may nudge q6
-        wrists = []
-        for q5, q6 in pairs:
-            v5 = q5 + round((s4 - q5) / tau) * tau
-            if not l4 <= v5 <= h4:
-                v5 = near(q5, s4, l4, h4)
-            if v5 is None:
-                wrists.append((inf, q5, q6, v5, None))
-                continue
-            cost = cost1 + w4 * (v5 - s4) * (v5 - s4)
-            v6 = None
-            if q6_final:
-                v6 = q6 + round((s5 - q6) / tau) * tau
-                if not l5 <= v6 <= h5:
-                    v6 = near(q6, s5, l5, h5)
-                cost = inf if v6 is None else cost + w5 * (v6 - s5) * (v6 - s5)
-            wrists.append((cost, q5, q6, v5, v6))
-        if wrists[1][0] < wrists[0][0]:
-            wrists.reverse()
-        for cost56, q5, q6, v5, v6 in wrists:
-            if cost56 >= best:
-                break
-            found = _nearest_elbow(k, t, c1, s1, p5x, p5y, s5abs, q5, q6, v1, v5, v6, cost56, best, sd, lo, hi, w, verify)
-            if found is not None:
-                best, best_q = found
-    return best_q
-
-
-def _nearest_elbow(
-    k: tuple[float, ...], t: Sequence[float], c1: float, s1: float, p5x: float, p5y: float, s5abs: float,
-    q5: float, q6: float, v1: float, v5: float, v6: float | None, cost56: float, best: float,
-    sd: Sequence[float], lo: Sequence[float], hi: Sequence[float], w: Sequence[float],
-    verify: Callable[[list[float]], bool] | None,
-) -> tuple[float, list[float]] | None:
-    """Step 4 of :func:`_nearest_solution` for one (shoulder, wrist) branch whose shoulder pan and wrist angles
-    cost ``cost56``: ``(cost, q)`` of its elbow cheaper than ``best``, or None. ``v6`` None: ``q6`` may still be
-    nudged (near the wrist singularity), so its cost is not yet in ``cost56``."""
-    d1, a2, a3, _, d5, d6, a2a3_sq, two_a2a3 = k
-    xx, yx, zx, _, xy, yy, zy, _, xz, yz, zz, pz = t
-    # _elbow and _wrist1_planar
-    c6 = math.cos(q6)
-    s6 = math.sin(q6)
-    z4x = -(s6 * xx + c6 * yx)
-    z4y = -(s6 * xy + c6 * yy)
-    z4z = -(s6 * xz + c6 * yz)
-    X = (p5x - d5 * z4x) * c1 + (p5y - d5 * z4y) * s1
-    Y = pz - d6 * zz - d5 * z4z - d1
-    c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
-    if not -1.0 <= c3 <= 1.0 and s5abs < _WRIST_NEAR_SINGULAR:
-        nudged = _singular_q6(k, t, c1, s1, p5x, p5y, q6, c3 > 1.0)
-        if nudged is not None:
-            q6 = nudged
-            c6 = math.cos(q6)
-            s6 = math.sin(q6)
-            X, Y = _wrist1_planar(k, t, c1, s1, p5x, p5y, q6)
-            c3 = (X * X + Y * Y - a2a3_sq) / two_a2a3
-    if not -1.0 <= c3 <= 1.0:
-        if not -1.0 - _CLIP_TOL <= c3 <= 1.0 + _CLIP_TOL:
-            return None
-        c3 = 1.0 if c3 > 1.0 else -1.0
-    near = _nearest_equivalent
-    s5 = sd[5]
-    if v6 is None:
-        l5, h5 = lo[5], hi[5]
-        v6 = q6 + round((s5 - q6) / _TWO_PI) * _TWO_PI
-        if not l5 <= v6 <= h5:
-            v6 = near(q6, s5, l5, h5)
-        if v6 is None:
-            return None
-        cost56 += w[5] * (v6 - s5) * (v6 - s5)
-    c5 = math.cos(q5)
-    s5_ = math.sin(q5)
-    # x4 = c5 x5 - s5 z6 with x5 = c6 x6 - s6 y6
-    x4x = c5 * (c6 * xx - s6 * yx) - s5_ * zx
-    x4y = c5 * (c6 * xy - s6 * yy) - s5_ * zy
-    x4z = c5 * (c6 * xz - s6 * yz) - s5_ * zz
-    base = math.atan2(Y, X)
-    q234 = math.atan2(x4z, x4x * c1 + x4y * s1)
-    _, s1_, s2, s3, _, _ = sd
-    _, l1, l2, l3, _, _ = lo
-    _, h1, h2, h3, _, _ = hi
-    _, w1, w2, w3, _, _ = w
-    # the two elbows (q3 = +acos, -acos), the one nearer the seed in q3 first: the other then rarely gets further
-    t3 = math.acos(c3)
-    elbows = []
-    for q3 in (t3, -t3):
-        v3 = q3 + round((s2 - q3) / _TWO_PI) * _TWO_PI
-        if not l2 <= v3 <= h2:
-            v3 = near(q3, s2, l2, h2)
-        if v3 is not None:
-            elbows.append((cost56 + w2 * (v3 - s2) * (v3 - s2), q3, v3))
-    if len(elbows) == 2 and elbows[1][0] < elbows[0][0]:
-        elbows.reverse()
-    found = None
-    for cost3, q3, v3 in elbows:
-        if cost3 >= best:
-            break
-        q2 = base - math.atan2(a3 * math.sin(q3), a2 + a3 * c3)  # _shoulder_lift
-        v2 = q2 + round((s1_ - q2) / _TWO_PI) * _TWO_PI
-        if not l1 <= v2 <= h1:
-            v2 = near(q2, s1_, l1, h1)
-        if v2 is None:
-            continue
-        cost2 = cost3 + w1 * (v2 - s1_) * (v2 - s1_)
-        if cost2 >= best:
-            continue
-        q4 = q234 - q2 - q3
-        v4 = q4 + round((s3 - q4) / _TWO_PI) * _TWO_PI
-        if not l3 <= v4 <= h3:
-            v4 = near(q4, s3, l3, h3)
-        if v4 is None:
-            continue
-        cost = cost2 + w3 * (v4 - s3) * (v4 - s3)
-        if cost < best:
-            q = [v1, v2, v3, v4, v5, v6]
-            if verify is None or verify(q):
-                best = cost
-                found = (cost, q)
-    return found
 
 
 def ur_ik(
@@ -771,7 +511,8 @@ def ur_ik(
 
     Arguments: ``flange_pose`` ``(4, 4)`` pose of ``tool0`` in the base frame (m);
     ``seed``, ``lower``, ``upper`` ``(6,)`` rad. Returns ``(6,)`` rad, verified
-    by forward kinematics to within ``tol`` m and ``tol`` rad.
+    by forward kinematics (or certified exact, for ``tol`` at least ``_CERTIFIED_ERROR``) to within
+    ``tol`` m and ``tol`` rad.
 
     Raises :class:`PlanningError` naming the target position and the reason:
     out of reach (with the distance from the shoulder and the arm's reach), too
@@ -790,18 +531,50 @@ def ur_ik(
         w = _UNIT_WEIGHTS
     else:
         w = weights.tolist() if isinstance(weights, np.ndarray) else [float(v) for v in weights]
-    chain = _chain(dh)
-    # The nearest branch nearly always reproduces the pose; only at the edge of the
-    # workspace does it not, and then the search is repeated checking every candidate.
-    best = _nearest_solution(k, t, sd, lo, hi, w)
-    if best is not None:
-        q = np.array(best)
-        if chain.reproduces(q, t, tol):
-            return q
-        best = _nearest_solution(k, t, sd, lo, hi, w, lambda q: chain.reproduces(np.array(q), t, tol))
+    # The nearest branch nearly always reproduces the pose: certainly when _certified, else checked by the
+    # closed-form FK (ur_fk); only at the edge of the workspace does it not, and then the search is repeated
+    # checking every candidate.
+    found = _nearest_search(k, t, sd, lo, hi, w)
+    if found is not None:
+        best = found[1]
+        if (found[2] and tol >= _CERTIFIED_ERROR and _certified(t)) or ur_reproduces(k, best, t, tol):
+            return np.array(best)
+        best = _nearest_solution(k, t, sd, lo, hi, w, lambda q: ur_reproduces(k, q, t, tol))
         if best is not None:
             return np.array(best)
-    raise PlanningError(f"cannot reach flange target {_fmt_pos(t)}: {_why_no_solution(dh, t, sd, lo, hi, chain, tol)}")
+    raise PlanningError(
+        f"cannot reach flange target {_fmt_pos(t)}: {_why_no_solution(dh, t, sd, lo, hi, _chain(dh), tol)}"
+    )
+
+
+#: Largest rotation-matrix defect (the root of the sum of the squares of ``|x6|² - 1``, ``|z6|² - 1``, ``x6 · z6``
+#: and the entries of ``y6 - z6 × x6``) of a target :func:`_certified` accepts, and its square.
+_ROTATION_DEFECT = 1e-12
+_ROTATION_DEFECT_SQ = _ROTATION_DEFECT * _ROTATION_DEFECT
+#: Flange error (m, rad) a certified branch stays below (``tests/test_ik_nearest.py`` asserts it on branches at
+#: every singularity); ``ur_ik`` relies on the certificate only for tolerances at least this large.
+_CERTIFIED_ERROR = 1e-11
+
+
+def _certified(t: Sequence[float]) -> bool:
+    """Whether a branch that :func:`_nearest_search` calls exact (no step clipped or nudged, the wrist away from
+    its singularity, no joint clamped onto a limit) reproduces the 12-float target ``t`` without a
+    forward-kinematics check: whether ``t``'s rotation ``[x6 y6 z6]`` is one (orthonormal, right-handed: defect
+    within :data:`_ROTATION_DEFECT`).
+
+    When no step is clipped, each step of the closed form solves its equation exactly for such a target, so the
+    branch reproduces it to rounding (about 1e-15 m and rad; the FK check would pass): 30 multiplications
+    instead of the FK's 60 and twelve sines."""
+    xx, yx, zx, _, xy, yy, zy, _, xz, yz, zz, _ = t
+    e1 = xx * xx + xy * xy + xz * xz - 1.0
+    e2 = zx * zx + zy * zy + zz * zz - 1.0
+    e3 = xx * zx + xy * zy + xz * zz
+    e4 = yx - (zy * xz - zz * xy)
+    e5 = yy - (zz * xx - zx * xz)
+    e6 = yz - (zx * xy - zy * xx)
+    return (
+        e1 * e1 + e2 * e2 + e3 * e3 + e4 * e4 + e5 * e5 + e6 * e6 <= _ROTATION_DEFECT_SQ
+    )  # fmt: skip
 
 
 def ur_ik_line(
@@ -827,29 +600,31 @@ def ur_ik_line(
         raise PlanningError("ur_ik_line: seed, lower and upper must each have 6 values")
     lo, hi = lo_arr.tolist(), hi_arr.tolist()
     w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
-    chain = _chain(dh)
     n = len(poses)
     targets12 = poses[:, :3].reshape(-1, 12)
     targets = targets12.tolist()
     # First the nearest branches unverified, each seeded by the previous, up to the first pose without a
-    # solution; then one vectorised FK check of them all: rows it puts within tol / 2 (the FKs agree to ~1e-15)
-    # are what ur_ik's own check accepts, so they stand; from the first other row on, ur_ik's steps exactly
-    # (check per pose, the verified search if needed).
-    fast, m = _unverified_walk(k, targets12, targets, seed_arr, lo_arr, hi_arr)
+    # solution; the leading rows _certified stand (they reproduce their poses to rounding, within tol / 2); then
+    # one vectorised FK check of the rest: rows it puts within tol / 2 (the FKs agree to ~1e-15) are what
+    # ur_ik's own check accepts, so they stand; from the first other row on, ur_ik's steps exactly (check per
+    # pose, the verified search if needed).
+    fast, m, certified = _unverified_walk(k, targets12, targets, seed_arr, lo_arr, hi_arr, 0.5 * tol >= _CERTIFIED_ERROR)
     good = m
-    if m:
-        dp, dr = _flange_errors(dh, fast[:m], poses[:m])
+    if certified < m:
+        dp, dr = _flange_errors(dh, fast[certified:m], poses[certified:m])
         bad = np.flatnonzero(~((dp <= 0.5 * tol) & (dr <= 0.5 * tol)))
         if len(bad):
-            good = int(bad[0])
+            good = certified + int(bad[0])
+    if good == n:
+        return fast, None
     out = fast[:good].tolist()
     sd_list = out[-1] if out else seed_arr.tolist()
     for t in targets[good:]:
         best = _nearest_solution(k, t, sd_list, lo, hi, w)
-        if best is not None and not _reproduces(chain, best, t, tol):
-            best = _nearest_solution(k, t, sd_list, lo, hi, w, lambda q: _reproduces(chain, q, t, tol))
+        if best is not None and not ur_reproduces(k, best, t, tol):
+            best = _nearest_solution(k, t, sd_list, lo, hi, w, lambda q: ur_reproduces(k, q, t, tol))
         if best is None:
-            reason = _why_no_solution(dh, t, sd_list, lo, hi, chain, tol)
+            reason = _why_no_solution(dh, t, sd_list, lo, hi, _chain(dh), tol)
             return np.array(out, dtype=float).reshape(-1, 6), PlanningError(
                 f"cannot reach flange target {_fmt_pos(t)}: {reason}"
             )
@@ -859,29 +634,39 @@ def ur_ik_line(
 
 
 def _unverified_walk(
-    k: tuple[float, ...], targets12: np.ndarray, targets: list[list[float]], seed: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, int]:
+    k: tuple[float, ...], targets12: np.ndarray, targets: list[list[float]], seed: np.ndarray, lo: np.ndarray,
+    hi: np.ndarray, certify: bool,
+) -> tuple[np.ndarray, int, int]:
     """:func:`_nearest_solution` (unit weights, unverified) at each of the 12-float targets ``targets12 (n, 12)``
     (``targets`` as lists) in turn, seeded by the previous one's result (the first by ``seed``):
-    ``(solutions (m, 6) rad, m)``, ``m`` the first target without a solution (``n`` if none).
+    ``(solutions (m, 6) rad, m, c)``, ``m`` the first target without a solution (``n`` if none), ``c`` how many
+    leading solutions are exact branches of :func:`_certified` targets (0 unless ``certify``).
 
     Up to :data:`_VECTORISED_WALK_POSES` poses, pose by pose; longer walks solve the branches of all poses at once
-    (:func:`_branches_many`, :func:`_nearest_chain`, in runs of at most :data:`_LINE_CHUNK` poses), which costs
-    a fixed ~0.9 ms of numpy calls and then half the time per pose; a pose the chain leaves out (the wrist
-    singularity, no branch within the limits) goes to :func:`_nearest_solution`.
+    (:func:`_branches_many`, :func:`_nearest_chain`, in runs of at most :data:`_LINE_CHUNK` poses; none
+    certified), which costs a fixed ~0.9 ms of numpy calls and then half the time per pose; a pose the chain
+    leaves out (the wrist singularity, no branch within the limits) goes to :func:`_nearest_solution`.
     """
     n = len(targets)
     w = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
     lo_list, hi_list = lo.tolist(), hi.tolist()
-    fast = np.empty((n, 6))
     if n < _VECTORISED_WALK_POSES:
         sd = seed.tolist()
-        for m, t in enumerate(targets):
-            best = _nearest_solution(k, t, sd, lo_list, hi_list, w)
-            if best is None:
-                return fast[:m], m
-            fast[m] = sd = best
-        return fast, n
+        rows = []
+        certified = 0
+        for t in targets:
+            found = _nearest_search(k, t, sd, lo_list, hi_list, w)
+            if found is None:
+                break
+            sd = found[1]
+            rows.append(sd)
+            if certify:
+                if found[2] and _certified(t):
+                    certified += 1
+                else:
+                    certify = False
+        return np.array(rows, dtype=float).reshape(-1, 6), len(rows), certified
+    fast = np.empty((n, 6))
     branches, exists, _ = _branches_many(k, targets12)
     m = 0
     sd = seed
@@ -900,12 +685,9 @@ def _unverified_walk(
         fast[m] = best
         sd = fast[m]
         m += 1
-    return fast[:m], m
+    return fast[:m], m, 0
 
 
-def _reproduces(chain: _Chain, q: list[float], t: Sequence[float], tol: float) -> bool:
-    """Whether the flange at ``q`` (rad) is within ``tol`` m and ``tol`` rad of the 12-float target ``t``."""
-    return chain.reproduces(np.array(q), t, tol)
 
 def _flange_errors(dh: DH, q: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(position error m, rotation error rad) ``(n,)`` each of the flange at ``q (n, 6)`` rad against ``poses

@@ -50,8 +50,9 @@ _CHAIN_PASSES = 6
 #: Most poses of a straight line solved in one vectorised run (see :func:`ur_ik_line`).
 _LINE_CHUNK = 256
 #: Fewest poses :func:`_unverified_walk` solves vectorised: below this a pose-by-pose walk is cheaper (measured
-#: on the UR3e: 0.7 vs 1.1 ms at 30 poses, 1.2 vs 1.3 at 60, 2.0 vs 1.7 at 120, 14 vs 8 at 1000).
-_VECTORISED_WALK_POSES = 96
+#: on the UR3e, fingers-down vertical lines, CPU of ``ur_ik_line``: 0.66 vs 0.97 ms at 100 poses, 2.0 vs 2.0 at
+#: 300, 6.7 vs 5.6 at 1000; the pose-by-pose walk needs no FK check of certified poses).
+_VECTORISED_WALK_POSES = 300
 
 
 def _branches_many(k: tuple[float, ...], t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -247,6 +247,10 @@ class Robot:
         self._frame_index = {n: i for i, n in enumerate(self.frame_names)}
         self._check_link(tcp_frame, "the TCP")
         self._parse_urdf_extras(urdf_root)
+        # per capsule, the piece of its link's collision mesh it encloses (robot.fit.Mesh, link frame), measured
+        # instead of the capsule near contact (geometry.link_meshes); None: the capsule is the geometry itself
+        self.capsule_meshes: tuple = (None,) * len(self.capsules)
+        self.link_meshes: dict = {}  # link name -> its whole collision mesh (link frame), for containment tests
         self.fixed_links = tuple(fixed_links)
         self._build_fk_tables(tables)
         if dh is not None:
@@ -331,7 +335,9 @@ class Robot:
 
         Meshes (STL, DAE, OBJ; ``package://``, ``file://`` or relative paths, searched in the file's own package,
         its directory, ``package_paths`` and ``ROS_PACKAGE_PATH``) and boxes are enclosed by fitted capsules
-        (:mod:`robocritics.robot.fit`, with a tested error bound); foreign-namespace attributes are ignored.
+        (:mod:`robocritics.robot.fit`, with a tested error bound), the fast path; near contact the link's own
+        mesh is measured (``capsule_meshes``, :mod:`robocritics.geometry.link_meshes`). Foreign-namespace
+        attributes are ignored.
 
         ``tool``: a bundled tool name (:data:`robocritics.robot.tools.TOOLS`: ``"robotiq_2f85"``,
         ``"robotiq_hande"``, ``"franka_hand"``, ``"none"``), a tool URDF path, or None: the file's own
@@ -360,6 +366,9 @@ class Robot:
         robot.tip_frame = facts["tip"]
         robot.tool_name = facts["tool"]
         robot.capsule_slack_m = _read_only([facts["slack_m"].get(c.name, 0.0) for c in robot.capsules])
+        # a finger's capsule slides with the opening and its link frame does not: fingers stay capsules
+        robot.capsule_meshes = tuple(None if c.frame in robot.finger_links else facts["mesh"].get(c.name) for c in robot.capsules)
+        robot.link_meshes = dict(facts["link_mesh"])
         infer(robot, tip=facts["tip"], reach_m=reach_m, home_q=home_q, fixed_links=fixed_links)
         if self_pairs is not None:
             robot.self_pairs = tuple((str(a), str(b)) for a, b in self_pairs)

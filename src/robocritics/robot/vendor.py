@@ -70,8 +70,8 @@ def arm_tree(
     name: str | None = None,
     tcp_frame: str = "tcp",
 ) -> tuple[ET.Element, dict]:
-    """The contract URDF tree of the vendor file at ``path`` and facts about it (``tip``, ``tool``,
-    ``slack_m`` per capsule name). Raises :class:`RobotModelError` naming element, link or joint and line."""
+    """The contract URDF tree of the vendor file at ``path`` and facts about it: ``tip``, ``tool``, and the
+    fitted geometry of :func:`_capsule_link` (``slack_m`` and ``mesh`` by capsule name, ``link_mesh`` by link). Raises :class:`RobotModelError` naming element, link or joint and line."""
     doc = _urdf.read_urdf(path)
     _override_limits(doc, joint_limits or {})
     _urdf.check_numbers(doc)
@@ -96,7 +96,7 @@ def arm_tree(
                 kept_joints.append(joint)
                 todo.append(child)
     out = ET.Element("robot", name=name or doc.root.get("name") or path.stem)
-    slack: dict[str, float] = {}
+    fitted: dict[str, dict] = {"slack_m": {}, "mesh": {}, "link_mesh": {}}
     root_name = tree.root
     if base_pose is not None:
         import pinocchio as pin
@@ -111,14 +111,14 @@ def arm_tree(
         ET.SubElement(mount, "origin", xyz=" ".join(repr(float(v)) for v in pose[:3, 3]),
                       rpy=" ".join(repr(float(v)) for v in pin.rpy.matrixToRpy(pose[:3, :3])))
     for link_name in keep:
-        out.append(_capsule_link(doc, tree.links[link_name], package_paths, slack))
+        out.append(_capsule_link(doc, tree.links[link_name], package_paths, fitted))
     for joint in kept_joints:
         out.append(_clean_joint(joint))
     if contract:
         if doc.root.find("gripper") is not None:
             out.append(doc.root.find("gripper"))
-        return out, {"tip": tip, "tool": "(the file's own)", "slack_m": slack}
-    tool_obj = _tool(tool, path, package_paths)
+        return out, {"tip": tip, "tool": "(the file's own)", **fitted}
+    tool_obj = _tool(tool, path, package_paths, fitted)
     if isinstance(tool_obj, Tool):
         out.extend(tool_obj.elements(tip))
         tool_name = tool_obj.name
@@ -131,10 +131,11 @@ def arm_tree(
             if element.tag in ("link", "joint") and element.get("name") in taken:
                 raise RobotModelError(f"tool {tool_name}: its {element.tag} {element.get('name')!r} has the name of one of the arm's")
             out.append(element)
-    return out, {"tip": tip, "tool": tool_name, "slack_m": slack}
+    return out, {"tip": tip, "tool": tool_name, **fitted}
 
 
-def _tool(tool, path: Path, package_paths) -> Tool | tuple[list[ET.Element], str]:
+def _tool(tool, path: Path, package_paths, fitted: dict) -> Tool | tuple[list[ET.Element], str]:
+    """A bundled tool, or a tool URDF's elements (its fitted geometry added to ``fitted``) and its name."""
     if tool is None:
         return tool_named("none")
     if isinstance(tool, Tool):
@@ -154,9 +155,8 @@ def _tool(tool, path: Path, package_paths) -> Tool | tuple[list[ET.Element], str
         raise doc.error(doc.root, "a tool needs a link named 'tcp' (+z the finger direction, fingers closing along y)")
     gripper = doc.root.find("gripper")
     elements: list[ET.Element] = []
-    slack: dict[str, float] = {}
     for link in tree.links.values():
-        elements.append(_capsule_link(doc, link, package_paths, slack))
+        elements.append(_capsule_link(doc, link, package_paths, fitted))
     for joint in tree.joints.values():
         elements.append(_clean_joint(joint))
     mount = ET.Element("joint", name="tool_mount", type="fixed")
@@ -229,9 +229,11 @@ def _clean_joint(joint: ET.Element) -> ET.Element:
     return out
 
 
-def _capsule_link(doc: _urdf.UrdfDocument, link: ET.Element, package_paths, slack: dict[str, float]) -> ET.Element:
+def _capsule_link(doc: _urdf.UrdfDocument, link: ET.Element, package_paths, fitted: dict) -> ET.Element:
     """The link with its collision geometry as capsules: cylinders, capsules and spheres as they are, meshes
-    and boxes (all of them together, in the link frame) enclosed by fitted capsules."""
+    and boxes (all of them together, in the link frame) enclosed by fitted capsules. Into ``fitted``: each
+    fitted capsule's ``slack_m`` and ``mesh`` (the piece it encloses) by capsule name, and the link's whole
+    ``link_mesh`` (link frame) by link name."""
     import pinocchio as pin
 
     name = link.get("name")
@@ -263,11 +265,13 @@ def _capsule_link(doc: _urdf.UrdfDocument, link: ET.Element, package_paths, slac
             except RobotModelError as exc:
                 raise doc.error(shape, f"<mesh> of {owner}: {exc}") from None
     if meshes:
-        fitted: list[FittedCapsule] = fit_capsules(Mesh.union(meshes))
+        whole = fitted["link_mesh"][name] = Mesh.union(meshes)
+        capsules: list[FittedCapsule] = fit_capsules(whole)
         k = len(out.findall("collision"))
-        for i, capsule in enumerate(fitted):
+        for i, capsule in enumerate(capsules):
             out.append(_cylinder(capsule.p0, capsule.p1, capsule.radius_m))
-            slack[f"{name}#{k + i}" if k + i else name] = capsule.slack_m
+            fitted["slack_m"][f"{name}#{k + i}" if k + i else name] = capsule.slack_m
+            fitted["mesh"][f"{name}#{k + i}" if k + i else name] = capsule.mesh
     return out
 
 

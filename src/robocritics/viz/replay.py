@@ -8,7 +8,8 @@ notebook and an offline HTML file:
 * the time axis ``time_s`` [s] of the *frames* drawn: the trajectory's samples
   thinned to at most :data:`MAX_FRAME_RATE_HZ`, always keeping the first and last
   sample and every verdict's worst sample and window bounds, so the moment a
-  critic points at is drawn exactly;
+  critic points at is drawn exactly; a long motion is thinned further to about
+  :data:`MAX_REPLAY_FRAMES` frames, its flagged windows kept at the full frame rate;
 * the robot as capsules: per frame the two end points (m, base frame) of every
   collision capsule (fingers included, so the gripper opens and closes), and
   each capsule's radius [m];
@@ -40,7 +41,7 @@ from ..geometry.pairs import capsule_pose, closest_points
 if TYPE_CHECKING:  # pragma: no cover
     from ..critic.report import Report
 
-__all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ"]
+__all__ = ["replay_data", "REPLAY_FORMAT", "MAX_FRAME_RATE_HZ", "MAX_REPLAY_FRAMES"]
 
 #: The run a replay draws: an :class:`~robocritics.execution.Execution`. Not imported, not even for type hints:
 #: ``Execution.show`` imports this package, and the import would close a cycle.
@@ -51,6 +52,9 @@ REPLAY_FORMAT = "robocritics-replay/1"
 
 #: Frames drawn per second of motion at most [Hz]: smooth playback, small files.
 MAX_FRAME_RATE_HZ = 30.0
+#: Most frames of one replay (5 min at MAX_FRAME_RATE_HZ, some 4 MB): a longer motion keeps its flagged windows at
+#: that rate and is thinned elsewhere (see :func:`_frame_samples`).
+MAX_REPLAY_FRAMES = 9_000
 
 # Colours of the scene's `colour` attributes; anything else gets a palette colour.
 _NAMED_COLOURS = {
@@ -104,14 +108,28 @@ def _pose12(pose: np.ndarray) -> list[float]:
     return [round(float(v), 6) for v in np.asarray(pose, float)[:3, :4].reshape(-1)]
 
 
-def _frame_samples(time_s: np.ndarray, keep: list[int]) -> np.ndarray:
-    """Sample indices drawn as frames: every k-th sample (at most MAX_FRAME_RATE_HZ) plus ``keep`` and the last."""
+def _frame_samples(time_s: np.ndarray, keep: list[int], windows: list[tuple[int, int]] = ()) -> np.ndarray:
+    """Sample indices drawn as frames: every k-th sample (at most MAX_FRAME_RATE_HZ) plus ``keep`` and the last.
+
+    A motion longer than :data:`MAX_REPLAY_FRAMES` frames at that rate (a long program) keeps the flagged
+    ``windows`` (inclusive sample ranges) whole at that rate, in up to half the frames (thinned evenly beyond), and
+    the rest of the motion evenly thinned to the frames left: the replay's size is bounded, not its length.
+    """
     T = len(time_s)
     if T == 1:
         return np.zeros(1, dtype=np.int64)
     rate_hz = (T - 1) / max(float(time_s[-1] - time_s[0]), 1e-9)
     stride = max(1, int(math.ceil(rate_hz / MAX_FRAME_RATE_HZ - 1e-9)))
-    picked = np.concatenate([np.arange(0, T, stride), np.asarray(keep, dtype=np.int64), [T - 1]])
+    base = np.arange(0, T, stride)
+    if len(base) > MAX_REPLAY_FRAMES:
+        # the regular frames inside the windows (the same grid as a short replay's)
+        flagged = [base[np.searchsorted(base, a) : np.searchsorted(base, b, side="right")] for a, b in windows]
+        flagged = unique_values(np.concatenate(flagged or [np.zeros(0, dtype=np.int64)]).astype(np.int64))
+        if len(flagged) > MAX_REPLAY_FRAMES // 2:
+            flagged = flagged[:: -(-len(flagged) // (MAX_REPLAY_FRAMES // 2))]
+        left = max(MAX_REPLAY_FRAMES - len(flagged), 2)
+        base = np.concatenate([np.arange(0, T, -(-T // left)), flagged])
+    picked = np.concatenate([base, np.asarray(keep, dtype=np.int64), [T - 1]])
     return unique_values(picked[(picked >= 0) & (picked < T)])  # (np.unique would load numpy.ma)
 
 
@@ -121,7 +139,7 @@ def _segment(execution: Run, pair_name: str, sample: int) -> list[list[float]] |
     pair = next((p for p in trajectory.pairs if p.name == pair_name), None)
     if pair is None:
         return None
-    p0, p1 = robot.capsule_segments(trajectory.frames[sample : sample + 1])
+    p0, p1 = robot.capsule_segments(trajectory.frames_at([sample]))
     capsule_index = {name: i for i, name in enumerate(robot.capsule_names)}
 
     def shapes_of(name: str) -> list[tuple[str, Any, np.ndarray]]:
@@ -129,9 +147,9 @@ def _segment(execution: Run, pair_name: str, sample: int) -> list[list[float]] |
             i = capsule_index[name]
             pose, length = capsule_pose(p0[0, i], p1[0, i])
             return [("capsule", (robot.capsule_radii[i], length), pose)]
-        moved = execution.object_poses.get(name)
+        moved = name in execution.object_poses or None
         return [
-            (s.kind, s.size if s.mesh is None else s.mesh, s.pose if moved is None else moved[sample])
+            (s.kind, s.size if s.mesh is None else s.mesh, s.pose if moved is None else _poses_at(execution, name, [sample])[0])
             for s in execution.scene.shapes()
             if s.owner == name
         ]
@@ -211,6 +229,11 @@ def _humans(scene: Any) -> list[dict[str, Any]]:
     ]
 
 
+def _flagged_windows(report: Report | None) -> list[tuple[int, int]]:
+    """The sample ranges (inclusive) of the verdicts that are not OK."""
+    return [r for v in (report.verdicts if report is not None else ()) if v.flag != "OK" for r in v.evidence.sample_ranges]
+
+
 def _keep_samples(report: Report | None) -> list[int]:
     keep: list[int] = []
     for v in report.verdicts if report is not None else ():
@@ -233,8 +256,8 @@ def replay_data(execution: Run, report: Report | None = None, *, title: str | No
     trajectory, robot, scene = execution.trajectory, execution.robot, execution.scene
     workspace = scene.workspace or robot.workspace  # a scene without one follows its robot
     time_all = np.asarray(trajectory.time, float)
-    frames = _frame_samples(time_all, _keep_samples(report))
-    p0, p1 = robot.capsule_segments(trajectory.frames[frames])
+    frames = _frame_samples(time_all, _keep_samples(report), _flagged_windows(report))
+    p0, p1 = robot.capsule_segments(trajectory.frames_at(frames))  # only the shown samples (a long run's too)
     capsule_ends = np.concatenate([p0, p1], axis=2)  # (F, C, 6)
 
     objects = []
@@ -250,7 +273,7 @@ def replay_data(execution: Run, report: Report | None = None, *, title: str | No
         if shape.mesh is not None:
             entry["triangles"] = _f32(shown_triangles(*shape.mesh).reshape(-1, 9))
         if o.id in execution.object_poses:
-            entry["poses"] = _f32(execution.object_poses[o.id][frames][:, :3, :4].reshape(len(frames), 12))
+            entry["poses"] = _f32(_poses_at(execution, o.id, frames)[:, :3, :4].reshape(len(frames), 12))
         objects.append(entry)
     boxes = []
     for c in scene.containers:
@@ -289,3 +312,10 @@ def replay_data(execution: Run, report: Report | None = None, *, title: str | No
         data["score_text"] = report.score_text
         data["summary"] = report.summary()
     return data
+
+
+def _poses_at(execution: Run, obj_id: str, samples) -> np.ndarray:
+    """``(n, 4, 4)`` poses of moving object ``obj_id`` at ``samples``, without a long run's whole ``(T, 4, 4)``."""
+    poses = execution.object_poses
+    at = getattr(poses, "at", None)
+    return at(obj_id, samples) if at is not None else np.asarray(poses[obj_id])[np.asarray(samples)]

@@ -29,6 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "Parts",
+    "carried_ids",
     "robot_parts",
     "part_speeds",
     "part_body_distances",
@@ -63,8 +64,17 @@ def _bounding_radius(kind: str, size: tuple[float, ...]) -> float:
     return float(size[0])
 
 
-def robot_parts(execution: "Execution") -> Parts:
-    """The robot's capsules and each object it carries (while held), from ``execution`` (needs its robot)."""
+def carried_ids(trajectory) -> list[str]:
+    """The ids of the objects ``trajectory`` carries at some sample, sorted (the carried parts, in order)."""
+    return sorted({a for a in trajectory.attached.tolist() if a})
+
+
+def robot_parts(execution: "Execution", carried: list[str] | None = None) -> Parts:
+    """The robot's capsules and each object it carries (while held), from ``execution`` (needs its robot).
+
+    ``carried``: the carried objects' ids, in order (default :func:`carried_ids` of its trajectory); a chunk of a
+    run (:meth:`~robocritics.execution.Execution.chunks`) passes the whole run's, so its parts are the run's.
+    """
     trajectory, robot = execution.trajectory, execution.robot
     p0, p1 = robot.capsule_segments(trajectory.frames)
     names = [c.name for c in robot.capsules]
@@ -72,7 +82,7 @@ def robot_parts(execution: "Execution") -> Parts:
     T = len(trajectory)
     starts, ends, present = [p0], [p1], [np.ones((T, len(names)), dtype=bool)]
     poses = getattr(execution, "object_poses", {}) or {}
-    for obj_id in sorted({a for a in trajectory.attached.tolist() if a}):
+    for obj_id in carried_ids(trajectory) if carried is None else carried:
         held = trajectory.attached == obj_id
         if obj_id not in poses:
             continue

@@ -44,6 +44,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from ..._arrays import min_over_columns, run_starts
+from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl  # not `from .. import`: the root imports the repairs, which import this module
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 
@@ -189,11 +190,47 @@ class CollisionCritic:
     Params = Params
 
     def check(self, execution, params: Params) -> Verdict:
-        trajectory, scene = execution.trajectory, execution.scene
-        time = trajectory.time
-        P = trajectory.proximity
-        counted = Counted(trajectory, params.ignore_pairs, params.contact_tolerance_m)
-        if not counted.columns.any():
+        return judge_in_chunks(self, execution, params)
+
+    def reduction(self, execution, params: Params) -> "_Closest":
+        return _Closest(self.name, execution.trajectory, params)
+
+
+class _Closest:
+    """The collision judgement, chunk by chunk: ``D_t`` per sample, where it is least (and its pair), and which
+    pairs pass either threshold (:class:`Counted` is per sample, so a chunk's is the whole run's rows)."""
+
+    def __init__(self, name: str, trajectory, params: Params):
+        self.name, self.trajectory, self.params = name, trajectory, params
+        pairs = trajectory.pairs
+        self.any_counted = any(p.kind == "environment" and p.name not in params.ignore_pairs for p in pairs)
+        self.per_sample = Series(len(trajectory))
+        self.closest = Extreme("min")
+        self.touching = AnyOver(len(pairs))  # counted pairs at or below penetration_m
+        self.near = AnyOver(len(pairs))  # counted pairs closer than d_warn_m
+
+    def add(self, chunk, execution) -> None:
+        if not self.any_counted:
+            return
+        params = self.params
+        window = chunk.trajectory
+        counted = Counted(window, params.ignore_pairs, params.contact_tolerance_m)
+        P = window.proximity
+        own = np.arange(chunk.own.start, chunk.own.stop)
+        per_sample = counted.closest(P)[chunk.own]  # D_t, without copying the (n, K) proximity
+        self.per_sample.put(chunk.start, per_sample)
+        self.closest.offer(
+            chunk.start, per_sample, lambda i: int(np.argmin(np.where(counted.row_mask(own[i]), P[own[i]], np.inf)))
+        )
+        for hits, threshold, strict in ((self.touching, params.penetration_m, False), (self.near, params.d_warn_m, True)):
+            rows = own[per_sample < threshold if strict else per_sample <= threshold]
+            if rows.size:
+                sub = np.where(counted.row_mask(rows), P[rows], np.inf)
+                hits.add((sub < threshold) if strict else (sub <= threshold))
+
+    def verdict(self) -> Verdict:
+        params, trajectory = self.params, self.trajectory
+        if not self.any_counted:
             return threshold_verdict(
                 self.name,
                 None,
@@ -202,10 +239,9 @@ class CollisionCritic:
                 threshold=params.d_warn_m,
                 unit="m",
             )
-        per_sample = counted.closest(P)  # D_t, without copying the (T, K) proximity
-        wt = int(np.argmin(per_sample))
-        worst = float(per_sample[wt])
-        pairs = trajectory.pairs
+        time, pairs = trajectory.time, trajectory.pairs
+        per_sample = self.per_sample.values
+        wt, worst = self.closest.index, float(self.closest.value)
         signal = make_signal(
             time,
             np.where(np.isfinite(per_sample), per_sample, np.nan),
@@ -225,9 +261,7 @@ class CollisionCritic:
                 unit="m",
                 signal=signal,
             )
-
-        wk = int(np.argmin(np.where(counted.row_mask(wt), P[wt], np.inf)))
-        wp = pairs[wk]
+        wp = pairs[self.closest.detail]
         details = {"closest_pair": wp.name, "closest_distance_m": worst}
         verdict = partial(
             threshold_verdict, self.name, trajectory, worst=wt, value=worst, unit="m", signal=signal, details=details
@@ -237,18 +271,12 @@ class CollisionCritic:
             "{during}."
         )
 
-        def involved(threshold: float, strict: bool) -> tuple[np.ndarray, list[str], list[str]]:
-            mask = per_sample < threshold if strict else per_sample <= threshold
-            rows = np.flatnonzero(mask)
-            sub = np.where(counted.row_mask(rows), P[rows], np.inf)
-            hit = (sub < threshold) if strict else (sub <= threshold)
-            col_hit = np.flatnonzero(hit.any(axis=0))
-            links = list(dict.fromkeys(pairs[k].a for k in col_hit))
-            objects = list(dict.fromkeys(_thing(pairs[k]) for k in col_hit))
-            return mask, links, objects
+        def involved(hits: AnyOver) -> tuple[list[str], list[str]]:
+            col_hit = np.flatnonzero(hits.hit)
+            return list(dict.fromkeys(pairs[k].a for k in col_hit)), list(dict.fromkeys(_thing(pairs[k]) for k in col_hit))
 
         if worst <= params.penetration_m:
-            mask, links, objects = involved(params.penetration_m, strict=False)
+            links, objects = involved(self.touching)
             depth = -worst
             what = "penetrates" if depth >= 0.0005 else "touches"
             extra = f" by {fmt_length(depth)}" if depth >= 0.0005 else ""
@@ -256,7 +284,7 @@ class CollisionCritic:
             also = f" It also hits {', '.join(others)}." if others else ""
             return verdict(
                 Flag.ERROR,
-                mask,
+                per_sample <= params.penetration_m,
                 links=links,
                 objects=objects,
                 threshold=params.penetration_m,
@@ -265,10 +293,10 @@ class CollisionCritic:
                 hint=f"To avoid the collision, {hint}",
             )
         if worst < params.d_warn_m:
-            mask, links, objects = involved(params.d_warn_m, strict=True)
+            links, objects = involved(self.near)
             return verdict(
                 Flag.WARNING,
-                mask,
+                per_sample < params.d_warn_m,
                 links=links,
                 objects=objects,
                 threshold=params.d_warn_m,

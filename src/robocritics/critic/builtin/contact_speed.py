@@ -30,7 +30,17 @@ from pydantic import Field
 
 from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
-from .cobot import nothing_to_judge, carried_mass, part_body_distances, part_speeds, robot_masses, robot_parts, slow_flagged_moves
+from ..chunked import Extreme, judge_in_chunks
+from .cobot import (
+    carried_ids,
+    carried_mass,
+    nothing_to_judge,
+    part_body_distances,
+    part_speeds,
+    robot_masses,
+    robot_parts,
+    slow_flagged_moves,
+)
 
 __all__ = ["ContactSpeedCritic", "register_critics", "contact_speeds"]
 
@@ -59,17 +69,19 @@ def requested(execution) -> bool:
     return bool(getattr(execution.scene, "humans", ()))
 
 
-def contact_speeds(execution, params: Params):
+def contact_speeds(execution, params: Params, carried: list[str] | None = None, payload_kg=None):
     """Per person: ``(body, speed (T, P, K) m/s, limit (T, K) m/s, parts)``: contact speed of each part on each
-    body capsule (0 when not closing in within ``near_m``) and the region's limit at each sample."""
+    body capsule (0 when not closing in within ``near_m``) and the region's limit at each sample. ``carried``
+    and ``payload_kg`` (the carried parts and the tool and workpiece mass ``(T,)`` kg) are a chunk's of the whole
+    run's (default: ``execution``'s own)."""
     from ...humans import BODY_REGIONS, scene_bodies, transient_speed_limit  # here: the critic is on demand
 
     trajectory, robot = execution.trajectory, execution.robot
-    parts = robot_parts(execution)
+    parts = robot_parts(execution, carried)
     speed = part_speeds(parts, trajectory.time)  # (T, P)
     moving_kg, tool_kg = robot_masses(robot)
-    payload_kg, _ = carried_mass(execution)
-    payload_kg = payload_kg + tool_kg  # (T,) m_L: tool and workpiece
+    if payload_kg is None:
+        payload_kg = carried_mass(execution)[0] + tool_kg  # (T,) m_L: tool and workpiece
     out = []
     for body in scene_bodies(execution.scene):
         d = part_body_distances(parts, body, within_m=params.near_m)  # (T, P, K), exact up to near_m
@@ -94,63 +106,107 @@ class ContactSpeedCritic:
         return requested(execution)
 
     def check(self, execution, params: Params) -> Verdict:
-        from ...humans import BODY_REGIONS, LIMITS_SOURCE  # here: the critic is on demand (people in the scene)
+        return judge_in_chunks(self, execution, params)
 
+    def reduction(self, execution, params: Params) -> "_Contacts":
+        return _Contacts(execution, params)
+
+
+class _Contacts:
+    """The contact-speed judgement, chunk by chunk (closing in needs the sample before: the chunk's halo): the
+    worst ratio to its limit per sample, which samples pass either threshold, and per person the worst
+    (sample, part, body capsule) with its speed and limit."""
+
+    def __init__(self, execution, params: Params):
+        self.execution, self.params = execution, params
+        self.nothing = nothing_to_judge(NAME, execution, "shapes and masses")
+        if self.nothing is not None:
+            return
         trajectory = execution.trajectory
-        nothing = nothing_to_judge(NAME, execution, "shapes and masses")
-        if nothing is not None:
-            return nothing
         T = len(trajectory)
-        worst = (0.0, 0, 0, 0, None)  # ratio, sample, part, capsule, per-person result
-        ratio_series = np.zeros(T)
-        over_warn = np.zeros(T, dtype=bool)
-        over_err = np.zeros(T, dtype=bool)
-        for body, contact, limit, parts in contact_speeds(execution, params):
+        self.carried = carried_ids(trajectory)
+        self.payload_kg = carried_mass(execution)[0] + robot_masses(execution.robot)[1]  # (T,) m_L
+        self.ratio_series = np.zeros(T)
+        self.over_warn = np.zeros(T, dtype=bool)
+        self.over_err = np.zeros(T, dtype=bool)
+        self.worst_of: list[Extreme] = []  # per person: the worst (sample, part, capsule) of the flattened ratio
+        self.parts: tuple[str, ...] = ()
+
+    def add(self, chunk, execution) -> None:
+        if self.nothing is not None:
+            return
+        lo, own = chunk.lo, chunk.own
+        payload = self.payload_kg[lo : lo + len(chunk.trajectory)]
+        results = contact_speeds(execution, self.params, self.carried, payload)
+        if not self.worst_of:
+            self.worst_of = [Extreme("max") for _ in results]
+        for b, (body, contact, limit, parts) in enumerate(results):
+            contact, limit = contact[own], limit[own]
+            self.parts = parts.names
             with np.errstate(divide="ignore", invalid="ignore"):
                 ratio = np.where(contact > 0, contact / limit[:, None, :], 0.0)  # inf on the head
             per_sample = ratio.max(axis=(1, 2))
-            ratio_series = np.maximum(ratio_series, np.where(np.isfinite(per_sample), per_sample, 1e9))
-            over_err |= per_sample > 1.0
-            over_warn |= per_sample > params.warn_fraction
-            flat = int(np.argmax(np.where(np.isfinite(ratio), ratio, 1e9)))
-            t, p, k = np.unravel_index(flat, ratio.shape)
-            r = float(ratio[t, p, k])
+            rows = slice(chunk.start, chunk.stop)
+            self.ratio_series[rows] = np.maximum(self.ratio_series[rows], np.where(np.isfinite(per_sample), per_sample, 1e9))
+            self.over_err[rows] |= per_sample > 1.0
+            self.over_warn[rows] |= per_sample > self.params.warn_fraction
+            P, K = ratio.shape[1:]
+
+            def detail(i, ratio=ratio, contact=contact, limit=limit, P=P, K=K):
+                t, p, k = np.unravel_index(i, ratio.shape)
+                return float(ratio[t, p, k]), int(p), int(k), float(contact[t, p, k]), float(limit[t, k])
+
+            flat = np.where(np.isfinite(ratio), ratio, 1e9).reshape(-1)
+            self.worst_of[b].offer(chunk.start * P * K, flat, detail)
+
+    def verdict(self) -> Verdict:
+        from ...humans import BODY_REGIONS, LIMITS_SOURCE, scene_bodies  # here: the critic is on demand
+
+        if self.nothing is not None:
+            return self.nothing
+        params, trajectory = self.params, self.execution.trajectory
+        bodies = scene_bodies(self.execution.scene)
+        worst = (0.0, 0, 0, 0, None)  # ratio, sample, part, capsule, (body, speed, limit)
+        for body, extreme in zip(bodies, self.worst_of):
+            if extreme.detail is None:
+                continue
+            r, p, k, speed, vmax = extreme.detail
             if r > worst[0]:
-                worst = (r, int(t), int(p), int(k), (body, contact, limit, parts))
-        signal = make_signal(trajectory.time, np.minimum(ratio_series, 10.0), label="contact speed / ISO/TS 15066 "
+                per_sample_cells = len(self.parts) * len(body)
+                worst = (r, extreme.index // per_sample_cells, p, k, (body, speed, vmax))
+        signal = make_signal(trajectory.time, np.minimum(self.ratio_series, 10.0), label="contact speed / ISO/TS 15066 "
                              "limit (worst part and body region)", unit="fraction of limit",
-                             warning=params.warn_fraction, error=1.0)
+                             warning=params.warn_fraction, error=1.0)  # fmt: skip
         r, t, p, k, found = worst
         if found is None:
             return threshold_verdict(NAME, trajectory, Flag.OK, worst=0, signal=signal, value=0.0, threshold=1.0,
                                      unit="fraction of limit",
-                                     message=f"No robot part closes in on a person within {fmt_value(params.near_m)} m.")
-        body, contact, limit, parts = found
+                                     message=f"No robot part closes in on a person within {fmt_value(params.near_m)} m.")  # fmt: skip
+        body, speed, vmax = found
         region = BODY_REGIONS[body.regions[k]]
-        speed, vmax = float(contact[t, p, k]), float(limit[t, k])
-        where = (f"the {parts.names[p]} closes in on {body.human}'s {region.label} ({body.names[k]}) at "
-                 f"{speed:.3f} m/s at {trajectory.time[t]:.2f} s")
-        details = {"human": body.human, "region": region.name, "body_capsule": body.names[k], "part": parts.names[p],
-                   "speed_m_s": speed, "limit_m_s": vmax, "source": LIMITS_SOURCE}
-        common = dict(worst=t, links=[parts.names[p]], signal=signal, details=details)
+        where = (f"the {self.parts[p]} closes in on {body.human}'s {region.label} ({body.names[k]}) at "
+                 f"{speed:.3f} m/s at {trajectory.time[t]:.2f} s")  # fmt: skip
+        details = {"human": body.human, "region": region.name, "body_capsule": body.names[k], "part": self.parts[p],
+                   "speed_m_s": speed, "limit_m_s": vmax, "source": LIMITS_SOURCE}  # fmt: skip
+        common = dict(worst=t, links=[self.parts[p]], signal=signal, details=details)
         hint = ("Slow the robot{during} (lib.reduce_speed), or keep it farther from the person's "
-                + region.label + ".")
+                + region.label + ".")  # fmt: skip
         if not region.contact_permitted:
-            return threshold_verdict(NAME, trajectory, Flag.ERROR, over_err, value=speed, threshold=0.0, unit="m/s",
+            return threshold_verdict(NAME, trajectory, Flag.ERROR, self.over_err, value=speed, threshold=0.0, unit="m/s",
                                      message=f"{where}: ISO/TS 15066 permits no contact with the {region.label}.",
-                                     hint="Keep the robot away from the person's head{during}.", **common)
+                                     hint="Keep the robot away from the person's head{during}.", **common)  # fmt: skip
         if r > 1.0:
-            flag, samples, said = Flag.ERROR, over_err, "above"
+            flag, samples, said = Flag.ERROR, self.over_err, "above"
         elif r > params.warn_fraction:
-            flag, samples, said = Flag.WARNING, over_warn, f"above {fmt_value(100 * params.warn_fraction)} % of"
+            flag, samples, said = Flag.WARNING, self.over_warn, f"above {fmt_value(100 * params.warn_fraction)} % of"
         else:
             return threshold_verdict(NAME, trajectory, Flag.OK, value=speed, threshold=vmax, unit="m/s",
                                      message=f"Contact speeds stay within {fmt_value(100 * params.warn_fraction)} % "
                                      f"of the ISO/TS 15066 limits (at most {100 * r:.0f} %: {where}, limit "
-                                     f"{vmax:.3f} m/s).", **common)
+                                     f"{vmax:.3f} m/s).", **common)  # fmt: skip
         return threshold_verdict(NAME, trajectory, flag, samples, value=speed, threshold=vmax, unit="m/s",
                                  message=f"{where}, {said} the ISO/TS 15066 transient-contact limit of {vmax:.3f} m/s "
-                                 f"for the {region.label}.", hint=hint, **common)
+                                 f"for the {region.label}.", hint=hint, **common)  # fmt: skip
 
 
 @hookimpl

@@ -37,6 +37,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
+from ..chunked import Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, ParamName, Verdict, fmt_value, make_signal, threshold_verdict
 from ...errors import CriticError
@@ -69,17 +70,20 @@ class Params(CriticParams):
         return self
 
 
-def spearing_speed(poses: np.ndarray, time: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def spearing_speed(poses: np.ndarray, time: np.ndarray, first_sample: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(s (T,), v (3, T), f (3, T))``: spearing speed m/s, TCP velocity m/s, unit finger direction.
 
     ``poses (T, 4, 4)`` are the TCP poses; component rows (3, T) keep every operation contiguous.
+    ``first_sample``: the index of ``poses[0]`` in the run (for the error naming a sample).
     """
     p = np.ascontiguousarray(poses[:, :3, 3].T)  # (3, T) m
     f = np.array(poses[:, :3, 2].T, order="C")  # (3, T) finger direction, a copy we may normalise
     norm = np.linalg.norm(f, axis=0)
     if np.any(norm < 1e-9):
         i = int(np.argmax(norm < 1e-9))
-        raise CriticError(f"the finger direction (z axis of the TCP frame) is zero at sample {i}; cannot judge spearing")
+        raise CriticError(
+            f"the finger direction (z axis of the TCP frame) is zero at sample {first_sample + i}; cannot judge spearing"
+        )
     f /= norm
     v = np.gradient(p, time, axis=1) if len(time) > 1 else np.zeros_like(p)  # (3, T) m/s
     s = np.maximum(np.einsum("it,it->t", v, f), 0.0)
@@ -92,19 +96,44 @@ class EndEffectorPoseCritic:
     Params = Params
 
     def check(self, execution, params: Params) -> Verdict:
-        trajectory = execution.trajectory
+        return judge_in_chunks(self, execution, params)
+
+    def reduction(self, execution, params: Params) -> "_Spearing":
+        return _Spearing(self.name, execution.trajectory, params)
+
+
+class _Spearing:
+    """The spearing judgement, chunk by chunk: the spearing speed per sample (central differences need the
+    samples either side: the chunk's halo), where it is largest (and the TCP velocity there), the fastest TCP."""
+
+    def __init__(self, name: str, trajectory, params: Params):
+        self.name, self.trajectory, self.params = name, trajectory, params
+        self.frame = params.frame or trajectory.tcp_frame
+        self.index = trajectory.frame_index(self.frame)
+        self.s = Series(len(trajectory))
+        self.fastest = Extreme("max")
+        self.tcp_speed = 0.0
+
+    def add(self, chunk, execution) -> None:
+        window = chunk.trajectory
+        s, v, _ = spearing_speed(window.frames[:, self.index], window.time, chunk.lo)
+        s, v = s[chunk.own], v[:, chunk.own]
+        self.s.put(chunk.start, s)
+        self.fastest.offer(chunk.start, s, lambda i: v[:, i].copy())
+        self.tcp_speed = max(self.tcp_speed, float(np.linalg.norm(v, axis=0).max()))
+
+    def verdict(self) -> Verdict:
+        params, trajectory, frame = self.params, self.trajectory, self.frame
         time = trajectory.time
-        frame = params.frame or trajectory.tcp_frame
-        poses = trajectory.frames[:, trajectory.frame_index(frame)]
-        s, v, f = spearing_speed(poses, time)
-        wt = int(np.argmax(s))
-        worst = float(s[wt])
-        speed = float(np.linalg.norm(v[:, wt]))
+        s = self.s.values
+        wt = self.fastest.index
+        worst = float(self.fastest.value)
+        speed = float(np.linalg.norm(self.fastest.detail))
         details = {
             "max_spearing_speed_m_s": worst,
             "tcp_speed_at_worst_m_s": speed,
             "alignment_at_worst": worst / speed if speed > 0 else 0.0,
-            "max_tcp_speed_m_s": float(np.linalg.norm(v, axis=0).max()),
+            "max_tcp_speed_m_s": self.tcp_speed,
         }
         signal = make_signal(
             time,

@@ -39,6 +39,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
+from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
 from ..._arrays import row_any, row_max, squared_norms
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_value, make_signal, threshold_verdict
@@ -97,14 +98,6 @@ def link_speeds(positions: np.ndarray, time: np.ndarray) -> np.ndarray:
     return speed
 
 
-def _selected_frames(trajectory, frames) -> tuple[tuple[str, ...], np.ndarray]:
-    """The names and positions ``(T, L, 3)`` (m) of the frames ``frames`` names, or of every frame."""
-    if not frames:
-        return trajectory.frame_names, trajectory.positions  # shared with the other critics
-    sel = [trajectory.frame_index(n) for n in frames]
-    return tuple(trajectory.frame_names[i] for i in sel), trajectory.positions[:, sel]
-
-
 def _joint_speeds(q: np.ndarray, time: np.ndarray, limits: np.ndarray, tolerance: float):
     """Joint speeds ``w (T-1, n)`` rad/s, the (interval, joint) of the highest fraction of its limit, that
     fraction, where a joint is over its limit by more than ``tolerance`` ``(T-1, n)``, and which intervals
@@ -127,23 +120,68 @@ def _sample_values(per_interval: np.ndarray, first=0.0) -> np.ndarray:
     return out
 
 
-def _links_over(v: np.ndarray, names: tuple[str, ...], threshold: float) -> list[str]:
-    """The links whose speed ``v (T-1, L)`` passes ``threshold`` (m/s) at some sample."""
-    return [names[i] for i in np.flatnonzero((v > threshold).any(axis=0))]
-
-
 class JointSpeedCritic:
     name = "joint_speed"
     description = "Linear speed of every link (paper Algorithm 1) and angular joint speed against the robot's limits."
     Params = Params
 
     def check(self, execution, params: Params) -> Verdict:
-        trajectory = execution.trajectory
+        return judge_in_chunks(self, execution, params)
+
+    def reduction(self, execution, params: Params) -> "_Speeds":
+        return _Speeds(self.name, execution.trajectory, params)
+
+
+class _Speeds:
+    """The joint-speed judgement, chunk by chunk: the fastest link per sample (from the chunk's frames and the
+    sample before it), where it is fastest (and that sample's link speeds), which links pass either threshold.
+    The angular joint speeds come from ``q``, which every trajectory stores."""
+
+    def __init__(self, name: str, trajectory, params: Params):
+        self.name, self.trajectory, self.params = name, trajectory, params
+        if params.frames:
+            self.sel = [trajectory.frame_index(n) for n in params.frames]
+            self.names = tuple(trajectory.frame_names[i] for i in self.sel)
+        else:
+            self.sel, self.names = None, trajectory.frame_names
         T = len(trajectory)
-        names, positions = _selected_frames(trajectory, params.frames)
+        self.vmax = Series(max(T - 1, 0))  # (T-1,): interval i ends at sample i + 1
+        self.fastest = Extreme("max")
+        self.over_max, self.over_warn = AnyOver(len(self.names)), AnyOver(len(self.names))
+
+    def add(self, chunk, execution) -> None:
+        if len(self.trajectory) < 2 or not self.names:
+            return
+        window = chunk.trajectory
+        positions = window.positions if self.sel is None else window.positions[:, self.sel]
+        # the intervals ending at the chunk's own samples (the first sample of the run ends none)
+        first = max(chunk.start, 1)
+        rows = slice(first - chunk.lo - 1, chunk.stop - chunk.lo - 1)
+        p = np.ascontiguousarray(positions)
+        squared = squared_norms(p[1:] - p[:-1])[rows]  # (n, L) squared steps, m^2
+        dt = np.diff(window.time)[rows]
+        # the fastest link per sample: sqrt and division by dt > 0 keep the order of the squared steps, so
+        # sqrt(max |step|^2) / dt is max(|step| / dt) bit for bit, without a speed per link
+        vmax = np.sqrt(row_max(squared)) / dt
+
+        def speeds(r):  # link_speeds of rows r, as it computes them: sqrt, then / dt
+            v = np.sqrt(squared[r])
+            v /= dt[r] if np.ndim(r) == 0 else dt[r][:, None]
+            return v
+
+        self.vmax.put(first - 1, vmax)
+        self.fastest.offer(first - 1, vmax, speeds)
+        for hits, threshold in ((self.over_max, self.params.max_speed_m_s), (self.over_warn, self.params.warn_speed_m_s)):
+            over = np.flatnonzero(vmax > threshold)
+            if over.size:
+                hits.add(speeds(over) > threshold)
+
+    def verdict(self) -> Verdict:
+        params, trajectory, names = self.params, self.trajectory, self.names
+        T = len(trajectory)
         time = trajectory.time
         limits = np.asarray(trajectory.limits.velocity_rad_s, dtype=float)
-        if T < 2 or positions.shape[1] == 0:
+        if T < 2 or len(names) == 0:
             return threshold_verdict(
                 self.name,
                 trajectory,
@@ -154,13 +192,10 @@ class JointSpeedCritic:
                 threshold=params.warn_speed_m_s,
                 unit="m/s",
             )
-
-        # --- measure: all samples at once --------------------------------------
-        v = link_speeds(positions, time)  # (T-1, L), speed reached at sample t = i + 1
-        vmax = row_max(v)  # (T-1,) fastest link per sample
-        wi = int(np.argmax(vmax))
-        wl = int(np.argmax(v[wi]))
-        worst_v = float(v[wi, wl])
+        vmax = self.vmax.values  # (T-1,) fastest link per sample
+        wi = self.fastest.index
+        wl = int(np.argmax(self.fastest.detail))
+        worst_v = float(self.fastest.detail[wl])
         w, (ji, jj), worst_ratio, over_joint, over_joint_rows = _joint_speeds(
             trajectory.q, time, limits, params.joint_limit_tolerance
         )
@@ -182,7 +217,7 @@ class JointSpeedCritic:
 
         if err_lin or err_joint:
             rows = over_max | over_joint_rows
-            links = _links_over(v, names, params.max_speed_m_s) if err_lin else []
+            links = [names[i] for i in np.flatnonzero(self.over_max.hit)] if err_lin else []
             joints_over = []
             if err_joint:
                 jover = over_joint.any(axis=0)
@@ -219,7 +254,7 @@ class JointSpeedCritic:
                 Flag.WARNING,
                 _sample_values(over_warn, False),
                 worst=wi + 1,
-                links=_links_over(v, names, params.warn_speed_m_s),
+                links=[names[i] for i in np.flatnonzero(self.over_warn.hit)],
                 value=worst_v,
                 threshold=params.warn_speed_m_s,
                 message=f"Joint speed is higher than the recommended value of {fmt_value(params.warn_speed_m_s)} m/s "

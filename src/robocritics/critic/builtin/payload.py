@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
+from ..chunked import judge_in_chunks
 from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, Verdict, fmt_value, make_signal, threshold_verdict
 from ...robot.arms import ARMS
@@ -49,30 +50,50 @@ def allowed_payload_kg(rated_kg: float, full_offset_m: float, offset_m: np.ndarr
         return np.where(offset_m <= full_offset_m, rated_kg, rated_kg * full_offset_m / offset_m)
 
 
+class _Levers:
+    """Centre of each held object in the frame ``frame`` (m), averaged over the samples it is held, read chunk by
+    chunk (a long run's frames are made a chunk at a time): :meth:`add` every chunk, then :meth:`levers`."""
+
+    def __init__(self, execution, frame: str):
+        trajectory = execution.trajectory
+        self.index = trajectory.frame_index(frame)
+        poses_of = getattr(execution, "object_poses", {}) or {}
+        self.local: dict[str, list[np.ndarray]] = {o: [] for o in poses_of if (trajectory.attached == o).any()}
+
+    def add(self, chunk, window) -> None:
+        own = chunk.own
+        attached = chunk.trajectory.attached[own]
+        for obj_id, parts in self.local.items():
+            held = attached == obj_id
+            if not held.any():
+                continue
+            f = chunk.trajectory.frames[own][held, self.index]  # (H, 4, 4)
+            centre = np.asarray(window.object_poses[obj_id], dtype=float)[own][held, :3, 3]
+            parts.append(np.einsum("hji,hj->hi", f[:, :3, :3], centre - f[:, :3, 3]))  # R^T (c - t)
+
+    def levers(self) -> dict[str, np.ndarray]:
+        return {o: np.concatenate(parts).mean(axis=0) for o, parts in self.local.items()}
+
+
 def _held_levers(execution, frame: str) -> dict[str, np.ndarray]:
-    """Centre of each held object in the frame ``frame`` (m), averaged over the samples it is held."""
-    trajectory = execution.trajectory
-    index = trajectory.frame_index(frame)
-    out = {}
-    for obj_id, poses in (getattr(execution, "object_poses", {}) or {}).items():
-        held = trajectory.attached == obj_id
-        if not held.any():
-            continue
-        f = trajectory.frames[held, index]  # (H, 4, 4)
-        centre = np.asarray(poses, dtype=float)[held, :3, 3]
-        local = np.einsum("hji,hj->hi", f[:, :3, :3], centre - f[:, :3, 3])  # R^T (c - t)
-        out[obj_id] = local.mean(axis=0)
-    return out
+    """:class:`_Levers` of every chunk of ``execution``."""
+    levers = _Levers(execution, frame)
+    if levers.local:
+        for chunk, window in execution.chunks():
+            levers.add(chunk, window)
+    return levers.levers()
 
 
-def joint_torques(execution) -> np.ndarray:
-    """``(T, n)`` joint torques (N m) of the motion by RNEA, with each held object's ``mass_kg`` on the last link."""
+def joint_torques(execution, levers: dict[str, np.ndarray] | None = None) -> np.ndarray:
+    """``(T, n)`` joint torques (N m) of the motion by RNEA, with each held object's ``mass_kg`` on the last link
+    (at ``levers``: its centre in the last link's frame, m; default measured on ``execution``)."""
     import pinocchio as pin  # here: a check that does not run this on-demand critic need not load Pinocchio
 
     trajectory, robot = execution.trajectory, execution.robot
     model = robot.model
     last = model.njoints - 1
-    levers = _held_levers(execution, _link_of_joint(robot, last))
+    if levers is None:
+        levers = _held_levers(execution, _link_of_joint(robot, last))
     q = np.asarray(trajectory.q, dtype=float)
     v = np.gradient(q, trajectory.time, axis=0) if len(q) > 1 else np.zeros_like(q)
     a = np.gradient(v, trajectory.time, axis=0) if len(q) > 1 else np.zeros_like(q)
@@ -133,16 +154,37 @@ class PayloadCritic:
         return requested(execution)
 
     def check(self, execution, params: Params) -> Verdict:
+        return judge_in_chunks(self, execution, params)
+
+    def reduction(self, execution, params: Params) -> "_Payload":
+        return _Payload(execution, params)
+
+
+class _Payload:
+    """The payload judgement: the held objects' levers read chunk by chunk, then the payload curve and the
+    torques (RNEA of ``q``, which every trajectory stores) over the whole run."""
+
+    def __init__(self, execution, params: Params):
+        self.execution, self.params = execution, params
+        robot = execution.robot
+        self.levers = None if robot is None else _Levers(execution, _link_of_joint(robot, robot.model.njoints - 1))
+
+    def add(self, chunk, execution) -> None:
+        if self.levers is not None and self.levers.local:
+            self.levers.add(chunk, execution)
+
+    def verdict(self) -> Verdict:
+        execution, params = self.execution, self.params
         trajectory, robot = execution.trajectory, execution.robot
         if robot is None:
             return Verdict(critic=NAME, flag=Flag.OK, message="no robot model: nothing to check (its inertias and "
-                           "torque limits are needed)", hint="judge the motion with its robot")
+                           "torque limits are needed)", hint="judge the motion with its robot")  # fmt: skip
         spec = ARMS.get(robot.name)
         carried, unknown = carried_mass(execution)
         _, tool_kg = robot_masses(robot)
         mass = tool_kg + carried  # (T,) kg
         tool_lever, flange = _tool_cog(robot)
-        levers = _held_levers(execution, _link_of_joint(robot, robot.model.njoints - 1))
+        levers = self.levers.levers()
         cog = np.tile(tool_lever * tool_kg, (len(trajectory), 1))
         for obj_id, lever in levers.items():
             rows = trajectory.attached == obj_id
@@ -154,7 +196,7 @@ class PayloadCritic:
         else:
             allowed = np.full(len(trajectory), np.inf)
         load = mass / allowed  # (T,) fraction of the allowed payload
-        tau = joint_torques(execution)
+        tau = joint_torques(execution, levers)
         limits = np.asarray(robot.model.effortLimit, dtype=float)
         torque = np.abs(tau) / limits  # (T, n)
         worst_joint = torque.argmax(axis=1)

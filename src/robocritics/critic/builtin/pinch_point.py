@@ -24,6 +24,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from ..hookspecs import hookimpl
+from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from .. import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
 
 __all__ = ["PinchPointCritic", "register_critics"]
@@ -46,11 +47,40 @@ class PinchPointCritic:
     Params = Params
 
     def check(self, execution, params: Params) -> Verdict:
-        trajectory = execution.trajectory
-        time = trajectory.time
-        pairs = trajectory.pairs
-        columns = trajectory.pair_mask(kind="self")  # (K,) only self pairs ever count
-        if not columns.any():
+        return judge_in_chunks(self, execution, params)
+
+    def reduction(self, execution, params: Params) -> "_Closest":
+        return _Closest(self.name, execution.trajectory, params)
+
+
+class _Closest:
+    """The pinch-point judgement, chunk by chunk: the closest self distance per sample, where it is least (and
+    its pair), and which pairs pass either threshold."""
+
+    def __init__(self, name: str, trajectory, params: Params):
+        self.name, self.trajectory, self.params = name, trajectory, params
+        self.columns = trajectory.pair_mask(kind="self")  # (K,) only self pairs ever count
+        self.gather = np.flatnonzero(self.columns)
+        self.per_sample = Series(len(trajectory))
+        self.closest = Extreme("min")
+        self.hits = {t: AnyOver(len(self.columns)) for t in (params.d_min_m, params.d_max_m)}
+
+    def add(self, chunk, execution) -> None:
+        if not self.gather.size:
+            return
+        P = chunk.trajectory.proximity[chunk.own]
+        # (n,): the self columns gathered, then a plain row minimum (4x faster than a masked `where=` reduction)
+        per_sample = P[:, self.gather].min(axis=1)
+        self.per_sample.put(chunk.start, per_sample)
+        self.closest.offer(chunk.start, per_sample, lambda i: int(np.argmin(np.where(self.columns, P[i], np.inf))))
+        for threshold, hits in self.hits.items():
+            rows = np.flatnonzero(per_sample < threshold)
+            if rows.size:
+                hits.add(np.where(self.columns, P[rows], np.inf) < threshold)
+
+    def verdict(self) -> Verdict:
+        params, trajectory = self.params, self.trajectory
+        if not self.gather.size:
             return threshold_verdict(
                 self.name,
                 None,
@@ -59,12 +89,9 @@ class PinchPointCritic:
                 threshold=params.d_max_m,
                 unit="m",
             )
-        P = trajectory.proximity
-        # (T,): the self columns gathered, then a plain row minimum (4x faster than a masked `where=` reduction)
-        per_sample = P[:, np.flatnonzero(columns)].min(axis=1)
-        wt = int(np.argmin(per_sample))
-        worst = float(per_sample[wt])
-        wk = int(np.argmin(np.where(columns, P[wt], np.inf)))
+        time, pairs = trajectory.time, trajectory.pairs
+        per_sample = self.per_sample.values
+        wt, worst, wk = self.closest.index, float(self.closest.value), self.closest.detail
         wp = pairs[wk]
         signal = make_signal(
             time,
@@ -79,25 +106,17 @@ class PinchPointCritic:
         verdict = partial(
             threshold_verdict, self.name, trajectory, worst=wt, value=worst, unit="m", signal=signal, details=details
         )
-
-        def involved(threshold: float):
-            mask = per_sample < threshold
-            rows = np.flatnonzero(mask)
-            hit = np.where(columns, P[rows], np.inf) < threshold
-            col_hit = np.flatnonzero(hit.any(axis=0))
-            links = list(dict.fromkeys(n for k in col_hit for n in (pairs[k].a, pairs[k].b)))
-            return mask, links
-
         if worst <= 0:
             where = f"the {wp.a} and the {wp.b} touch (overlap {fmt_length(-worst)}) at {time[wt]:.2f} s"
         else:
             where = f"the {wp.a} and the {wp.b} come within {fmt_length(worst)} of each other at {time[wt]:.2f} s"
         for flag, threshold in ((Flag.ERROR, params.d_min_m), (Flag.WARNING, params.d_max_m)):
             if worst < threshold:
-                mask, links = involved(threshold)
+                col_hit = np.flatnonzero(self.hits[threshold].hit)
+                links = list(dict.fromkeys(n for k in col_hit for n in (pairs[k].a, pairs[k].b)))
                 return verdict(
                     flag,
-                    mask,
+                    per_sample < threshold,
                     links=links,
                     threshold=threshold,
                     message=f"Pinch point: {where}, closer than {fmt_length(threshold)}.",

@@ -34,7 +34,8 @@ from pydantic import Field
 from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 from ...robot.arms import ARMS, UR3E
-from .cobot import nothing_to_judge, part_body_nearest, part_speeds, robot_parts, slow_flagged_moves
+from ..chunked import Series, judge_in_chunks
+from .cobot import carried_ids, nothing_to_judge, part_body_nearest, part_speeds, robot_parts, slow_flagged_moves
 from .contact_speed import requested
 
 __all__ = ["SeparationCritic", "register_critics", "protective_separation"]
@@ -95,32 +96,71 @@ class SeparationCritic:
         return requested(execution)
 
     def check(self, execution, params: Params) -> Verdict:
+        return judge_in_chunks(self, execution, params)
+
+    def reduction(self, execution, params: Params) -> "_Separations":
+        return _Separations(execution, params)
+
+
+def _separations(execution, params: Params, carried: list[str], t_s: float, z_r: float):
+    """``(speed, sep, s_p, who, v_toward)`` ``(T,)`` of ``execution`` (a chunk of a run, with the run's
+    ``carried`` objects): the fastest part's speed (m/s), the separation from the closest person by
+    ``S - S_p`` (m), its S_p (m), that person's index and the robot's speed toward them (m/s)."""
+    from ...humans import scene_bodies  # here: the critic is on demand (people in the scene)
+
+    trajectory = execution.trajectory
+    time = trajectory.time
+    parts = robot_parts(execution, carried)
+    speed = part_speeds(parts, time).max(axis=1)  # (T,) fastest part, m/s
+    T = len(trajectory)
+    sep, s_p, who = np.full(T, np.inf), np.zeros(T), np.zeros(T, dtype=np.int64)
+    v_toward = np.zeros(T)
+    for b, body in enumerate(scene_bodies(execution.scene)):
+        d = part_body_nearest(parts, body)  # (T, P) part to person
+        closing = np.zeros(d.shape)
+        with np.errstate(invalid="ignore"):
+            closing[1:] = np.nan_to_num(-(d[1:] - d[:-1]) / np.diff(time)[:, None], nan=0.0, posinf=0.0,
+                                        neginf=0.0)  # fmt: skip
+        v_r = np.clip(closing, 0.0, None).max(axis=1)
+        s = d.min(axis=1)
+        sp = protective_separation(v_r, params, t_s, z_r)
+        closer = (s - sp) < (sep - s_p)
+        sep, s_p, v_toward = np.where(closer, s, sep), np.where(closer, sp, s_p), np.where(closer, v_r, v_toward)
+        who[closer] = b
+    return speed, sep, s_p, who, v_toward
+
+
+class _Separations:
+    """The separation judgement, chunk by chunk (speeds need the sample before: the chunk's halo): the
+    per-sample separation, S_p, closest person and speeds, judged as a whole at the end."""
+
+    def __init__(self, execution, params: Params):
+        self.execution, self.params = execution, params
+        self.nothing = nothing_to_judge(NAME, execution, "shapes")
+        if self.nothing is not None:
+            return
+        self.facts = _arm_facts(execution.robot)
+        self.carried = carried_ids(execution.trajectory)
+        T = len(execution.trajectory)
+        self.series = [Series(T), Series(T, fill=np.inf), Series(T), Series(T, dtype=np.int64, fill=0), Series(T)]
+
+    def add(self, chunk, execution) -> None:
+        if self.nothing is not None:
+            return
+        t_s, z_r, _ = self.facts
+        for series, values in zip(self.series, _separations(execution, self.params, self.carried, t_s, z_r)):
+            series.put(chunk.start, values[chunk.own])
+
+    def verdict(self) -> Verdict:
         from ...humans import scene_bodies  # here: the critic is on demand (people in the scene)
 
-        trajectory = execution.trajectory
-        nothing = nothing_to_judge(NAME, execution, "shapes")
-        if nothing is not None:
-            return nothing
-        t_s, z_r, stopping_data = _arm_facts(execution.robot)
+        if self.nothing is not None:
+            return self.nothing
+        params, trajectory = self.params, self.execution.trajectory
+        t_s, z_r, stopping_data = self.facts
         time = trajectory.time
-        parts = robot_parts(execution)
-        speed = part_speeds(parts, time).max(axis=1)  # (T,) fastest part, m/s
-        T = len(trajectory)
-        sep, s_p, who = np.full(T, np.inf), np.zeros(T), np.zeros(T, dtype=np.int64)
-        v_toward = np.zeros(T)
-        bodies = scene_bodies(execution.scene)
-        for b, body in enumerate(bodies):
-            d = part_body_nearest(parts, body)  # (T, P) part to person
-            closing = np.zeros(d.shape)
-            with np.errstate(invalid="ignore"):
-                closing[1:] = np.nan_to_num(-(d[1:] - d[:-1]) / np.diff(time)[:, None], nan=0.0, posinf=0.0,
-                                            neginf=0.0)
-            v_r = np.clip(closing, 0.0, None).max(axis=1)
-            s = d.min(axis=1)
-            sp = protective_separation(v_r, params, t_s, z_r)
-            closer = (s - sp) < (sep - s_p)
-            sep, s_p, v_toward = np.where(closer, s, sep), np.where(closer, sp, s_p), np.where(closer, v_r, v_toward)
-            who[closer] = b
+        bodies = scene_bodies(self.execution.scene)
+        speed, sep, s_p, who, v_toward = (series.values for series in self.series)
         fast = speed > params.reduced_speed_m_s
         err = fast & (sep < s_p)
         warn = fast & (sep < s_p + params.warn_margin_m)

@@ -43,6 +43,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field
 
+from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
 from ..._arrays import row_max, squared_norms, unique_values
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_length, make_signal, threshold_verdict
@@ -77,44 +78,80 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
 
     Returns ``(points (N, 3), sample index (N,), frame index (N,))``.
     """
-    T, L, _ = X.shape
-    if tolerance_m > 0 and T > 2:
-        nb = -(-T // BLOCK)
-        d2 = X[2:] - X[1:-1]  # second differences p_{t+1} - 2 p_t + p_{t-1}, centred at samples 1..T-2
-        d2 -= X[1:-1]
-        d2 += X[:-2]
-        M = np.zeros((nb * BLOCK, L))  # squared second-difference norms by sample (0 where undefined)
-        squared_norms(d2, out=M[1 : T - 1])
-        # block maxima along contiguous rows of the (L, T) transpose: a maximum over axis 1 of the
-        # (nb, BLOCK, L) view costs 4x more
-        Mb = np.sqrt(np.ascontiguousarray(M.T).reshape(L, nb, BLOCK).max(axis=2)).T  # (nb, L) block maxima, m
-        with np.errstate(divide="ignore"):
-            smax = np.sqrt(8.0 * tolerance_m / Mb)
-        # stride: largest power of two <= smax, within [1, BLOCK]; frame-major order (L, nb)
-        stride = np.exp2(np.floor(np.log2(np.clip(smax, 1.0, BLOCK)))).astype(np.int64).T.ravel()
-        start = np.tile(np.arange(nb, dtype=np.int64) * BLOCK, L)
-        frame = np.repeat(np.arange(L, dtype=np.int64), nb)
-        count = -(-np.minimum(BLOCK, T - start) // stride)  # kept samples per block
-        run = np.repeat(np.arange(stride.size), count)
-        offset = np.arange(run.size) - np.repeat(np.cumsum(count) - count, count)
-        ti = start[run] + offset * stride[run]
-        li = frame[run]
-        # every frame's last sample closes its last chord
-        last_start = (nb - 1) * BLOCK
-        last = np.flatnonzero((T - 1 - last_start) % stride.reshape(L, nb)[:, -1] != 0)
-        if last.size:
-            ti = np.concatenate([ti, np.full(last.size, T - 1)])
-            li = np.concatenate([li, last])
-    else:
-        li, ti = np.divmod(np.arange(T * L), T)
-    P = X[ti, li]
+    T = X.shape[0]
+    ti, li = kept_samples(X, 0, 0, T, T, tolerance_m)
+    ti, li = frame_major(ti, li)
+    return without_repeats(X[ti, li], ti, li)
+
+
+def kept_samples(X: np.ndarray, lo: int, start: int, stop: int, T: int, tolerance_m: float):
+    """``(sample (N,), frame (N,))`` indices (in the run of ``T`` samples) of the points kept from samples
+    ``start..stop-1`` (``start`` a multiple of :data:`BLOCK`), frame-major: for each frame, its kept samples
+    block by block. ``X (n, L, 3)`` holds samples ``lo..lo+n-1``: those and the sample either side (for the
+    second differences). Without the closing sample of :func:`frame_major`.
+    """
+    L = X.shape[1]
+    n = stop - start
+    if not (tolerance_m > 0 and T > 2):
+        li, ti = np.divmod(np.arange(n * L), n)
+        return ti + start, li
+    nb = -(-n // BLOCK)
+    M = np.zeros((nb * BLOCK, L))  # squared second-difference norms by sample (0 where undefined)
+    first, last = max(start, 1), min(stop, T - 1)  # the samples with a second difference
+    if last > first:
+        c = X[first - lo : last - lo]
+        d2 = X[first + 1 - lo : last + 1 - lo] - c  # second differences p_{t+1} - 2 p_t + p_{t-1}
+        d2 -= c
+        d2 += X[first - 1 - lo : last - 1 - lo]
+        squared_norms(d2, out=M[first - start : last - start])
+    # block maxima along contiguous rows of the (L, T) transpose: a maximum over axis 1 of the
+    # (nb, BLOCK, L) view costs 4x more
+    Mb = np.sqrt(np.ascontiguousarray(M.T).reshape(L, nb, BLOCK).max(axis=2)).T  # (nb, L) block maxima, m
+    with np.errstate(divide="ignore"):
+        smax = np.sqrt(8.0 * tolerance_m / Mb)
+    # stride: largest power of two <= smax, within [1, BLOCK]; frame-major order (L, nb)
+    stride = np.exp2(np.floor(np.log2(np.clip(smax, 1.0, BLOCK)))).astype(np.int64).T.ravel()
+    block_start = np.tile(np.arange(nb, dtype=np.int64) * BLOCK + start, L)
+    frame = np.repeat(np.arange(L, dtype=np.int64), nb)
+    count = -(-np.minimum(BLOCK, stop - block_start) // stride)  # kept samples per block
+    run = np.repeat(np.arange(stride.size), count)
+    offset = np.arange(run.size) - np.repeat(np.cumsum(count) - count, count)
+    ti = block_start[run] + offset * stride[run]
+    li = frame[run]
+    if stop == T:  # every frame's last sample closes its last chord
+        last_start = start + (nb - 1) * BLOCK
+        closing = np.flatnonzero((T - 1 - last_start) % stride.reshape(L, nb)[:, -1] != 0)
+        if closing.size:  # marked by a negative frame index, for frame_major to put last
+            ti = np.concatenate([ti, np.full(closing.size, T - 1)])
+            li = np.concatenate([li, -1 - closing])
+    return ti, li
+
+
+def frame_major(ti: np.ndarray, li: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The kept points of consecutive chunks (:func:`kept_samples`, concatenated) in the order of the whole run:
+    frame by frame, then the closing samples of the frames that need one; the frame indices made plain."""
+    order = frame_major_order(li)
+    li = li[order]
+    return ti[order], np.where(li < 0, -1 - li, li)
+
+
+def frame_major_order(li: np.ndarray) -> np.ndarray:
+    """The permutation :func:`frame_major` applies (frame indices as :func:`kept_samples` marks them)."""
+    order = np.argsort(li, kind="stable")
+    closing = li[order] < 0
+    return np.concatenate([order[~closing], order[closing][::-1]])
+
+
+def without_repeats(P: np.ndarray, *along: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``(P, *along)`` without each point of ``P (N, 3)`` equal to the one before it (a frame that does not
+    move: kept once), and the same rows of the arrays ``along``."""
     if len(P) > 1:
         same = P[1:] == P[:-1]
         dup = np.zeros(len(P), dtype=bool)
         dup[1:] = same[:, 0] & same[:, 1] & same[:, 2]
         if dup.any():
-            P, ti, li = P[~dup], ti[~dup], li[~dup]
-    return P, ti, li
+            return (P[~dup], *(a[~dup] for a in along))
+    return (P, *along)
 
 
 def hull_volume(P: np.ndarray) -> tuple[float, float, np.ndarray]:
@@ -155,24 +192,54 @@ class SpaceUsageCritic:
     Params = Params
 
     def check(self, execution, params: Params) -> Verdict:
-        trajectory, scene = execution.trajectory, execution.scene
-        names = trajectory.frame_names
-        if params.frames:
-            sel = [trajectory.frame_index(n) for n in params.frames]
-            names = tuple(names[i] for i in sel)
-            X = np.ascontiguousarray(trajectory.positions[:, sel])
-        else:
-            X = trajectory.positions  # (T, L, 3) m, contiguous, shared with the other critics
-        time = trajectory.time
-        workspace = scene.workspace or _robot_workspace(execution.robot)
-        w_volume = float(workspace.volume_m3)
+        return judge_in_chunks(self, execution, params)
 
+    def reduction(self, execution, params: Params) -> "_Swept":
+        return _Swept(self.name, execution, params)
+
+
+class _Swept:
+    """The space-usage judgement, chunk by chunk: the farthest link beyond the workspace per sample (where it is
+    farthest, and which links leave it), and the points each chunk keeps for the hull (:func:`kept_samples`:
+    chunks start on the hull's 64-sample blocks), with how far outside each lies; the hull of them all at the end."""
+
+    def __init__(self, name: str, execution, params: Params):
+        trajectory = execution.trajectory
+        self.name, self.trajectory, self.params = name, trajectory, params
+        names = trajectory.frame_names
+        self.sel = None
+        if params.frames:
+            self.sel = [trajectory.frame_index(n) for n in params.frames]
+            names = tuple(names[i] for i in self.sel)
+        self.names = names
+        self.workspace = execution.scene.workspace or _robot_workspace(execution.robot)
+        self.per_sample = Series(len(trajectory))
+        self.farthest = Extreme("max")
+        self.links_out = AnyOver(len(names))
+        self.kept: list[tuple[np.ndarray, ...]] = []  # per chunk: (sample, frame, point, outside distance)
+
+    def add(self, chunk, execution) -> None:
+        window, params = chunk.trajectory, self.params
+        X = window.positions if self.sel is None else np.ascontiguousarray(window.positions[:, self.sel])
+        own = X[chunk.own]
         # --- leaving the workspace: every point ---------------------------------
-        outside = np.asarray(workspace.outside_distance(X), dtype=float)  # (T, L) m, > 0 outside
+        outside = np.asarray(self.workspace.outside_distance(own), dtype=float)  # (n, L) m, > 0 outside
         per_sample = row_max(outside)
-        oi = int(np.argmax(per_sample))
-        ol = int(np.argmax(outside[oi]))
-        worst_out = float(outside[oi, ol])
+        self.per_sample.put(chunk.start, per_sample)
+        self.farthest.offer(chunk.start, per_sample, lambda i: int(np.argmax(outside[i])))
+        self.links_out.add(outside[per_sample > params.outside_tolerance_m] > params.outside_tolerance_m)
+        # --- the points the hull needs ----------------------------------------
+        ti, li = kept_samples(X, chunk.lo, chunk.start, chunk.stop, len(self.trajectory), params.hull_tolerance_m)
+        frame = np.where(li < 0, -1 - li, li)
+        self.kept.append((ti, li, X[ti - chunk.lo, frame], outside[ti - chunk.start, frame]))
+
+    def verdict(self) -> Verdict:
+        params, trajectory, names = self.params, self.trajectory, self.names
+        time = trajectory.time
+        w_volume = float(self.workspace.volume_m3)
+        per_sample = self.per_sample.values
+        oi, ol = self.farthest.index, self.farthest.detail
+        worst_out = float(self.farthest.value)
         signal = make_signal(
             time,
             per_sample,
@@ -182,7 +249,10 @@ class SpaceUsageCritic:
         )
 
         # --- swept volume ----------------------------------------------------------
-        P, ti, li = hull_points(X, params.hull_tolerance_m)
+        ti, li, points, outside_at = (np.concatenate(parts) for parts in zip(*self.kept))
+        order = frame_major_order(li)
+        ti, li = frame_major(ti, li)
+        P, ti, li, outside_at = without_repeats(points[order], ti, li, outside_at[order])
         volume, area, vertices = hull_volume(P)
         fraction = volume / w_volume if w_volume > 0 else float("inf")
         tol = params.hull_tolerance_m
@@ -197,13 +267,11 @@ class SpaceUsageCritic:
 
         verdict = partial(threshold_verdict, self.name, trajectory, signal=signal, details=details)
         if worst_out > params.outside_tolerance_m:
-            rows = per_sample > params.outside_tolerance_m  # samples with some link outside
-            links_out = (outside[rows] > params.outside_tolerance_m).any(axis=0)
             return verdict(
                 Flag.ERROR,
-                rows,
+                per_sample > params.outside_tolerance_m,  # samples with some link outside
                 worst=oi,
-                links=[names[i] for i in np.flatnonzero(links_out)],
+                links=[names[i] for i in np.flatnonzero(self.links_out.hit)],
                 value=worst_out,
                 threshold=params.outside_tolerance_m,
                 unit="m",
@@ -216,7 +284,7 @@ class SpaceUsageCritic:
         if volume > limit:
             samples = ti[vertices]
             # the hull vertex nearest to leaving the workspace
-            far = int(np.argmax(outside[samples, li[vertices]])) if len(samples) else None
+            far = int(np.argmax(outside_at[vertices])) if len(samples) else None
             return verdict(
                 Flag.WARNING,
                 samples,
