@@ -1,6 +1,6 @@
 """Peak memory and CPU of simulating and judging a long program: a palletising-like loop at 500 Hz.
 
-One program (``PROGRAM`` below: an apple carried from the table into the brown box and back, over and over, in the
+One program (``tests/long_program.py``: an apple carried from the table into the brown box and back, over and over, in the
 bundled sorting scene with its 14 shapes) is repeated to last about 2, 10 and 30 minutes, and each length is
 simulated (``robocritics.simulate``, 500 Hz) and judged by the default critics (``critique``) in a fresh child
 interpreter. The table shows the samples, the child's peak resident memory (``VmHWM`` from
@@ -20,31 +20,11 @@ import json
 import subprocess
 import sys
 import time
+from pathlib import Path
 
-PROGRAM = """\
-lib.set_speed(0.5)
-apple = objects[0]
-home_x, home_y, home_z = apple.x, apple.y, apple.z
-for i in range(REPEATS):
-    lib.open_gripper()
-    lib.move_above(apple, 0.10)
-    lib.move_linear(apple.x, apple.y, apple.z)
-    lib.close_gripper()
-    lib.move_up(0.15)
-    lib.move_to(brown_box.x, brown_box.y, brown_box.top + 0.12)
-    lib.move_down(0.10)
-    lib.open_gripper()
-    lib.move_up(0.10)
-    lib.move_above(apple, 0.10)
-    lib.move_linear(apple.x, apple.y, apple.z)
-    lib.close_gripper()
-    lib.move_up(0.15)
-    lib.move_to(home_x, home_y, home_z + 0.15)
-    lib.move_down(0.15)
-    lib.open_gripper()
-    lib.move_up(0.10)
-lib.home()
-"""
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the program lives with the tests
+from long_program import repeated_sorting  # noqa: E402
+
 #: Seconds of motion per repetition of the loop (measured: 15.35 s at speed 0.5).
 SECONDS_PER_REPEAT = 15.35
 RATE_HZ = 500.0
@@ -66,7 +46,7 @@ def child(minutes: float) -> None:
     critique(simulate("move_to(0.3, 0.1, 0.2)\n", scene, robot))  # imports and caches
     baseline = vm_hwm_mb()
     repeats = max(1, round(minutes * 60 / SECONDS_PER_REPEAT))
-    source = PROGRAM.replace("REPEATS", str(repeats))
+    source = repeated_sorting(repeats)
     t0 = time.process_time()
     execution = simulate(source, scene, robot, sample_rate_hz=RATE_HZ)
     t1 = time.process_time()

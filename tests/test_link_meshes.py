@@ -27,6 +27,8 @@ from robocritics.planning.trace import EXACT_WITHIN_M, MESH_EXACT_WITHIN_M, buil
 from robocritics.robot import fit
 from robocritics.scene import Scene
 
+from mesh_reference import point_triangle
+
 # --- a one-joint arm whose upper link is a mesh: a tube with a housing across its far end ------------------
 
 
@@ -91,26 +93,6 @@ def _coal_raw(pose: np.ndarray, shape) -> float:
     return coal.distance(model, T(pose), geometry, T(np.asarray(shape.pose)), request, coal.DistanceResult())
 
 
-def _point_triangles(p: np.ndarray, tri: np.ndarray) -> float:
-    """Least distance of point ``p`` to the triangles ``tri (F, 3, 3)``, brute force (the plane inside a
-    triangle, else its nearest edge)."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    n = np.cross(b - a, c - a)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    h = ((p - a) * n).sum(1)
-    q = p - h[:, None] * n
-    inside = np.ones(len(tri), dtype=bool)
-    for u, v in ((a, b), (b, c), (c, a)):
-        inside &= (np.cross(v - u, q - u) * n).sum(1) >= 0
-
-    def seg(u, v):
-        d = v - u
-        t = np.clip(((p - u) * d).sum(1) / (d * d).sum(1), 0, 1)
-        return np.linalg.norm(u + t[:, None] * d - p, axis=1)
-
-    return float(np.where(inside, np.abs(h), np.min([seg(a, b), seg(b, c), seg(c, a)], axis=0)).min())
-
-
 def _values(robot, scene, q, entity: str) -> tuple[float, float]:
     """The least value over the upper link's capsules against ``entity`` with the meshes refined, and the
     same with the capsules alone."""
@@ -164,7 +146,7 @@ def test_near_contact_the_link_reads_coal_on_its_raw_mesh_and_the_brute_force_di
         assert MESH_EXACT_WITHIN_M < value <= exact + 1e-9 and capsule - 1e-12 <= value
     if kind == "sphere" and exact > 0:  # outside: the brute-force distance to the surface
         placed = _link_triangles() @ pose[:3, :3].T + pose[:3, 3]
-        assert exact == pytest.approx(_point_triangles(np.array(where), placed) - dims[0], abs=1e-6)
+        assert exact == pytest.approx(point_triangle(np.array(where), placed).min() - dims[0], abs=1e-6)
 
 
 def test_a_sphere_inside_the_closed_link_mesh_is_a_penetration_not_its_gap_to_the_surface(arm):

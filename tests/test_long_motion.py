@@ -12,29 +12,7 @@ import json
 import subprocess
 import sys
 
-LOOP = """\
-lib.set_speed(0.5)
-apple = objects[0]
-x, y, z = apple.x, apple.y, apple.z
-for i in range(REPEATS):
-    lib.open_gripper()
-    lib.move_above(apple, 0.10)
-    lib.move_linear(apple.x, apple.y, apple.z)
-    lib.close_gripper()
-    lib.move_up(0.15)
-    lib.move_to(brown_box.x, brown_box.y, brown_box.top + 0.12)
-    lib.move_down(0.10)
-    lib.open_gripper()
-    lib.move_up(0.10)
-    lib.move_above(apple, 0.10)
-    lib.move_linear(apple.x, apple.y, apple.z)
-    lib.close_gripper()
-    lib.move_up(0.15)
-    lib.move_to(x, y, z + 0.15)
-    lib.move_down(0.15)
-    lib.open_gripper()
-lib.home()
-"""
+from long_program import repeated_sorting
 
 CHILD = """
 import json, sys
@@ -55,7 +33,7 @@ print(json.dumps({"samples": len(run.trajectory), "compact": run.trajectory.comp
 
 def measured(repeats: int) -> dict:
     done = subprocess.run(
-        [sys.executable, "-c", CHILD, LOOP.replace("REPEATS", str(repeats))],
+        [sys.executable, "-c", CHILD, repeated_sorting(repeats)],
         capture_output=True, text=True, timeout=600, check=True,
     )  # fmt: skip
     return json.loads(done.stdout.strip().splitlines()[-1])

@@ -30,6 +30,8 @@ import robocritics.scene as scene_module
 from robocritics.llm.prompts import describe_scene
 from robocritics.scene import Scene, rpy_matrix
 
+from mesh_reference import point_segment, point_triangle
+
 FACES = np.array([(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
                   (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)])  # fmt: skip
 
@@ -69,26 +71,6 @@ def cell(tmp_path):
 
 
 # --- reference: the distance of a segment to a triangle, by its cases ----------------------------------
-
-
-def point_segment(p, a, b):
-    d = b - a
-    t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0, 1)
-    return np.linalg.norm(a + t[..., None] * d - p, axis=-1)
-
-
-def point_triangle(p, tri):
-    """Distance of point ``p`` to each triangle ``tri (F, 3, 3)``: the plane inside the triangle, else an edge."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    n = np.cross(b - a, c - a)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    h = ((p - a) * n).sum(1)
-    q = p - h[:, None] * n
-    inside = np.ones(len(tri), dtype=bool)
-    for u, v in ((a, b), (b, c), (c, a)):
-        inside &= (np.cross(v - u, q - u) * n).sum(1) >= 0
-    edges = np.min([point_segment(p, u, v) for u, v in ((a, b), (b, c), (c, a))], axis=0)
-    return np.where(inside, np.abs(h), edges)
 
 
 def segment_segment(p0, p1, q0, q1, steps=4001):

@@ -42,8 +42,8 @@ def test_the_errors_are_pinocchios(q, dq, arm):
 @settings(max_examples=300, deadline=None)
 @given(q=joints, dq=st.lists(st.floats(-1e-8, 1e-8), min_size=6, max_size=6), pick=st.integers(0, 3))
 def test_reproduces_is_the_errors_within_tol_at_the_boundary(q, dq, pick):
-    """``ur_reproduces`` (FK written out) decides as ``ur_pose_errors`` does, with the tolerance set to the error
-    itself and the floats on either side of it: the written-out expressions are the same floats."""
+    """``ur_reproduces`` decides as ``ur_pose_errors`` does, with the tolerance set to the error itself and the
+    floats on either side of it."""
     k = UR3E.dh._ur
     t = dh_forward(UR3E.dh, np.array(q))[:3].ravel().tolist()
     moved = (np.array(q) + np.array(dq)).tolist()

@@ -158,18 +158,23 @@ def build_trajectory(
         q=q,
         time=time,
         frames=frames,
-        frame_names=robot.frame_names,
         proximity=proximity,
         pairs=pairs,
         gripper_opening_m=opening,
         attached=attached_arr,
         step=step_arr,
         steps=steps,
-        limits=robot.limits,
-        robot_name=robot.name,
-        kinematic_hash=robot.kinematic_hash,
-        tcp_frame=robot.tcp_frame,
+        **_robot_facts(robot),
     )
+
+
+def _robot_facts(robot) -> dict:
+    """The arm's facts a :class:`Trajectory` carries, whole or compact: frame names, limits, name, kinematic
+    hash and TCP frame."""
+    return {
+        "frame_names": robot.frame_names, "limits": robot.limits, "robot_name": robot.name,
+        "kinematic_hash": robot.kinematic_hash, "tcp_frame": robot.tcp_frame,
+    }  # fmt: skip
 
 
 class _Distances:
@@ -334,16 +339,12 @@ def build_compact_trajectory(robot, scene: Scene, q, time, *, gripper_opening_m,
         q=q,
         time=time,
         frames=None,
-        frame_names=robot.frame_names,
         proximity=None,
         pairs=geometry.pairs,
         gripper_opening_m=opening,
         attached=attached,
         step=step,
         steps=steps,
-        limits=robot.limits,
-        robot_name=robot.name,
-        kinematic_hash=robot.kinematic_hash,
-        tcp_frame=robot.tcp_frame,
+        **_robot_facts(robot),
         geometry=geometry,
     )

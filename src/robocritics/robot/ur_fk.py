@@ -65,30 +65,6 @@ def ur_pose_errors(k: Sequence[float], q: Sequence[float], t: Sequence[float]) -
 
 def ur_reproduces(k: Sequence[float], q: Sequence[float], t: Sequence[float], tol: float) -> bool:
     """Whether the flange at ``q`` (rad) is within ``tol`` m and ``tol`` rad of the 12-float target ``t``:
-    :func:`ur_pose_errors` both within ``tol`` (NaN never is), with :func:`ur_flange_pose12` written out (the same
-    expressions, so the same floats) and the error of each entry taken as soon as it is known."""
-    d1, a2, a3, d4, d5, d6 = k[0], k[1], k[2], k[3], k[4], k[5]
-    q1, q2, q3, q4, q5, q6 = q
-    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11 = t
-    cos, sin = math.cos, math.sin
-    c1, s1 = cos(q1), sin(q1)
-    q23 = q2 + q3
-    q234 = q23 + q4
-    c234, s234 = cos(q234), sin(q234)
-    c5, s5 = cos(q5), sin(q5)
-    c6, s6 = cos(q6), sin(q6)
-    ux, uy = c234 * c1, c234 * s1
-    vx, vy = -s234 * c1, -s234 * s1
-    x5x, x5y, x5z = c5 * ux + s5 * s1, c5 * uy - s5 * c1, c5 * s234
-    zx, zy, zz = c5 * s1 - s5 * ux, -c5 * c1 - s5 * uy, -s5 * s234
-    reach = a2 * cos(q2) + a3 * cos(q23)
-    e3 = reach * c1 + d4 * s1 - d5 * vx + d6 * zx - t3
-    e7 = reach * s1 - d4 * c1 - d5 * vy + d6 * zy - t7
-    e11 = d1 + a2 * sin(q2) + a3 * sin(q23) - d5 * c234 + d6 * zz - t11
-    if not math.sqrt(e3 * e3 + e7 * e7 + e11 * e11) <= tol:
-        return False
-    e0, e1, e2 = c6 * x5x + s6 * vx - t0, c6 * vx - s6 * x5x - t1, zx - t2
-    e4, e5, e6 = c6 * x5y + s6 * vy - t4, c6 * vy - s6 * x5y - t5, zy - t6
-    e8, e9, e10 = c6 * x5z + s6 * c234 - t8, c6 * c234 - s6 * x5z - t9, zz - t10
-    sq = 0.0 + e0 * e0 + e1 * e1 + e2 * e2 + e4 * e4 + e5 * e5 + e6 * e6 + e8 * e8 + e9 * e9 + e10 * e10
-    return math.sqrt(0.5 * sq) <= tol
+    :func:`ur_pose_errors` both within ``tol`` (NaN never is)."""
+    position_m, rotation_rad = ur_pose_errors(k, q, t)
+    return position_m <= tol and rotation_rad <= tol
