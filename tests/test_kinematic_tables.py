@@ -61,9 +61,13 @@ def test_a_stored_copy_of_another_text_or_layout_is_not_used(tmp_path):
 
 
 @pytest.mark.parametrize("name", BUNDLED_ARM_NAMES)
-def test_a_bundled_arm_from_its_stored_copy_is_the_arm_pinocchio_reads(name, tmp_path):
+def test_a_bundled_arm_from_its_stored_copy_is_the_arm_pinocchio_reads(name, tmp_path, monkeypatch):
     """The bundled robot (stored tables, no Pinocchio model yet) and the same file read by Pinocchio: the same
     frames and capsules to the bit, the same limits, pairs, home and hash; its Pinocchio model built on use."""
+    import robocritics.robot.model as model_module
+
+    # loaded afresh: the parsed arms are shared by their copies, and an earlier test may have used Pinocchio on one
+    monkeypatch.setattr(model_module, "_BUNDLED", {})
     bundled = Robot.bundled(name)
     # not built by loading a UR arm (the Panda's home comes from numeric IK, which runs on Pinocchio)
     assert (bundled._pinocchio._model is None) == (bundled.dh is not None)

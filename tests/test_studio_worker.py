@@ -214,8 +214,9 @@ def test_a_job_past_the_memory_limit_is_an_error_and_the_next_job_works(sorting)
         assert probe.evaluate("home()\n").ok
         warm = status_bytes(probe.pid, "VmPeak")
         probe.evaluate(LONG)
-        assert status_bytes(probe.pid, "VmPeak") > warm + 100 * 1024**2  # the long motion needs >100 MB more
-    limit = warm + 50 * 1024**2
+        # the long motion needs >60 MB more (about 80 MB: judged in chunks since issue 28, not 100+ MB whole)
+        assert status_bytes(probe.pid, "VmPeak") > warm + 60 * 1024**2
+    limit = warm + 30 * 1024**2
     with Evaluator(sorting, memory_bytes=limit) as ev:
         assert ev.evaluate("home()\n").ok
         over = ev.evaluate(LONG)

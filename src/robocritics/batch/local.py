@@ -14,6 +14,7 @@ is replaced, and its row is an error row of type ``WorkerDied``/``WorkerTimeout`
 from __future__ import annotations
 
 import os
+import tempfile
 import threading
 import time
 from collections import deque
@@ -54,11 +55,21 @@ class BatchError(RoboCriticsError):
     """The batch itself cannot run (a worker cannot start, a missing engine): not one row's problem."""
 
 
-def _serve(conn, robot, memory_bytes: int, sample_rate_hz: float) -> None:
-    """A worker's main loop: set the limit, load the robot, then answer Jobs with output rows."""
+def _serve(conn, robot, memory_bytes: int, sample_rate_hz: float, startup_log: str) -> None:
+    """A worker's main loop: set the limit, load the robot, then answer Jobs with output rows.
+
+    While it starts, what the process writes to its standard error goes to the file ``startup_log``: a library
+    that cannot allocate under the limit (OpenBLAS) prints there and exits, and the parent names that line in
+    its one-line error instead of the lines reaching the user's terminal from every try.
+    """
     os.environ.update(SINGLE_THREADED_ENV)  # for anything this process starts
+    stderr = os.dup(2)
+    with open(startup_log, "wb") as log:
+        os.dup2(log.fileno(), 2)
     limit_address_space(memory_bytes)
     try:
+        import coal  # noqa: F401 - every row's critics measure with it (the hull): a limit too small to load it
+        # fails here, once, as a worker that could not start, not in every row as a critic's ImportError
         from ..robot.model import default_robot
 
         robot = robot if robot is not None else default_robot()
@@ -66,6 +77,8 @@ def _serve(conn, robot, memory_bytes: int, sample_rate_hz: float) -> None:
         conn.send(("failed", f"{type(exc).__name__}: {exc}"))
         return
     scenes = SceneCache()
+    os.dup2(stderr, 2)
+    os.close(stderr)
     conn.send(("ready", os.getpid()))
     while True:
         try:
@@ -85,11 +98,36 @@ class _Worker(Child):
     """One child process and the row it is working on."""
 
     def __init__(self, robot, memory_bytes: int, sample_rate_hz: float):
-        super().__init__(_serve, (robot, memory_bytes, sample_rate_hz), name="robocritics-batch", env=WORKER_ENV)
+        fd, self.startup_log = tempfile.mkstemp(prefix="robocritics-worker-", suffix=".log")
+        os.close(fd)
+        args = (robot, memory_bytes, sample_rate_hz, self.startup_log)
+        super().__init__(_serve, args, name="robocritics-batch", env=WORKER_ENV)
         self.ready = False
         self.job: Job | None = None
         self.job_started = 0.0
         self.rows_done = 0
+
+    def startup_output(self) -> str:
+        """The last line the worker wrote to its standard error while starting ('' for none), and the file gone."""
+        try:
+            with open(self.startup_log, "rb") as f:
+                f.seek(0, os.SEEK_END)
+                f.seek(max(0, f.tell() - 4096))
+                lines = [line.strip() for line in f.read().decode("utf-8", "replace").splitlines() if line.strip()]
+        except OSError:
+            lines = []
+        self.forget_startup_log()
+        return lines[-1][:300] if lines else ""
+
+    def forget_startup_log(self) -> None:
+        try:
+            os.unlink(self.startup_log)
+        except OSError:
+            pass
+
+    def kill(self) -> None:
+        super().kill()
+        self.forget_startup_log()
 
 
 class LocalEngine:
@@ -218,6 +256,7 @@ class LocalEngine:
             kind, value = message
             if kind == "ready":
                 w.ready, self._start_failures = True, 0
+                w.forget_startup_log()
                 return None
             if kind == "row":
                 with self._lock:
@@ -227,7 +266,9 @@ class LocalEngine:
                     self._replace(w, recycle=True)
                 return value
             if kind == "failed" or not w.ready:
-                self._start_failure(w, value or f"the worker died while starting ({w.death()})")
+                said = "" if value else w.startup_output()
+                why = value or f"the worker died while starting ({w.death()})" + (f": {said}" if said else "")
+                self._start_failure(w, why)
                 return None
             if job is None:  # died between rows
                 self._replace(w)
