@@ -71,8 +71,9 @@ def test_bundled_programs_lines_equal_the_point_by_point_walk(monkeypatch):
     calls = []
     real = Robot.ik_line
 
-    def checked(self, positions, seed=None, *, yaw_rad=0.0):
-        q, err = real(self, positions, seed=seed, yaw_rad=yaw_rad)
+    def checked(self, positions, seed=None, *, yaw_rad=0.0, tilt_rad=0.0):
+        assert tilt_rad == 0.0  # the bundled arm approaches fingers down
+        q, err = real(self, positions, seed=seed, yaw_rad=yaw_rad, tilt_rad=tilt_rad)
         q_ref, err_ref = sequential(self, np.asarray(positions), self.home_q if seed is None else seed, yaw_rad)
         calls.append((len(q), float(np.max(np.abs(q - q_ref), initial=0.0)), str(err) == str(err_ref)))
         return q, err

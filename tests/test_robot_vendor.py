@@ -49,8 +49,9 @@ def _arms():
     return [pytest.param(base / rel if base else None, kw, id=name) for name, base, rel, kw in rows]
 
 
-def _raw_tip_pose(path: Path, joint_names, q, tip: str) -> np.ndarray:
-    """The tip's pose from Pinocchio on the raw vendor file (every other joint at zero)."""
+def _raw_tip_pose(path: Path, joint_names, q, tip: str, *, wrist: bool = False):
+    """The tip's pose from Pinocchio on the raw vendor file (every other joint at zero); with ``wrist``, also the
+    position of the last moving joint before it (m, world)."""
     model = pin.buildModelFromUrdf(str(path))
     data = model.createData()
     x = pin.neutral(model)
@@ -62,7 +63,9 @@ def _raw_tip_pose(path: Path, joint_names, q, tip: str) -> np.ndarray:
         else:  # continuous: (cos, sin)
             x[idx : idx + 2] = (math.cos(value), math.sin(value))
     pin.framesForwardKinematics(model, data, x)
-    return data.oMf[model.getFrameId(tip, pin.FrameType.BODY)].homogeneous
+    frame = model.frames[model.getFrameId(tip, pin.FrameType.BODY)]
+    pose = data.oMf[model.getFrameId(tip, pin.FrameType.BODY)].homogeneous
+    return (pose, data.oMi[frame.parentJoint].translation.copy()) if wrist else pose
 
 
 @pytest.mark.parametrize("path, kwargs", _arms())
@@ -81,9 +84,15 @@ def test_a_vendor_arm_loads_as_shipped_and_its_fk_is_pinocchios_on_the_raw_file(
     for q in rng.uniform(robot.lower, robot.upper, size=(5, robot.n)):
         ours = robot.forward(q)[tip]
         np.testing.assert_allclose(ours, _raw_tip_pose(path, robot.joint_names, q, robot.tip_frame), atol=1e-12)
-    # the TCP is the tool's, out along the flange's z
+    # the TCP is the tool's, along one of the flange's axes and out of the wrist (the Kinova's and the Z1's
+    # flanges face out along x, not z): farther from the last moving joint than the flange is
     pose = robot.forward(robot.home_q)
-    np.testing.assert_allclose(np.linalg.inv(pose[tip]) @ pose[robot.tcp_index][:, 3], (0, 0, TOOLS[kwargs["tool"]].tcp_from_flange_m, 1), atol=1e-12)
+    offset = (np.linalg.inv(pose[tip]) @ pose[robot.tcp_index][:, 3])[:3]
+    length = TOOLS[kwargs["tool"]].tcp_from_flange_m
+    assert np.sort(np.abs(offset)) == pytest.approx((0, 0, length), abs=1e-12)
+    raw_tip, wrist = _raw_tip_pose(path, robot.joint_names, robot.home_q, robot.tip_frame, wrist=True)
+    tcp = pose[robot.tcp_index][:3, 3]
+    assert np.linalg.norm(tcp - wrist) > np.linalg.norm(raw_tip[:3, 3] - wrist) + 0.5 * length
     # the reach is sampled, not the stretched chain: no farther than the chain, and the home is in front of it
     assert 0.2 < robot.reach_m < 3.0
 
@@ -197,7 +206,7 @@ _ARM = """<?xml version="1.0"?>
   <link name="tool0"/>
   <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
     <origin xyz="{origin}" rpy="0 0 0"/><axis xyz="0 0 1"/><limit lower="{lower}" upper="1" effort="1" velocity="{velocity}" drake:acceleration="3"/></joint>
-  <joint name="flange" type="fixed"><parent link="upper"/><child link="tool0"/><origin xyz="0.3 0 0"/></joint>
+  <joint name="flange" type="fixed"><parent link="upper"/><child link="tool0"/><origin xyz="0.3 0 0" rpy="0 1.5707963267948966 0"/></joint>
 </robot>
 """
 

@@ -53,7 +53,8 @@ from ..errors import PlanningError
 from ..program.plan import Plan, SkillCall
 from ..scene import MAX_COORD_M, Container, Scene, rpy_matrix
 from ..trajectory import CHUNK_SAMPLES, Step
-from ..robot.model import Robot, fingers_down
+from ..robot.approach import approach_rotation
+from ..robot.model import Robot
 from .spline import cubic_spline
 from .world import World
 from .timing import (
@@ -313,6 +314,7 @@ class Planner:
         home_tcp = robot.tcp_pose(robot.home_q)[:3, 3]
         self.home_heading = math.atan2(home_tcp[1], home_tcp[0])
         self.yaw = 0.0
+        self.tilt = robot.approach_tilts_rad[0]  # the fingers' tilt from straight down (robot.approach), rad
         self.speed = 1.0
         self.opening = robot.max_opening_m
         self.world = World(scene, robot, settings)  # the objects: held, resting, fallen
@@ -467,17 +469,44 @@ class Planner:
             )
         self.ik_solves += solves
 
-    def ik(self, point: np.ndarray, call: SkillCall, yaw: float | None = None, seed=None, counted: bool = False) -> np.ndarray:
+    def ik(self, point: np.ndarray, call: SkillCall, yaw: float | None = None, seed=None, counted: bool = False,
+           tilt: float | None = None) -> np.ndarray:
         if not counted:
             self.count_ik(call)
         yaw_rad = self.yaw if yaw is None else yaw
         try:
-            return self.robot.ik(point, seed=self.q if seed is None else seed, yaw_rad=yaw_rad)
+            return self.robot.ik(point, seed=self.q if seed is None else seed, yaw_rad=yaw_rad,
+                                 tilt_rad=self.tilt if tilt is None else tilt)
         except PlanningError as exc:
             err = PlanningError(f"{call.describe()}: {exc.reason}", line=call.line)
             # what could not be reached, for repairs that look for the nearest reachable point
             err.call, err.target_m, err.yaw_rad = call, tuple(float(v) for v in point), float(yaw_rad)
             raise err from None
+
+    def later_tilts(self) -> tuple[float, ...]:
+        """The robot's approach tilts after the current one: what a move tries when its target is out of reach."""
+        tilts = self.robot.approach_tilts_rad
+        return tilts[tilts.index(self.tilt) + 1:] if self.tilt in tilts else ()
+
+    def tilted(self, tilt: float, call: SkillCall) -> None:
+        """Approach at ``tilt`` from now on, and say so in the events (the critics judge the real fingers)."""
+        self.tilt = tilt
+        self.event("approach", max(len(self.steps) - 1, 0), call,
+                   f"out of reach with the fingers at the last tilt: they now approach {math.degrees(tilt):.0f} deg from straight down")
+
+    def approach_ik(self, point: np.ndarray, call: SkillCall, seed) -> np.ndarray:
+        """:meth:`ik` at the current tilt, else at the first later tilt that reaches ``point`` (which then stays)."""
+        try:
+            return self.ik(point, call, seed=seed)
+        except PlanningError as first:
+            for tilt in self.later_tilts():
+                try:
+                    q = self.ik(point, call, seed=seed, tilt=tilt)
+                except PlanningError:
+                    continue
+                self.tilted(tilt, call)
+                return q
+            raise first
 
     # --- sample bookkeeping ---------------------------------------------------------------
 
@@ -558,16 +587,17 @@ class Planner:
         seed = home.copy()
         turn = math.atan2(point[1], point[0]) - self.home_heading
         # the equivalent base angle closest to where the base is now
-        seed[0] = home[0] + turn
+        seed[0] = home[0] + turn * self.robot.base_turn_sign  # (the sign is +-1, or 0 for a base that does not turn)
         seed[0] += 2 * math.pi * round((self.q[0] - seed[0]) / (2 * math.pi))
         if natural:
             lo, hi = float(self.robot.lower[0]), float(self.robot.upper[0])
             inside = [seed[0] + 2 * math.pi * k for k in (-2, -1, 0, 1, 2) if lo <= seed[0] + 2 * math.pi * k <= hi]
             if inside:
                 seed[0] = min(inside, key=lambda b: abs(b - self.q[0]))
-        # with the fingers down, turning the base by `turn` turns the fingers by +turn and
-        # wrist 3 turns them by minus its angle: compensate both to keep the requested yaw
-        seed[-1] = home[-1] + turn - (self.yaw if yaw is None else yaw)
+        # with the fingers down, turning the base by `turn` turns the fingers by +turn and the last joint
+        # turns them by wrist_yaw_per_rad (-1 on a UR arm) times its angle: compensate both to keep the yaw
+        k = -self.robot.wrist_yaw_per_rad
+        seed[-1] = home[-1] + turn * k - (self.yaw if yaw is None else yaw) * k
         seed[-1] += 2 * math.pi * round((self.q[-1] - seed[-1]) / (2 * math.pi))
         return seed
 
@@ -575,7 +605,7 @@ class Planner:
         start = self.tcp()[:3, 3]
         natural = call.args.get("posture") == "natural"
         for via in self.routed_points(start, point):
-            self.joint_move(self.ik(via, call, seed=self.posture_seed(via, natural=natural)), step)
+            self.joint_move(self.approach_ik(via, call, self.posture_seed(via, natural=natural)), step)
 
     def line_move(self, goal: np.ndarray, call: SkillCall, step: int) -> None:
         start = self.tcp()[:3, 3]
@@ -590,28 +620,12 @@ class Planner:
         direction = (goal - start) / length
         # dense IK to bound |dq/ds| so the timed line respects every joint speed limit
         n_grid = max(2, int(math.ceil(length / self.settings.line_step_m)) + 1)
-        self.count_ik(call, n_grid)  # before solving any of them
         grid = np.linspace(0.0, length, n_grid)
         points = start + grid[:, None] * direction
-        # every grid point seeded by the previous one's solution, in one call; then the errors in the order a
-        # point-by-point walk meets them: a joint jump before the first point that has no solution
-        q_grid, failure = self.robot.ik_line(points, seed=self.q, yaw_rad=self.yaw)
+        q_grid, err = self.line_grid(points, goal, call, self.q, self.tilt)
+        if err is not None:
+            q_grid = self.retilted_line(points, goal, call, step, err)
         joint_steps = np.abs(np.diff(q_grid, axis=0))  # (n - 1, joints) rad between grid points
-        jumps = np.flatnonzero(joint_steps.max(axis=1) > self.settings.line_max_joint_step_rad)
-        if len(jumps):
-            x, y, z = points[jumps[0] + 1]
-            raise PlanningError(
-                f"{call.describe()}: the straight line passes a singularity or a joint limit near "
-                f"({x:.3f}, {y:.3f}, {z:.3f}) m; use move_to for this move",
-                line=call.line,
-            )
-        if failure is not None:
-            point = points[len(q_grid)]
-            err = PlanningError(f"{call.describe()}: {failure.reason}", line=call.line)
-            # what could not be reached, for repairs that look for the nearest reachable point
-            err.call, err.target_m, err.yaw_rad = call, tuple(float(v) for v in point), float(self.yaw)
-            err.goal_m = tuple(float(v) for v in goal)  # the line's end, beyond the point that failed
-            raise err
         dq_ds = joint_steps.max(axis=0) / (length / (n_grid - 1))
         joint_cap = np.min(JOINT_SPEED_MARGIN * self.limits.velocity / np.maximum(dq_ds, _STILL_JOINT_RAD_PER_M))
         f = self.speed
@@ -630,6 +644,56 @@ class Planner:
         q = cubic_spline(grid, q_grid, s)
         self.emit(Segment(q, times, duration), step)
         self.q = q_grid[-1]
+
+    def line_grid(self, points: np.ndarray, goal: np.ndarray, call: SkillCall, seed: np.ndarray,
+                  tilt) -> tuple[np.ndarray, PlanningError | None]:
+        """IK at every grid point of a straight line, each seeded by the previous one's solution (the first by
+        ``seed``), at ``tilt`` (rad: one, or one per point); and the error a point-by-point walk meets first (a joint jump before the first
+        point that has no solution), or None."""
+        self.count_ik(call, len(points))  # before solving any of them
+        q_grid, failure = self.robot.ik_line(points, seed=seed, yaw_rad=self.yaw, tilt_rad=tilt)
+        joint_steps = np.abs(np.diff(q_grid, axis=0))  # (n - 1, joints) rad between grid points
+        jumps = np.flatnonzero(joint_steps.max(axis=1) > self.settings.line_max_joint_step_rad)
+        if len(jumps):
+            x, y, z = points[jumps[0] + 1]
+            return q_grid, PlanningError(
+                f"{call.describe()}: the straight line passes a singularity or a joint limit near "
+                f"({x:.3f}, {y:.3f}, {z:.3f}) m; use move_to for this move",
+                line=call.line,
+            )
+        if failure is not None:
+            point = points[len(q_grid)]
+            err = PlanningError(f"{call.describe()}: {failure.reason}", line=call.line)
+            # what could not be reached, for repairs that look for the nearest reachable point
+            err.call, err.target_m, err.yaw_rad = call, tuple(float(v) for v in point), float(self.yaw)
+            err.goal_m = tuple(float(v) for v in goal)  # the line's end, beyond the point that failed
+            return q_grid, err
+        return q_grid, None
+
+    def retilted_line(self, points: np.ndarray, goal: np.ndarray, call: SkillCall, step: int,
+                      err: PlanningError) -> np.ndarray:
+        """The line's IK grid at the first later approach tilt along which the whole line is solved, after
+        turning the fingers to it at the start (a joint move); else with the tilt turning evenly along the line
+        from the current one to the first of the robot's tilts that reaches it (no tilt may reach both ends: a
+        5-joint arm with a long tool); raises ``err`` (the current tilt's) if none."""
+        for tilt in self.robot.approach_tilts_rad:
+            if tilt == self.tilt:
+                continue
+            q_grid, failed = self.line_grid(points, goal, call, self.q, np.linspace(self.tilt, tilt, len(points)))
+            if failed is None:
+                self.tilted(tilt, call)
+                return q_grid
+        for tilt in self.later_tilts():
+            try:
+                start_q = self.ik(points[0], call, seed=self.q, tilt=tilt)
+            except PlanningError:
+                continue
+            q_grid, failed = self.line_grid(points, goal, call, start_q, tilt)
+            if failed is None:
+                self.tilted(tilt, call)
+                self.joint_move(start_q, step)
+                return q_grid
+        raise err
 
     def gripper_move(self, target_opening: float, step: int) -> None:
         if not self.admit(self.settings.gripper_time_s, sample_count(self.settings.gripper_time_s, self.rate)):
@@ -677,7 +741,8 @@ class Planner:
         contacts = self.world.contacts_at(self.tcp())
         if goal_point is not None:
             goal_tcp = np.eye(4)
-            goal_tcp[:3, :3], goal_tcp[:3, 3] = fingers_down(self.yaw), goal_point
+            goal_tcp[:3, :3] = approach_rotation(goal_point, self.yaw, self.tilt, self.robot.shoulder_m)
+            goal_tcp[:3, 3] = goal_point
             contacts |= self.world.contacts_at(goal_tcp)
         return contacts
 
@@ -722,6 +787,7 @@ class Planner:
         step = self.add_step(call, self._move_contacts(None, call))
         self.joint_move(self.robot.home_q, step)
         self.yaw = 0.0
+        self.tilt = self.robot.approach_tilts_rad[0]
 
     def do_wait(self, call: SkillCall) -> None:
         step = self.add_step(call, self._move_contacts(None, call))

@@ -56,7 +56,7 @@ def _towards_seed(model, data, fid, q, seed, lo, hi, clip, attempt, tol, max_ste
     for _ in range(NULL_SPACE_STEPS):
         pin.computeJointJacobians(model, data, q)
         pin.framesForwardKinematics(model, data, q)
-        J = pin.getFrameJacobian(model, data, fid, pin.LOCAL)[:task_dims]
+        J = pin.getFrameJacobian(model, data, fid, pin.LOCAL).reshape(6, model.nv)[:task_dims]
         null = np.eye(model.nv) - np.linalg.pinv(J) @ J
         step = null @ (seed - q)
         big = float(np.abs(step).max())
@@ -129,9 +129,9 @@ def _frame_id(model: Any, frame_id: int | str) -> int:
 
 def _restart(model: Any, gen: np.random.Generator, q0: np.ndarray, lo: np.ndarray, hi: np.ndarray, clip: bool,
              near_seed_try: int) -> np.ndarray:
-    """Where restart ``near_seed_try`` (0: not a redundant arm) of numeric IK begins: for a redundant arm's first
-    four, near the seed (its solution far from the seed is on another branch of its self-motion: deterministic
-    noise growing 0.15 rad a try); otherwise anywhere within the limits (an unbounded joint within +-pi), or
+    """Where restart ``near_seed_try`` of numeric IK begins: the first four near the seed (a descent from the
+    seed that failed at a joint limit, or a solution far from it, is on another branch: deterministic noise
+    growing 0.15 rad a try); otherwise anywhere within the limits (an unbounded joint within +-pi), or
     Pinocchio's random configuration for a model whose configuration is not its joint angles."""
     if 0 < near_seed_try <= 4 and clip:
         return np.clip(q0 + gen.normal(0.0, 0.15 * near_seed_try, q0.shape), lo, hi)
@@ -172,10 +172,10 @@ def numeric_ik(
     ``pin.integrate``. Position-only uses ``e = p* - p`` and the translational
     rows rotated to the base frame. Converged when the position error ≤ ``tol``
     m and the rotation error ≤ ``tol`` rad; otherwise up to ``restarts`` more
-    attempts from random configurations within the limits (deterministic
+    attempts, the first four near the seed, then from random configurations within the limits (deterministic
     ``rng``). On a redundant arm (more joints than the target constrains, a 7-joint arm) the solution then
     slides along its self-motion towards the seed (:func:`_towards_seed`, at most :data:`NULL_SPACE_STEPS`
-    steps): the null-space preference is the seed's posture. A solution with a joint more than
+    steps): the null-space preference is the seed's posture. On any arm, a solution with a joint more than
     :data:`NEAR_SEED_RAD` from the seed is compared with the solutions of further attempts (near the seed first)
     and the nearest of up to three is returned. Returns ``(nq,)``; raises :class:`PlanningError` with the best
     residual (m, rad) if nothing converged.
@@ -199,14 +199,13 @@ def numeric_ik(
     redundant = model.nv > len(eye)
     found: list[np.ndarray] = []
     for k in range(restarts + 1):
-        start = q0 if k == 0 else _restart(model, gen, q0, lo, hi, clip, k if redundant else 0)
+        start = q0 if k == 0 else _restart(model, gen, q0, lo, hi, clip, k)
         q, dp, dr = attempt(start)
         if dp + dr < best[1] + best[2]:
             best = (q, dp, dr)
         if dp <= tol and dr <= tol:
-            if not redundant:
-                return np.array(q, dtype=float)
-            q = _towards_seed(model, data, fid, q, q0, lo, hi, clip, attempt, tol, max_step, len(eye))
+            if redundant:
+                q = _towards_seed(model, data, fid, q, q0, lo, hi, clip, attempt, tol, max_step, len(eye))
             found.append(np.array(q, dtype=float))
             # near the seed (every joint within NEAR_SEED_RAD), or several branches seen: the nearest of them
             if np.abs(q - q0).max() <= NEAR_SEED_RAD or len(found) >= 3:
@@ -223,18 +222,24 @@ def numeric_ik(
 
 
 def pointing_ik(model: Any, data: Any, fid: int, position: Any, axis: Any, seed: Any, lower: Any, upper: Any, *,
-                max_iter: int = 200, tol: float = 1e-9, restarts: int = 20, max_step: float = 0.5, rng: int = 0) -> np.ndarray:
+                max_iter: int = 200, tol: float = 1e-9, restarts: int = 20, max_step: float = 0.5, rng: int = 0,
+                cone_rad: float | None = None) -> np.ndarray:
     """IK for the frame ``fid`` at ``position`` (m) with its +z axis along ``axis`` and the turn about that axis
     free: five constraints, for arms with fewer than six joints (a 5-joint arm cannot choose the yaw of a
     fingers-down grasp as well). Damped least squares on ``e = [p* - p, z x z*]`` with the rows
     ``[J_v; (J_w x z) x z*]`` (world-aligned frame Jacobian), clipped to the limits; restarts as
-    :func:`numeric_ik` (the seed first, then near it, then anywhere, deterministic). Raises PlanningError."""
+    :func:`numeric_ik` (the seed first, then near it, then anywhere, deterministic). Raises PlanningError.
+
+    ``cone_rad``: the +z axis at this angle from ``axis`` instead, leaning whichever way the arm allows (four
+    constraints: a 5-joint arm's wrist leans in its own plane): ``e = [p* - p, cos(cone) - z . z*]`` with the
+    rows ``[J_v; (z x z*)^T J_w]``."""
     p_des = np.asarray(position, float).reshape(3)
     z_des = np.asarray(axis, float).reshape(3)
     z_des = z_des / np.linalg.norm(z_des)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     gen = np.random.default_rng(rng)
     q0 = np.clip(np.asarray(seed, float).reshape(model.nq), lo, hi)
+    cone = None if cone_rad is None else math.cos(cone_rad)  # the cosine the axes' dot product must have
 
     def attempt(q):
         best_q, best = q, (math.inf, math.inf)
@@ -243,17 +248,24 @@ def pointing_ik(model: Any, data: Any, fid: int, position: Any, axis: Any, seed:
             pin.framesForwardKinematics(model, data, q)
             oMf = data.oMf[fid]
             z = oMf.rotation[:, 2]
-            e = np.concatenate([p_des - oMf.translation, np.cross(z, z_des)])
-            dp, dr = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])) + (2.0 if z @ z_des < 0 else 0.0)
+            if cone is None:
+                e = np.concatenate([p_des - oMf.translation, np.cross(z, z_des)])
+                dp, dr = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])) + (2.0 if z @ z_des < 0 else 0.0)
+            else:
+                e = np.append(p_des - oMf.translation, cone - z @ z_des)
+                dp, dr = float(np.linalg.norm(e[:3])), abs(float(e[3]))
             if dp + dr < best[0] + best[1]:
                 best_q, best = q, (dp, dr)
             if dp <= tol and dr <= tol:
                 break
-            J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
-            Jr = np.cross(np.cross(J[3:].T, z), z_des).T  # d(z x z*)/dq: z moves by w x z
-            A = np.vstack([J[:3], -Jr])
+            J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED).reshape(6, model.nv)  # a 1-joint model gives (6,)
+            if cone is None:
+                Jr = np.cross(np.cross(J[3:].T, z), z_des).T  # d(z x z*)/dq: z moves by w x z
+                A = np.vstack([J[:3], -Jr])
+            else:  # d(z . z*)/dq = z* . (w x z) = (z x z*) . w
+                A = np.vstack([J[:3], np.cross(z, z_des) @ J[3:]])
             lam = 1e-10 + 1e-3 * float(e @ e)
-            dq = A.T @ np.linalg.solve(A @ A.T + lam * np.eye(6), e)
+            dq = A.T @ np.linalg.solve(A @ A.T + lam * np.eye(len(e)), e)
             big = float(np.abs(dq).max())
             if big > max_step:
                 dq *= max_step / big
@@ -274,6 +286,8 @@ def pointing_ik(model: Any, data: Any, fid: int, position: Any, axis: Any, seed:
         if dp <= tol and dr <= tol:
             return np.array(q, dtype=float)
     _, dp, dr = best
+    how = f"along {np.round(z_des, 3).tolist()}" if cone_rad is None else \
+        f"{math.degrees(cone_rad):.0f} deg from {np.round(z_des, 3).tolist()}"
     raise PlanningError(f"numeric IK did not reach ({p_des[0]:.3f}, {p_des[1]:.3f}, {p_des[2]:.3f}) m with the finger "
-                        f"axis along {np.round(z_des, 3).tolist()} after {restarts + 1} attempts: best residual "
+                        f"axis {how} after {restarts + 1} attempts: best residual "
                         f"{dp:.3g} m, {dr:.3g} rad")

@@ -54,15 +54,9 @@ from .kinematic_tables import (
     rotation_angle,
     stored_tables,
 )
+from .approach import approach_rotation, fingers_down
 
 __all__ = ["Robot", "Capsule", "fingers_down", "DH_TOLERANCE_M", "default_robot", "default_workspace"]
-
-
-def fingers_down(yaw_rad: float = 0.0) -> np.ndarray:
-    """Rotation with the finger direction (tcp +z) pointing straight down, turned by ``yaw_rad`` about z."""
-    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
-    # Rz(yaw) @ Rx(pi)
-    return np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]])
 
 
 @dataclass(frozen=True)
@@ -199,6 +193,15 @@ class Robot:
     stored copy), so a check with a bundled arm does not load Pinocchio.
     """
 
+    #: Tilts of the fingers from straight down (rad, :mod:`robocritics.robot.approach`) the planner approaches at,
+    #: the next where a target is out of reach at the current one: fingers down for the bundled arms.
+    approach_tilts_rad: tuple[float, ...] = (0.0,)
+    #: +1 / -1 when the first joint's axis is +z / -z, 0 when not vertical: how home turns to face a target.
+    base_turn_sign: float = 1.0
+    #: The fingers' yaw per rad of the last joint, fingers down (rad/rad): -1 on the UR arms and the Panda
+    #: (the flange's z points down), +1 when it points up, 0 when the last joint is not the roll.
+    wrist_yaw_per_rad: float = -1.0
+
     def __init__(
         self,
         urdf_path: str | Path,
@@ -329,6 +332,7 @@ class Robot:
         joint_limits: dict | None = None,
         name: str | None = None,
         package_paths=(),
+        approach_tilts_rad=None,
         **kwargs,
     ) -> "Robot":
         """Load an arm from a URDF as its vendor ships it (docs/robots.md, "Bring your own arm").
@@ -348,7 +352,9 @@ class Robot:
         inferred unless given (a collision-free home inside the limits; the farthest sampled flange distance
         from the shoulder; the links whose height no joint changes). ``joint_limits``: ``{joint: (lower,
         upper)}`` or ``(lower, upper, velocity)`` overrides (rad or m, rad/s or m/s), applied before the
-        file's limits are checked. Other keywords as for the constructor (``dh=``, ``acceleration_limits=``,
+        file's limits are checked. ``approach_tilts_rad``: the tilts of the fingers from straight down (rad,
+        one or several in [0, pi/2]) the planner approaches targets at, the first by default (inferred: the
+        least that reaches a tabletop pick, then larger ones; :mod:`robocritics.robot.approach`). Other keywords as for the constructor (``dh=``, ``acceleration_limits=``,
         ``jerk_limits=``, ``self_pairs=``; ``home=`` is ``home_q``). Raises :class:`RobotModelError` naming
         the element, joint or link and the line.
         """
@@ -369,7 +375,8 @@ class Robot:
         # a finger's capsule slides with the opening and its link frame does not: fingers stay capsules
         robot.capsule_meshes = tuple(None if c.frame in robot.finger_links else facts["mesh"].get(c.name) for c in robot.capsules)
         robot.link_meshes = dict(facts["link_mesh"])
-        infer(robot, tip=facts["tip"], reach_m=reach_m, home_q=home_q, fixed_links=fixed_links)
+        infer(robot, tip=facts["tip"], reach_m=reach_m, home_q=home_q, fixed_links=fixed_links,
+              approach_tilts_rad=approach_tilts_rad)
         if self_pairs is not None:
             robot.self_pairs = tuple((str(a), str(b)) for a, b in self_pairs)
         return robot
@@ -781,14 +788,17 @@ class Robot:
         seed: np.ndarray | None = None,
         *,
         yaw_rad: float = 0.0,
+        tilt_rad: float = 0.0,
     ) -> np.ndarray:
         """Joint angles (rad) that put the TCP at ``position`` (m) with ``orientation``.
 
         ``orientation`` is a 3x3 rotation of the tcp frame (default: fingers straight
-        down, turned by ``yaw_rad``). Among all solutions within the joint limits
+        down, turned by ``yaw_rad``, and leaning ``tilt_rad`` outwards from the shoulder:
+        :func:`~robocritics.robot.approach.approach_rotation`). Among all solutions within the joint limits
         the one nearest ``seed`` (default: the home pose) is returned. An arm with fewer than six joints
-        cannot choose the yaw as well: with the default orientation its fingers point down and the yaw is
-        what its wrist allows (:func:`~robocritics.robot.ik_numeric.pointing_ik`). UR arms use
+        cannot choose the yaw as well, and a tilted approach (``tilt_rad`` > 0) does not ask it to: the finger axis
+        is as asked and the turn about it what the wrist allows nearest the seed
+        (:func:`~robocritics.robot.ik_numeric.pointing_ik`). UR arms use
         closed-form IK (all 8 branches); others Pinocchio damped least squares.
         Raises :class:`PlanningError` naming the target and why.
         """
@@ -797,28 +807,37 @@ class Robot:
         p = np.asarray(position, dtype=float).reshape(3)
         if not np.all(np.isfinite(p)):
             raise PlanningError(f"target {p.tolist()} is not a finite position")
-        R = fingers_down(yaw_rad) if orientation is None else np.asarray(orientation, float)
+        R = approach_rotation(p, yaw_rad, tilt_rad, self.shoulder_m) if orientation is None else np.asarray(orientation, float)
         target = np.eye(4)
         target[:3, :3], target[:3, 3] = R, p
         seed = self.home_q if seed is None else np.asarray(seed, float)
         try:
+            if orientation is None and (self.n < 6 or tilt_rad != 0.0):
+                # fewer than six joints cannot also choose the yaw, and a tilted approach leaves it to the
+                # wrist: the finger axis as asked, turned about it as the wrist allows nearest the seed
+                from .ik_numeric import pointing_ik
+
+                if self.n < 6 and tilt_rad != 0.0:  # its wrist leans in its own plane, not the shoulder's
+                    return pointing_ik(self.model, self.data, self._tcp_frame_id, p, (0.0, 0.0, -1.0), seed,
+                                       self.lower, self.upper, cone_rad=tilt_rad)
+                return pointing_ik(self.model, self.data, self._tcp_frame_id, p, R[:, 2], seed, self.lower, self.upper)
             if self.dh is not None and self.tcp_in_flange is not None:
                 flange = target @ self._flange_in_tcp
                 return _ik.ur_ik(self.dh, flange, seed, self.lower, self.upper)
-            from .ik_numeric import numeric_ik, pointing_ik
+            from .ik_numeric import numeric_ik
 
-            if orientation is None and self.n < 6:
-                # fewer than six joints cannot also choose the yaw: fingers down, turned as the wrist allows
-                return pointing_ik(self.model, self.data, self._tcp_frame_id, p, R[:, 2], seed, self.lower, self.upper)
             return numeric_ik(self.model, self.data, self._tcp_frame_id, target, seed, self.lower, self.upper)
         except PlanningError as exc:
-            pose = "with the fingers down" if orientation is None else "in the requested orientation"
+            pose = "in the requested orientation" if orientation is not None else (
+                "with the fingers down" if tilt_rad == 0.0 else f"with the fingers {math.degrees(tilt_rad):.0f} deg from down")
             raise PlanningError(
                 f"cannot put the TCP at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m {pose}: {exc.reason}"
             ) from None
 
-    def ik_line(self, positions, seed: np.ndarray | None = None, *, yaw_rad: float = 0.0) -> tuple[np.ndarray, PlanningError | None]:
-        """:meth:`ik` with the fingers down (turned by ``yaw_rad``) at each of ``positions`` ``(n, 3)`` m in turn,
+    def ik_line(self, positions, seed: np.ndarray | None = None, *, yaw_rad: float = 0.0,
+                tilt_rad=0.0) -> tuple[np.ndarray, PlanningError | None]:
+        """:meth:`ik` with the fingers down (turned by ``yaw_rad``, tilted by ``tilt_rad``: one tilt, or one per
+        position) at each of ``positions`` ``(n, 3)`` m in turn,
         each seeded by the previous solution (the first by ``seed``, default the home pose).
 
         Returns ``(q (m, 6) rad, error)``: row ``i`` is what ``ik(positions[i], seed=q[i - 1], yaw_rad=yaw_rad)``
@@ -830,11 +849,12 @@ class Robot:
 
         p = np.asarray(positions, dtype=float).reshape(-1, 3)
         seed = self.home_q if seed is None else np.asarray(seed, float)
-        if self.dh is None or self.tcp_in_flange is None:
+        tilts = np.broadcast_to(np.asarray(tilt_rad, float), (len(p),))
+        if self.dh is None or self.tcp_in_flange is None or tilts.any():
             rows: list[np.ndarray] = []
-            for point in p:
+            for point, tilt in zip(p, tilts.tolist()):
                 try:
-                    seed = self.ik(point, seed=seed, yaw_rad=yaw_rad)
+                    seed = self.ik(point, seed=seed, yaw_rad=yaw_rad, tilt_rad=tilt)
                 except PlanningError as exc:
                     return np.array(rows, dtype=float).reshape(-1, self.n), exc
                 rows.append(seed)
@@ -850,7 +870,8 @@ class Robot:
             exc = PlanningError(f"target {p[n_ok].tolist()} is not a finite position")
         elif exc is not None:
             x, y, z = p[len(q)]
-            exc = PlanningError(f"cannot put the TCP at ({x:.3f}, {y:.3f}, {z:.3f}) m with the fingers down: {exc.reason}")
+            pose = "with the fingers down"
+            exc = PlanningError(f"cannot put the TCP at ({x:.3f}, {y:.3f}, {z:.3f}) m {pose}: {exc.reason}")
         return q, exc
 
     # --- self-collision pairs ---------------------------------------------------------

@@ -42,8 +42,10 @@ class Tool:
     def grasps(self) -> bool:
         return self.max_opening_m > 0
 
-    def elements(self, flange: str) -> list[ET.Element]:
-        """URDF ``<link>``/``<joint>`` elements (and the ``<gripper>``) that mount this tool on ``flange``."""
+    def elements(self, flange: str, mount_rpy: tuple[float, float, float] | None = None) -> list[ET.Element]:
+        """URDF ``<link>``/``<joint>`` elements (and the ``<gripper>``) that mount this tool on ``flange``: its mount
+        frame is the flange frame, or turned by ``mount_rpy`` (rad; where the flange's outward axis is not its z,
+        :func:`~robocritics.robot.vendor.flange_mount_rpy`), then ``mount_yaw_rad`` about the tool's z."""
         out: list[ET.Element] = []
 
         def link(name, capsules=()):
@@ -52,15 +54,16 @@ class Tool:
                 element.append(_cylinder(p0, p1, r))
             out.append(element)
 
-        def joint(name, parent, child, xyz, yaw=0.0):
+        def joint(name, parent, child, xyz, yaw=0.0, turn=None):
             element = ET.Element("joint", name=name, type="fixed")
             ET.SubElement(element, "parent", link=parent)
             ET.SubElement(element, "child", link=child)
-            ET.SubElement(element, "origin", xyz=" ".join(repr(float(v)) for v in xyz), rpy=f"0 0 {yaw!r}")
+            ET.SubElement(element, "origin", xyz=" ".join(repr(float(v)) for v in xyz),
+                          rpy=f"0 0 {yaw!r}" if turn is None else _turned_rpy(turn, yaw))
             out.append(element)
 
         link("gripper_body", self.body)
-        joint("tool_mount", flange, "gripper_body", (0, 0, 0), self.mount_yaw_rad)
+        joint("tool_mount", flange, "gripper_body", (0, 0, 0), self.mount_yaw_rad, mount_rpy)
         link("tcp")
         joint("tcp_joint", "gripper_body", "tcp", (0, 0, self.tcp_from_flange_m))
         links = ["gripper_body"]
@@ -79,6 +82,15 @@ class Tool:
             out.append(ET.Element("gripper", name=self.name, max_opening="0", tcp="tcp", fingers="", links=" ".join(links),
                                   mass=repr(self.mass_kg)))
         return out
+
+
+def _turned_rpy(rpy, yaw: float) -> str:
+    """The URDF ``rpy`` of the rotation ``rpy`` followed by ``yaw`` about the turned frame's z (rad)."""
+    import numpy as np
+    import pinocchio as pin
+
+    R = pin.rpy.rpyToMatrix(*rpy) @ pin.rpy.rpyToMatrix(0.0, 0.0, yaw)
+    return " ".join(repr(float(v)) for v in pin.rpy.matrixToRpy(np.asarray(R)))
 
 
 def _cylinder(p0, p1, radius) -> ET.Element:

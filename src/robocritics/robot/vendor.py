@@ -23,6 +23,7 @@ import numpy as np
 from ..errors import RobotModelError
 from . import urdf as _urdf
 from .fit import FittedCapsule, Mesh, box_mesh, fit_capsules, load_mesh
+from .approach import infer_tilts, turn_rates
 from .tools import Tool, tool_named, _cylinder
 
 __all__ = ["arm_tree", "infer", "base_pose_matrix", "REACH_SAMPLES"]
@@ -119,8 +120,9 @@ def arm_tree(
             out.append(doc.root.find("gripper"))
         return out, {"tip": tip, "tool": "(the file's own)", **fitted}
     tool_obj = _tool(tool, path, package_paths, fitted)
+    mount_rpy = flange_mount_rpy(doc, joints)
     if isinstance(tool_obj, Tool):
-        out.extend(tool_obj.elements(tip))
+        out.extend(tool_obj.elements(tip, mount_rpy))
         tool_name = tool_obj.name
     else:  # a tool URDF: its tree mounted on the tip
         tool_tree, tool_name = tool_obj
@@ -128,10 +130,54 @@ def arm_tree(
         for element in tool_tree:
             if element.tag == "joint" and element.get("name") == "tool_mount":
                 element.find("parent").set("link", tip)
+                if mount_rpy is not None:
+                    element.find("origin").set("rpy", " ".join(repr(float(v)) for v in mount_rpy))
             if element.tag in ("link", "joint") and element.get("name") in taken:
                 raise RobotModelError(f"tool {tool_name}: its {element.tag} {element.get('name')!r} has the name of one of the arm's")
             out.append(element)
     return out, {"tip": tip, "tool": tool_name, **fitted}
+
+
+#: The tool mount's rpy (rad) that turns its z onto each of the flange's axes but +z (``Rx``/``Ry`` by +-pi/2, pi).
+_MOUNT_RPY = {(1, 0, 0): (0.0, math.pi / 2, 0.0), (-1, 0, 0): (0.0, -math.pi / 2, 0.0),
+              (0, 1, 0): (-math.pi / 2, 0.0, 0.0), (0, -1, 0): (math.pi / 2, 0.0, 0.0), (0, 0, -1): (math.pi, 0.0, 0.0)}
+
+
+def flange_mount_rpy(doc: _urdf.UrdfDocument, joints: list[ET.Element]) -> tuple[float, float, float] | None:
+    """How a tool turns to stand out of the flange, as the tool mount's rpy (rad), or None when the flange's
+    outward axis is its z (ROS-Industrial's ``tool0``, and most vendor flanges).
+
+    The outward direction, in the tip frame: the last moving joint's axis, signed to point from that joint to
+    the tip, when the fixed joints between them offset the tip along it (a wrist roll, as Unitree's Z1 rolls
+    about x); the offset's direction when it is not along the axis; the axis when there is no offset; then
+    snapped to the nearest of the tip frame's six axis directions."""
+    import pinocchio as pin
+
+    moving = [k for k, j in enumerate(joints) if j.get("type") in _urdf.MOVING_JOINT_TYPES]
+    last = moving[-1]
+    axis_element = joints[last].find("axis")
+    axis = np.array(_urdf.floats(doc, axis_element, "xyz", 3, f"joint {joints[last].get('name')!r}", default=(1, 0, 0))
+                    if axis_element is not None else (1.0, 0.0, 0.0), dtype=float)
+    pose = np.eye(4)  # the tip in the last moving joint's frame
+    for joint in joints[last + 1:]:
+        origin = joint.find("origin")
+        step = np.eye(4)
+        if origin is not None:
+            owner = f"joint {joint.get('name')!r}"
+            step[:3, :3] = pin.rpy.rpyToMatrix(*_urdf.floats(doc, origin, "rpy", 3, owner, default=(0, 0, 0), bound=100.0))
+            step[:3, 3] = _urdf.floats(doc, origin, "xyz", 3, owner, default=(0, 0, 0))
+        pose = pose @ step
+    R = pose[:3, :3]
+    axis_t, offset_t = R.T @ (axis / np.linalg.norm(axis)), R.T @ pose[:3, 3]
+    if np.linalg.norm(offset_t) < 1e-3:
+        out = axis_t
+    else:
+        unit = offset_t / np.linalg.norm(offset_t)
+        out = axis_t * math.copysign(1.0, axis_t @ unit) if abs(axis_t @ unit) >= 0.5 else unit
+    k = int(np.argmax(np.abs(out)))
+    snapped = [0, 0, 0]
+    snapped[k] = 1 if out[k] > 0 else -1
+    return _MOUNT_RPY.get(tuple(snapped))
 
 
 def _tool(tool, path: Path, package_paths, fitted: dict) -> Tool | tuple[list[ET.Element], str]:
@@ -162,6 +208,7 @@ def _tool(tool, path: Path, package_paths, fitted: dict) -> Tool | tuple[list[ET
     mount = ET.Element("joint", name="tool_mount", type="fixed")
     ET.SubElement(mount, "parent", link="__TIP__")
     ET.SubElement(mount, "child", link=tree.root)
+    ET.SubElement(mount, "origin", xyz="0 0 0", rpy="0 0 0")
     elements.append(mount)
     links = " ".join(tree.links)
     if gripper is None:
@@ -310,8 +357,9 @@ def height_invariant_links(robot) -> tuple[str, ...]:
                  and f.name != "universe")
 
 
-def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links) -> None:
-    """Set ``robot``'s fixed links, reach and home (each unless given), and its pinch pairs at the home pose."""
+def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links, approach_tilts_rad=None) -> None:
+    """Set ``robot``'s fixed links, reach, home and approach tilts (each unless given), its pinch pairs at the
+    home pose, and how its base and wrist turn (:func:`~robocritics.robot.approach.turn_rates`)."""
     from ..geometry.kernels import capsule_capsule
 
     robot.fixed_links = tuple(fixed_links) if fixed_links is not None else height_invariant_links(robot)
@@ -334,7 +382,21 @@ def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links) -> Non
     if home_q is None:
         home_q = _home(robot, samples, frames, p0, p1, capsule_capsule, structural)
     robot.home_q = home_q
+    robot.base_turn_sign, robot.wrist_yaw_per_rad = turn_rates(robot, robot.home_q)
+    robot.approach_tilts_rad = _tilts(approach_tilts_rad) if approach_tilts_rad is not None else infer_tilts(robot)
     robot.self_pairs = tuple(pair for pair in robot._default_self_pairs(robot.home_q) if pair not in structural)
+
+
+def _tilts(values) -> tuple[float, ...]:
+    """``approach_tilts_rad=`` checked: one tilt or a sequence of them, each in [0, pi/2] rad."""
+    try:
+        tilts = tuple(float(v) for v in (values if np.ndim(values) else (values,)))
+    except (TypeError, ValueError):
+        tilts = ()
+    if not tilts or not all(0.0 <= t <= math.pi / 2 for t in tilts):
+        raise RobotModelError(f"approach_tilts_rad = {values!r}: give one or more tilts from straight down, each "
+                              "in [0, pi/2] rad (0: fingers down, pi/2: horizontal)")
+    return tilts
 
 
 def _structural_pairs(robot, p0, p1, capsule_capsule) -> set[tuple[str, str]]:
