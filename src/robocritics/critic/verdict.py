@@ -74,7 +74,8 @@ class Evidence(_Model):
     Sample indices index the trajectory's arrays. For a finding that holds on
     a set of samples (every sample over a threshold), ``first_sample`` /
     ``last_sample`` bound the set, ``sample_ranges`` lists its runs (inclusive,
-    at most 20), and ``time_window_s`` is ``(time[first], time[last])``.
+    at most 20 in time order: of more, the run holding ``worst_sample`` and the
+    rest spread evenly from the first to the last, :func:`kept_runs`), and ``time_window_s`` is ``(time[first], time[last])``.
     ``worst_sample`` is where the measured ``value`` was taken. ``lines`` and
     ``skills`` come from the trajectory's step provenance of those samples.
     """
@@ -155,6 +156,25 @@ def runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
 
 
+def kept_runs(starts: np.ndarray, ends: np.ndarray, max_runs: int, worst: int | None = None) -> list[int]:
+    """Which of the runs ``starts[k]..ends[k]`` (time order) a bounded evidence lists: all of up to ``max_runs``;
+    of more, ``max_runs`` of them spread evenly over the motion (the first and the last always) with the run
+    holding sample ``worst`` in place of the spread one nearest it, so a long program's timeline marks where
+    its findings recur and where the worst is, not only its first minutes."""
+    n = len(starts)
+    if n <= max_runs:
+        return list(range(n))
+    if max_runs <= 0:
+        return []
+    keep = np.round(np.linspace(0, n - 1, max_runs)).astype(np.int64)
+    if worst is not None:
+        holding = int(np.searchsorted(starts, worst, side="right")) - 1
+        if holding >= 0 and worst <= ends[holding] and holding not in keep:
+            inner = np.abs(keep[1:-1] - holding) if max_runs > 2 else np.abs(keep - holding)
+            keep[int(np.argmin(inner)) + (1 if max_runs > 2 else 0)] = holding
+    return sorted(set(keep.tolist()))
+
+
 def make_evidence(
     trajectory: "Trajectory",
     samples: np.ndarray | None = None,
@@ -192,7 +212,7 @@ def make_evidence(
             first_sample=int(idx[0]),
             last_sample=int(idx[-1]),
             time_window_s=(float(time[idx[0]]), float(time[idx[-1]])),
-            sample_ranges=[(int(a), int(b)) for a, b in zip(starts[:max_ranges], ends[:max_ranges])],
+            sample_ranges=[(int(starts[k]), int(ends[k])) for k in kept_runs(starts, ends, max_ranges, worst)],
             samples_flagged=int(idx.size),
             lines=trajectory.lines(idx),
             skills=trajectory.skills(idx),
