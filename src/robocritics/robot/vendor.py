@@ -357,6 +357,35 @@ def height_invariant_links(robot) -> tuple[str, ...]:
                  and f.name != "universe")
 
 
+def _axis_housings(robot) -> np.ndarray:
+    """Per capsule, whether it is the housing of a joint whose axis is horizontal and never changes height (a UR
+    shoulder): on that joint's child link, both ends within half its radius of the axis. Its lowest point moves
+    by no more than that offset as the joint turns, and its table distance is the vendor's design, not the
+    program's (as a fixed link's is)."""
+    import pinocchio as pin
+
+    model = robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, np.asarray(robot.lower + robot.upper, float) / 2)
+    invariant = set(height_invariant_links(robot))
+    parent_joint = {f.name: f.parentJoint for f in model.frames if f.type == pin.FrameType.BODY}
+    out = np.zeros(len(robot.capsules), dtype=bool)
+    for k, capsule in enumerate(robot.capsules):
+        j = parent_joint[capsule.frame]
+        kind, axis = robot._joint_motion[j] if j > 0 else ("fixed", None)
+        parent = next((f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == model.parents[j]), None)
+        if kind != "revolute" or parent not in invariant:
+            continue
+        unit = np.asarray(axis, float) / np.linalg.norm(axis)
+        if abs((data.oMi[j].rotation @ unit)[2]) > 1e-6:
+            continue
+        frame = model.frames[model.getFrameId(capsule.frame, pin.FrameType.BODY)]
+        ends = [frame.placement.act(np.asarray(p, float)) for p in (capsule.p0, capsule.p1)]  # in the joint frame
+        off_axis = [np.linalg.norm(e - (e @ unit) * unit) for e in ends]
+        out[k] = max(off_axis) <= 0.5 * capsule.radius_m
+    return out
+
+
 def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links, approach_tilts_rad=None) -> None:
     """Set ``robot``'s fixed links, reach, home and approach tilts (each unless given), its pinch pairs at the
     home pose, and how its base and wrist turn (:func:`~robocritics.robot.approach.turn_rates`)."""
@@ -376,7 +405,8 @@ def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links, approa
     # a capsule whose lowest point keeps its height (a housing centred on a horizontal shoulder axis) stands
     # where the file put it: its table distance is as constant as a fixed link's
     lowest = np.minimum(p0[..., 2], p1[..., 2]) - robot.capsule_radii
-    steady = np.ptp(lowest, axis=0) < 1e-3
+    housings = _axis_housings(robot)
+    steady = (np.ptp(lowest, axis=0) < 1e-3) | housings
     robot.table_fixed_capsules = tuple(name for name, still in zip(robot.capsule_names, steady) if still)
     structural = _structural_pairs(robot, p0, p1, capsule_capsule)
     if home_q is None:
@@ -384,7 +414,11 @@ def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links, approa
     robot.home_q = home_q
     robot.base_turn_sign, robot.wrist_yaw_per_rad = turn_rates(robot, robot.home_q)
     robot.approach_tilts_rad = _tilts(approach_tilts_rad) if approach_tilts_rad is not None else infer_tilts(robot)
-    robot.self_pairs = tuple(pair for pair in robot._default_self_pairs(robot.home_q) if pair not in structural)
+    # a joint's housing that stands where the file put it (_axis_housings) against the links below it: the vendor's
+    # design, whatever the program does, so no pinch point
+    standing = {c.name for c, housing in zip(robot.capsules, housings) if housing or c.frame in robot.fixed_links}
+    robot.self_pairs = tuple(pair for pair in robot._default_self_pairs(robot.home_q)
+                             if pair not in structural and not set(pair) <= standing)
 
 
 def _tilts(values) -> tuple[float, ...]:
