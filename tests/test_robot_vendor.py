@@ -366,7 +366,7 @@ def _pick_scene(path: Path, reach_m: float) -> Path:
     return path
 
 
-_CLI_ARMS = [p for p in _arms() if p.id in ("airo ur5e", "pybullet xarm6", "erd panda")]
+_CLI_ARMS = [p for p in _arms() if p.id in ("airo ur5e", "pybullet xarm6", "erd panda", "erd ur5", "erd ur10", "pybullet iiwa")]
 
 
 @pytest.mark.parametrize("path, kwargs", _CLI_ARMS)

@@ -51,7 +51,6 @@ from .kinematic_tables import (
     pinocchio_frame_pose,
     pinocchio_rpy,
     pinocchio_urdf,
-    rotation_angle,
     stored_tables,
 )
 from .approach import approach_rotation, fingers_down
@@ -201,6 +200,9 @@ class Robot:
     #: The fingers' yaw per rad of the last joint, fingers down (rad/rad): -1 on the UR arms and the Panda
     #: (the flange's z points down), +1 when it points up, 0 when the last joint is not the roll.
     wrist_yaw_per_rad: float = -1.0
+    #: The inverse of the DH base's pose (4x4) in the robot's base frame, when ``dh`` was recognised in a vendor
+    #: file whose base is not the DH base (:mod:`robocritics.robot.dh_chain`); None: the same frame.
+    dh_base_inverse: np.ndarray | None = None
 
     def __init__(
         self,
@@ -375,6 +377,8 @@ class Robot:
         # a finger's capsule slides with the opening and its link frame does not: fingers stay capsules
         robot.capsule_meshes = tuple(None if c.frame in robot.finger_links else facts["mesh"].get(c.name) for c in robot.capsules)
         robot.link_meshes = dict(facts["link_mesh"])
+        if robot.dh is None:
+            robot._use_ur_chain(facts["tip"])
         infer(robot, tip=facts["tip"], reach_m=reach_m, home_q=home_q, fixed_links=fixed_links,
               approach_tilts_rad=approach_tilts_rad)
         if self_pairs is not None:
@@ -561,51 +565,23 @@ class Robot:
         return scene.model_copy(update={"workspace": self.workspace})
 
     def _check_dh(self, dh) -> None:
-        """Refuse ``dh`` unless the URDF's ``tool0`` is the DH flange (within ``DH_TOLERANCE_M``) at a
-        spread of configurations: a URDF in another base convention (ROS's UR description turns the
-        base 180 deg about z) would otherwise get IK solutions for the wrong arm."""
-        flange = self._check_link("tool0", "the flange that dh= describes")
-        if self.n != 6:
-            raise RobotModelError(f"{self.urdf_path}: dh= describes 6 joints, the URDF has {self.n}")
-        # zero, home-like and two off-axis configurations: each length and each twist shows in one of them
-        checks = np.array([
-            np.zeros(6),
-            [0.3, -1.2, 1.1, -0.7, 0.9, 0.4],
-            [-2.1, -0.4, -1.9, 2.2, -1.3, 2.7],
-            [1.0, 0.8, 0.5, 1.5, 2.0, -1.0],
-        ])
-        checks = np.clip(checks, self.lower, self.upper)
-        # accepted on the tables Pinocchio read (the FK tests/test_fk_fast.py checks against it; a tolerance of
-        # 1e-6 m and rad is far above their difference from Pinocchio's); a refusal names the configuration that
-        # Pinocchio's own FK and log3 find worst, as it always has
-        frames = self.forward(checks)[:, flange]
-        if all(
-            np.linalg.norm(urdf[:3, 3] - table[:3, 3]) <= DH_TOLERANCE_M
-            and rotation_angle(urdf[:3, :3].T @ table[:3, :3]) <= DH_TOLERANCE_M
-            for urdf, table in zip(frames, (np.array(dh.flange_pose(q)) for q in checks))
-        ):
+        """Refuse ``dh`` unless the URDF's ``tool0`` is its flange (:func:`~robocritics.robot.dh_chain.check_dh`)."""
+        from .dh_chain import check_dh
+
+        check_dh(self, dh, DH_TOLERANCE_M)
+
+    def _use_ur_chain(self, tip: str) -> None:
+        """Closed-form IK when the URDF is a UR chain with its flange at ``tip`` (:mod:`.dh_chain`): ``dh``, the
+        DH base and the TCP in DH frame 6 (``tcp_in_flange``) set from it; else nothing changes (numeric IK)."""
+        from .dh_chain import recognise_ur_chain
+
+        chain = recognise_ur_chain(self, tip, DH_TOLERANCE_M)
+        if chain is None:
             return
-        import pinocchio as pin
-
-        from .ik import dh_forward
-
-        worst_m, worst_rad, worst_q = 0.0, 0.0, checks[0]
-        flange_id = int(self.model.getFrameId("tool0", pin.FrameType.BODY))
-        for q in checks:
-            table = dh_forward(dh, q)
-            pin.framesForwardKinematics(self.model, self.data, q)
-            urdf = self.data.oMf[flange_id].homogeneous
-            dp = float(np.linalg.norm(urdf[:3, 3] - table[:3, 3]))
-            dr = float(np.linalg.norm(pin.log3(urdf[:3, :3].T @ table[:3, :3])))
-            if max(dp, dr) > max(worst_m, worst_rad):
-                worst_m, worst_rad, worst_q = dp, dr, q
-        if worst_m > DH_TOLERANCE_M or worst_rad > DH_TOLERANCE_M:
-            raise RobotModelError(
-                f"{self.urdf_path}: the URDF's tool0 does not follow dh={getattr(dh, 'name', dh)!r}: at q = "
-                f"[{', '.join(f'{v:.2f}' for v in worst_q)}] rad it is {worst_m:.4f} m and {worst_rad:.4f} rad from "
-                "the DH flange. Check the base convention (ROS UR descriptions turn base_link 180 deg about z "
-                "against UR's DH base) and the joint zero offsets, or load it without dh= (numeric IK)"
-            )
+        fk = self._forward_static(np.zeros(self.n))
+        tcp_in_flange = chain.flange_in_dh @ np.linalg.inv(fk[self._frame_index[tip]]) @ fk[self.tcp_index]
+        self.dh, self.dh_base_inverse = chain.dh, _read_only(np.linalg.inv(chain.base))
+        self.tcp_in_flange, self._flange_in_tcp = _read_only(tcp_in_flange), _read_only(np.linalg.inv(tcp_in_flange))
 
     def _forward_static(self, q: np.ndarray) -> np.ndarray:
         return self.forward(q[None, :])[0]
@@ -823,6 +799,8 @@ class Robot:
                 return pointing_ik(self.model, self.data, self._tcp_frame_id, p, R[:, 2], seed, self.lower, self.upper)
             if self.dh is not None and self.tcp_in_flange is not None:
                 flange = target @ self._flange_in_tcp
+                if self.dh_base_inverse is not None:  # a vendor file's UR chain (robot.dh_chain): in its DH base
+                    flange = self.dh_base_inverse @ flange
                 return _ik.ur_ik(self.dh, flange, seed, self.lower, self.upper)
             from .ik_numeric import numeric_ik
 
@@ -865,7 +843,10 @@ class Robot:
         target[:] = np.eye(4)
         target[:, :3, :3], target[:, :3, 3] = fingers_down(yaw_rad), p[:n_ok]
         # the same per-pose products as ik()'s ``target @ self._flange_in_tcp`` (matmul per stacked slice)
-        q, exc = _ik.ur_ik_line(self.dh, target @ self._flange_in_tcp, seed, self.lower, self.upper)
+        flanges = target @ self._flange_in_tcp
+        if self.dh_base_inverse is not None:
+            flanges = self.dh_base_inverse @ flanges
+        q, exc = _ik.ur_ik_line(self.dh, flanges, seed, self.lower, self.upper)
         if exc is None and n_ok < len(p):
             exc = PlanningError(f"target {p[n_ok].tolist()} is not a finite position")
         elif exc is not None:

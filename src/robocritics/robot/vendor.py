@@ -357,6 +357,35 @@ def height_invariant_links(robot) -> tuple[str, ...]:
                  and f.name != "universe")
 
 
+def _axis_housings(robot) -> np.ndarray:
+    """Per capsule, whether it is the housing of a joint whose axis is horizontal and never changes height (a UR
+    shoulder): on that joint's child link, both ends within half its radius of the axis. Its lowest point moves
+    by no more than that offset as the joint turns, and its table distance is the vendor's design, not the
+    program's (as a fixed link's is)."""
+    import pinocchio as pin
+
+    model = robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, np.asarray(robot.lower + robot.upper, float) / 2)
+    invariant = set(height_invariant_links(robot))
+    parent_joint = {f.name: f.parentJoint for f in model.frames if f.type == pin.FrameType.BODY}
+    out = np.zeros(len(robot.capsules), dtype=bool)
+    for k, capsule in enumerate(robot.capsules):
+        j = parent_joint[capsule.frame]
+        kind, axis = robot._joint_motion[j] if j > 0 else ("fixed", None)
+        parent = next((f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == model.parents[j]), None)
+        if kind != "revolute" or parent not in invariant:
+            continue
+        unit = np.asarray(axis, float) / np.linalg.norm(axis)
+        if abs((data.oMi[j].rotation @ unit)[2]) > 1e-6:
+            continue
+        frame = model.frames[model.getFrameId(capsule.frame, pin.FrameType.BODY)]
+        ends = [frame.placement.act(np.asarray(p, float)) for p in (capsule.p0, capsule.p1)]  # in the joint frame
+        off_axis = [np.linalg.norm(e - (e @ unit) * unit) for e in ends]
+        out[k] = max(off_axis) <= 0.5 * capsule.radius_m
+    return out
+
+
 def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links, approach_tilts_rad=None) -> None:
     """Set ``robot``'s fixed links, reach, home and approach tilts (each unless given), its pinch pairs at the
     home pose, and how its base and wrist turn (:func:`~robocritics.robot.approach.turn_rates`)."""
@@ -376,7 +405,8 @@ def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links, approa
     # a capsule whose lowest point keeps its height (a housing centred on a horizontal shoulder axis) stands
     # where the file put it: its table distance is as constant as a fixed link's
     lowest = np.minimum(p0[..., 2], p1[..., 2]) - robot.capsule_radii
-    steady = np.ptp(lowest, axis=0) < 1e-3
+    housings = _axis_housings(robot)
+    steady = (np.ptp(lowest, axis=0) < 1e-3) | housings
     robot.table_fixed_capsules = tuple(name for name, still in zip(robot.capsule_names, steady) if still)
     structural = _structural_pairs(robot, p0, p1, capsule_capsule)
     if home_q is None:
@@ -384,7 +414,11 @@ def infer(robot, *, tip: str, reach_m: float | None, home_q, fixed_links, approa
     robot.home_q = home_q
     robot.base_turn_sign, robot.wrist_yaw_per_rad = turn_rates(robot, robot.home_q)
     robot.approach_tilts_rad = _tilts(approach_tilts_rad) if approach_tilts_rad is not None else infer_tilts(robot)
-    robot.self_pairs = tuple(pair for pair in robot._default_self_pairs(robot.home_q) if pair not in structural)
+    # a joint's housing that stands where the file put it (_axis_housings) against the links below it: the vendor's
+    # design, whatever the program does, so no pinch point
+    standing = {c.name for c, housing in zip(robot.capsules, housings) if housing or c.frame in robot.fixed_links}
+    robot.self_pairs = tuple(pair for pair in robot._default_self_pairs(robot.home_q)
+                             if pair not in structural and not set(pair) <= standing)
 
 
 def _tilts(values) -> tuple[float, ...]:
@@ -430,14 +464,49 @@ def _close_pairs(robot) -> tuple[tuple[str, str], ...]:
     return tuple(out)
 
 
-def _home(robot, samples, frames, p0, p1, capsule_capsule, structural) -> np.ndarray:
-    """The sampled configuration that is free of collision (no capsule pair of non-adjacent links touching,
-    no moving capsule touching the table), keeps away from the joint limits, and puts the TCP in front
-    of the shoulder at half the reach with the fingers down; refined by IK to that point when it can be."""
-    tcp = frames[:, robot.tcp_index]
+#: Sampled configurations refined by IK to the home point; the refined one farthest from the joint limits wins.
+HOME_CANDIDATES = 12
+
+
+def elbow_heights(robot, frames: np.ndarray) -> np.ndarray:
+    """Per configuration (``frames (T, L, 4, 4)`` of :meth:`Robot.forward`), how high the elbow stands above the
+    straight line from the shoulder to the wrist (m; negative: elbow down).
+
+    Shoulder: the origin of the second moving joint; wrist: that of the last but one; elbow: of the joints
+    between, the origin farthest from that line. Its height is its z minus the line's z where it is nearest
+    the line. An arm with fewer than four joints has no elbow: zero."""
+    origins = _joint_origins(robot, frames)
+    if origins.shape[1] < 4:
+        return np.zeros(len(frames))
+    shoulder, wrist, middle = origins[:, 1], origins[:, -2], origins[:, 2:-2]
+    if middle.shape[1] == 0:
+        return np.zeros(len(frames))
+    line = wrist - shoulder
+    length_sq = np.maximum(np.einsum("ti,ti->t", line, line), 1e-12)
+    t = np.einsum("tki,ti->tk", middle - shoulder[:, None], line) / length_sq[:, None]
+    nearest = shoulder[:, None] + t[..., None] * line[:, None]
+    off = middle - nearest
+    elbow = np.argmax(np.einsum("tki,tki->tk", off, off), axis=1)
+    return off[np.arange(len(frames)), elbow, 2]
+
+
+def _joint_origins(robot, frames: np.ndarray) -> np.ndarray:
+    """``(T, n, 3)`` m: each moving joint's origin (its child link's frame) in the base frame."""
+    import pinocchio as pin
+
+    child = {}
+    for f in robot.model.frames:
+        if f.type == pin.FrameType.BODY and f.parentJoint > 0 and f.parentJoint not in child:
+            child[f.parentJoint] = robot.frame_names.index(f.name)
+    return frames[:, [child[j] for j in range(1, robot.model.njoints)]][..., :3, 3]
+
+
+def _clearance(robot, p0, p1, capsule_capsule, structural) -> np.ndarray:
+    """Per configuration, the least distance (m) of a moving capsule to the table and of a non-adjacent capsule
+    pair (not ``structural``) to each other, from the capsule ends ``p0``, ``p1`` ``(T, C, 3)``."""
     movable = np.array([c.frame not in robot.fixed_links and c.name not in robot.table_fixed_capsules for c in robot.capsules])
     lowest = np.minimum(p0[..., 2], p1[..., 2]) - robot.capsule_radii
-    clearance = lowest[:, movable].min(axis=1) if movable.any() else np.full(len(samples), np.inf)
+    clearance = lowest[:, movable].min(axis=1) if movable.any() else np.full(len(p0), np.inf)
     names = robot.capsule_names
     for a, b in robot._default_self_pairs(None):
         if (a, b) in structural:
@@ -445,17 +514,51 @@ def _home(robot, samples, frames, p0, p1, capsule_capsule, structural) -> np.nda
         i, j = names.index(a), names.index(b)
         d = capsule_capsule(p0[:, i], p1[:, i], robot.capsule_radii[i], p0[:, j], p1[:, j], robot.capsule_radii[j])
         clearance = np.minimum(clearance, d)
+    return clearance
+
+
+def _limit_margin(robot, q: np.ndarray) -> np.ndarray:
+    """Per configuration ``q (T, n)``, the least distance of a joint from its nearer limit as a fraction of its
+    range (0 at a limit, 0.5 mid-range)."""
     span = np.maximum(robot.upper - robot.lower, 1e-9)
-    margin = np.min(np.minimum(samples - robot.lower, robot.upper - samples) / span, axis=1)
+    return np.min(np.minimum(q - robot.lower, robot.upper - q) / span, axis=1)
+
+
+def _home(robot, samples, frames, p0, p1, capsule_capsule, structural) -> np.ndarray:
+    """A home pose as an engineer would choose one: the TCP in front of the shoulder at half the reach (as high
+    above the table), fingers down, elbow up (:func:`elbow_heights`), free of collision (:func:`_clearance`),
+    away from the joint limits.
+
+    The sampled configurations that are clear (elbow up where any clear one is) are ranked by their TCP's
+    distance from that point, its fingers' lean from down and their joint margin (:func:`_limit_margin`); the
+    best :data:`HOME_CANDIDATES` are each refined by IK to the point, and of the refined ones still clear and
+    elbow up, the one farthest from the joint limits is home (a base joint at mid-range leaves it room to turn
+    either way). When none refines, the best sample itself."""
+    tcp = frames[:, robot.tcp_index]
+    clearance = _clearance(robot, p0, p1, capsule_capsule, structural)
+    up = elbow_heights(robot, frames) >= 0.0
     target = robot.shoulder_m + np.array([0.5 * robot.reach_m, 0.0, -robot.shoulder_m[2] + 0.5 * robot.reach_m])
     down = -tcp[:, :3, 2] @ np.array([0.0, 0.0, 1.0])
-    score = -np.linalg.norm(tcp[:, :3, 3] - target, axis=1) / robot.reach_m + 0.5 * down + margin
-    if (clearance > 0).any():
-        score[clearance <= 0] = -np.inf
+    score = -np.linalg.norm(tcp[:, :3, 3] - target, axis=1) / robot.reach_m + 0.5 * down + _limit_margin(robot, samples)
+    clear = clearance > 0
+    if (clear & up).any():
+        clear &= up
+    if clear.any():
+        score[~clear] = -np.inf
     else:  # nothing sampled is clear: the least colliding one (the critics will say where it touches)
-        score = clearance
-    seed = samples[int(np.argmax(score))]
-    try:
-        return robot.ik(target, seed=seed)
-    except Exception:  # the sampled pose itself is a valid home; the refinement is a nicety
-        return seed
+        return samples[int(np.argmax(clearance))]
+    ranked = np.argsort(-score, kind="stable")[: min(HOME_CANDIDATES, int(clear.sum()))]
+    refined = []
+    for k in ranked.tolist():
+        try:
+            refined.append(robot.ik(target, seed=samples[k]))
+        except Exception:  # this sample does not reach the point fingers down; the next may
+            continue
+    if refined:
+        q = np.array(refined)
+        r_frames, r0, r1 = robot.forward_with_capsules(q)
+        good = (_clearance(robot, r0, r1, capsule_capsule, structural) > 0) & (elbow_heights(robot, r_frames) >= 0.0)
+        if good.any():
+            margin = np.where(good, _limit_margin(robot, q), -np.inf)
+            return q[int(np.argmax(margin))]
+    return samples[int(ranked[0])]

@@ -60,6 +60,9 @@ class Arm:
         dh = getattr(robot, "dh", None)
         if dh is None or not getattr(dh, "is_ur_like", False) or robot.tcp_in_flange is None:
             raise URScriptError(f"URScript runs on UR arms; the robot {robot.name!r} has no UR kinematics (use --robot ur3e, ur5e, ...)")
+        if getattr(robot, "dh_base_inverse", None) is not None:  # URScript poses are in UR's base frame, not the file's
+            raise URScriptError(f"URScript runs on UR arms in UR's base frame; the robot {robot.name!r} is a UR chain in "
+                                "another base convention (a ROS description): use --robot ur3e, ur5e, ...")
         self.robot = robot
         self.options = options
         self.lines = source_lines
