@@ -148,12 +148,14 @@ def build_trajectory(
         if p.kind == "environment" and p.group_a == "arm"
         for j in range(bounds[k], bounds[k + 1])
     ]
+    own = [j for k, p in enumerate(pairs) if p.kind == "self" for j in range(bounds[k], bounds[k + 1])]
     capsules = [(name, float(r)) for name, r in zip(robot.capsule_names, robot.capsule_radii)]
     poses = {oid: np.asarray(pose, float) for oid, pose in object_poses.items()}
     proximity = np.zeros((T, 0))
     if flat:
         kernel = prox.ProximityKernel(capsules, scene.shapes(), flat, moving=list(object_poses))
-        by_pair = kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=arm).T  # (K', T) C-order
+        sets = [arm, own] if own else [arm]
+        by_pair = kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=sets).T  # (K', T) C-order
         # each reported pair is the least of its consecutive kernel rows (an entity's shapes): every pair's
         # first row in one gather, then the pairs of several rows (containers) folded in row by row
         # (np.minimum.reduceat along axis 0 is 15x slower)
