@@ -192,6 +192,18 @@ _DEPTH = {"box": _seg_box_depth, "cylinder": _seg_cyl_depth}
 #: UR3e's 10 capsules) in one chunk.
 _FAR_CHUNKS = 8
 
+def _rows_to_local(p: np.ndarray, Rc: np.ndarray, translate: bool = True) -> np.ndarray:
+    """``R^T (p - c)`` (or ``R^T p``) per entry for points ``p (3, m)`` and poses given as the rows ``Rc (12, m)``
+    of their ``[R c]`` entries (row-major: ``R[i][j]`` is row ``4 i + j``, ``c[i]`` row ``4 i + 3``): the same
+    operations in the same order as :func:`~.kernels._to_local`, so the same values bit for bit."""
+    px, py, pz = p
+    if translate:
+        px, py, pz = px - Rc[3], py - Rc[7], pz - Rc[11]
+    return np.stack(
+        [Rc[j] * px + Rc[4 + j] * py + Rc[8 + j] * pz for j in range(3)]
+    )
+
+
 def _as_slice(rows: np.ndarray) -> slice | None:
     """``rows`` as an equivalent slice (for in-place output), or None."""
     if len(rows) == 0 or (rows < 0).any():
@@ -403,13 +415,13 @@ class ProximityKernel:
         the cutoff of column k at sample t is ``c_tk = far_m``, raised when ``exact_min_of``
         gives column sets (one list of columns is one set; a column belongs to at most one):
         ``u_tS`` is an upper bound of the least distance over set S at t, ``c_tk =
-        max(far_m, u_tS)`` for k in S and ``max(far_m, max over S of u_tS)`` for a column in
-        no set. Every value at or below its ``c_tk`` is exact; a value above it may instead be
-        a *lower bound* that is itself above ``c_tk``. So any threshold test at or below
-        ``far_m`` gives the exact answer, and the per-sample minimum over a set of columns X
-        is exact at every sample when X holds the whole set of each of its columns (and at
-        least one set if it holds a column in no set): a bound in X is above a ``u_tS`` with
-        S in X, so above the least distance over X. The bounds of a capsule/shape or
+        max(far_m, u_tS)`` for k in S, and the first set's for a column in no set. Every value
+        at or below its ``c_tk`` is exact; a value above it may instead be a *lower bound*
+        that is itself above ``c_tk``. So any threshold test at or below ``far_m`` gives the
+        exact answer, and the per-sample minimum over a set of columns X is exact at every
+        sample when X holds the whole set of each of its columns (and the first set if it
+        holds a column in no set): a bound in X is above a ``u_tS`` with S in X, so above the
+        least distance over X. The bounds of a capsule/shape or
         capsule/capsule pair hold for a block of 32 samples (:func:`~.blocks.capsule_balls`:
         balls about the segments' midpoints, starts and ends over the block), so only the
         blocks that can be within the cutoff are evaluated exactly; for two boxes/cylinders
@@ -459,8 +471,9 @@ class ProximityKernel:
                         for rr in g.rows:
                             rr = rr[rr >= 0]
                             buf[rr] = buf1[rr]
-        cut = self._run(groups, P0, D, poses, far_m, buf, set_of)
+        cuts = self._run(groups, P0, D, poses, far_m, buf, set_of)
         if self._meshes:
+            cut = None if cuts is None else cuts[0][np.unique(cuts[1][[k for k, _, _ in self._meshes]])].max(axis=0)
             self._mesh_rows(p0, p1, poses, buf, cut)
         return buf.T
 
@@ -490,97 +503,136 @@ class ProximityKernel:
         far_m: float | None,
         buf: np.ndarray,
         set_of: np.ndarray | None = None,
-    ) -> np.ndarray | None:
+    ) -> tuple[np.ndarray, np.ndarray] | None:
         """Evaluate ``groups`` for segments ``P0 + t D`` ``(3, C, T)`` into the rows of ``buf (K, T)``.
 
         With ``far_m``, a first pass writes every capsule/shape and capsule/capsule pair's block lower bound
-        into ``buf`` (:meth:`_bounds`, :func:`~.blocks.self_bounds`) and lowers the upper bounds ``u_tS`` of
-        the column sets (``set_of (K,)``: each row's set, -1 for none) by the rows' block upper bounds; the
-        cutoffs are ``cut (S + 1, T)``: ``max(far_m, u_tS)`` per set, then the row of the columns in no set
-        (``max(far_m, max_S u_tS)``), and ``crow (K,)`` the cutoff row of each column. The second pass
-        replaces the bounds that are ``<= c_t`` by exact values. Returns the cutoffs of the columns in no
-        set ``(T,)``, the largest (None without ``far_m``).
+        into ``buf`` and sets the cutoffs (:meth:`_cutoffs`); the second pass replaces the bounds that are
+        ``<= c_t`` by exact values (:meth:`_product`, :meth:`_self_pairs`, then the batches and the deferred
+        Newton and depth passes, :meth:`_finish`). The shape pairs come last (:meth:`_shape_pairs`): by then
+        the capsule rows of each column set are exact wherever they can be its least distance, so their
+        minimum (an upper bound of the set's least distance, and no larger than the block bound) lowers the
+        shape pairs' cutoffs. Returns ``(cut, crow)`` (None without ``far_m``).
         """
         T = P0.shape[2]
         cut = crow = None
-        lbs: dict[tuple[int, int], list] = {}
+        lbs: dict[tuple[int, int], Any] = {}
         if far_m is not None:
-            n_sets = 0 if set_of is None else int(set_of.max(initial=-1)) + 1
-            # u_tS: +inf (every value exact) until a bound of the set's rows lowers it
-            upper = np.full((n_sets, T), np.inf)
-            balls = None
-            for gi, g in enumerate(groups):
-                if g.product or g.kind == "capsule":
-                    if balls is None:
-                        balls = capsule_balls(P0, D)
-                    if g.kind == "capsule":
-                        lbs[gi, 0] = self_bounds(balls, g.ia, g.ib, g.r, g.cols, buf, upper, set_of)
-                        continue
-                    for t0, t1, pose in self._chunks(g, T, poses, far=True):
-                        lbs[gi, t0] = self._bounds(g, balls, t1 - t0, pose, buf, t0, upper, set_of)
-            cut = np.empty((n_sets + 1, T))
-            np.maximum(upper, far_m, out=cut[:n_sets])
-            cut[n_sets] = far_m if n_sets == 0 else cut[:n_sets].max(axis=0)
-            crow = np.full(len(self.pairs), n_sets) if set_of is None else np.where(set_of >= 0, set_of, n_sets)
+            cut, crow = self._cutoffs(groups, P0, D, poses, far_m, buf, set_of, lbs)
         hits: dict[str, list[tuple[np.ndarray, list[np.ndarray], np.ndarray]]] = {}
-        changes: dict[tuple[str, ...], np.ndarray] = {}  # moving pose keys -> where any of them changes
-        runs: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # id(changes[...]) -> run starts, run of each sample
-        starts: dict[tuple[int, int], np.ndarray] = {}  # (id(poses), id(changes[...])) -> the poses at the run starts
+        batch: dict[str, list] = {}  # the near entries of the product groups, per kind (:meth:`_flush`)
         for gi, g in enumerate(groups):
-            if g.kind == "shape":
-                items, cols = [], []
-                for col, i, j in zip(g.cols, g.ia, g.ib):
-                    a, b = self.shapes[i], self.shapes[j]
-                    ka, kb = self._pose_key.get(a.name, ""), self._pose_key.get(b.name, "")
-                    moved = tuple(sorted({ka, kb} & poses.keys()))
-                    for key in moved:
-                        if (key,) not in changes:
-                            changes[key,] = _pose_changes(poses[key], T)
-                    if moved not in changes:  # one array per set of moving poses: _shape_runs shares its runs
-                        changes[moved] = np.logical_or.reduce([changes[key,] for key in moved]) if moved else _pose_changes(a.pose[None], T)
-                    changed = changes[moved]
-                    Pa = poses[ka] if ka in poses else np.asarray(a.pose, dtype=_FLOAT)[None]
-                    Pb = poses[kb] if kb in poses else np.asarray(b.pose, dtype=_FLOAT)[None]
-                    if a.kind == "sphere" or b.kind == "sphere":  # closed form, exact: once per run of equal poses
-                        if id(changed) not in runs:  # the runs and the poses at their starts: once per pose key
-                            runs[id(changed)] = np.flatnonzero(changed), np.cumsum(changed) - 1
-                        first, run = runs[id(changed)]
-                        at = []
-                        for P in (Pa, Pb):
-                            if len(P) > 1 and (id(P), id(changed)) not in starts:
-                                starts[id(P), id(changed)] = P[first]
-                            at.append(P if len(P) == 1 else starts[id(P), id(changed)])
-                        v = shape_shape(a, b, *at)
-                        if len(v) == 1:
-                            buf[col] = v[0]
-                        else:
-                            np.take(v, run, out=buf[col])
-                        continue
-                    items.append((a, b, Pa, Pb, changed))
-                    cols.append(col)
-                if items:
-                    for col, v in zip(cols, _shape_runs(items, None if cut is None else cut[-1])):
-                        buf[col] = v
-                continue
             if g.product:
                 for t0, t1, pose in self._chunks(g, T, poses, far=cut is not None):
                     c = None if cut is None else cut[:, t0:t1]
-                    self._product(g, P0, D, t0, t1, buf, hits, c, pose, lbs.get((gi, t0)), crow)
+                    self._product(g, P0, D, t0, t1, buf, hits, c, pose, lbs.get((gi, t0)), crow, batch)
+            elif g.kind == "capsule":
+                self._self_pairs(g, P0, D, buf, None if cut is None else cut[crow[g.cols]], lbs.get((gi, 0)))
+        self._flush(batch, buf, hits)
+        self._finish(buf, hits)
+        shape_groups = [g for g in groups if g.kind == "shape"]
+        if shape_groups:
+            shape_cut = None
+            if cut is not None:
+                shape_cut = cut.copy()
+                for s in range(len(cut) - 1):  # the exact minimum of each set's capsule rows so far
+                    rows = [k for g in groups if g.kind != "shape" for k in g.cols.tolist() if set_of[k] == s]
+                    if rows:
+                        np.minimum(shape_cut[s], np.maximum(buf[rows].min(axis=0), far_m), out=shape_cut[s])
+                if len(cut) > 1:
+                    shape_cut[-1] = shape_cut[0]
+            for g in shape_groups:
+                self._shape_pairs(g, poses, buf, None if cut is None else shape_cut[np.unique(crow[g.cols])].max(axis=0))
+        return None if cut is None else (cut, crow)
+
+    def _cutoffs(self, groups, P0, D, poses, far_m, buf, set_of, lbs) -> tuple[np.ndarray, np.ndarray]:
+        """The block bounds of every capsule/shape and capsule/capsule group (into ``buf`` and ``lbs``) and the
+        cutoffs ``cut (S + 1, T)``: ``max(far_m, u_tS)`` per column set (``set_of (K,)``: each row's set, -1
+        for none; ``u_tS`` the least block upper bound of the set's rows), then the row of the columns in no
+        set (the first set's, or ``far_m``); and ``crow (K,)``, the cutoff row of each column."""
+        T = P0.shape[2]
+        n_sets = 0 if set_of is None else int(set_of.max(initial=-1)) + 1
+        upper = np.full((n_sets, T), np.inf)  # u_tS: +inf (every value exact) until a bound of the set lowers it
+        balls = None
+        for gi, g in enumerate(groups):
+            if g.product or g.kind == "capsule":
+                if balls is None:
+                    balls = capsule_balls(P0, D)
+                if g.kind == "capsule":
+                    lbs[gi, 0] = self_bounds(balls, g.ia, g.ib, g.r, g.cols, buf, upper, set_of)
+                    continue
+                for t0, t1, pose in self._chunks(g, T, poses, far=True):
+                    lbs[gi, t0] = self._bounds(g, balls, t1 - t0, pose, buf, t0, upper, set_of)
+        cut = np.empty((n_sets + 1, T))
+        np.maximum(upper, far_m, out=cut[:n_sets])
+        cut[n_sets] = far_m if n_sets == 0 else cut[0]  # the columns in no set: the first set's cutoffs
+        crow = np.full(len(self.pairs), n_sets) if set_of is None else np.where(set_of >= 0, set_of, n_sets)
+        return cut, crow
+
+    def _self_pairs(self, g: _Group, P0: np.ndarray, D: np.ndarray, buf: np.ndarray, cut: np.ndarray | None, lb) -> None:
+        """Capsule-capsule rows: where ``cut (P, T)`` is given, only the near blocks (block bounds ``lb``), in one
+        flat batch; else every sample, in chunks."""
+        T = P0.shape[2]
+        if cut is not None:
+            pi, ti = near_entries(lb, cut, T)
+            flat_a, flat_b = g.ia[pi] * T + ti, g.ib[pi] * T + ti
+            P2, D2 = P0.reshape(3, -1), D.reshape(3, -1)
+            a, d = np.take(P2, flat_a, axis=1), np.take(D2, flat_a, axis=1)
+            b, e = np.take(P2, flat_b, axis=1), np.take(D2, flat_b, axis=1)
+            buf.reshape(-1)[g.cols[pi] * T + ti] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r[pi, 0]
+            return
+        step = max(64, self.chunk // max(len(g.cols), 1))
+        for t0 in range(0, T, step):
+            t1 = min(T, t0 + step)
+            a, d = P0[:, g.ia, t0:t1], D[:, g.ia, t0:t1]
+            b, e = P0[:, g.ib, t0:t1], D[:, g.ib, t0:t1]
+            buf[g.cols, t0:t1] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r
+
+    def _shape_pairs(self, g: _Group, poses: dict, buf: np.ndarray, cut: np.ndarray | None) -> None:
+        """Shape-shape rows: a sphere in closed form once per run of equal poses, the others by
+        :func:`_shape_runs` with the cutoffs ``cut (T,)`` (None: every value exact)."""
+        T = buf.shape[1]
+        changes: dict[tuple[str, ...], np.ndarray] = {}  # moving pose keys -> where any of them changes
+        runs: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # id(changes[...]) -> run starts, run of each sample
+        starts: dict[tuple[int, int], np.ndarray] = {}  # (id(poses), id(changes[...])) -> the poses at the run starts
+        items, cols = [], []
+        for col, i, j in zip(g.cols, g.ia, g.ib):
+            a, b = self.shapes[i], self.shapes[j]
+            ka, kb = self._pose_key.get(a.name, ""), self._pose_key.get(b.name, "")
+            moved = tuple(sorted({ka, kb} & poses.keys()))
+            for key in moved:
+                if (key,) not in changes:
+                    changes[key,] = _pose_changes(poses[key], T)
+            if moved not in changes:  # one array per set of moving poses: _shape_runs shares its runs
+                changes[moved] = np.logical_or.reduce([changes[key,] for key in moved]) if moved else _pose_changes(a.pose[None], T)
+            changed = changes[moved]
+            Pa = poses[ka] if ka in poses else np.asarray(a.pose, dtype=_FLOAT)[None]
+            Pb = poses[kb] if kb in poses else np.asarray(b.pose, dtype=_FLOAT)[None]
+            if a.kind == "sphere" or b.kind == "sphere":  # closed form, exact: once per run of equal poses
+                if id(changed) not in runs:  # the runs and the poses at their starts: once per pose key
+                    runs[id(changed)] = np.flatnonzero(changed), np.cumsum(changed) - 1
+                first, run = runs[id(changed)]
+                at = []
+                for P in (Pa, Pb):
+                    if len(P) > 1 and (id(P), id(changed)) not in starts:
+                        starts[id(P), id(changed)] = P[first]
+                    at.append(P if len(P) == 1 else starts[id(P), id(changed)])
+                v = shape_shape(a, b, *at)
+                if len(v) == 1:
+                    buf[col] = v[0]
+                else:
+                    np.take(v, run, out=buf[col])
                 continue
-            if cut is not None:  # the near blocks of every self pair, in one flat batch
-                pi, ti = near_entries(lbs[gi, 0], cut[crow[g.cols]], T)
-                flat_a, flat_b = g.ia[pi] * T + ti, g.ib[pi] * T + ti
-                P2, D2 = P0.reshape(3, -1), D.reshape(3, -1)
-                a, d = np.take(P2, flat_a, axis=1), np.take(D2, flat_a, axis=1)
-                b, e = np.take(P2, flat_b, axis=1), np.take(D2, flat_b, axis=1)
-                buf.reshape(-1)[g.cols[pi] * T + ti] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r[pi, 0]
-                continue
-            step = max(64, self.chunk // max(len(g.cols), 1))
-            for t0 in range(0, T, step):
-                t1 = min(T, t0 + step)
-                a, d = P0[:, g.ia, t0:t1], D[:, g.ia, t0:t1]
-                b, e = P0[:, g.ib, t0:t1], D[:, g.ib, t0:t1]
-                buf[g.cols, t0:t1] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r
+            items.append((a, b, Pa, Pb, changed))
+            cols.append(col)
+        if items:
+            for col, v in zip(cols, _shape_runs(items, cut)):
+                buf[col] = v
+
+    @staticmethod
+    def _finish(buf: np.ndarray, hits: dict) -> None:
+        """The deferred work, one batch each: cylinder pairs whose closest point is interior (Newton), then the
+        depths of the segments that meet a shape."""
         flat = buf.reshape(-1)
         pending = hits.pop("cylinder-inner", None)
         if pending:
@@ -597,7 +649,6 @@ class ProximityKernel:
             args = [np.concatenate([e[1][i] for e in entries]) for i in range(len(entries[0][1]))]
             r = np.concatenate([e[2] for e in entries])
             flat[where] = -_DEPTH[kind](*args) - r
-        return None if cut is None else cut[-1]
 
     def _chunks(self, g: _Group, T: int, poses: dict, far: bool = False):
         """``(t0, t1, pose)`` chunks of a product group: about ``chunk`` pair-samples each, keeping temporaries in cache.
@@ -734,7 +785,7 @@ class ProximityKernel:
             ci, ti, where = ci[keep], ti[keep], where[keep]
         if not ci.size:
             return
-        args = [np.broadcast_to(a[i], sq.shape)[ci, ti] - c[i] for i in range(3)]
+        args = [np.broadcast_to(a[i], sq.shape)[ci, ti] - np.broadcast_to(c[i], sq.shape)[ci, ti] for i in range(3)]
         args += [np.broadcast_to(d[i], sq.shape)[ci, ti] for i in range(3)]
         args += [np.broadcast_to(np.asarray(v, dtype=_FLOAT), sq.shape)[ci, ti] for v in size]
         hits.setdefault(kind, []).append((where, args, np.broadcast_to(r, sq.shape)[ci, ti]))
@@ -762,14 +813,15 @@ class ProximityKernel:
         pose: np.ndarray | None,
         lbs: list | None = None,
         crow: np.ndarray | None = None,
+        batch: dict | None = None,
     ) -> None:
         """Evaluate one product group for the samples ``t0 .. t1``; ``P0``, ``D``: ``(3, C, T)`` segment starts and
         directions of every capsule.
 
         ``pose (n, 4, 4)``: the per-sample pose of a moving group's shape. ``cut (R, n)``: :meth:`_bounds` has
         written block lower bounds ``lbs`` into ``buf``; only the blocks whose bound is ``<= cut[crow[k]]``
-        (row k's cutoff) somewhere in the block are evaluated exactly (gathered into one flat batch per shape),
-        the others keep their bound.
+        (row k's cutoff) somewhere in the block are evaluated exactly, the others keep their bound: the near
+        entries of every shape go into ``batch`` (per kind, :meth:`_flush` evaluates them in one call).
         """
         T = buf.shape[1]
         n = t1 - t0
@@ -781,6 +833,8 @@ class ProximityKernel:
             Tp = P0.shape[2]
             a2, d2 = np.ascontiguousarray(P0).reshape(3, -1), np.ascontiguousarray(D).reshape(3, -1)
             base = g.caps * Tp + t0
+            if pose is not None:  # the pose's [R c] entries as contiguous rows (12, n): one take per batch
+                rc = np.ascontiguousarray(pose[:, :3, :].reshape(n, 12).T)
             for s, lb in enumerate(lbs):
                 rows = g.rows[s]
                 near = lb <= cut_b[crow[np.maximum(rows, 0)]]
@@ -796,21 +850,25 @@ class ProximityKernel:
                 flat_i = base[ci] + ti  # (3, m): one flat batch of (capsule, sample) entries
                 ga, gd = np.take(a2, flat_i, axis=1), np.take(d2, flat_i, axis=1)
                 if pose is not None and g.kind == "sphere":  # as :meth:`_local`: a ball needs only p - c
-                    ga = ga - pose[ti, :3, 3].T
+                    ga = ga - np.take(rc[3::4], ti, axis=1)
                 elif pose is not None:
-                    R, c0 = pose[ti, :3, :3], pose[ti, :3, 3]
-                    ga, gd = np.stack(_to_local(*ga, R, c0)), np.stack(_to_local(*gd, R, c0, translate=False))
+                    Rc = np.take(rc, ti, axis=1)
+                    ga, gd = _rows_to_local(ga, Rc), _rows_to_local(gd, Rc, translate=False)
                 elif g.rot is not None:
                     ga, gd = g.rot.T @ ga, g.rot.T @ gd
-                ga, gd = ga[:, None, :], gd[:, None, :]
-                where = rows[ci] * T + t0 + ti
-                o = np.empty((1, len(where)))
                 c = tuple(v[s] for v in g.centre)
                 size = tuple(v[s] for v in g.size)
-                self._shape_eval(g.kind, ga, gd, self._prep(g.kind, gd), c, size, r[ci, 0][None], lambda ci, ti: where[ti], hits, o)
-                flat[where] = o[0]
+                batch.setdefault(g.kind, []).append((ga, gd, c, size, r[ci, 0], rows[ci] * T + t0 + ti))
             return
         a, d = self._local(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], pose)
+        if n == 1 and pose is None:  # one sample (capsules that stand still): a few entries per shape, batched
+            for s in range(len(g.centre[0])):
+                rows = g.rows[s]
+                ci = np.flatnonzero(rows >= 0)
+                c = tuple(v[s] for v in g.centre)
+                size = tuple(v[s] for v in g.size)
+                batch.setdefault(g.kind, []).append((a[:, ci, 0], d[:, ci, 0], c, size, r[ci, 0], rows[ci] * T + t0))
+            return
         aux = self._prep(g.kind, d)
         for s in range(len(g.centre[0])):
             c = tuple(ci[s] for ci in g.centre)
@@ -827,6 +885,23 @@ class ProximityKernel:
             if view is None:
                 keep = rows >= 0
                 buf[rows[keep], t0 : t0 + n] = o[keep]
+
+    def _flush(self, batch: dict, buf: np.ndarray, hits: dict) -> None:
+        """Evaluate the near entries that :meth:`_product` gathered, one kernel call per shape kind: ``batch[kind]``
+        lists ``(a, d (3, m) in the shape's frame, centre, size (scalars), r (m,), where (m,) flat output index)``.
+        Elementwise, so every value is the one a call per shape gives, bit for bit."""
+        flat = buf.reshape(-1)
+        for kind, parts in batch.items():
+            a = np.concatenate([p[0] for p in parts], axis=1)[:, None, :]
+            d = np.concatenate([p[1] for p in parts], axis=1)[:, None, :]
+            count = [p[0].shape[1] for p in parts]
+            c = tuple(np.repeat([p[2][i] for p in parts], count)[None] for i in range(3))
+            size = tuple(np.repeat([p[3][i] for p in parts], count)[None] for i in range(len(parts[0][3])))
+            r = np.concatenate([p[4] for p in parts])[None]
+            where = np.concatenate([p[5] for p in parts])
+            o = np.empty((1, len(where)))
+            self._shape_eval(kind, a, d, self._prep(kind, d), c, size, r, lambda ci, ti: where[ti], hits, o)
+            flat[where] = o[0]
 
     @staticmethod
     def _prep(kind: str, d: np.ndarray):
