@@ -85,12 +85,16 @@ takes about 40 ms on one core, and about 30 ms with ``far_m=0.1``
 (``benchmarks/bench_proximity.py``: random motions, where most pairs are near).
 
 **Far pairs** (``far_m``): per capsule and block of 32 samples, bounding balls of
-the segments give a lower bound of every capsule/box and capsule/cylinder pair's
-distance; a pair is evaluated exactly only in the blocks where that bound is
-within the cutoff, so on a real program (a few per cent of the pairs near) most
-of the exact work is skipped. The cutoff rises per sample to an upper bound of the
-least distance of chosen columns (``exact_min_of``), which keeps their minimum
-exact: see :meth:`ProximityKernel.distances`.
+the segments (:mod:`~robocritics.geometry.blocks`) give a lower bound of every
+capsule/shape and capsule/capsule pair's distance; a pair is evaluated exactly only
+in the blocks where that bound is within the cutoff, so on a real program (a few
+per cent of the pairs near) most of the exact work is skipped. The cutoff rises per
+sample to an upper bound of the least distance of each chosen column set
+(``exact_min_of``: the trace's arm pairs and its self pairs), which keeps each
+set's minimum exact: see :meth:`ProximityKernel.distances`. The near entries of
+every capsule/shape group are gathered and evaluated in one kernel call per shape
+kind (elementwise, so the numbers are those of a call per pair, bit for bit:
+``tests/test_proximity_sets.py`` checks the pruned kernel against the plain one).
 """
 
 from __future__ import annotations
@@ -202,6 +206,12 @@ def _rows_to_local(p: np.ndarray, Rc: np.ndarray, translate: bool = True) -> np.
     return np.stack(
         [Rc[j] * px + Rc[4 + j] * py + Rc[8 + j] * pz for j in range(3)]
     )
+
+
+def _rotate_back(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``R^T p`` for points ``p (3, ...)``, elementwise (``sum_i R[i, j] p_i``, in that order): the same numbers
+    whatever the layout of ``p``, where a BLAS product may round differently for a different shape."""
+    return np.stack([R[0, j] * p[0] + R[1, j] * p[1] + R[2, j] * p[2] for j in range(3)])
 
 
 def _as_slice(rows: np.ndarray) -> slice | None:
@@ -671,7 +681,7 @@ class ProximityKernel:
             R, c = pose[:, :3, :3], pose[:, :3, 3]
             return np.stack(_to_local(a[0], a[1], a[2], R, c)), np.stack(_to_local(d[0], d[1], d[2], R, c, translate=False))
         if g.rot is not None:
-            return np.tensordot(g.rot.T, a, axes=1), np.tensordot(g.rot.T, d, axes=1)  # R^T p: into the shapes' frame
+            return _rotate_back(g.rot, a), _rotate_back(g.rot, d)  # R^T p: into the shapes' frame
         return a, d
 
     def _bounds(self, g, balls_all, n_chunk, pose, buf, t0, upper, set_of) -> list:
@@ -855,7 +865,7 @@ class ProximityKernel:
                     Rc = np.take(rc, ti, axis=1)
                     ga, gd = _rows_to_local(ga, Rc), _rows_to_local(gd, Rc, translate=False)
                 elif g.rot is not None:
-                    ga, gd = g.rot.T @ ga, g.rot.T @ gd
+                    ga, gd = _rotate_back(g.rot, ga), _rotate_back(g.rot, gd)
                 c = tuple(v[s] for v in g.centre)
                 size = tuple(v[s] for v in g.size)
                 batch.setdefault(g.kind, []).append((ga, gd, c, size, r[ci, 0], rows[ci] * T + t0 + ti))

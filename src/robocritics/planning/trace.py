@@ -10,11 +10,12 @@ distance (m, <= 0 on penetration) of every proximity pair:
   every object the gripper carries at some point against every other entity.
 
 A distance is exact when it is at most :data:`EXACT_WITHIN_M` or at most the arm's
-closest distance to the scene at that sample; beyond both, it may be a lower bound
-that is itself larger (what lies that far needs no exact value). So every threshold
-test up to ``EXACT_WITHIN_M`` is exact, and so is, at every sample, the closest
-distance over any set of environment pairs that includes the arm links' (the
-collision critic's ``D_t``).
+closest distance to the scene at that sample (a self pair: the closest self
+distance at that sample); beyond both, it may be a lower bound that is itself
+larger (what lies that far needs no exact value). So every threshold test up to
+``EXACT_WITHIN_M`` is exact, and so are, at every sample, the closest distance over
+any set of environment pairs that includes the arm links' (the collision critic's
+``D_t``) and the closest self distance (the pinch-point critic's).
 
 Objects that the program moves have a pose per sample (``object_poses``):
 at rest, carried with the TCP, at rest again where they were released, so
@@ -34,8 +35,9 @@ from ..geometry import proximity as prox
 
 __all__ = ["build_trajectory", "EXACT_WITHIN_M"]
 
-#: Distances (robot capsules and carried objects against the scene) are exact up to this many metres
-#: (twice the collision critic's warning distance) and up to the arm's closest distance at each sample;
+#: Distances (robot capsules against the scene and against each other, carried objects against the scene) are
+#: exact up to this many metres (twice the collision critic's warning distance) and up to the closest distance of the
+#: arm (a self pair: of the self pairs) at each sample;
 #: larger ones may be a lower bound that is itself larger (:meth:`ProximityKernel.distances`).
 EXACT_WITHIN_M = 0.10
 
@@ -139,7 +141,8 @@ def build_trajectory(
     pairs, members = _reported_pairs(robot, scene, _carried_ids(attached_arr))
 
     # one kernel for robot and carried-object pairs: exact within EXACT_WITHIN_M and within the arm's closest
-    # distance at each sample (its columns' minimum stays exact); farther values are bounds, never evaluated
+    # distance at each sample (its columns' minimum stays exact; the self pairs: within the closest self distance);
+    # farther values are bounds, never evaluated
     flat = [pair for group in members for pair in group]
     bounds = np.cumsum([0] + [len(g) for g in members])
     arm = [
