@@ -75,14 +75,21 @@ def lower_upper(upper: np.ndarray, sets: np.ndarray, ub: np.ndarray, t0: int, n:
         np.minimum(upper[s, t0 : t0 + n], u, out=upper[s, t0 : t0 + n])
 
 
-def self_bounds(balls, ia, ib, r, cols, buf, upper, set_of) -> np.ndarray:
-    """Block bounds (m) of capsule pairs ``(ia[p], ib[p])`` (radius sums ``r (P, 1)``) from their balls
-    (:func:`capsule_balls`): every point of capsule a's segment is within ``rho_a`` of the ball centre
-    ``c_a`` at every sample of the block, so the segments are at least ``|c_a - c_b| - rho_a - rho_b`` apart
-    and (start, end or midpoint balls, ``rho'`` without the half length) at most ``|c_a' - c_b'| + rho_a' +
-    rho_b'``; less ``r``, the signed distance (the segment distance less the radii, exact also when they
-    overlap) lies between. The lower bound goes to ``buf`` rows ``cols`` (and is returned, ``(P, nb)``); the
-    upper bound of the rows in a column set lowers ``upper`` (:func:`lower_upper`).
+def self_bounds(balls, ia, ib, r, cols, buf, upper, set_of, centre) -> np.ndarray:
+    """Block bounds (m) of capsule pairs ``(ia[p], ib[p])`` (radius sums ``r (P, 1)``), the tighter of two:
+
+    * from their balls (:func:`capsule_balls`): every point of capsule a's segment is within ``rho_a`` of the
+      ball centre ``c_a`` at every sample of the block, so the segments are at least ``|c_a - c_b| - rho_a -
+      rho_b`` apart and (start, end or midpoint balls, ``rho'`` without the half length) at most ``|c_a' -
+      c_b'| + rho_a' + rho_b'``; less ``r``, the signed distance (the segment distance less the radii, exact
+      also when they overlap) lies between;
+    * from the exact signed distance ``centre (P, nb)`` at the block's centre sample (the centre of the start
+      and end balls): the distance of two segments moves no more than their endpoints, so it stays within
+      ``rho_a + rho_b`` of it, ``rho`` the larger radius of a capsule's start and end balls (less a rounding
+      allowance of 1e-12 m).
+
+    The lower bound goes to ``buf`` rows ``cols`` (and is returned, ``(P, nb)``); the upper bound of the rows in a
+    column set lowers ``upper`` (:func:`lower_upper`).
     """
     T = buf.shape[1]
     out = []
@@ -90,12 +97,16 @@ def self_bounds(balls, ia, ib, r, cols, buf, upper, set_of) -> np.ndarray:
         diff = c[:, ia] - c[:, ib]
         gap = np.sqrt(np.einsum("ipn,ipn->pn", diff, diff))
         out.append((gap, rho[ia] + rho[ib]))
-    lb = out[0][0] - out[0][1] - r
+    move = np.maximum(balls[1][1], balls[2][1])
+    slack = move[ia] + move[ib]
+    slack += 1e-12
+    lb = np.maximum(out[0][0] - out[0][1] - r, centre - slack)
     buf[cols] = np.repeat(lb, BLOCK, axis=1)[:, :T]
     if set_of is not None:
         sel = set_of[cols] >= 0
         if sel.any():
             ub = np.minimum.reduce([(gap + rho)[sel] for gap, rho in out]) - r[sel]
+            np.minimum(ub, (centre + slack)[sel], out=ub)
             lower_upper(upper, set_of[cols[sel]], ub, 0, T)
     return lb
 

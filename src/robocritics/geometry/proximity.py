@@ -569,7 +569,10 @@ class ProximityKernel:
                 if balls is None:
                     balls = capsule_balls(P0, D)
                 if g.kind == "capsule":
-                    lbs[gi, 0] = self_bounds(balls, g.ia, g.ib, g.r, g.cols, buf, upper, set_of)
+                    tc = np.minimum(np.arange(-(-T // BLOCK)) * BLOCK + BLOCK // 2, T - 1)  # the balls' centres
+                    a, d, b, e = P0[:, g.ia][:, :, tc], D[:, g.ia][:, :, tc], P0[:, g.ib][:, :, tc], D[:, g.ib][:, :, tc]
+                    centre = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r  # exact at each block's centre sample
+                    lbs[gi, 0] = self_bounds(balls, g.ia, g.ib, g.r, g.cols, buf, upper, set_of, centre)
                     continue
                 for t0, t1, pose in self._chunks(g, T, poses, far=True):
                     lbs[gi, t0] = self._bounds(g, balls, t1 - t0, pose, buf, t0, upper, set_of)
