@@ -147,7 +147,7 @@ def test_closest_is_the_row_minimum_of_the_counted_distances(traj):
     from robocritics.critic.builtin.collision import Counted
 
     want = counted_distances(traj).min(axis=1) if traj.proximity.shape[1] else np.full(len(traj), np.inf)
-    got = Counted(traj).closest(traj.proximity)
+    got = Counted(traj).closest()
     np.testing.assert_array_equal(got, want)
 
 
@@ -158,7 +158,7 @@ def test_closest_with_intended_contacts_and_nothing_always_counted():
     trajectory = traj_with(pairs, {0: dip(-0.002, slice(20, 40)), 1: 0.3}, steps=steps, step=step)
     from robocritics.critic.builtin.collision import Counted
 
-    got = Counted(trajectory).closest(trajectory.proximity)
+    got = Counted(trajectory).closest()
     want = np.where(np.arange(T) >= 25, 0.3, dip(-0.002, slice(20, 40)))  # the apple counts until the grasp step
     want = np.minimum(want, 0.3)
     np.testing.assert_array_equal(got, want)

@@ -84,10 +84,18 @@ class Execution:
     goals: tuple[Goal, ...] = ()
     #: Where the motion came from, in words: ``"program"`` for the skill API, else the tool or file.
     source: str = "program"
+    #: Arrays derived from this run's trajectory that several critics read (:mod:`robocritics.critic.derived`),
+    #: each computed on first use. Not an argument: every new Execution (a ``replace`` of one, a chunk's) starts
+    #: empty, so nothing derived outlives the run object it was derived from.
+    derived: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def duration_s(self) -> float:
         return self.trajectory.duration_s
+
+    def __getstate__(self) -> dict:
+        # derived arrays are a cache of the trajectory's: not shipped between processes (a batch pickles runs)
+        return {**self.__dict__, "derived": {}}
 
     def chunks(self, size: int | None = None) -> Iterator[tuple["Chunk", "Execution"]]:
         """The run chunk by chunk (:meth:`robocritics.trajectory.Trajectory.chunks`, ``size`` samples each): each

@@ -633,24 +633,37 @@ class Workspace(_Model):
     def outside_distance(self, points: np.ndarray) -> np.ndarray:
         """How far each point ``(..., 3)`` lies outside the sphere, m (<= 0 inside): ``|p - c| - r``.
 
-        Evaluated component-wise: a norm over a length-3 axis is several times slower in
-        numpy, and critics call this on every link of every sample.
+        Evaluated component-wise (:meth:`squared_centre_distance`, :meth:`outside_of_squared`): a norm over a
+        length-3 axis is several times slower in numpy, and critics call this on every link of every sample.
         """
         points = np.asarray(points, dtype=float)
+        d = self.squared_centre_distance(points[..., 0], points[..., 1], points[..., 2])
+        if isinstance(d, np.ndarray):
+            np.sqrt(d, out=d)
+        else:  # a single point
+            d = np.sqrt(d)
+        return d - self.radius_m
+
+    def squared_centre_distance(self, x, y, z) -> np.ndarray:
+        """``|p - c|^2``, m^2, of the points whose coordinates (m) are the equal-shaped arrays ``x``, ``y``, ``z``,
+        as ``((x - cx)^2 + (y - cy)^2) + (z - cz)^2``."""
         c = self.center
-        dx = points[..., 0] - c[0]
-        dy = points[..., 1] - c[1]
-        dz = points[..., 2] - c[2]
+        dx = np.subtract(x, c[0])
+        dy = np.subtract(y, c[1])
+        dz = np.subtract(z, c[2])
         dx *= dx
         dy *= dy
         dz *= dz
         dx += dy
         dx += dz
-        if isinstance(dx, np.ndarray):
-            np.sqrt(dx, out=dx)
-        else:  # a single point
-            dx = np.sqrt(dx)
-        return dx - self.radius_m
+        return dx
+
+    def outside_of_squared(self, squared: np.ndarray) -> np.ndarray:
+        """``sqrt(squared) - r``, m: how far outside the sphere a point lies whose squared distance from the
+        centre is ``squared`` (m^2). It does not decrease with ``squared``, so the farthest of several points is
+        the one of largest squared distance, and ``outside_of_squared(max(squared))`` is the largest outside
+        distance bit for bit."""
+        return np.sqrt(squared) - self.radius_m
 
 
 MIN_HEIGHT_M = 1.40

@@ -330,7 +330,10 @@ def critique(
     own; a bad goal raises :class:`~robocritics.errors.GoalError`. Goals are checked on the final scene, which
     only an Execution has.
     """
-    execution = as_execution(run, scene, goals=goals, robot=robot)
+    from dataclasses import replace
+
+    # a copy: the arrays the critics derive from the run (robocritics.critic.derived) live as long as this call
+    execution = replace(as_execution(run, scene, goals=goals, robot=robot))
     selected = select_critics(_requested_selection(critics, execution), params)
     # the critics that reduce over chunks (:mod:`robocritics.critic.chunked`) share one pass over the run's chunks
     reductions = {

@@ -87,11 +87,14 @@ class Counted:
 
     ``columns (K,)`` selects the environment pairs (minus ignored ones);
     ``gcols`` are those whose a-side is the gripper or a carried object, and
-    ``intended (T, len(gcols))`` marks, per sample, which of them do not count
-    there: intended contacts while they overlap by less than ``contact_tolerance_m``
+    :meth:`excused` says, at given samples, which of them do not count there:
+    intended contacts while they overlap by less than ``contact_tolerance_m``
     (m; deeper, they count), and carried-object pairs of an object that is not
-    held at that sample (None when that never happens). Built from per-step and
-    per-attachment tables indexed by sample: no loop over samples.
+    held at that sample; ``intended`` is None when that never happens. Built from
+    per-step and per-attachment tables: the (step, held object) of a sample changes
+    a few times per program, so :meth:`closest`'s gripper distances are masked
+    segment by segment of constant (step, held object), with no loop over samples
+    and no ``(T, Kg)`` mask.
     """
 
     def __init__(self, trajectory, ignore_pairs=(), contact_tolerance_m: float = Params().contact_tolerance_m):
@@ -100,7 +103,8 @@ class Counted:
         self.gcols = np.flatnonzero(
             self.columns & np.array([p.group_a in ("gripper", "attached") for p in pairs], dtype=bool)
         )
-        self.intended: np.ndarray | None = None
+        self.intended: bool | None = None
+        self._proximity = trajectory.proximity
         if self.gcols.size == 0:
             return
         entities = [pairs[k].b_entity for k in self.gcols]
@@ -125,21 +129,43 @@ class Counted:
         run, held = _run_ids(trajectory.attached)
         holding = np.array([[h != "" and e == h for e in entities] for h in held.tolist()], dtype=bool)
         absent = np.array([[c is not None and c != h for c in carriers] for h in held.tolist()], dtype=bool)
-        # per sample, the row of its (step, run): both contact tables combined into one small (S R, Kg) table
-        # first, so the (T, Kg) mask is one gather (two gathers and their `or` cost 2x)
-        contact = None
+        # per sample, the row of its (step, run) in one small (S R, Kg) table of intended contacts; the key
+        # changes a few times per program, so the (Kg, T) gripper distances are masked segment by segment
         if table is not None:
             contact = (table[:, None, :] | holding[None, :, :]).reshape(-1, len(entities))
-            contact = contact[trajectory.step * len(held) + run]
-        elif holding.any():
-            contact = holding[run]
-        excluded = None
-        if contact is not None:
-            # an intended contact is touching, not a penetration: deeper than the tolerance it counts
-            excluded = contact & (trajectory.proximity[:, self.gcols] > -contact_tolerance_m)
-        if absent.any():
-            excluded = absent[run] if excluded is None else excluded | absent[run]
-        self.intended = excluded
+            key = trajectory.step * len(held) + run
+        else:
+            contact, key = holding, run
+        self._contact, self._absent, self._key, self._run = contact, absent, key, run
+        self._tolerance = contact_tolerance_m
+        if not (contact.any() or absent.any()):
+            return
+        self.intended = True
+        # the gripper pairs' distances (Kg, T), a copy, +inf where they do not count
+        gripper = self._gripper = self._proximity.T[self.gcols]
+        starts = run_starts(key)
+        stops = np.append(starts[1:], len(key))
+        keys = key[starts]
+        active = np.flatnonzero(contact.any(axis=1)[keys] | absent.any(axis=1)[run[starts]])
+        for i in active.tolist():
+            a, b = int(starts[i]), int(stops[i])
+            gone = np.flatnonzero(absent[run[a]])
+            if gone.size:  # a carried object's pairs while it is not the one held
+                gripper[gone, a:b] = np.inf
+            touched = np.flatnonzero(contact[keys[i]])
+            if touched.size:  # an intended contact is touching, not a penetration: deeper it counts
+                part = gripper[touched, a:b]
+                np.putmask(part, part > -contact_tolerance_m, np.inf)
+                gripper[touched, a:b] = part
+
+    def excused(self, rows) -> np.ndarray:
+        """``(len(rows), Kg)`` (or ``(Kg,)`` for one row): which gripper pairs (``gcols``) do not count at ``rows``
+        (all False when every one counts)."""
+        rows = np.asarray(rows)
+        if self.intended is None:
+            return np.zeros(rows.shape + self.gcols.shape, dtype=bool)
+        depth = self._proximity[rows][..., self.gcols]
+        return (self._contact[self._key[rows]] & (depth > -self._tolerance)) | self._absent[self._run[rows]]
 
     def row_mask(self, rows) -> np.ndarray:
         """``(len(rows), K)`` (or ``(K,)`` for one row) mask of the pairs that count at ``rows``."""
@@ -148,23 +174,22 @@ class Counted:
         rows = np.asarray(rows)
         mask = np.empty(rows.shape + self.columns.shape, dtype=bool)
         mask[...] = self.columns
-        mask[..., self.gcols] = ~self.intended[rows]
+        mask[..., self.gcols] = ~self.excused(rows)
         return mask
 
-    def closest(self, P: np.ndarray) -> np.ndarray:
-        """``(T,)`` closest counted distance per sample, m (+inf where nothing counts).
+    def closest(self) -> np.ndarray:
+        """``(T,)`` closest counted distance per sample of the trajectory, m (+inf where nothing counts).
 
         The counted columns are gathered (as rows of ``P.T``: :func:`robocritics._arrays.min_over_columns`) and
-        reduced by a plain minimum: a masked ``where=`` reduction over ``(T, K)`` is about 4x slower.
+        reduced by a plain minimum: a masked ``where=`` reduction over ``(T, K)`` is about 4x slower. The
+        gripper pairs' rows, gathered when the mask was made, hold +inf where they do not count.
         """
         always = self.columns.copy()
         if self.intended is not None:
             always[self.gcols] = False
-        out = min_over_columns(P, np.flatnonzero(always))
+        out = min_over_columns(self._proximity, np.flatnonzero(always))
         if self.intended is not None:
-            gripper = P.T[self.gcols]  # (Kg, T), a copy
-            np.putmask(gripper, self.intended.T, np.inf)
-            np.minimum(out, gripper.min(axis=0), out=out)
+            np.minimum(out, self._gripper.min(axis=0), out=out)
         return out
 
 
@@ -217,7 +242,7 @@ class _Closest:
         counted = Counted(window, params.ignore_pairs, params.contact_tolerance_m)
         P = window.proximity
         own = np.arange(chunk.own.start, chunk.own.stop)
-        per_sample = counted.closest(P)[chunk.own]  # D_t, without copying the (n, K) proximity
+        per_sample = counted.closest()[chunk.own]  # D_t, without copying the (n, K) proximity
         self.per_sample.put(chunk.start, per_sample)
         self.closest.offer(
             chunk.start, per_sample, lambda i: int(np.argmin(np.where(counted.row_mask(own[i]), P[own[i]], np.inf)))

@@ -41,7 +41,8 @@ from pydantic import Field, model_validator
 
 from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
-from ..._arrays import row_any, row_max, squared_norms
+from ..._arrays import row_any, squared_norms
+from ..derived import position_planes
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["JointSpeedCritic", "register_critics", "link_speeds"]
@@ -96,6 +97,19 @@ def link_speeds(positions: np.ndarray, time: np.ndarray) -> np.ndarray:
     np.sqrt(speed, out=speed)
     speed /= np.diff(time)[:, None]
     return speed
+
+
+def squared_steps(Y: np.ndarray, rows: slice) -> np.ndarray:
+    """``(L, n)`` squared lengths, m^2, of the steps ``p_{i+1} - p_i`` of the positions ``Y (3, L, T)``
+    (coordinate planes, :func:`robocritics.critic.derived.position_planes`) for the intervals ``i`` of ``rows``,
+    as :func:`link_speeds` squares them (``x^2 + z^2 + y^2``, :func:`robocritics._arrays.squared_norms`' order)."""
+    lo, hi = rows.start, rows.stop
+    d = [Y[c, :, lo + 1 : hi + 1] - Y[c, :, lo:hi] for c in (0, 2, 1)]
+    out = np.multiply(d[0], d[0], out=d[0])
+    for dc in d[1:]:
+        dc *= dc
+        out += dc
+    return out
 
 
 def _joint_speeds(q: np.ndarray, time: np.ndarray, limits: np.ndarray, tolerance: float):
@@ -153,19 +167,20 @@ class _Speeds:
         if len(self.trajectory) < 2 or not self.names:
             return
         window = chunk.trajectory
-        positions = window.positions if self.sel is None else window.positions[:, self.sel]
+        Y = position_planes(execution)  # (3, L, n) m
+        if self.sel is not None:
+            Y = Y[:, self.sel]
         # the intervals ending at the chunk's own samples (the first sample of the run ends none)
         first = max(chunk.start, 1)
         rows = slice(first - chunk.lo - 1, chunk.stop - chunk.lo - 1)
-        p = np.ascontiguousarray(positions)
-        squared = squared_norms(p[1:] - p[:-1])[rows]  # (n, L) squared steps, m^2
+        squared = squared_steps(Y, rows)  # (L, n) squared steps, m^2
         dt = np.diff(window.time)[rows]
         # the fastest link per sample: sqrt and division by dt > 0 keep the order of the squared steps, so
         # sqrt(max |step|^2) / dt is max(|step| / dt) bit for bit, without a speed per link
-        vmax = np.sqrt(row_max(squared)) / dt
+        vmax = np.sqrt(squared.max(axis=0)) / dt
 
         def speeds(r):  # link_speeds of rows r, as it computes them: sqrt, then / dt
-            v = np.sqrt(squared[r])
+            v = np.sqrt(squared[:, r].T)
             v /= dt[r] if np.ndim(r) == 0 else dt[r][:, None]
             return v
 

@@ -23,6 +23,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
+from ..._arrays import min_over_columns
 from ..hookspecs import hookimpl
 from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from .. import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
@@ -69,8 +70,9 @@ class _Closest:
         if not self.gather.size:
             return
         P = chunk.trajectory.proximity[chunk.own]
-        # (n,): the self columns gathered, then a plain row minimum (4x faster than a masked `where=` reduction)
-        per_sample = P[:, self.gather].min(axis=1)
+        # (n,): the self columns gathered as rows of P.T, then elementwise minima of whole rows (the minimum along
+        # each short row of P[:, gather] costs 2x, a masked `where=` reduction 8x)
+        per_sample = min_over_columns(P, self.gather)
         self.per_sample.put(chunk.start, per_sample)
         self.closest.offer(chunk.start, per_sample, lambda i: int(np.argmin(np.where(self.columns, P[i], np.inf))))
         for threshold, hits in self.hits.items():

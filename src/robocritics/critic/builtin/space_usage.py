@@ -45,7 +45,9 @@ from pydantic import Field
 
 from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
-from ..._arrays import row_max, squared_norms, unique_values
+from ..._arrays import row_max, unique_values
+from ...scene import Workspace
+from ..derived import position_planes
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_length, make_signal, threshold_verdict
 from ...geometry.hull import convex_hull
 
@@ -79,34 +81,49 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
     Returns ``(points (N, 3), sample index (N,), frame index (N,))``.
     """
     T = X.shape[0]
-    ti, li = kept_samples(X, 0, 0, T, T, tolerance_m)
+    ti, li = kept_samples(np.ascontiguousarray(X.transpose(2, 1, 0)), 0, 0, T, T, tolerance_m)
     ti, li = frame_major(ti, li)
     return without_repeats(X[ti, li], ti, li)
 
 
-def kept_samples(X: np.ndarray, lo: int, start: int, stop: int, T: int, tolerance_m: float):
+def second_differences(Y: np.ndarray, rows: slice) -> np.ndarray:
+    """``(L, n)`` squared norms, m^2, of the second differences ``p_{t+1} - 2 p_t + p_{t-1}`` of the positions
+    ``Y (3, L, T)`` (coordinate planes) at the samples ``t`` of ``rows`` (each with a sample either side), as
+    ``((p_{t+1} - p_t) - p_t) + p_{t-1}`` per coordinate and ``x^2 + z^2 + y^2``
+    (:func:`robocritics._arrays.squared_norms`' order)."""
+    lo, hi = rows.start, rows.stop
+    d = []
+    for c in (0, 2, 1):
+        Yc = Y[c]
+        dc = Yc[:, lo + 1 : hi + 1] - Yc[:, lo:hi]
+        dc -= Yc[:, lo:hi]
+        dc += Yc[:, lo - 1 : hi - 1]
+        d.append(dc)
+    out = np.multiply(d[0], d[0], out=d[0])
+    for dc in d[1:]:
+        dc *= dc
+        out += dc
+    return out
+
+
+def kept_samples(Y: np.ndarray, lo: int, start: int, stop: int, T: int, tolerance_m: float):
     """``(sample (N,), frame (N,))`` indices (in the run of ``T`` samples) of the points kept from samples
     ``start..stop-1`` (``start`` a multiple of :data:`BLOCK`), frame-major: for each frame, its kept samples
-    block by block. ``X (n, L, 3)`` holds samples ``lo..lo+n-1``: those and the sample either side (for the
-    second differences). Without the closing sample of :func:`frame_major`.
+    block by block. ``Y (3, L, n)`` holds the coordinate planes of samples ``lo..lo+n-1``
+    (:func:`robocritics.critic.derived.position_planes`): those and the sample either side (for the second
+    differences). Without the closing sample of :func:`frame_major`.
     """
-    L = X.shape[1]
+    L = Y.shape[1]
     n = stop - start
     if not (tolerance_m > 0 and T > 2):
         li, ti = np.divmod(np.arange(n * L), n)
         return ti + start, li
     nb = -(-n // BLOCK)
-    M = np.zeros((nb * BLOCK, L))  # squared second-difference norms by sample (0 where undefined)
+    M = np.zeros((L, nb * BLOCK))  # squared second-difference norms by frame and sample (0 where undefined)
     first, last = max(start, 1), min(stop, T - 1)  # the samples with a second difference
     if last > first:
-        c = X[first - lo : last - lo]
-        d2 = X[first + 1 - lo : last + 1 - lo] - c  # second differences p_{t+1} - 2 p_t + p_{t-1}
-        d2 -= c
-        d2 += X[first - 1 - lo : last - 1 - lo]
-        squared_norms(d2, out=M[first - start : last - start])
-    # block maxima along contiguous rows of the (L, T) transpose: a maximum over axis 1 of the
-    # (nb, BLOCK, L) view costs 4x more
-    Mb = np.sqrt(np.ascontiguousarray(M.T).reshape(L, nb, BLOCK).max(axis=2)).T  # (nb, L) block maxima, m
+        M[:, first - start : last - start] = second_differences(Y, slice(first - lo, last - lo))
+    Mb = np.sqrt(M.reshape(L, nb, BLOCK).max(axis=2)).T  # (nb, L) block maxima, m
     with np.errstate(divide="ignore"):
         smax = np.sqrt(8.0 * tolerance_m / Mb)
     # stride: largest power of two <= smax, within [1, BLOCK]; frame-major order (L, nb)
@@ -186,6 +203,25 @@ def _robot_workspace(robot):
     return default_workspace()
 
 
+def _outside(workspace, Y: np.ndarray, own: slice):
+    """``(per_sample (n,), outside)``: how far the farthest point of each sample ``own`` of the planes
+    ``Y (3, L, T)`` lies outside ``workspace``, m, and ``outside(rows, frames)``, the outside distances of the
+    points at those (broadcast) indices, rows counted from ``own.start``: as ``workspace.outside_distance`` gives
+    them, bit for bit.
+
+    The sphere's squared centre distances are taken once; the farthest point of a sample is the one of largest
+    squared distance (``outside_of_squared`` does not decrease), so only the samples' and the asked points'
+    square roots are taken. A workspace that defines its own ``outside_distance`` is asked for every point.
+    """
+    if type(workspace).outside_distance is not Workspace.outside_distance:
+        distance = np.asarray(workspace.outside_distance(Y[:, :, own].transpose(2, 1, 0)), dtype=float)  # (n, L)
+        return row_max(distance), lambda rows, frames: distance[rows, frames]
+    squared = workspace.squared_centre_distance(Y[0, :, own], Y[1, :, own], Y[2, :, own])  # (L, n) m^2
+    return workspace.outside_of_squared(squared.max(axis=0)), lambda rows, frames: workspace.outside_of_squared(
+        squared[frames, rows]
+    )
+
+
 class SpaceUsageCritic:
     name = "space_usage"
     description = "Convex-hull volume of the links' swept positions against the allowed workspace; leaving it is an error."
@@ -219,19 +255,22 @@ class _Swept:
         self.kept: list[tuple[np.ndarray, ...]] = []  # per chunk: (sample, frame, point, outside distance)
 
     def add(self, chunk, execution) -> None:
-        window, params = chunk.trajectory, self.params
-        X = window.positions if self.sel is None else np.ascontiguousarray(window.positions[:, self.sel])
-        own = X[chunk.own]
-        # --- leaving the workspace: every point ---------------------------------
-        outside = np.asarray(self.workspace.outside_distance(own), dtype=float)  # (n, L) m, > 0 outside
-        per_sample = row_max(outside)
+        params, workspace = self.params, self.workspace
+        Y = position_planes(execution)  # (3, L, n) m
+        if self.sel is not None:
+            Y = Y[:, self.sel]
+        per_sample, outside = _outside(workspace, Y, slice(chunk.own.start, chunk.own.stop))
         self.per_sample.put(chunk.start, per_sample)
-        self.farthest.offer(chunk.start, per_sample, lambda i: int(np.argmax(outside[i])))
-        self.links_out.add(outside[per_sample > params.outside_tolerance_m] > params.outside_tolerance_m)
+        frames = np.arange(Y.shape[1])
+        self.farthest.offer(chunk.start, per_sample, lambda i: int(np.argmax(outside(i, frames))))
+        over = np.flatnonzero(per_sample > params.outside_tolerance_m)
+        if over.size:  # (rows, L): the links outside at the samples where some link is
+            self.links_out.add(outside(over[:, None], frames[None, :]) > params.outside_tolerance_m)
         # --- the points the hull needs ----------------------------------------
-        ti, li = kept_samples(X, chunk.lo, chunk.start, chunk.stop, len(self.trajectory), params.hull_tolerance_m)
+        ti, li = kept_samples(Y, chunk.lo, chunk.start, chunk.stop, len(self.trajectory), params.hull_tolerance_m)
         frame = np.where(li < 0, -1 - li, li)
-        self.kept.append((ti, li, X[ti - chunk.lo, frame], outside[ti - chunk.start, frame]))
+        points = Y[:, frame, ti - chunk.lo].T
+        self.kept.append((ti, li, points, outside(ti - chunk.start, frame)))
 
     def verdict(self) -> Verdict:
         params, trajectory, names = self.params, self.trajectory, self.names
