@@ -56,9 +56,10 @@ kinematics before it is returned: the closed-form FK of :mod:`robocritics.robot.
 CPU from Python), or, for a branch no step of which was clipped, nudged or clamped, of a
 target whose rotation is orthonormal, the certificate that the closed form is then exact
 (:func:`_certified`; ``tests/test_ik_nearest.py`` checks it against Pinocchio at the
-singularities). :func:`ur_ik_all` lists the branches; :func:`ur_ik` searches the same
-steps branch-and-bound for the one nearest a seed configuration
-(:mod:`robocritics.robot.ik_nearest`).
+singularities). :func:`ur_ik_all` lists the branches; :func:`ur_ik_all_many` lists those of
+many poses in one numpy pass (cheaper per pose from about 15 poses on; ``benchmarks/bench_ik.py
+--all-many``); :func:`ur_ik` searches the same steps branch-and-bound for the one nearest a seed
+configuration (:mod:`robocritics.robot.ik_nearest`).
 
 For arms that are not UR-like, :func:`~robocritics.robot.ik_numeric.numeric_ik` runs a damped-least-squares
 (Levenberg-Marquardt) iteration on a Pinocchio model with random restarts.
