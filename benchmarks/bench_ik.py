@@ -6,6 +6,7 @@ Reproduce with::
     .venv/bin/python benchmarks/bench_ik.py --n 1000 --seed 1
     .venv/bin/python benchmarks/bench_ik.py --lines       # also ur_ik_line along straight lines
     .venv/bin/python benchmarks/bench_ik.py --before-src /tmp/c045a0b   # CPU per solve against another tree
+    .venv/bin/python benchmarks/bench_ik.py --all-many    # ur_ik_all_many (n poses in one call) vs ur_ik_all
 
 What is measured
 ----------------
@@ -324,12 +325,39 @@ def table(results: list[Result], reference: Result | None) -> str:
     return "\n".join(lines)
 
 
+def bench_all_many(seed: int, sizes: tuple[int, ...] = (1, 8, 30, 200), repeats: int = 7) -> str:
+    """ur_ik_all_many (every branch of n poses in one numpy call) vs ur_ik_all pose by pose, on the random targets:
+    CPU us per pose, the least of ``repeats`` (interleaved: the same machine load for both)."""
+    from robocritics.robot.ik import ur_ik_all_many
+
+    _, poses, _ = make_targets(max(sizes), seed)
+    lines = [f"{'poses':>6} {'ur_ik_all per pose us':>22} {'ur_ik_all_many per pose us':>27} {'ratio':>6}"]
+    for n in sizes:
+        def scalar() -> None:
+            for T in poses[:n]:
+                ur_ik_all(UR3E_DH, T)
+
+        def many() -> None:
+            ur_ik_all_many(UR3E_DH, poses[:n])
+
+        best = {scalar: math.inf, many: math.inf}
+        for _ in range(repeats):
+            for f in (scalar, many):
+                t0 = time.process_time()
+                f()
+                best[f] = min(best[f], time.process_time() - t0)
+        a, b = best[scalar] / n * 1e6, best[many] / n * 1e6
+        lines.append(f"{n:>6} {a:>22.1f} {b:>27.1f} {b / a:>6.2f}")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=200, help="number of targets (default 200)")
     ap.add_argument("--seed", type=int, default=7, help="random seed (default 7)")
     ap.add_argument("--no-lively", action="store_true", help="skip lively-tk")
     ap.add_argument("--lines", action="store_true", help="also time ur_ik_line along straight lines")
+    ap.add_argument("--all-many", action="store_true", help="only time ur_ik_all_many against ur_ik_all")
     ap.add_argument("--before-src", metavar="DIR", help="compare ur_ik / ur_ik_all CPU with the tree in DIR")
     ap.add_argument("--cpu-child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -337,6 +365,11 @@ def main(argv: list[str] | None = None) -> int:
         import json
 
         print(json.dumps(cpu_per_solve(args.n, args.seed)))
+        return 0
+    if args.all_many:
+        print(f"ur_ik_all_many vs ur_ik_all, CPU us per pose (least of 7), random targets (seed {args.seed}):")
+        print(bench_all_many(args.seed))
+        print(f"reproduce: {REPRO} --all-many")
         return 0
     if args.before_src:
         print(f"UR3e closed-form IK, CPU per solve: {args.n} targets (seed {args.seed}), seed = truth + N(0, 0.2 rad)")

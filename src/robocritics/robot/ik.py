@@ -56,9 +56,10 @@ kinematics before it is returned: the closed-form FK of :mod:`robocritics.robot.
 CPU from Python), or, for a branch no step of which was clipped, nudged or clamped, of a
 target whose rotation is orthonormal, the certificate that the closed form is then exact
 (:func:`_certified`; ``tests/test_ik_nearest.py`` checks it against Pinocchio at the
-singularities). :func:`ur_ik_all` lists the branches; :func:`ur_ik` searches the same
-steps branch-and-bound for the one nearest a seed configuration
-(:mod:`robocritics.robot.ik_nearest`).
+singularities). :func:`ur_ik_all` lists the branches; :func:`ur_ik_all_many` lists those of
+many poses in one numpy pass (cheaper per pose from about 15 poses on; ``benchmarks/bench_ik.py
+--all-many``); :func:`ur_ik` searches the same steps branch-and-bound for the one nearest a seed
+configuration (:mod:`robocritics.robot.ik_nearest`).
 
 For arms that are not UR-like, :func:`~robocritics.robot.ik_numeric.numeric_ik` runs a damped-least-squares
 (Levenberg-Marquardt) iteration on a Pinocchio model with random restarts.
@@ -90,6 +91,7 @@ from .ik_many import (
     _WRIST_SINGULAR,
     _branches_many,
     _nearest_chain,
+    _pose_errors_many,
 )
 from .ik_nearest import _nearest_equivalent, _nearest_search, _nearest_solution, _singular_q6, _wrap, _wrist1_planar
 from .ur_fk import ur_reproduces
@@ -101,6 +103,7 @@ __all__ = [
     "dh_urdf",
     "ur_ik",
     "ur_ik_all",
+    "ur_ik_all_many",
     "ur_reach",
 ]
 
@@ -250,7 +253,9 @@ def _pose_error(fk: Sequence[float], target: Sequence[float]) -> tuple[float, fl
 def _pose12(pose: Any) -> list[float]:
     """The top 3 rows of a 4x4 homogeneous transform as 12 plain floats."""
     if isinstance(pose, np.ndarray) and pose.shape == (4, 4):
-        return pose[:3].ravel().tolist()
+        t = pose.ravel().tolist()  # one view fewer than pose[:3].ravel(): a tenth of ur_ik's numpy time
+        del t[12:]
+        return t
     homogeneous = getattr(pose, "homogeneous", None)  # pinocchio.SE3
     arr = np.asarray(homogeneous if homogeneous is not None else pose, dtype=float)
     if arr.shape != (4, 4):
@@ -462,6 +467,42 @@ def ur_ik_all(dh: DH, flange_pose: Any, *, q6_singular: float = 0.0) -> np.ndarr
     At the wrist singularity (``sin q5 ≈ 0``) ``q6`` is set to ``q6_singular``.
     """
     return np.array(_solutions(dh, _pose12(flange_pose), q6_singular), dtype=float).reshape(-1, 6)
+
+
+def ur_ik_all_many(dh: DH, flange_poses: Any, *, q6_singular: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`ur_ik_all` of ``n`` flange poses in one call: the eight branches of every pose as arrays.
+
+    ``flange_poses`` ``(n, 4, 4)`` (m). Returns ``(q (n, 8, 6) rad, valid (n, 8) bool)``: ``q[i][valid[i]]`` is
+    ``ur_ik_all(dh, flange_poses[i])`` (the same rows in the same order, equal to the last bit or two: numpy's
+    and libm's sines may round differently), each wrapped to ``(-pi, pi]``, duplicates removed, every row within
+    1e-9 m and 1e-9 rad of its pose by forward kinematics; invalid rows are NaN. The branches are computed for
+    all poses at once (:func:`_branches_many`, one closed-form FK check of all ``8 n`` branches: :func:`_pose_errors_many`); a pose near the wrist
+    singularity (``q6`` free: ``q6_singular``) goes through :func:`ur_ik_all`'s scalar steps.
+    """
+    poses = np.asarray(flange_poses, dtype=float)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+        raise PlanningError(f"ur_ik_all_many: flange_poses must have shape (n, 4, 4), got {poses.shape}")
+    n = len(poses)
+    targets12 = poses[:, :3].reshape(-1, 12)
+    q, valid, scalar = _branches_many(dh._ur, targets12)
+    with np.errstate(invalid="ignore"):  # the rows of branches that do not exist are garbage (NaN)
+        # _wrap elementwise, bit for bit: fmod is exact, and so is the one shift by 2 pi of a remainder beyond pi
+        q = np.fmod(q, _TWO_PI)
+        q = np.where(q > _PI, q - _TWO_PI, q)
+        q = np.where(q <= -_PI, q + _TWO_PI, q)
+        dp, dr = _pose_errors_many(dh._ur, q.reshape(-1, 6), np.repeat(targets12, 8, axis=0))
+        valid = valid & (dp <= _VERIFY_TOL).reshape(n, 8) & (dr <= _VERIFY_TOL).reshape(n, 8)
+    # _is_duplicate against the rows kept before, branch by branch (all poses at once)
+    for j in range(1, 8):
+        near = np.abs(np.fmod(q[:, j : j + 1] - q[:, :j], _TWO_PI))  # within the tolerance of 0 or of 2 pi
+        same = (near < _DUPLICATE_TOL) | (near > _TWO_PI - _DUPLICATE_TOL)
+        valid[:, j] &= ~(same.all(axis=2) & valid[:, :j]).any(axis=1)
+    for i in np.flatnonzero(scalar).tolist():
+        rows = _solutions(dh, targets12[i].tolist(), q6_singular)
+        valid[i] = np.arange(8) < len(rows)
+        q[i, : len(rows)] = rows
+    q[~valid] = np.nan
+    return q, valid
 
 
 def _solutions(dh: DH, t: Sequence[float], q6_singular: float) -> list[list[float]]:

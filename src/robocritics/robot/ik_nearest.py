@@ -215,7 +215,6 @@ def _nearest_wrists(
     _, _, _, _, l4, l5 = lo
     _, _, _, _, h4, h5 = hi
     _, _, _, _, w4, w5 = w
-    inf = math.inf
     free = s5abs < _WRIST_NEAR_SINGULAR  # q6 is not final: the elbow step may nudge it
     if free:
         exact = False
