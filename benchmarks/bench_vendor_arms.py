@@ -52,9 +52,13 @@ def arms() -> list[tuple[str, Path, dict]]:
         ("example-robot-data", "UR10", erd / "ur_description/urdf/ur10_robot.urdf", {}),
         ("example-robot-data", "xArm7", erd / "xarm_description/urdf/xarm7.urdf", {}),
         ("example-robot-data", "Kinova j2s6s200", erd / "kinova_description/robots/kinova.urdf", {}),
-        ("example-robot-data", "Unitree Z1", erd / "z1_description/urdf/z1.urdf", {"tip": "gripperStator"}),
+        # the flange: the Robotiq replaces the Z1's own gripper (its stator jaw, kept with tip="gripperStator", hits the apple)
+        ("example-robot-data", "Unitree Z1", erd / "z1_description/urdf/z1.urdf", {"tip": "link06"}),
         ("example-robot-data", "Panda", erd / "panda_description/urdf/panda.urdf", {"tip": "panda_link8", "tool": "franka_hand"}),
-        ("example-robot-data", "SO-100", erd / "so_arm_description/urdf/so100.urdf", {"tip": "gripper"}),
+        # its file faces -y and its shoulder pan turns +-2 rad: the apple at +27 deg is out of its range, so it
+        # stands turned to face +x, as a cell would mount it
+        ("example-robot-data", "SO-100", erd / "so_arm_description/urdf/so100.urdf",
+         {"tip": "gripper", "base_pose": (0.0, 0.0, 0.0, 0.0, 0.0, math.pi / 2)}),
         ("rtb-data", "iiwa14 R820", rtb and rtb / "xacro/kuka_description/kuka_lbr_iiwa/urdf/lbr_iiwa_14_r820.urdf", {}),
         ("rtb-data", "KUKA KR16-2", rtb and rtb / "xacro/kuka_description/kuka_kr16/urdf/kr16_2.urdf", {}),
         ("rtb-data", "Puma560", rtb and rtb / "xacro/unimation_puma560_description/urdf/puma560_robot.urdf", {}),

@@ -672,11 +672,13 @@ class Planner:
 
     def retilted_line(self, points: np.ndarray, goal: np.ndarray, call: SkillCall, step: int,
                       err: PlanningError) -> np.ndarray:
-        """The line's IK grid at the first later approach tilt along which the whole line is solved, after
-        turning the fingers to it at the start (a joint move); else with the tilt turning evenly along the line
-        from the current one to the first of the robot's tilts that reaches it (no tilt may reach both ends: a
-        5-joint arm with a long tool); raises ``err`` (the current tilt's) if none."""
-        for tilt in self.robot.approach_tilts_rad:
+        """The line's IK grid with the tilt turning evenly along the line from the current one to the nearest
+        of the robot's other tilts along which the whole line is solved (no tilt may reach both ends: a 5-joint
+        arm with a long tool stands up above an object and leans less at its foot); else at the first later
+        tilt along which the whole line is solved, after turning the fingers to it at the start (a joint
+        move); raises ``err`` (the current tilt's) if none. Nearest first: the fingers turn the least, and
+        each tilt that fails costs a failed IK search."""
+        for tilt in sorted(self.robot.approach_tilts_rad, key=lambda t: abs(t - self.tilt)):
             if tilt == self.tilt:
                 continue
             q_grid, failed = self.line_grid(points, goal, call, self.q, np.linspace(self.tilt, tilt, len(points)))

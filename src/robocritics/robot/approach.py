@@ -83,9 +83,12 @@ def probe_points(robot) -> np.ndarray:
 
 
 def infer_tilts(robot) -> tuple[float, ...]:
-    """The tilts a URDF arm approaches at: from the least tilt of :data:`TILT_LADDER_RAD` at which it reaches
-    every :func:`probe_points` (each seeded from home) up the rest of the ladder; the whole ladder when no
-    tilt reaches them all (the planner then finds each move's own)."""
+    """The tilts a URDF arm approaches at, in the order the planner tries them: from the least tilt of
+    :data:`TILT_LADDER_RAD` at which it reaches every :func:`probe_points` (each seeded from home) up the rest
+    of the ladder, then the lesser tilts, nearest first; the whole ladder when no tilt reaches them all (the
+    planner then finds each move's own). The lesser tilts stay: a 5-joint arm with a long tool that leans 60
+    deg above an object may reach its foot only at 30 deg, and a straight line down turns the fingers between
+    the two (:meth:`~robocritics.planning.planner.Planner.retilted_line`)."""
     from ..errors import PlanningError
 
     points = probe_points(robot)
@@ -95,5 +98,5 @@ def infer_tilts(robot) -> tuple[float, ...]:
                 robot.ik(p, seed=robot.home_q, tilt_rad=tilt)
         except PlanningError:
             continue
-        return TILT_LADDER_RAD[k:]
+        return TILT_LADDER_RAD[k:] + TILT_LADDER_RAD[:k][::-1]
     return TILT_LADDER_RAD

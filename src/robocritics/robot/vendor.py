@@ -149,8 +149,11 @@ def flange_mount_rpy(doc: _urdf.UrdfDocument, joints: list[ET.Element]) -> tuple
 
     The outward direction, in the tip frame: the last moving joint's axis, signed to point from that joint to
     the tip, when the fixed joints between them offset the tip along it (a wrist roll, as Unitree's Z1 rolls
-    about x); the offset's direction when it is not along the axis; the axis when there is no offset; then
-    snapped to the nearest of the tip frame's six axis directions."""
+    about x); the offset's direction when it is not along the axis. A tip at the last joint itself (no fixed
+    offset) is signed by the offset from the joint before, whose axis passes through the last joint's parent
+    frame: the SO-100's wrist roll sits 6 cm out along its -y from the wrist flex, so its tool faces -y, not
+    back through the wrist. The axis as it is when neither offset says; then snapped to the nearest of the tip
+    frame's six axis directions."""
     import pinocchio as pin
 
     moving = [k for k, j in enumerate(joints) if j.get("type") in _urdf.MOVING_JOINT_TYPES]
@@ -158,22 +161,27 @@ def flange_mount_rpy(doc: _urdf.UrdfDocument, joints: list[ET.Element]) -> tuple
     axis_element = joints[last].find("axis")
     axis = np.array(_urdf.floats(doc, axis_element, "xyz", 3, f"joint {joints[last].get('name')!r}", default=(1, 0, 0))
                     if axis_element is not None else (1.0, 0.0, 0.0), dtype=float)
-    pose = np.eye(4)  # the tip in the last moving joint's frame
-    for joint in joints[last + 1:]:
+    steps = []  # the pose of each joint's frame in its parent's, from the last moving joint on
+    for joint in joints[last:]:
         origin = joint.find("origin")
         step = np.eye(4)
         if origin is not None:
             owner = f"joint {joint.get('name')!r}"
             step[:3, :3] = pin.rpy.rpyToMatrix(*_urdf.floats(doc, origin, "rpy", 3, owner, default=(0, 0, 0), bound=100.0))
             step[:3, 3] = _urdf.floats(doc, origin, "xyz", 3, owner, default=(0, 0, 0))
+        steps.append(step)
+    pose = np.eye(4)  # the tip in the last moving joint's frame
+    for step in steps[1:]:
         pose = pose @ step
     R = pose[:3, :3]
     axis_t, offset_t = R.T @ (axis / np.linalg.norm(axis)), R.T @ pose[:3, 3]
-    if np.linalg.norm(offset_t) < 1e-3:
-        out = axis_t
-    else:
+    if np.linalg.norm(offset_t) >= 1e-3:
         unit = offset_t / np.linalg.norm(offset_t)
         out = axis_t * math.copysign(1.0, axis_t @ unit) if abs(axis_t @ unit) >= 0.5 else unit
+    else:  # the tip at the last joint: the axis, signed by the last joint's offset from its parent frame
+        before = (steps[0][:3, :3] @ R).T @ (steps[0] @ pose)[:3, 3]
+        along = float(axis_t @ before)
+        out = axis_t * math.copysign(1.0, along) if abs(along) >= 0.5 * np.linalg.norm(before) > 0 else axis_t
     k = int(np.argmax(np.abs(out)))
     snapped = [0, 0, 0]
     snapped[k] = 1 if out[k] > 0 else -1
