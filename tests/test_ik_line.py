@@ -137,8 +137,9 @@ def test_ik_line_of_an_arm_without_closed_form_is_its_ik_point_by_point():
     from importlib import resources
 
     urdf = resources.files("robocritics.robot") / "models" / "ur3e.urdf"
-    robot = Robot.from_urdf(str(urdf))  # no DH table given: Pinocchio's numeric IK
-    assert robot.dh is None
+    robot = Robot.from_urdf(str(urdf))
+    assert robot.dh is not None  # a UR chain is recognised in its URDF (robot/dh_chain.py) ...
+    robot.dh = None  # ... so take its closed form away: Pinocchio's numeric IK, as on an arm without one
     points = np.array([0.3, 0.1, 0.2]) + np.linspace(0.0, 1.0, 6)[:, None] * np.array([0.0, 0.03, 0.03])
     q, err = assert_same(robot, points, robot.home_q, 0.2)
     assert err is None and q.shape == (6, robot.n)
