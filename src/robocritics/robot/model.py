@@ -406,9 +406,9 @@ class Robot:
             data = self.__dict__["_data"] = self.model.createData()
         return data
 
-    @property
+    @cached_property
     def _tcp_frame_id(self) -> int:
-        """Pinocchio's id of the TCP link in :attr:`model`."""
+        """Pinocchio's id of the TCP link in :attr:`model` (looked up once: a line's IK asks at every point)."""
         import pinocchio as pin
 
         return int(self.model.getFrameId(self.tcp_frame, pin.FrameType.BODY))
@@ -821,7 +821,9 @@ class Robot:
         Returns ``(q (m, 6) rad, error)``: row ``i`` is what ``ik(positions[i], seed=q[i - 1], yaw_rad=yaw_rad)``
         returns; ``m = n`` and ``error`` None when every position is solved, else the ``m`` solved rows and the
         :class:`PlanningError` :meth:`ik` raises for position ``m``. For UR arms the closed form runs without
-        the per-call conversions (one stacked matmul for the flange poses).
+        the per-call conversions (one stacked matmul for the flange poses); other arms track each point from the
+        last (:func:`~robocritics.robot.ik_track.track_line`: :meth:`ik`'s solution to its solver tolerances,
+        a few Newton steps instead of its general search).
         """
         from . import ik as _ik
 
@@ -829,14 +831,9 @@ class Robot:
         seed = self.home_q if seed is None else np.asarray(seed, float)
         tilts = np.broadcast_to(np.asarray(tilt_rad, float), (len(p),))
         if self.dh is None or self.tcp_in_flange is None or tilts.any():
-            rows: list[np.ndarray] = []
-            for point, tilt in zip(p, tilts.tolist()):
-                try:
-                    seed = self.ik(point, seed=seed, yaw_rad=yaw_rad, tilt_rad=tilt)
-                except PlanningError as exc:
-                    return np.array(rows, dtype=float).reshape(-1, self.n), exc
-                rows.append(seed)
-            return np.array(rows, dtype=float).reshape(-1, self.n), None
+            from .ik_track import track_line  # each point tracked from the last, else solved by ik()
+
+            return track_line(self, p, seed, yaw_rad, tilts)
         finite = np.isfinite(p).all(axis=1)
         n_ok = len(p) if finite.all() else int(np.argmin(finite))
         target = np.empty((n_ok, 4, 4))
