@@ -247,11 +247,13 @@ class _Closest:
         self.closest.offer(
             chunk.start, per_sample, lambda i: int(np.argmin(np.where(counted.row_mask(own[i]), P[own[i]], np.inf)))
         )
-        for hits, threshold, strict in ((self.touching, params.penetration_m, False), (self.near, params.d_warn_m, True)):
-            rows = own[per_sample < threshold if strict else per_sample <= threshold]
-            if rows.size:
-                sub = np.where(counted.row_mask(rows), P[rows], np.inf)
-                hits.add((sub < threshold) if strict else (sub <= threshold))
+        # which pairs come within either threshold: each pair's closest counted distance over the samples closer
+        # than d_warn_m (penetration_m is lower, so those hold every sample at or below it; NaN left out)
+        rows = own[per_sample < params.d_warn_m]
+        if rows.size:
+            nearest = np.fmin.reduce(np.where(counted.row_mask(rows), P[rows], np.inf), axis=0)[None, :]  # (1, K) m
+            self.touching.add(nearest <= params.penetration_m)
+            self.near.add(nearest < params.d_warn_m)
 
     def verdict(self) -> Verdict:
         params, trajectory = self.params, self.trajectory
