@@ -43,7 +43,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..._arrays import min_over_columns, run_starts
+from ..._arrays import run_starts
 from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl  # not `from .. import`: the root imports the repairs, which import this module
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
@@ -105,6 +105,9 @@ class Counted:
         )
         self.intended: bool | None = None
         self._proximity = trajectory.proximity
+        # the counted pairs' distances (Ke, T), gathered in one pass over the (T, K) proximity (a gather per
+        # group of columns reads every row again): the gripper pairs' rows get +inf where they do not count
+        self._counted = self._proximity.T[np.flatnonzero(self.columns)]
         if self.gcols.size == 0:
             return
         entities = [pairs[k].b_entity for k in self.gcols]
@@ -141,22 +144,22 @@ class Counted:
         if not (contact.any() or absent.any()):
             return
         self.intended = True
-        # the gripper pairs' distances (Kg, T), a copy, +inf where they do not count
-        gripper = self._gripper = self._proximity.T[self.gcols]
+        gripper = np.searchsorted(np.flatnonzero(self.columns), self.gcols)  # their rows of the counted distances
+        counted = self._counted
         starts = run_starts(key)
         stops = np.append(starts[1:], len(key))
         keys = key[starts]
         active = np.flatnonzero(contact.any(axis=1)[keys] | absent.any(axis=1)[run[starts]])
         for i in active.tolist():
             a, b = int(starts[i]), int(stops[i])
-            gone = np.flatnonzero(absent[run[a]])
+            gone = gripper[absent[run[a]]]
             if gone.size:  # a carried object's pairs while it is not the one held
-                gripper[gone, a:b] = np.inf
-            touched = np.flatnonzero(contact[keys[i]])
+                counted[gone, a:b] = np.inf
+            touched = gripper[contact[keys[i]]]
             if touched.size:  # an intended contact is touching, not a penetration: deeper it counts
-                part = gripper[touched, a:b]
+                part = counted[touched, a:b]
                 np.putmask(part, part > -contact_tolerance_m, np.inf)
-                gripper[touched, a:b] = part
+                counted[touched, a:b] = part
 
     def excused(self, rows) -> np.ndarray:
         """``(len(rows), Kg)`` (or ``(Kg,)`` for one row): which gripper pairs (``gcols``) do not count at ``rows``
@@ -180,17 +183,13 @@ class Counted:
     def closest(self) -> np.ndarray:
         """``(T,)`` closest counted distance per sample of the trajectory, m (+inf where nothing counts).
 
-        The counted columns are gathered (as rows of ``P.T``: :func:`robocritics._arrays.min_over_columns`) and
-        reduced by a plain minimum: a masked ``where=`` reduction over ``(T, K)`` is about 4x slower. The
-        gripper pairs' rows, gathered when the mask was made, hold +inf where they do not count.
+        The counted pairs' rows, gathered (and masked where the gripper pairs do not count) when this was built,
+        reduced by elementwise minima of whole rows: a masked ``where=`` reduction over ``(T, K)`` is about 4x
+        slower.
         """
-        always = self.columns.copy()
-        if self.intended is not None:
-            always[self.gcols] = False
-        out = min_over_columns(self._proximity, np.flatnonzero(always))
-        if self.intended is not None:
-            np.minimum(out, self._gripper.min(axis=0), out=out)
-        return out
+        if not len(self._counted):
+            return np.full(len(self._proximity), np.inf)
+        return self._counted.min(axis=0)
 
 
 def counted_distances(trajectory, ignore_pairs=(), contact_tolerance_m: float = Params().contact_tolerance_m) -> np.ndarray:
@@ -247,11 +246,13 @@ class _Closest:
         self.closest.offer(
             chunk.start, per_sample, lambda i: int(np.argmin(np.where(counted.row_mask(own[i]), P[own[i]], np.inf)))
         )
-        for hits, threshold, strict in ((self.touching, params.penetration_m, False), (self.near, params.d_warn_m, True)):
-            rows = own[per_sample < threshold if strict else per_sample <= threshold]
-            if rows.size:
-                sub = np.where(counted.row_mask(rows), P[rows], np.inf)
-                hits.add((sub < threshold) if strict else (sub <= threshold))
+        # which pairs come within either threshold: each pair's closest counted distance over the samples closer
+        # than d_warn_m (penetration_m is lower, so those hold every sample at or below it; NaN left out)
+        rows = own[per_sample < params.d_warn_m]
+        if rows.size:
+            nearest = np.fmin.reduce(np.where(counted.row_mask(rows), P[rows], np.inf), axis=0)[None, :]  # (1, K) m
+            self.touching.add(nearest <= params.penetration_m)
+            self.near.add(nearest < params.d_warn_m)
 
     def verdict(self) -> Verdict:
         params, trajectory = self.params, self.trajectory

@@ -37,6 +37,7 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
+from ..derived import position_planes
 from ..chunked import Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
 from .. import CriticParams, Flag, ParamName, Verdict, fmt_value, make_signal, threshold_verdict
@@ -70,14 +71,13 @@ class Params(CriticParams):
         return self
 
 
-def spearing_speed(poses: np.ndarray, time: np.ndarray, first_sample: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def spearing_speed(p: np.ndarray, f: np.ndarray, time: np.ndarray, first_sample: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(s (T,), v (3, T), f (3, T))``: spearing speed m/s, TCP velocity m/s, unit finger direction.
 
-    ``poses (T, 4, 4)`` are the TCP poses; component rows (3, T) keep every operation contiguous.
-    ``first_sample``: the index of ``poses[0]`` in the run (for the error naming a sample).
+    ``p (3, T)`` m are the TCP positions and ``f (3, T)`` its finger directions (the z axes of its poses, any
+    length: normalised in place); component rows keep every operation contiguous.
+    ``first_sample``: the index of sample 0 in the run (for the error naming a sample).
     """
-    p = np.ascontiguousarray(poses[:, :3, 3].T)  # (3, T) m
-    f = np.array(poses[:, :3, 2].T, order="C")  # (3, T) finger direction, a copy we may normalise
     norm = np.linalg.norm(f, axis=0)
     if np.any(norm < 1e-9):
         i = int(np.argmax(norm < 1e-9))
@@ -116,7 +116,9 @@ class _Spearing:
 
     def add(self, chunk, execution) -> None:
         window = chunk.trajectory
-        s, v, _ = spearing_speed(window.frames[:, self.index], window.time, chunk.lo)
+        p = position_planes(execution)[:, self.index]  # (3, n) m, shared with the other critics
+        f = np.array(window.frames[:, self.index, :3, 2].T, order="C")  # (3, n), a copy spearing_speed normalises
+        s, v, _ = spearing_speed(p, f, window.time, chunk.lo)
         s, v = s[chunk.own], v[:, chunk.own]
         self.s.put(chunk.start, s)
         self.fastest.offer(chunk.start, s, lambda i: v[:, i].copy())

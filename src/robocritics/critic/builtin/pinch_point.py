@@ -75,10 +75,13 @@ class _Closest:
         per_sample = min_over_columns(P, self.gather)
         self.per_sample.put(chunk.start, per_sample)
         self.closest.offer(chunk.start, per_sample, lambda i: int(np.argmin(np.where(self.columns, P[i], np.inf))))
-        for threshold, hits in self.hits.items():
-            rows = np.flatnonzero(per_sample < threshold)
-            if rows.size:
-                hits.add(np.where(self.columns, P[rows], np.inf) < threshold)
+        # which pairs come within either threshold: each self pair's closest distance over the samples closer than
+        # d_max_m (d_min_m is no larger, so those hold every sample below it; NaN left out)
+        rows = np.flatnonzero(per_sample < self.params.d_max_m)
+        if rows.size:
+            nearest = np.fmin.reduce(np.where(self.columns, P[rows], np.inf), axis=0)[None, :]  # (1, K) m
+            for threshold, hits in self.hits.items():
+                hits.add(nearest < threshold)
 
     def verdict(self) -> Verdict:
         params, trajectory = self.params, self.trajectory

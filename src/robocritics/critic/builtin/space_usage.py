@@ -86,24 +86,24 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
     return without_repeats(X[ti, li], ti, li)
 
 
-def second_differences(Y: np.ndarray, rows: slice) -> np.ndarray:
+def second_differences(Y: np.ndarray, rows: slice, out: np.ndarray | None = None) -> np.ndarray:
     """``(L, n)`` squared norms, m^2, of the second differences ``p_{t+1} - 2 p_t + p_{t-1}`` of the positions
     ``Y (3, L, T)`` (coordinate planes) at the samples ``t`` of ``rows`` (each with a sample either side), as
     ``((p_{t+1} - p_t) - p_t) + p_{t-1}`` per coordinate and ``x^2 + z^2 + y^2``
-    (:func:`robocritics._arrays.squared_norms`' order)."""
+    (:func:`robocritics._arrays.squared_norms`' order); into ``out`` when given."""
     lo, hi = rows.start, rows.stop
-    d = []
-    for c in (0, 2, 1):
+    total = out
+    for c in (0, 2, 1):  # x, then z and y added
         Yc = Y[c]
-        dc = Yc[:, lo + 1 : hi + 1] - Yc[:, lo:hi]
+        dc = np.subtract(Yc[:, lo + 1 : hi + 1], Yc[:, lo:hi])
         dc -= Yc[:, lo:hi]
         dc += Yc[:, lo - 1 : hi - 1]
-        d.append(dc)
-    out = np.multiply(d[0], d[0], out=d[0])
-    for dc in d[1:]:
-        dc *= dc
-        out += dc
-    return out
+        if c == 0:
+            total = np.multiply(dc, dc, out=out)
+        else:
+            dc *= dc
+            total += dc
+    return total
 
 
 def kept_samples(Y: np.ndarray, lo: int, start: int, stop: int, T: int, tolerance_m: float):
@@ -119,10 +119,12 @@ def kept_samples(Y: np.ndarray, lo: int, start: int, stop: int, T: int, toleranc
         li, ti = np.divmod(np.arange(n * L), n)
         return ti + start, li
     nb = -(-n // BLOCK)
-    M = np.zeros((L, nb * BLOCK))  # squared second-difference norms by frame and sample (0 where undefined)
+    M = np.empty((L, nb * BLOCK))  # squared second-difference norms by frame and sample (0 where undefined)
     first, last = max(start, 1), min(stop, T - 1)  # the samples with a second difference
     if last > first:
-        M[:, first - start : last - start] = second_differences(Y, slice(first - lo, last - lo))
+        second_differences(Y, slice(first - lo, last - lo), out=M[:, first - start : last - start])
+    M[:, : max(first - start, 0)] = 0.0
+    M[:, max(last - start, 0) :] = 0.0
     Mb = np.sqrt(M.reshape(L, nb, BLOCK).max(axis=2)).T  # (nb, L) block maxima, m
     with np.errstate(divide="ignore"):
         smax = np.sqrt(8.0 * tolerance_m / Mb)
@@ -204,21 +206,25 @@ def _robot_workspace(robot):
 
 
 def _outside(workspace, Y: np.ndarray, own: slice):
-    """``(per_sample (n,), outside)``: how far the farthest point of each sample ``own`` of the planes
-    ``Y (3, L, T)`` lies outside ``workspace``, m, and ``outside(rows, frames)``, the outside distances of the
-    points at those (broadcast) indices, rows counted from ``own.start``: as ``workspace.outside_distance`` gives
-    them, bit for bit.
+    """``(per_sample (n,), outside, farthest)`` for the samples ``own`` of the planes ``Y (3, L, T)``: how far
+    the farthest point of each sample lies outside ``workspace``, m; ``outside(rows, frames)``, the outside
+    distances of the points at those (broadcast) indices, rows counted from ``own.start``; and
+    ``farthest(rows) (L,)``, each frame's largest outside distance over ``rows`` (NaN left out): all as
+    ``workspace.outside_distance`` gives them, bit for bit.
 
-    The sphere's squared centre distances are taken once; the farthest point of a sample is the one of largest
-    squared distance (``outside_of_squared`` does not decrease), so only the samples' and the asked points'
-    square roots are taken. A workspace that defines its own ``outside_distance`` is asked for every point.
+    The sphere's squared centre distances are taken once; the farthest of several points is the one of largest
+    squared distance (``outside_of_squared`` does not decrease), so only the samples', the frames' and the asked
+    points' square roots are taken. A workspace that defines its own ``outside_distance`` is asked for every point.
     """
     if type(workspace).outside_distance is not Workspace.outside_distance:
         distance = np.asarray(workspace.outside_distance(Y[:, :, own].transpose(2, 1, 0)), dtype=float)  # (n, L)
-        return row_max(distance), lambda rows, frames: distance[rows, frames]
+        return (row_max(distance), lambda rows, frames: distance[rows, frames],
+                lambda rows: np.fmax.reduce(distance[rows], axis=0))  # fmt: skip
     squared = workspace.squared_centre_distance(Y[0, :, own], Y[1, :, own], Y[2, :, own])  # (L, n) m^2
-    return workspace.outside_of_squared(squared.max(axis=0)), lambda rows, frames: workspace.outside_of_squared(
-        squared[frames, rows]
+    return (
+        workspace.outside_of_squared(squared.max(axis=0)),
+        lambda rows, frames: workspace.outside_of_squared(squared[frames, rows]),
+        lambda rows: workspace.outside_of_squared(np.fmax.reduce(squared[:, rows], axis=1)),
     )
 
 
@@ -259,13 +265,13 @@ class _Swept:
         Y = position_planes(execution)  # (3, L, n) m
         if self.sel is not None:
             Y = Y[:, self.sel]
-        per_sample, outside = _outside(workspace, Y, slice(chunk.own.start, chunk.own.stop))
+        per_sample, outside, farthest = _outside(workspace, Y, slice(chunk.own.start, chunk.own.stop))
         self.per_sample.put(chunk.start, per_sample)
         frames = np.arange(Y.shape[1])
         self.farthest.offer(chunk.start, per_sample, lambda i: int(np.argmax(outside(i, frames))))
         over = np.flatnonzero(per_sample > params.outside_tolerance_m)
-        if over.size:  # (rows, L): the links outside at the samples where some link is
-            self.links_out.add(outside(over[:, None], frames[None, :]) > params.outside_tolerance_m)
+        if over.size:  # the links outside at some sample where some link is: those whose farthest there is
+            self.links_out.add((farthest(over) > params.outside_tolerance_m)[None, :])
         # --- the points the hull needs ----------------------------------------
         ti, li = kept_samples(Y, chunk.lo, chunk.start, chunk.stop, len(self.trajectory), params.hull_tolerance_m)
         frame = np.where(li < 0, -1 - li, li)
