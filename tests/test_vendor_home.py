@@ -55,13 +55,20 @@ def _elbow_height_reference(robot: Robot, q) -> float:
     data = robot.model.createData()
     pin.forwardKinematics(robot.model, data, np.asarray(q, float))
     origins = [data.oMi[j].translation.copy() for j in range(1, robot.model.njoints)]
-    shoulder, wrist = origins[1], origins[-2]
-    best, height = -1.0, 0.0
-    for point in origins[2:-2]:
-        t = (point - shoulder) @ (wrist - shoulder) / ((wrist - shoulder) @ (wrist - shoulder))
-        off = point - (shoulder + t * (wrist - shoulder))
-        if off @ off > best:
-            best, height = off @ off, off[2]
+    # the elbow and the wrist picked as the docstring says, on Pinocchio's placements at the clipped zero
+    zero_data = robot.model.createData()
+    pin.forwardKinematics(robot.model, zero_data, np.clip(np.zeros(robot.n), robot.lower, robot.upper))
+    zero = [zero_data.oMi[j].translation.copy() for j in range(1, robot.model.njoints)]
+    n = len(zero)
+    elbow = max(range(2, n - 1), key=lambda k: (min(np.linalg.norm(zero[k] - zero[1]), np.linalg.norm(zero[k] - zero[-1])), -k))
+    wrist = n - 1
+    for k in range(elbow + 1, n):
+        if np.linalg.norm(zero[k] - zero[elbow]) >= 0.01:
+            wrist = k
+            break
+    s, w, e = origins[1], origins[wrist], origins[elbow]
+    t = (e - s) @ (w - s) / ((w - s) @ (w - s))
+    height = e[2] - (s + t * (w - s))[2]
     return float(height)
 
 
@@ -94,8 +101,8 @@ def test_elbow_heights_tell_the_elbow_up_branch_from_the_elbow_down_one_of_the_s
     branches = ur_ik_all(robot.dh, flange)
     heights = elbow_heights(robot, robot.forward(branches))
     # same TCP, both signs among the branches; the bundled home is an elbow-up one
-    assert (heights > 0.05).any() and (heights < -0.05).any()
-    assert elbow_heights(robot, robot.forward(robot.home_q[None]))[0] > 0.05
+    assert (heights > 0.01).any() and (heights < -0.01).any()
+    assert elbow_heights(robot, robot.forward(robot.home_q[None]))[0] > 0.01
     for q, h in zip(branches, heights):
         assert h == pytest.approx(_elbow_height_reference(robot, q), abs=1e-9)
 

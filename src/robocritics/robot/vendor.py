@@ -480,22 +480,22 @@ def elbow_heights(robot, frames: np.ndarray) -> np.ndarray:
     """Per configuration (``frames (T, L, 4, 4)`` of :meth:`Robot.forward`), how high the elbow stands above the
     straight line from the shoulder to the wrist (m; negative: elbow down).
 
-    Shoulder: the origin of the second moving joint; wrist: that of the last but one; elbow: of the joints
-    between, the origin farthest from that line. Its height is its z minus the line's z where it is nearest
-    the line. An arm with fewer than four joints has no elbow: zero."""
+    Shoulder: the origin of the second moving joint. Elbow: of the joints between it and the last, the origin
+    farthest from both ends of the chain (the larger of the two least distances, stretched out at the
+    clipped zero configuration). Wrist: the first origin after the elbow at least 1 cm from it (vendors put
+    a joint's origin anywhere on its axis, an iiwa's in pairs at one point), else the last joint's. The height
+    is the elbow's z minus the line's z where the elbow is nearest the line. Fewer than three joints: zero."""
     origins = _joint_origins(robot, frames)
-    if origins.shape[1] < 4:
+    n = origins.shape[1]
+    if n < 3:
         return np.zeros(len(frames))
-    shoulder, wrist, middle = origins[:, 1], origins[:, -2], origins[:, 2:-2]
-    if middle.shape[1] == 0:
-        return np.zeros(len(frames))
-    line = wrist - shoulder
-    length_sq = np.maximum(np.einsum("ti,ti->t", line, line), 1e-12)
-    t = np.einsum("tki,ti->tk", middle - shoulder[:, None], line) / length_sq[:, None]
-    nearest = shoulder[:, None] + t[..., None] * line[:, None]
-    off = middle - nearest
-    elbow = np.argmax(np.einsum("tki,tki->tk", off, off), axis=1)
-    return off[np.arange(len(frames)), elbow, 2]
+    zero = _joint_origins(robot, robot.forward(np.clip(np.zeros(robot.n), robot.lower, robot.upper))[None])[0]
+    reach = [min(np.linalg.norm(zero[k] - zero[1]), np.linalg.norm(zero[k] - zero[-1])) for k in range(2, n - 1)]
+    elbow = 2 + int(np.argmax(reach))
+    wrist = next((k for k in range(elbow + 1, n) if np.linalg.norm(zero[k] - zero[elbow]) >= 0.01), n - 1)
+    shoulder, line = origins[:, 1], origins[:, wrist] - origins[:, 1]
+    t = np.einsum("ti,ti->t", origins[:, elbow] - shoulder, line) / np.maximum(np.einsum("ti,ti->t", line, line), 1e-12)
+    return origins[:, elbow, 2] - (shoulder[:, 2] + t * line[:, 2])
 
 
 def _joint_origins(robot, frames: np.ndarray) -> np.ndarray:
