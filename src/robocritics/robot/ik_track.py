@@ -44,6 +44,9 @@ __all__ = ["track_line", "track_pose", "track_pointing", "TRACK_MAX_MOVE_RAD"]
 
 #: The most a joint may move from the seed in a tracking solve [rad]; beyond, the general solver decides.
 TRACK_MAX_MOVE_RAD = 0.5
+#: Restarts of the general solver for a line's point after its first: the four near the seed
+#: (:func:`~robocritics.robot.ik_numeric.numeric_ik`); a solution from anywhere else is a joint jump.
+LINE_RESTARTS = 4
 #: Newton steps before a tracking solve gives up (the general solver then decides).
 _MAX_STEPS = 12
 #: A converged iterate whose next step moves no joint more than this [rad] is the optimum (the step is the
@@ -204,7 +207,9 @@ def track_line(robot, positions: np.ndarray, seed: np.ndarray, yaw_rad: float,
                 q = track_pose(model, data, fid, R, point, seed, lo, hi, guess=guess)
         if q is None:
             try:
-                q = robot.ik(point, seed=seed, yaw_rad=yaw_rad, tilt_rad=tilt)
+                # after a line's first point only the restarts near the seed (a far solution is a joint
+                # jump the planner refuses): a point out of reach at this tilt fails in 5 tries, not 21
+                q = robot.ik(point, seed=seed, yaw_rad=yaw_rad, tilt_rad=tilt, restarts=LINE_RESTARTS if rows else 20)
             except PlanningError as exc:
                 return np.array(rows, dtype=float).reshape(-1, robot.n), exc
         rows.append(q)

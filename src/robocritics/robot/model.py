@@ -765,6 +765,7 @@ class Robot:
         *,
         yaw_rad: float = 0.0,
         tilt_rad: float = 0.0,
+        restarts: int = 20,
     ) -> np.ndarray:
         """Joint angles (rad) that put the TCP at ``position`` (m) with ``orientation``.
 
@@ -776,6 +777,7 @@ class Robot:
         is as asked and the turn about it what the wrist allows nearest the seed
         (:func:`~robocritics.robot.ik_numeric.pointing_ik`). UR arms use
         closed-form IK (all 8 branches); others Pinocchio damped least squares.
+        ``restarts``: how many more attempts numeric IK makes after the seed's (the first four near it).
         Raises :class:`PlanningError` naming the target and why.
         """
         from . import ik as _ik
@@ -795,8 +797,9 @@ class Robot:
 
                 if self.n < 6 and tilt_rad != 0.0:  # its wrist leans in its own plane, not the shoulder's
                     return pointing_ik(self.model, self.data, self._tcp_frame_id, p, (0.0, 0.0, -1.0), seed,
-                                       self.lower, self.upper, cone_rad=tilt_rad)
-                return pointing_ik(self.model, self.data, self._tcp_frame_id, p, R[:, 2], seed, self.lower, self.upper)
+                                       self.lower, self.upper, cone_rad=tilt_rad, restarts=restarts)
+                return pointing_ik(self.model, self.data, self._tcp_frame_id, p, R[:, 2], seed, self.lower, self.upper,
+                                   restarts=restarts)
             if self.dh is not None and self.tcp_in_flange is not None:
                 flange = target @ self._flange_in_tcp
                 if self.dh_base_inverse is not None:  # a vendor file's UR chain (robot.dh_chain): in its DH base
@@ -804,7 +807,8 @@ class Robot:
                 return _ik.ur_ik(self.dh, flange, seed, self.lower, self.upper)
             from .ik_numeric import numeric_ik
 
-            return numeric_ik(self.model, self.data, self._tcp_frame_id, target, seed, self.lower, self.upper)
+            return numeric_ik(self.model, self.data, self._tcp_frame_id, target, seed, self.lower, self.upper,
+                              restarts=restarts)
         except PlanningError as exc:
             pose = "in the requested orientation" if orientation is not None else (
                 "with the fingers down" if tilt_rad == 0.0 else f"with the fingers {math.degrees(tilt_rad):.0f} deg from down")
