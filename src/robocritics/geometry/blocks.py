@@ -16,6 +16,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .._arrays import unique_values
+
 __all__ = ["BLOCK", "blocks", "capsule_balls", "column_sets", "lower_upper", "near_entries", "self_bounds"]
 
 #: Samples per block of the far-pair bounds: a capsule far from a shape over a block is not evaluated there;
@@ -70,7 +72,7 @@ def column_sets(exact_min_of: Sequence[int] | Sequence[Sequence[int]], K: int) -
 def lower_upper(upper: np.ndarray, sets: np.ndarray, ub: np.ndarray, t0: int, n: int) -> None:
     """Lower each set's upper bound ``upper (S, T)`` (m, its least distance per sample) over the samples
     ``t0 .. t0 + n`` by the block upper bounds ``ub (m, nb)`` of rows of the sets ``sets (m,)``."""
-    for s in np.unique(sets).tolist():
+    for s in unique_values(sets).tolist():  # not np.unique: it loads numpy.ma (tests/test_check_imports.py)
         u = np.repeat(ub[sets == s].min(axis=0), BLOCK)[:n]
         np.minimum(upper[s, t0 : t0 + n], u, out=upper[s, t0 : t0 + n])
 

@@ -105,6 +105,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import unique_values
 from ..scene import Shape
 from .kernels import (
     _EYE3,
@@ -483,7 +484,7 @@ class ProximityKernel:
                             buf[rr] = buf1[rr]
         cuts = self._run(groups, P0, D, poses, far_m, buf, set_of)
         if self._meshes:
-            cut = None if cuts is None else cuts[0][np.unique(cuts[1][[k for k, _, _ in self._meshes]])].max(axis=0)
+            cut = None if cuts is None else cuts[0][unique_values(cuts[1][[k for k, _, _ in self._meshes]])].max(axis=0)
             self._mesh_rows(p0, p1, poses, buf, cut)
         return buf.T
 
@@ -552,7 +553,7 @@ class ProximityKernel:
                 if len(cut) > 1:
                     shape_cut[-1] = shape_cut[0]
             for g in shape_groups:
-                self._shape_pairs(g, poses, buf, None if cut is None else shape_cut[np.unique(crow[g.cols])].max(axis=0))
+                self._shape_pairs(g, poses, buf, None if cut is None else shape_cut[unique_values(crow[g.cols])].max(axis=0))
         return None if cut is None else (cut, crow)
 
     def _cutoffs(self, groups, P0, D, poses, far_m, buf, set_of, lbs) -> tuple[np.ndarray, np.ndarray]:
