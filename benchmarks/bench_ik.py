@@ -258,15 +258,22 @@ def bench_lines(sizes: tuple[int, ...] = (30, 120, 300, 1000), repeats: int = 7)
             return ur_ik_line(robot.dh, flanges, robot.home_q, robot.lower, robot.upper)[0]
 
         assert np.max(np.abs(walk() - line())) <= 1e-12
-        best = {walk: math.inf, line: math.inf}
-        for _ in range(repeats):
-            for f in (walk, line):  # interleaved: the same machine load for both
-                t0 = time.process_time()
-                f()
-                best[f] = min(best[f], time.process_time() - t0)
+        best = least_cpu((walk, line), repeats)
         a, b = best[walk] / n * 1e6, best[line] / n * 1e6
         lines.append(f"{n:>6} {a:>18.1f} {b:>23.1f} {b / a:>6.2f}")
     return "\n".join(lines)
+
+
+def least_cpu(functions, repeats: int) -> dict:
+    """The least CPU seconds of each of ``functions`` over ``repeats`` rounds, run interleaved so that every
+    function sees the same machine load."""
+    best = {f: math.inf for f in functions}
+    for _ in range(repeats):
+        for f in functions:
+            t0 = time.process_time()
+            f()
+            best[f] = min(best[f], time.process_time() - t0)
+    return best
 
 
 def cpu_per_solve(n: int, seed: int, passes: int = 9) -> dict[str, float]:
@@ -340,12 +347,7 @@ def bench_all_many(seed: int, sizes: tuple[int, ...] = (1, 8, 30, 200), repeats:
         def many() -> None:
             ur_ik_all_many(UR3E_DH, poses[:n])
 
-        best = {scalar: math.inf, many: math.inf}
-        for _ in range(repeats):
-            for f in (scalar, many):
-                t0 = time.process_time()
-                f()
-                best[f] = min(best[f], time.process_time() - t0)
+        best = least_cpu((scalar, many), repeats)
         a, b = best[scalar] / n * 1e6, best[many] / n * 1e6
         lines.append(f"{n:>6} {a:>22.1f} {b:>27.1f} {b / a:>6.2f}")
     return "\n".join(lines)
