@@ -151,3 +151,36 @@ def test_notebook_display_renders_inside_its_iframe(driver, tmp_path):
         assert len(driver.find_elements("css selector", ".rc-verdict")) == len(report.verdicts)
     finally:
         driver.switch_to.default_content()
+
+
+def test_a_long_program_replay_spreads_its_flagged_windows_over_the_whole_timeline(driver, tmp_path):
+    # a palletising-like program of ~3 minutes: its report keeps at most 20 flagged windows spread over the run
+    # (critic.verdict.kept_runs), and the replay's timeline shows them where they happen, not bunched at the start
+    from long_program import repeated_sorting
+
+    program = tmp_path / "long_sorting.py"
+    program.write_text(repeated_sorting(12))
+    out = tmp_path / "long_sorting.html"
+    proc = subprocess.run(
+        [sys.executable, "-m", "robocritics", "check", str(program), "--scene", "sorting", "--html", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode in (0, 1), proc.stderr
+    assert out.stat().st_size < 8_000_000  # thinned frames: the file stays bounded whatever the length
+    driver.get(out.as_uri())
+    wait_for(driver, READY, what="the first frame")
+    marks = driver.execute_script(
+        "return [...document.querySelectorAll('.rc-mark')].map(m => {"
+        " const r = m.getBoundingClientRect(), t = m.parentElement.getBoundingClientRect();"
+        " return [m.dataset.critic, (r.left - t.left) / t.width]; })"
+    )
+    assert marks, "a long sorting run has flagged windows"
+    for critic in {c for c, _ in marks}:
+        lefts = sorted(x for c, x in marks if c == critic)
+        assert len(lefts) <= 20
+        if len(lefts) >= 5:  # spread: the first in the first fifth of the run, the last in its last fifth
+            assert lefts[0] < 0.2 and lefts[-1] > 0.8, (critic, lefts)
+    canvas = driver.find_element("css selector", ".rc-canvas")
+    assert min(canvas_stats(driver, canvas)["variance"]) > 200
+    assert severe_console_errors(driver) == []
+    save_screenshot(driver, "replay_long_program.png")
