@@ -28,7 +28,7 @@ What is measured
   - ``robocritics ur_ik``: closed form searched branch-and-bound for the
     branch nearest to the seed within the limits, FK-verified (closed-form FK,
     or certified exact: no step clipped, a target rotation that is one) (the
-    function the planner calls).
+    function the planner calls; the search in C, ``robot/_ur_nearest.c``, where it is built).
   - ``robocritics ur_ik_all``: all (up to 8) branches, each FK-verified.
   - ``Pinocchio DLS``: ``robocritics.robot.ik_numeric.numeric_ik`` on a Pinocchio model
     built from a URDF generated from the same DH table (tol 1e-10).

@@ -59,7 +59,8 @@ target whose rotation is orthonormal, the certificate that the closed form is th
 singularities). :func:`ur_ik_all` lists the branches; :func:`ur_ik_all_many` lists those of
 many poses in one numpy pass (cheaper per pose from about 15 poses on; ``benchmarks/bench_ik.py
 --all-many``); :func:`ur_ik` searches the same steps branch-and-bound for the one nearest a seed
-configuration (:mod:`robocritics.robot.ik_nearest`).
+configuration (:mod:`robocritics.robot.ik_nearest`; in C where ``robocritics.robot._ur_nearest`` is built, the
+same floats).
 
 For arms that are not UR-like, :func:`~robocritics.robot.ik_numeric.numeric_ik` runs a damped-least-squares
 (Levenberg-Marquardt) iteration on a Pinocchio model with random restarts.
