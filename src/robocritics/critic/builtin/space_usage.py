@@ -55,11 +55,6 @@ __all__ = ["SpaceUsageCritic", "register_critics", "hull_points", "hull_volume",
 
 BLOCK = 64
 
-PART = 4096
-"""Samples a chunk is judged in at a time (a multiple of :data:`BLOCK`): (L, PART) float64 arrays, 393 kB for 12
-frames, stay in a core's cache across the passes over them; the whole chunk's arrays (12 frames, 16,384 samples:
-1.6 MB each) do not."""
-
 class Params(CriticParams):
     warn_fraction: float = Field(
         0.5,
@@ -266,29 +261,22 @@ class _Swept:
         self.kept: list[tuple[np.ndarray, ...]] = []  # per chunk: (sample, frame, point, outside distance)
 
     def add(self, chunk, execution) -> None:
+        params, workspace = self.params, self.workspace
         Y = position_planes(execution)  # (3, L, n) m
         if self.sel is not None:
             Y = Y[:, self.sel]
-        # the chunk's own samples in parts of PART: each part's arrays, (L, PART) float64, stay in the cache
-        # between the passes over them; parts start on the hull's blocks, so they reduce as chunks do
-        for start in range(chunk.start, chunk.stop, PART):
-            self._add_part(Y, chunk.lo, start, min(start + PART, chunk.stop))
-
-    def _add_part(self, Y: np.ndarray, lo: int, start: int, stop: int) -> None:
-        """Samples ``start..stop-1`` of the planes ``Y (3, L, n)`` of samples ``lo..lo+n-1``."""
-        params = self.params
-        per_sample, outside, farthest = _outside(self.workspace, Y, slice(start - lo, stop - lo))
-        self.per_sample.put(start, per_sample)
+        per_sample, outside, farthest = _outside(workspace, Y, slice(chunk.own.start, chunk.own.stop))
+        self.per_sample.put(chunk.start, per_sample)
         frames = np.arange(Y.shape[1])
-        self.farthest.offer(start, per_sample, lambda i: int(np.argmax(outside(i, frames))))
+        self.farthest.offer(chunk.start, per_sample, lambda i: int(np.argmax(outside(i, frames))))
         over = np.flatnonzero(per_sample > params.outside_tolerance_m)
         if over.size:  # the links outside at some sample where some link is: those whose farthest there is
             self.links_out.add((farthest(over) > params.outside_tolerance_m)[None, :])
         # --- the points the hull needs ----------------------------------------
-        ti, li = kept_samples(Y, lo, start, stop, len(self.trajectory), params.hull_tolerance_m)
+        ti, li = kept_samples(Y, chunk.lo, chunk.start, chunk.stop, len(self.trajectory), params.hull_tolerance_m)
         frame = np.where(li < 0, -1 - li, li)
-        points = Y[:, frame, ti - lo].T
-        self.kept.append((ti, li, points, outside(ti - start, frame)))
+        points = Y[:, frame, ti - chunk.lo].T
+        self.kept.append((ti, li, points, outside(ti - chunk.start, frame)))
 
     def verdict(self) -> Verdict:
         params, trajectory, names = self.params, self.trajectory, self.names
