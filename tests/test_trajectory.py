@@ -122,6 +122,25 @@ def test_positions_are_the_frame_origins_shared_read_only_and_not_pickled(execut
     np.testing.assert_array_equal(part.positions, pos[3:10])
 
 
+def test_position_planes_are_the_positions_transposed_kept_read_only_and_not_pickled(execution):
+    import pickle
+
+    traj = Trajectory.from_json(execution.trajectory.to_json())  # a fresh one: nothing cached yet
+    planes = traj.position_planes
+    np.testing.assert_array_equal(planes, np.asarray(traj.frames[:, :, :3, 3]).transpose(2, 1, 0))
+    assert "_positions" not in traj.__dict__  # gathered from the frames, not through the positions copy
+    assert planes.flags.c_contiguous and not planes.flags.writeable
+    assert traj.position_planes is planes  # judged again: not transposed again
+    with pytest.raises(ValueError):
+        planes[0, 0, 0] = 1.0
+    blob = pickle.dumps(traj)
+    assert len(blob) == len(pickle.dumps(Trajectory.from_json(traj.to_json())))  # the cache is not shipped
+    again = pickle.loads(blob)
+    assert "_position_planes" not in again.__dict__
+    np.testing.assert_array_equal(again.position_planes, planes)
+    np.testing.assert_array_equal(traj.slice(3, 10).position_planes, planes[:, :, 3:10])
+
+
 def _content_hash_reference(traj):
     """The hash written plainly: each array's little-endian bytes, then every sample's held-object id joined by NUL."""
     import hashlib

@@ -322,10 +322,27 @@ class Trajectory:
             self.__dict__["_positions"] = cached
         return cached
 
+    @property
+    def position_planes(self) -> np.ndarray:
+        """``(3, L, T)`` m: :attr:`positions` as planes of x, y and z, each frame's samples contiguous
+        (``planes[c, l, t] = positions[t, l, c]``): the layout the critics scan
+        (:func:`robocritics.critic.derived.position_planes`). Gathered from ``frames`` in one pass (not through
+        :attr:`positions`), one read-only copy made on first use, as :attr:`positions` (a compact trajectory:
+        computed each time)."""
+        if self.geometry is not None:
+            return np.ascontiguousarray(self.frames[:, :, :3, 3].transpose(2, 1, 0))
+        cached = self.__dict__.get("_position_planes")
+        if cached is None:
+            cached = np.ascontiguousarray(self._frames[:, :, :3, 3].transpose(2, 1, 0))
+            cached.setflags(write=False)
+            self.__dict__["_position_planes"] = cached
+        return cached
+
     def __getstate__(self) -> dict:
-        # the positions cache is derived from frames: not pickled (a batch ships trajectories between processes)
+        # the positions caches are derived from frames: not pickled (a batch ships trajectories between processes)
         state = dict(self.__dict__)
         state.pop("_positions", None)
+        state.pop("_position_planes", None)
         return state
 
     @property

@@ -36,6 +36,6 @@ def position_planes(execution: "Execution") -> np.ndarray:
     """``(3, L, T)`` m: every frame's origin in the base frame, as planes of x, y and z, each frame's samples
     contiguous: ``planes[c, l, t] = trajectory.positions[t, l, c]``. Differences along time, norms over the
     coordinates and maxima over the frames are then operations on whole contiguous rows (3-6x cheaper than on the
-    interleaved ``(T, L, 3)`` array)."""
-    return shared(execution, "position_planes",
-                  lambda: np.ascontiguousarray(execution.trajectory.positions.transpose(2, 1, 0)))  # fmt: skip
+    interleaved ``(T, L, 3)`` array). A stored trajectory keeps them (:attr:`Trajectory.position_planes`, made
+    once, as its ``positions``): judging it again does not transpose them again."""
+    return shared(execution, "position_planes", lambda: execution.trajectory.position_planes)

@@ -191,6 +191,16 @@ class Counted:
             return np.full(len(self._proximity), np.inf)
         return self._counted.min(axis=0)
 
+    def nearest(self, rows: np.ndarray) -> np.ndarray:
+        """``(K,)`` each pair's closest counted distance over the samples ``rows`` (non-empty), m, NaN left out;
+        +inf for the pairs that never count. ``np.fmin.reduce`` of the proximity masked by :meth:`row_mask` there,
+        from the counted pairs' gathered rows (masked where they do not count when this was built): no
+        ``(len(rows), K)`` gather of the proximity and its mask."""
+        out = np.full(len(self.columns), np.inf)
+        if len(self._counted):
+            out[self.columns] = np.fmin.reduce(self._counted[:, rows], axis=1)
+        return out
+
 
 def counted_distances(trajectory, ignore_pairs=(), contact_tolerance_m: float = Params().contact_tolerance_m) -> np.ndarray:
     """``(T, K)`` proximity, m, with every pair that does not count (self pairs, ignored pairs,
@@ -250,7 +260,7 @@ class _Closest:
         # than d_warn_m (penetration_m is lower, so those hold every sample at or below it; NaN left out)
         rows = own[per_sample < params.d_warn_m]
         if rows.size:
-            nearest = np.fmin.reduce(np.where(counted.row_mask(rows), P[rows], np.inf), axis=0)[None, :]  # (1, K) m
+            nearest = counted.nearest(rows)[None, :]  # (1, K) m
             self.touching.add(nearest <= params.penetration_m)
             self.near.add(nearest < params.d_warn_m)
 

@@ -23,7 +23,6 @@ from functools import partial
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..._arrays import min_over_columns
 from ..hookspecs import hookimpl
 from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from .. import CriticParams, Flag, Verdict, fmt_length, make_signal, threshold_verdict
@@ -70,16 +69,18 @@ class _Closest:
         if not self.gather.size:
             return
         P = chunk.trajectory.proximity[chunk.own]
-        # (n,): the self columns gathered as rows of P.T, then elementwise minima of whole rows (the minimum along
-        # each short row of P[:, gather] costs 2x, a masked `where=` reduction 8x)
-        per_sample = min_over_columns(P, self.gather)
+        # (n,): the self columns gathered as rows of P.T (Ks, n), then elementwise minima of whole rows (the minimum
+        # along each short row of P[:, gather] costs 2x, a masked `where=` reduction 8x)
+        rows_of_pairs = P.T[self.gather]
+        per_sample = rows_of_pairs.min(axis=0)
         self.per_sample.put(chunk.start, per_sample)
         self.closest.offer(chunk.start, per_sample, lambda i: int(np.argmin(np.where(self.columns, P[i], np.inf))))
         # which pairs come within either threshold: each self pair's closest distance over the samples closer than
         # d_max_m (d_min_m is no larger, so those hold every sample below it; NaN left out)
         rows = np.flatnonzero(per_sample < self.params.d_max_m)
         if rows.size:
-            nearest = np.fmin.reduce(np.where(self.columns, P[rows], np.inf), axis=0)[None, :]  # (1, K) m
+            nearest = np.full((1, len(self.columns)), np.inf)  # (1, K) m; the gathered rows, not P[rows]
+            nearest[0, self.gather] = np.fmin.reduce(rows_of_pairs[:, rows], axis=1)
             for threshold, hits in self.hits.items():
                 hits.add(nearest < threshold)
 
