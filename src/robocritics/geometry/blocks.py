@@ -18,11 +18,16 @@ import numpy as np
 
 from .._arrays import unique_values
 
-__all__ = ["BLOCK", "blocks", "capsule_balls", "column_sets", "lower_upper", "near_entries", "self_bounds"]
+__all__ = ["BATCH", "BLOCK", "blocks", "capsule_balls", "column_sets", "fill_rows", "lower_upper", "near_entries", "self_bounds"]
 
 #: Samples per block of the far-pair bounds: a capsule far from a shape over a block is not evaluated there;
 #: shorter blocks bound tighter, longer ones cost less.
 BLOCK = 32
+
+#: Entries (pair-samples) handled at a time where the near blocks are gathered, evaluated or filled with their bound
+#: (:func:`near_entries`, :func:`fill_rows`, the kernel's batches): their temporaries stay a few MB however long the
+#: run is and however many of its blocks are near (every one, with ``far_m`` infinite).
+BATCH = 16384
 
 
 def blocks(x: np.ndarray, nb: int) -> np.ndarray:
@@ -103,7 +108,7 @@ def self_bounds(balls, ia, ib, r, cols, buf, upper, set_of, centre) -> np.ndarra
     slack = move[ia] + move[ib]
     slack += 1e-12
     lb = np.maximum(out[0][0] - out[0][1] - r, centre - slack)
-    buf[cols] = np.repeat(lb, BLOCK, axis=1)[:, :T]
+    fill_rows(buf, cols, lb, 0, T)
     if set_of is not None:
         sel = set_of[cols] >= 0
         if sel.any():
@@ -113,14 +118,24 @@ def self_bounds(balls, ia, ib, r, cols, buf, upper, set_of, centre) -> np.ndarra
     return lb
 
 
-def near_entries(lb: np.ndarray, cut: np.ndarray, T: int) -> tuple[np.ndarray, np.ndarray]:
-    """The ``(row, sample)`` entries ``(m,)`` each of the blocks where a row's lower bound ``lb (P, nb)`` is at
-    most the largest of its cutoffs ``cut (P, T)`` over the block's samples (samples below ``T``)."""
-    near = lb <= blocks(cut, lb.shape[1]).max(axis=2)
-    pi, bi = np.nonzero(near)
-    ti = (bi[:, None] * BLOCK + np.arange(BLOCK)).ravel()
-    pi = np.repeat(pi, BLOCK)
-    if T % BLOCK:  # the last block is short
-        ok = ti < T
-        pi, ti = pi[ok], ti[ok]
-    return pi, ti
+def near_entries(rows: np.ndarray, near: np.ndarray, n: int):
+    """The ``(row, sample)`` entries ``(m,)`` of the near blocks ``(rows[i], near[i])`` of a run of ``n`` samples,
+    in slices of at most :data:`BATCH` entries (samples below ``n``): the gathers that follow hold no more
+    than a slice, whatever the run's length and however many blocks are near."""
+    per = max(1, BATCH // BLOCK)
+    for i in range(0, len(rows), per):
+        bi = near[i : i + per]
+        ti = (bi[:, None] * BLOCK + np.arange(BLOCK)).ravel()
+        pi = np.repeat(rows[i : i + per], BLOCK)
+        if n % BLOCK:  # the run's last block is short
+            ok = ti < n
+            pi, ti = pi[ok], ti[ok]
+        yield pi, ti
+
+
+def fill_rows(buf: np.ndarray, rows: np.ndarray, lb: np.ndarray, t0: int, n: int) -> None:
+    """``buf[rows[i], t0 : t0 + n]`` = the block bounds ``lb[i] (nb,)`` m, each repeated over its block's samples;
+    about :data:`BATCH` values at a time (the repeated copy of a slice of rows is the only temporary)."""
+    per = max(1, BATCH // max(n, 1))
+    for i in range(0, len(rows), per):
+        buf[rows[i : i + per], t0 : t0 + n] = np.repeat(lb[i : i + per], BLOCK, axis=1)[:, :n]

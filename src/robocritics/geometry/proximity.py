@@ -120,7 +120,7 @@ from .kernels import (
     _seg_seg_sq,
     _to_local,
 )
-from .blocks import BLOCK, blocks, capsule_balls, column_sets, lower_upper, near_entries, self_bounds
+from .blocks import BATCH, BLOCK, blocks, capsule_balls, column_sets, fill_rows, lower_upper, near_entries, self_bounds
 from .pairs import _bounding_radius, _pose_changes, _shape_runs, shape_shape
 
 __all__ = ["CapsuleSpec", "ProximityKernel", "reduce_min"]
@@ -229,6 +229,31 @@ def _subgroup(g: _Group, keep: np.ndarray) -> _Group:
     """The product group ``g`` restricted to the capsules ``keep`` (a mask over ``g.caps``)."""
     rows = [rr[keep] for rr in g.rows]
     return replace(g, caps=g.caps[keep], rows=rows, views=[_as_slice(rr) for rr in rows], r=g.r[keep])
+
+
+class _Batch:
+    """Near entries of product groups gathered per shape kind and evaluated before they pass :data:`~.blocks.BATCH` (:meth:`ProximityKernel._flush`, then their deferred Newton and depth passes), so the gathered copies
+    stay a few MB however many entries are near; each entry's value is the same whichever batch holds it."""
+
+    def __init__(self, kernel: "ProximityKernel", buf: np.ndarray):
+        self.kernel, self.buf = kernel, buf
+        self.parts: dict[str, list] = {}
+        self.count = 0
+
+    def add(self, kind: str, part: tuple) -> None:
+        """One shape's entries ``(a, d (3, m), centre, size, r (m,), where (m,))`` (see :meth:`ProximityKernel._flush`)."""
+        m = part[0].shape[1]
+        if self.count + m > BATCH:  # a batch holds at most BATCH entries (or one part, which near_entries bounds)
+            self.flush()
+        self.parts.setdefault(kind, []).append(part)
+        self.count += m
+
+    def flush(self) -> None:
+        if self.parts:
+            hits: dict = {}
+            self.kernel._flush(self.parts, self.buf, hits)
+            self.kernel._finish(self.buf, hits)
+        self.parts, self.count = {}, 0
 
 
 class ProximityKernel:
@@ -526,20 +551,21 @@ class ProximityKernel:
         shape pairs' cutoffs. Returns ``(cut, crow)`` (None without ``far_m``).
         """
         T = P0.shape[2]
-        cut = crow = None
+        cut = crow = cut_b = None
         lbs: dict[tuple[int, int], Any] = {}
         if far_m is not None:
             cut, crow = self._cutoffs(groups, P0, D, poses, far_m, buf, set_of, lbs)
+            cut_b = blocks(cut, -(-T // BLOCK)).max(axis=2)  # each cutoff row's largest per block
         hits: dict[str, list[tuple[np.ndarray, list[np.ndarray], np.ndarray]]] = {}
-        batch: dict[str, list] = {}  # the near entries of the product groups, per kind (:meth:`_flush`)
+        batch = _Batch(self, buf)  # the near entries of the product groups, evaluated BATCH at a time
         for gi, g in enumerate(groups):
             if g.product:
                 for t0, t1, pose in self._chunks(g, T, poses, far=cut is not None):
                     c = None if cut is None else cut[:, t0:t1]
                     self._product(g, P0, D, t0, t1, buf, hits, c, pose, lbs.get((gi, t0)), crow, batch)
             elif g.kind == "capsule":
-                self._self_pairs(g, P0, D, buf, None if cut is None else cut[crow[g.cols]], lbs.get((gi, 0)))
-        self._flush(batch, buf, hits)
+                self._self_pairs(g, P0, D, buf, None if cut is None else cut_b[crow[g.cols]], lbs.get((gi, 0)))
+        batch.flush()
         self._finish(buf, hits)
         shape_groups = [g for g in groups if g.kind == "shape"]
         if shape_groups:
@@ -548,8 +574,11 @@ class ProximityKernel:
                 shape_cut = cut.copy()
                 for s in range(len(cut) - 1):  # the exact minimum of each set's capsule rows so far
                     rows = [k for g in groups if g.kind != "shape" for k in g.cols.tolist() if set_of[k] == s]
-                    if rows:
-                        np.minimum(shape_cut[s], np.maximum(buf[rows].min(axis=0), far_m), out=shape_cut[s])
+                    if rows:  # row by row: no (rows, T) copy
+                        least = buf[rows[0]].copy()
+                        for k in rows[1:]:
+                            np.minimum(least, buf[k], out=least)
+                        np.minimum(shape_cut[s], np.maximum(least, far_m), out=shape_cut[s])
                 if len(cut) > 1:
                     shape_cut[-1] = shape_cut[0]
             for g in shape_groups:
@@ -583,17 +612,18 @@ class ProximityKernel:
         crow = np.full(len(self.pairs), n_sets) if set_of is None else np.where(set_of >= 0, set_of, n_sets)
         return cut, crow
 
-    def _self_pairs(self, g: _Group, P0: np.ndarray, D: np.ndarray, buf: np.ndarray, cut: np.ndarray | None, lb) -> None:
-        """Capsule-capsule rows: where ``cut (P, T)`` is given, only the near blocks (block bounds ``lb``), in one
-        flat batch; else every sample, in chunks."""
+    def _self_pairs(self, g: _Group, P0: np.ndarray, D: np.ndarray, buf: np.ndarray, cut_b: np.ndarray | None, lb) -> None:
+        """Capsule-capsule rows: where the cutoffs ``cut_b (P, blocks)`` (each row's largest per block) are given,
+        only the blocks whose bound ``lb`` is within them, in flat batches (:func:`~.blocks.near_entries`); else
+        every sample, in chunks."""
         T = P0.shape[2]
-        if cut is not None:
-            pi, ti = near_entries(lb, cut, T)
-            flat_a, flat_b = g.ia[pi] * T + ti, g.ib[pi] * T + ti
+        if cut_b is not None:
             P2, D2 = P0.reshape(3, -1), D.reshape(3, -1)
-            a, d = np.take(P2, flat_a, axis=1), np.take(D2, flat_a, axis=1)
-            b, e = np.take(P2, flat_b, axis=1), np.take(D2, flat_b, axis=1)
-            buf.reshape(-1)[g.cols[pi] * T + ti] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r[pi, 0]
+            for pi, ti in near_entries(*np.nonzero(lb <= cut_b), T):
+                flat_a, flat_b = g.ia[pi] * T + ti, g.ib[pi] * T + ti
+                a, d = np.take(P2, flat_a, axis=1), np.take(D2, flat_a, axis=1)
+                b, e = np.take(P2, flat_b, axis=1), np.take(D2, flat_b, axis=1)
+                buf.reshape(-1)[g.cols[pi] * T + ti] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r[pi, 0]
             return
         step = max(64, self.chunk // max(len(g.cols), 1))
         for t0 in range(0, T, step):
@@ -728,7 +758,7 @@ class ProximityKernel:
                 e = [self._outside(g.kind, c, g, s) for c, _ in balls]
                 e_ub = e
             lb = e[0] - balls[0][1] - r
-            buf[rows[keep], t0 : t0 + n] = np.repeat(lb[keep], BLOCK, axis=1)[:, :n]
+            fill_rows(buf, rows[keep], lb[keep], t0, n)
             out.append(lb)
             if set_of is not None:
                 sel = keep.copy()
@@ -748,7 +778,7 @@ class ProximityKernel:
         lb = e[0] - balls[0][1] - g.r  # (S, Cg, nb)
         rows = np.stack(g.rows)  # (S, Cg)
         keep = rows >= 0
-        buf[rows[keep], t0 : t0 + n] = np.repeat(lb[keep], BLOCK, axis=1)[:, :n]
+        fill_rows(buf, rows[keep], lb[keep], t0, n)
         if set_of is not None:
             sel = keep & (set_of[np.where(keep, rows, 0)] >= 0)
             if sel.any():
@@ -827,7 +857,7 @@ class ProximityKernel:
         pose: np.ndarray | None,
         lbs: list | None = None,
         crow: np.ndarray | None = None,
-        batch: dict | None = None,
+        batch: _Batch | None = None,
     ) -> None:
         """Evaluate one product group for the samples ``t0 .. t1``; ``P0``, ``D``: ``(3, C, T)`` segment starts and
         directions of every capsule.
@@ -835,13 +865,13 @@ class ProximityKernel:
         ``pose (n, 4, 4)``: the per-sample pose of a moving group's shape. ``cut (R, n)``: :meth:`_bounds` has
         written block lower bounds ``lbs`` into ``buf``; only the blocks whose bound is ``<= cut[crow[k]]``
         (row k's cutoff) somewhere in the block are evaluated exactly, the others keep their bound: the near
-        entries of every shape go into ``batch`` (per kind, :meth:`_flush` evaluates them in one call).
+        entries of every shape go into ``batch`` (:class:`_Batch`: evaluated per kind, :data:`~.blocks.BATCH` at a
+        time).
         """
         T = buf.shape[1]
         n = t1 - t0
         r = g.r
         if cut is not None:
-            flat = buf.reshape(-1)
             cut_b = blocks(cut, lbs[0].shape[1]).max(axis=2)  # (R, nb): each cutoff row's largest per block
             # flat takes of the entries straight from (3, C * T): no (3, Cg, n) copy of the group's capsules
             Tp = P0.shape[2]
@@ -853,26 +883,19 @@ class ProximityKernel:
                 rows = g.rows[s]
                 near = lb <= cut_b[crow[np.maximum(rows, 0)]]
                 near &= (rows >= 0)[:, None]
-                ci, bi = np.nonzero(near)
-                if not ci.size:
-                    continue
-                ti = (bi[:, None] * BLOCK + np.arange(BLOCK)).ravel()
-                ci = np.repeat(ci, BLOCK)
-                if n % BLOCK:  # the last block is short
-                    ok = ti < n
-                    ci, ti = ci[ok], ti[ok]
-                flat_i = base[ci] + ti  # (3, m): one flat batch of (capsule, sample) entries
-                ga, gd = np.take(a2, flat_i, axis=1), np.take(d2, flat_i, axis=1)
-                if pose is not None and g.kind == "sphere":  # as :meth:`_local`: a ball needs only p - c
-                    ga = ga - np.take(rc[3::4], ti, axis=1)
-                elif pose is not None:
-                    Rc = np.take(rc, ti, axis=1)
-                    ga, gd = _rows_to_local(ga, Rc), _rows_to_local(gd, Rc, translate=False)
-                elif g.rot is not None:
-                    ga, gd = _rotate_back(g.rot, ga), _rotate_back(g.rot, gd)
                 c = tuple(v[s] for v in g.centre)
                 size = tuple(v[s] for v in g.size)
-                batch.setdefault(g.kind, []).append((ga, gd, c, size, r[ci, 0], rows[ci] * T + t0 + ti))
+                for ci, ti in near_entries(*np.nonzero(near), n):
+                    flat_i = base[ci] + ti  # (3, m): one flat batch of (capsule, sample) entries
+                    ga, gd = np.take(a2, flat_i, axis=1), np.take(d2, flat_i, axis=1)
+                    if pose is not None and g.kind == "sphere":  # as :meth:`_local`: a ball needs only p - c
+                        ga = ga - np.take(rc[3::4], ti, axis=1)
+                    elif pose is not None:
+                        Rc = np.take(rc, ti, axis=1)
+                        ga, gd = _rows_to_local(ga, Rc), _rows_to_local(gd, Rc, translate=False)
+                    elif g.rot is not None:
+                        ga, gd = _rotate_back(g.rot, ga), _rotate_back(g.rot, gd)
+                    batch.add(g.kind, (ga, gd, c, size, r[ci, 0], rows[ci] * T + t0 + ti))
             return
         a, d = self._local(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], pose)
         if n == 1 and pose is None:  # one sample (capsules that stand still): a few entries per shape, batched
@@ -881,7 +904,7 @@ class ProximityKernel:
                 ci = np.flatnonzero(rows >= 0)
                 c = tuple(v[s] for v in g.centre)
                 size = tuple(v[s] for v in g.size)
-                batch.setdefault(g.kind, []).append((a[:, ci, 0], d[:, ci, 0], c, size, r[ci, 0], rows[ci] * T + t0))
+                batch.add(g.kind, (a[:, ci, 0], d[:, ci, 0], c, size, r[ci, 0], rows[ci] * T + t0))
             return
         aux = self._prep(g.kind, d)
         for s in range(len(g.centre[0])):
