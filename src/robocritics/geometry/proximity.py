@@ -94,7 +94,11 @@ sample to an upper bound of the least distance of each chosen column set
 set's minimum exact: see :meth:`ProximityKernel.distances`. The near entries of
 every capsule/shape group are gathered and evaluated in one kernel call per shape
 kind (elementwise, so the numbers are those of a call per pair, bit for bit:
-``tests/test_proximity_sets.py`` checks the pruned kernel against the plain one).
+``tests/test_proximity_sets.py`` checks the pruned kernel against the plain one),
+:data:`~robocritics.geometry.blocks.BATCH` entries at a time: the gathered copies and
+their temporaries stay a few MB however long the run and however many of its blocks
+are near, so the pruned kernel takes no more memory than the plain one (which works
+in chunks), also with every block near (``far_m`` infinite).
 """
 
 from __future__ import annotations
