@@ -70,18 +70,24 @@ def test_every_pair_matches_coal(robot, q, scene_name):
                 refs.append(coal_distance(ga, ta, gb, tb))
             else:
                 refs.append(min(coal_distance(ga, ta, coal_shape(s), tf(s.pose)) for s in shapes if s.owner == pair.b_entity))
-        # exact within EXACT_WITHIN_M and within the arm's closest distance; beyond, a lower bound beyond both
-        exact_within = max(EXACT_WITHIN_M, min(refs[k] for k in arm))
+        # exact within EXACT_WITHIN_M and within the arm's closest distance (a self pair: the closest self
+        # distance); beyond, a lower bound beyond both
+        own = [k for k, p in enumerate(traj.pairs) if p.kind == "self"]
+        env_within = max(EXACT_WITHIN_M, min(refs[k] for k in arm))
+        self_within = max(EXACT_WITHIN_M, min(refs[k] for k in own))
         for k, (pair, ref) in enumerate(zip(traj.pairs, refs)):
             ours = traj.proximity[t, k]
-            if pair.kind == "environment" and ref > exact_within:
+            exact_within = self_within if pair.kind == "self" else env_within
+            if ref > exact_within:
                 assert exact_within - 1e-6 < ours <= ref + 1e-9, (pair.name, t, ours, ref)
             elif ref > 1e-9:
                 assert ours == pytest.approx(ref, abs=1e-6), (pair.name, t)
             else:
                 assert ours <= 1e-9, (pair.name, t, ours, ref)  # touching or penetrating: never positive
-        # so the closest environment distance of the arm (and of any set of pairs holding it) is exact
+        # so the closest environment distance of the arm (and of any set of pairs holding it) is exact, and so is
+        # the closest self distance (the pinch-point critic's)
         assert traj.proximity[t, arm].min() == pytest.approx(min(refs[k] for k in arm), abs=1e-6)
+        assert traj.proximity[t, own].min() == pytest.approx(min(refs[k] for k in own), abs=1e-6)
 
 
 def test_carried_object_pairs_are_exact_near_and_bounded_far(robot):

@@ -85,12 +85,20 @@ takes about 40 ms on one core, and about 30 ms with ``far_m=0.1``
 (``benchmarks/bench_proximity.py``: random motions, where most pairs are near).
 
 **Far pairs** (``far_m``): per capsule and block of 32 samples, bounding balls of
-the segments give a lower bound of every capsule/box and capsule/cylinder pair's
-distance; a pair is evaluated exactly only in the blocks where that bound is
-within the cutoff, so on a real program (a few per cent of the pairs near) most
-of the exact work is skipped. The cutoff rises per sample to an upper bound of the
-least distance of chosen columns (``exact_min_of``), which keeps their minimum
-exact: see :meth:`ProximityKernel.distances`.
+the segments (:mod:`~robocritics.geometry.blocks`) give a lower bound of every
+capsule/shape and capsule/capsule pair's distance; a pair is evaluated exactly only
+in the blocks where that bound is within the cutoff, so on a real program (a few
+per cent of the pairs near) most of the exact work is skipped. The cutoff rises per
+sample to an upper bound of the least distance of each chosen column set
+(``exact_min_of``: the trace's arm pairs and its self pairs), which keeps each
+set's minimum exact: see :meth:`ProximityKernel.distances`. The near entries of
+every capsule/shape group are gathered and evaluated in one kernel call per shape
+kind (elementwise, so the numbers are those of a call per pair, bit for bit:
+``tests/test_proximity_sets.py`` checks the pruned kernel against the plain one),
+:data:`~robocritics.geometry.blocks.BATCH` entries at a time: the gathered copies and
+their temporaries stay a few MB however long the run and however many of its blocks
+are near, so the pruned kernel takes no more memory than the plain one (which works
+in chunks), also with every block near (``far_m`` infinite).
 """
 
 from __future__ import annotations
@@ -101,6 +109,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import unique_values
 from ..scene import Shape
 from .kernels import (
     _EYE3,
@@ -115,6 +124,7 @@ from .kernels import (
     _seg_seg_sq,
     _to_local,
 )
+from .blocks import BATCH, BLOCK, blocks, capsule_balls, column_sets, fill_rows, lower_upper, near_entries, self_bounds
 from .pairs import _bounding_radius, _pose_changes, _shape_runs, shape_shape
 
 __all__ = ["CapsuleSpec", "ProximityKernel", "reduce_min"]
@@ -191,37 +201,22 @@ _DEPTH = {"box": _seg_box_depth, "cylinder": _seg_cyl_depth}
 #: UR3e's 10 capsules) in one chunk.
 _FAR_CHUNKS = 8
 
-#: Samples per block of the far-pair bounds (:meth:`ProximityKernel._bounds`): a capsule far from a shape over a
-#: block is not evaluated there; shorter blocks bound tighter, longer ones cost less.
-_BLOCK = 32
+def _rows_to_local(p: np.ndarray, Rc: np.ndarray, translate: bool = True) -> np.ndarray:
+    """``R^T (p - c)`` (or ``R^T p``) per entry for points ``p (3, m)`` and poses given as the rows ``Rc (12, m)``
+    of their ``[R c]`` entries (row-major: ``R[i][j]`` is row ``4 i + j``, ``c[i]`` row ``4 i + 3``): the same
+    operations in the same order as :func:`~.kernels._to_local`, so the same values bit for bit."""
+    px, py, pz = p
+    if translate:
+        px, py, pz = px - Rc[3], py - Rc[7], pz - Rc[11]
+    return np.stack(
+        [Rc[j] * px + Rc[4 + j] * py + Rc[8 + j] * pz for j in range(3)]
+    )
 
 
-def _capsule_balls(P0: np.ndarray, D: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per capsule and block of :data:`_BLOCK` samples, balls ``(centre (3, C, nb), radius (C, nb))`` m holding
-    the segment midpoints (the radius grown by the farthest one's half length: the ball holds the segments),
-    the start points and the end points of segments ``P0 + t D`` ``(3, C, T)``. Centre: the block's middle sample.
-    """
-    nb = -(-P0.shape[2] // _BLOCK)
-    start, d = _blocks(P0, nb), _blocks(D, nb)  # (3, C, nb, B), padded once
-    half = np.sqrt(np.einsum("icnb,icnb->cnb", d, d))
-    half *= 0.5
-    out = []
-    for pb, h in ((start + 0.5 * d, half), (start, None), (start + d, None)):
-        c = np.ascontiguousarray(pb[..., _BLOCK // 2])  # padding repeats real samples: any index will do
-        diff = pb - c[..., None]
-        dist = np.sqrt(np.einsum("icnb,icnb->cnb", diff, diff))
-        if h is not None:
-            dist += h
-        out.append((c, dist.max(axis=2)))
-    return out
-
-
-def _blocks(x: np.ndarray, nb: int) -> np.ndarray:
-    """``x (..., n)`` as ``(..., nb, _BLOCK)``, the last block padded with copies of the last sample."""
-    n = x.shape[-1]
-    if nb * _BLOCK != n:
-        x = np.concatenate([x, np.repeat(x[..., -1:], nb * _BLOCK - n, axis=-1)], axis=-1)
-    return x.reshape(*x.shape[:-1], nb, _BLOCK)
+def _rotate_back(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``R^T p`` for points ``p (3, ...)``, elementwise (``sum_i R[i, j] p_i``, in that order): the same numbers
+    whatever the layout of ``p``, where a BLAS product may round differently for a different shape."""
+    return np.stack([R[0, j] * p[0] + R[1, j] * p[1] + R[2, j] * p[2] for j in range(3)])
 
 
 def _as_slice(rows: np.ndarray) -> slice | None:
@@ -238,6 +233,31 @@ def _subgroup(g: _Group, keep: np.ndarray) -> _Group:
     """The product group ``g`` restricted to the capsules ``keep`` (a mask over ``g.caps``)."""
     rows = [rr[keep] for rr in g.rows]
     return replace(g, caps=g.caps[keep], rows=rows, views=[_as_slice(rr) for rr in rows], r=g.r[keep])
+
+
+class _Batch:
+    """Near entries of product groups gathered per shape kind and evaluated before they pass :data:`~.blocks.BATCH` (:meth:`ProximityKernel._flush`, then their deferred Newton and depth passes), so the gathered copies
+    stay a few MB however many entries are near; each entry's value is the same whichever batch holds it."""
+
+    def __init__(self, kernel: "ProximityKernel", buf: np.ndarray):
+        self.kernel, self.buf = kernel, buf
+        self.parts: dict[str, list] = {}
+        self.count = 0
+
+    def add(self, kind: str, part: tuple) -> None:
+        """One shape's entries ``(a, d (3, m), centre, size, r (m,), where (m,))`` (see :meth:`ProximityKernel._flush`)."""
+        m = part[0].shape[1]
+        if self.count + m > BATCH:  # a batch holds at most BATCH entries (or one part, which near_entries bounds)
+            self.flush()
+        self.parts.setdefault(kind, []).append(part)
+        self.count += m
+
+    def flush(self) -> None:
+        if self.parts:
+            hits: dict = {}
+            self.kernel._flush(self.parts, self.buf, hits)
+            self.kernel._finish(self.buf, hits)
+        self.parts, self.count = {}, 0
 
 
 class ProximityKernel:
@@ -424,7 +444,7 @@ class ProximityKernel:
         p1: Any,
         poses: Mapping[str, Any] | None = None,
         far_m: float | None = None,
-        exact_min_of: Sequence[int] | None = None,
+        exact_min_of: Sequence[int] | Sequence[Sequence[int]] | None = None,
     ) -> np.ndarray:
         """Signed distances ``(T, K)`` in m for capsule endpoints ``p0``, ``p1`` ``(T, C, 3)`` (base frame).
 
@@ -432,19 +452,22 @@ class ProximityKernel:
         result is column-major (Fortran-ordered): each pair's column is contiguous.
 
         ``far_m=None`` (the default): every value is exact. With ``far_m >= 0`` set (m),
-        the cutoff at sample t is ``c_t = far_m``, raised to ``max(far_m, u_t)`` when
-        ``exact_min_of`` lists columns: ``u_t`` is an upper bound of their least distance
-        at t. Every value at or below ``c_t`` is exact; a value above it may instead be a
-        *lower bound* that is itself above ``c_t``. So any threshold test at or below
-        ``far_m`` gives the exact answer, and the per-sample minimum over any set of
-        columns that includes ``exact_min_of`` is exact at every sample (the pair that
-        attains it is within ``u_t``). The bounds of a capsule/box or capsule/cylinder pair
-        hold for a block of 32 samples (:meth:`_bounds`: balls about the segments'
-        midpoints, starts and ends over the block), so only the blocks that can be within
-        the cutoff are evaluated exactly; for two boxes/cylinders (:func:`shape_shape`),
-        a bounding ball's gap or a projection gap (:func:`_convex_bounds`). Capsule-capsule
-        and sphere pairs are always exact. A shape pair listed both ways round is bounded
-        once (the distance is symmetric).
+        the cutoff of column k at sample t is ``c_tk = far_m``, raised when ``exact_min_of``
+        gives column sets (one list of columns is one set; a column belongs to at most one):
+        ``u_tS`` is an upper bound of the least distance over set S at t, ``c_tk =
+        max(far_m, u_tS)`` for k in S, and the first set's for a column in no set. Every value
+        at or below its ``c_tk`` is exact; a value above it may instead be a *lower bound*
+        that is itself above ``c_tk``. So any threshold test at or below ``far_m`` gives the
+        exact answer, and the per-sample minimum over a set of columns X is exact at every
+        sample when X holds the whole set of each of its columns (and the first set if it
+        holds a column in no set): a bound in X is above a ``u_tS`` with S in X, so above the
+        least distance over X. The bounds of a capsule/shape or
+        capsule/capsule pair hold for a block of 32 samples (:func:`~.blocks.capsule_balls`:
+        balls about the segments' midpoints, starts and ends over the block), so only the
+        blocks that can be within the cutoff are evaluated exactly; for two boxes/cylinders
+        (:func:`shape_shape`), a bounding ball's gap or a projection gap
+        (:func:`_convex_bounds`). A shape pair with a sphere is always exact; a shape pair
+        listed both ways round is bounded once (the distance is symmetric).
         """
         p0 = np.asarray(p0, dtype=_FLOAT)
         p1 = np.asarray(p1, dtype=_FLOAT)
@@ -454,10 +477,7 @@ class ProximityKernel:
         T = p0.shape[0]
         if far_m is not None and not far_m >= 0.0:
             raise ValueError(f"far_m must be >= 0 m (or None: every value exact), got {far_m}")
-        tight = None
-        if far_m is not None and exact_min_of is not None:
-            tight = np.zeros(len(self.pairs), dtype=bool)
-            tight[np.asarray(exact_min_of, dtype=np.int64)] = True
+        set_of = None if far_m is None or exact_min_of is None else column_sets(exact_min_of, len(self.pairs))
         poses = dict(poses or {})
         for key in self.moving:
             if key not in poses:
@@ -491,8 +511,9 @@ class ProximityKernel:
                         for rr in g.rows:
                             rr = rr[rr >= 0]
                             buf[rr] = buf1[rr]
-        cut = self._run(groups, P0, D, poses, far_m, buf, tight)
+        cuts = self._run(groups, P0, D, poses, far_m, buf, set_of)
         if self._meshes:
+            cut = None if cuts is None else cuts[0][unique_values(cuts[1][[k for k, _, _ in self._meshes]])].max(axis=0)
             self._mesh_rows(p0, p1, poses, buf, cut)
         return buf.T
 
@@ -521,68 +542,145 @@ class ProximityKernel:
         poses: dict,
         far_m: float | None,
         buf: np.ndarray,
-        tight: np.ndarray | None = None,
-    ) -> np.ndarray | None:
+        set_of: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray] | None:
         """Evaluate ``groups`` for segments ``P0 + t D`` ``(3, C, T)`` into the rows of ``buf (K, T)``.
 
-        With ``far_m``, a first pass writes every capsule/box and capsule/cylinder pair's lower bound into
-        ``buf`` (:meth:`_bounds`) and sets the per-sample cutoff ``c_t = max(far_m, u_t)``, ``u_t`` the least
-        upper bound over the rows ``tight`` (bool ``(K,)``); the second pass replaces the bounds that are
-        ``<= c_t`` by exact values, sample by sample. Returns the cutoffs ``c_t`` (None without ``far_m``).
+        With ``far_m``, a first pass writes every capsule/shape and capsule/capsule pair's block lower bound
+        into ``buf`` and sets the cutoffs (:meth:`_cutoffs`); the second pass replaces the bounds that are
+        ``<= c_t`` by exact values (:meth:`_product`, :meth:`_self_pairs`, then the batches and the deferred
+        Newton and depth passes, :meth:`_finish`). The shape pairs come last (:meth:`_shape_pairs`): by then
+        the capsule rows of each column set are exact wherever they can be its least distance, so their
+        minimum (an upper bound of the set's least distance, and no larger than the block bound) lowers the
+        shape pairs' cutoffs. Returns ``(cut, crow)`` (None without ``far_m``).
         """
         T = P0.shape[2]
-        cut = None
-        lbs: dict[tuple[int, int], list] = {}
+        cut = crow = cut_b = None
+        lbs: dict[tuple[int, int], Any] = {}
         if far_m is not None:
-            # u_t: +inf (every value exact) until a bound of a `tight` row lowers it; without `tight`, c_t = far_m
-            upper = np.full(T, np.inf if tight is not None else far_m)
-            balls = None
-            for gi, g in enumerate(groups):
-                if g.product and g.kind != "sphere":
-                    if balls is None:
-                        balls = _capsule_balls(P0, D)
-                    for t0, t1, pose in self._chunks(g, T, poses, far=True):
-                        lbs[gi, t0] = self._bounds(g, balls, t1 - t0, pose, buf, t0, upper, tight)
-            cut = np.maximum(upper, far_m)
+            cut, crow = self._cutoffs(groups, P0, D, poses, far_m, buf, set_of, lbs)
+            cut_b = blocks(cut, -(-T // BLOCK)).max(axis=2)  # each cutoff row's largest per block
         hits: dict[str, list[tuple[np.ndarray, list[np.ndarray], np.ndarray]]] = {}
-        changes: dict[tuple[str, ...], np.ndarray] = {}  # moving pose keys -> where any of them changes
+        batch = _Batch(self, buf)  # the near entries of the product groups, evaluated BATCH at a time
         for gi, g in enumerate(groups):
-            if g.kind == "shape":
-                items, cols = [], []
-                for col, i, j in zip(g.cols, g.ia, g.ib):
-                    a, b = self.shapes[i], self.shapes[j]
-                    ka, kb = self._pose_key.get(a.name, ""), self._pose_key.get(b.name, "")
-                    moved = tuple(sorted({ka, kb} & poses.keys()))
-                    for key in moved:
-                        if (key,) not in changes:
-                            changes[key,] = _pose_changes(poses[key], T)
-                    if moved not in changes:  # one array per set of moving poses: _shape_runs shares its runs
-                        changes[moved] = np.logical_or.reduce([changes[key,] for key in moved]) if moved else _pose_changes(a.pose[None], T)
-                    changed = changes[moved]
-                    Pa = poses[ka] if ka in poses else np.asarray(a.pose, dtype=_FLOAT)[None]
-                    Pb = poses[kb] if kb in poses else np.asarray(b.pose, dtype=_FLOAT)[None]
-                    if a.kind == "sphere" or b.kind == "sphere":  # closed form, exact: once per run of equal poses
-                        first = np.flatnonzero(changed)
-                        at = [P if len(P) == 1 else P[first] for P in (Pa, Pb)]
-                        buf[col] = np.broadcast_to(shape_shape(a, b, *at), (len(first),))[np.cumsum(changed) - 1]
-                        continue
-                    items.append((a, b, Pa, Pb, changed))
-                    cols.append(col)
-                if items:
-                    for col, v in zip(cols, _shape_runs(items, cut)):
-                        buf[col] = v
-                continue
             if g.product:
-                for t0, t1, pose in self._chunks(g, T, poses, far=cut is not None and g.kind != "sphere"):
-                    c = None if cut is None or g.kind == "sphere" else cut[t0:t1]
-                    self._product(g, P0, D, t0, t1, buf, hits, c, pose, lbs.get((gi, t0)))
+                for t0, t1, pose in self._chunks(g, T, poses, far=cut is not None):
+                    c = None if cut is None else cut[:, t0:t1]
+                    self._product(g, P0, D, t0, t1, buf, hits, c, pose, lbs.get((gi, t0)), crow, batch)
+            elif g.kind == "capsule":
+                self._self_pairs(g, P0, D, buf, None if cut is None else cut_b[crow[g.cols]], lbs.get((gi, 0)))
+        batch.flush()
+        self._finish(buf, hits)
+        shape_groups = [g for g in groups if g.kind == "shape"]
+        if shape_groups:
+            shape_cut = None
+            if cut is not None:
+                shape_cut = cut.copy()
+                for s in range(len(cut) - 1):  # the exact minimum of each set's capsule rows so far
+                    rows = [k for g in groups if g.kind != "shape" for k in g.cols.tolist() if set_of[k] == s]
+                    if rows:  # row by row: no (rows, T) copy
+                        least = buf[rows[0]].copy()
+                        for k in rows[1:]:
+                            np.minimum(least, buf[k], out=least)
+                        np.minimum(shape_cut[s], np.maximum(least, far_m), out=shape_cut[s])
+                if len(cut) > 1:
+                    shape_cut[-1] = shape_cut[0]
+            for g in shape_groups:
+                self._shape_pairs(g, poses, buf, None if cut is None else shape_cut[unique_values(crow[g.cols])].max(axis=0))
+        return None if cut is None else (cut, crow)
+
+    def _cutoffs(self, groups, P0, D, poses, far_m, buf, set_of, lbs) -> tuple[np.ndarray, np.ndarray]:
+        """The block bounds of every capsule/shape and capsule/capsule group (into ``buf`` and ``lbs``) and the
+        cutoffs ``cut (S + 1, T)``: ``max(far_m, u_tS)`` per column set (``set_of (K,)``: each row's set, -1
+        for none; ``u_tS`` the least block upper bound of the set's rows), then the row of the columns in no
+        set (the first set's, or ``far_m``); and ``crow (K,)``, the cutoff row of each column."""
+        T = P0.shape[2]
+        n_sets = 0 if set_of is None else int(set_of.max(initial=-1)) + 1
+        upper = np.full((n_sets, T), np.inf)  # u_tS: +inf (every value exact) until a bound of the set lowers it
+        balls = None
+        for gi, g in enumerate(groups):
+            if g.product or g.kind == "capsule":
+                if balls is None:
+                    balls = capsule_balls(P0, D)
+                if g.kind == "capsule":
+                    tc = np.minimum(np.arange(-(-T // BLOCK)) * BLOCK + BLOCK // 2, T - 1)  # the balls' centres
+                    a, d, b, e = P0[:, g.ia][:, :, tc], D[:, g.ia][:, :, tc], P0[:, g.ib][:, :, tc], D[:, g.ib][:, :, tc]
+                    centre = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r  # exact at each block's centre sample
+                    lbs[gi, 0] = self_bounds(balls, g.ia, g.ib, g.r, g.cols, buf, upper, set_of, centre)
+                    continue
+                for t0, t1, pose in self._chunks(g, T, poses, far=True):
+                    lbs[gi, t0] = self._bounds(g, balls, t1 - t0, pose, buf, t0, upper, set_of)
+        cut = np.empty((n_sets + 1, T))
+        np.maximum(upper, far_m, out=cut[:n_sets])
+        cut[n_sets] = far_m if n_sets == 0 else cut[0]  # the columns in no set: the first set's cutoffs
+        crow = np.full(len(self.pairs), n_sets) if set_of is None else np.where(set_of >= 0, set_of, n_sets)
+        return cut, crow
+
+    def _self_pairs(self, g: _Group, P0: np.ndarray, D: np.ndarray, buf: np.ndarray, cut_b: np.ndarray | None, lb) -> None:
+        """Capsule-capsule rows: where the cutoffs ``cut_b (P, blocks)`` (each row's largest per block) are given,
+        only the blocks whose bound ``lb`` is within them, in flat batches (:func:`~.blocks.near_entries`); else
+        every sample, in chunks."""
+        T = P0.shape[2]
+        if cut_b is not None:
+            P2, D2 = P0.reshape(3, -1), D.reshape(3, -1)
+            for pi, ti in near_entries(*np.nonzero(lb <= cut_b), T):
+                flat_a, flat_b = g.ia[pi] * T + ti, g.ib[pi] * T + ti
+                a, d = np.take(P2, flat_a, axis=1), np.take(D2, flat_a, axis=1)
+                b, e = np.take(P2, flat_b, axis=1), np.take(D2, flat_b, axis=1)
+                buf.reshape(-1)[g.cols[pi] * T + ti] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r[pi, 0]
+            return
+        step = max(64, self.chunk // max(len(g.cols), 1))
+        for t0 in range(0, T, step):
+            t1 = min(T, t0 + step)
+            a, d = P0[:, g.ia, t0:t1], D[:, g.ia, t0:t1]
+            b, e = P0[:, g.ib, t0:t1], D[:, g.ib, t0:t1]
+            buf[g.cols, t0:t1] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r
+
+    def _shape_pairs(self, g: _Group, poses: dict, buf: np.ndarray, cut: np.ndarray | None) -> None:
+        """Shape-shape rows: a sphere in closed form once per run of equal poses, the others by
+        :func:`_shape_runs` with the cutoffs ``cut (T,)`` (None: every value exact)."""
+        T = buf.shape[1]
+        changes: dict[tuple[str, ...], np.ndarray] = {}  # moving pose keys -> where any of them changes
+        runs: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # id(changes[...]) -> run starts, run of each sample
+        starts: dict[tuple[int, int], np.ndarray] = {}  # (id(poses), id(changes[...])) -> the poses at the run starts
+        items, cols = [], []
+        for col, i, j in zip(g.cols, g.ia, g.ib):
+            a, b = self.shapes[i], self.shapes[j]
+            ka, kb = self._pose_key.get(a.name, ""), self._pose_key.get(b.name, "")
+            moved = tuple(sorted({ka, kb} & poses.keys()))
+            for key in moved:
+                if (key,) not in changes:
+                    changes[key,] = _pose_changes(poses[key], T)
+            if moved not in changes:  # one array per set of moving poses: _shape_runs shares its runs
+                changes[moved] = np.logical_or.reduce([changes[key,] for key in moved]) if moved else _pose_changes(a.pose[None], T)
+            changed = changes[moved]
+            Pa = poses[ka] if ka in poses else np.asarray(a.pose, dtype=_FLOAT)[None]
+            Pb = poses[kb] if kb in poses else np.asarray(b.pose, dtype=_FLOAT)[None]
+            if a.kind == "sphere" or b.kind == "sphere":  # closed form, exact: once per run of equal poses
+                if id(changed) not in runs:  # the runs and the poses at their starts: once per pose key
+                    runs[id(changed)] = np.flatnonzero(changed), np.cumsum(changed) - 1
+                first, run = runs[id(changed)]
+                at = []
+                for P in (Pa, Pb):
+                    if len(P) > 1 and (id(P), id(changed)) not in starts:
+                        starts[id(P), id(changed)] = P[first]
+                    at.append(P if len(P) == 1 else starts[id(P), id(changed)])
+                v = shape_shape(a, b, *at)
+                if len(v) == 1:
+                    buf[col] = v[0]
+                else:
+                    np.take(v, run, out=buf[col])
                 continue
-            step = max(64, self.chunk // max(len(g.cols), 1))
-            for t0 in range(0, T, step):
-                t1 = min(T, t0 + step)
-                a, d = P0[:, g.ia, t0:t1], D[:, g.ia, t0:t1]
-                b, e = P0[:, g.ib, t0:t1], D[:, g.ib, t0:t1]
-                buf[g.cols, t0:t1] = np.sqrt(_seg_seg_sq(*a, *d, *b, *e)) - g.r
+            items.append((a, b, Pa, Pb, changed))
+            cols.append(col)
+        if items:
+            for col, v in zip(cols, _shape_runs(items, cut)):
+                buf[col] = v
+
+    @staticmethod
+    def _finish(buf: np.ndarray, hits: dict) -> None:
+        """The deferred work, one batch each: cylinder pairs whose closest point is interior (Newton), then the
+        depths of the segments that meet a shape."""
         flat = buf.reshape(-1)
         pending = hits.pop("cylinder-inner", None)
         if pending:
@@ -599,7 +697,6 @@ class ProximityKernel:
             args = [np.concatenate([e[1][i] for e in entries]) for i in range(len(entries[0][1]))]
             r = np.concatenate([e[2] for e in entries])
             flat[where] = -_DEPTH[kind](*args) - r
-        return cut
 
     def _chunks(self, g: _Group, T: int, poses: dict, far: bool = False):
         """``(t0, t1, pose)`` chunks of a product group: about ``chunk`` pair-samples each, keeping temporaries in cache.
@@ -608,7 +705,7 @@ class ProximityKernel:
         (a few per cent of the pair-samples): :data:`_FAR_CHUNKS` times longer, so the per-shape work of the
         bounds and the gathers runs over fewer, longer arrays.
         """
-        step = max(64, (_FAR_CHUNKS if far else 1) * self.chunk // max(len(g.caps), 1)) // _BLOCK * _BLOCK
+        step = max(64, (_FAR_CHUNKS if far else 1) * self.chunk // max(len(g.caps), 1)) // BLOCK * BLOCK
         for t0 in range(0, T, step):
             t1 = min(T, t0 + step)
             yield t0, t1, (poses[g.pose_key][t0:t1] if g.pose_key is not None else None)
@@ -622,13 +719,13 @@ class ProximityKernel:
             R, c = pose[:, :3, :3], pose[:, :3, 3]
             return np.stack(_to_local(a[0], a[1], a[2], R, c)), np.stack(_to_local(d[0], d[1], d[2], R, c, translate=False))
         if g.rot is not None:
-            return np.tensordot(g.rot.T, a, axes=1), np.tensordot(g.rot.T, d, axes=1)  # R^T p: into the shapes' frame
+            return _rotate_back(g.rot, a), _rotate_back(g.rot, d)  # R^T p: into the shapes' frame
         return a, d
 
-    def _bounds(self, g, balls_all, n_chunk, pose, buf, t0, upper, tight) -> list:
+    def _bounds(self, g, balls_all, n_chunk, pose, buf, t0, upper, set_of) -> list:
         """Block bounds of a box or cylinder product group for the samples ``t0 ..`` (base frame ``a``, ``d``).
 
-        Per capsule and block of :data:`_BLOCK` samples, the balls ``(c, rho)`` that hold the segment
+        Per capsule and block of :data:`BLOCK` samples, the balls ``(c, rho)`` that hold the segment
         midpoints (``rho``: their farthest one plus its half length) and the start and end points. Every
         point of the capsule is then within ``rho + r`` of ``c``, and the capsule holds the ball of radius
         ``r`` about each of those points; ``e`` (the distance outside the shape, 0 inside) is 1-Lipschitz, so
@@ -638,14 +735,14 @@ class ProximityKernel:
 
         (``rho'`` without the half length; the left side is used only where it is positive). A shape that
         moves is bounded by the ball of its centre's path over the block plus its bounding radius. The lower
-        bound goes to ``buf`` (and is returned per shape, ``(Cg, blocks)``); the upper bound, over the rows
-        ``tight``, lowers ``upper (T,)``.
+        bound goes to ``buf`` (and is returned per shape, ``(Cg, blocks)``); the upper bound of the rows in a
+        column set (``set_of``) lowers that set's ``upper (S, T)`` (:func:`~.blocks.lower_upper`).
         """
         n = n_chunk
-        b0, nb = t0 // _BLOCK, -(-n // _BLOCK)  # chunks start on a block
+        b0, nb = t0 // BLOCK, -(-n // BLOCK)  # chunks start on a block
         balls = [(c[:, g.caps, b0 : b0 + nb], rho[g.caps, b0 : b0 + nb]) for c, rho in balls_all]
         if pose is not None:  # the shape's centre over each block: a ball about the middle of its extent
-            sc = _blocks(np.ascontiguousarray(pose[:, :3, 3].T)[:, None, :], nb)[:, 0]  # (3, nb, B)
+            sc = blocks(np.ascontiguousarray(pose[:, :3, 3].T)[:, None, :], nb)[:, 0]  # (3, nb, B)
             s_c = 0.5 * (sc.min(axis=2) + sc.max(axis=2))
             s_rho = np.sqrt(np.einsum("inb,inb->nb", sc - s_c[..., None], sc - s_c[..., None])).max(axis=1)
             s_rho += _bounding_radius(g.kind, self._size_of(g))
@@ -653,7 +750,7 @@ class ProximityKernel:
             balls = [(np.tensordot(g.rot.T, c, axes=1), rho) for c, rho in balls]
         r = g.r
         if pose is None:
-            return self._static_bounds(g, balls, n, buf, t0, upper, tight)
+            return self._static_bounds(g, balls, n, buf, t0, upper, set_of)
         out = []
         for s in range(len(g.centre[0])):
             rows = g.rows[s]
@@ -665,19 +762,18 @@ class ProximityKernel:
                 e = [self._outside(g.kind, c, g, s) for c, _ in balls]
                 e_ub = e
             lb = e[0] - balls[0][1] - r
-            buf[rows[keep], t0 : t0 + n] = np.repeat(lb[keep], _BLOCK, axis=1)[:, :n]
+            fill_rows(buf, rows[keep], lb[keep], t0, n)
             out.append(lb)
-            if tight is not None:
+            if set_of is not None:
                 sel = keep.copy()
-                sel[keep] = tight[rows[keep]]
+                sel[keep] = set_of[rows[keep]] >= 0
                 if sel.any():
                     ub = np.minimum.reduce([(x + rho)[sel] for x, (_, rho) in zip(e_ub, balls)]) - r[sel]
-                    ub = np.repeat(ub.min(axis=0), _BLOCK)[:n]
-                    np.minimum(upper[t0 : t0 + n], ub, out=upper[t0 : t0 + n])
+                    lower_upper(upper, set_of[rows[sel]], ub, t0, n)
         return out
 
     @staticmethod
-    def _static_bounds(g, balls, n, buf, t0, upper, tight) -> list:
+    def _static_bounds(g, balls, n, buf, t0, upper, set_of) -> list:
         """:meth:`_bounds` for a group of static shapes: every shape at once, ``(S, Cg, blocks)`` arrays."""
         S = len(g.centre[0])
         centre = [np.asarray(v, dtype=_FLOAT)[:, None, None] for v in g.centre]
@@ -686,14 +782,13 @@ class ProximityKernel:
         lb = e[0] - balls[0][1] - g.r  # (S, Cg, nb)
         rows = np.stack(g.rows)  # (S, Cg)
         keep = rows >= 0
-        buf[rows[keep], t0 : t0 + n] = np.repeat(lb[keep], _BLOCK, axis=1)[:, :n]
-        if tight is not None:
-            sel = keep & tight[np.where(keep, rows, 0)]
+        fill_rows(buf, rows[keep], lb[keep], t0, n)
+        if set_of is not None:
+            sel = keep & (set_of[np.where(keep, rows, 0)] >= 0)
             if sel.any():
                 ub = np.minimum.reduce([(x + rho)[sel] for x, (_, rho) in zip(e, balls)])
                 ub -= np.broadcast_to(g.r, (S,) + g.r.shape)[sel]
-                ub = np.repeat(ub.min(axis=0), _BLOCK)[:n]
-                np.minimum(upper[t0 : t0 + n], ub, out=upper[t0 : t0 + n])
+                lower_upper(upper, set_of[rows[sel]], ub, t0, n)
         return list(lb)
 
     @staticmethod
@@ -701,6 +796,9 @@ class ProximityKernel:
         """Distance (m) of the points ``p`` (x, y, z in the shapes' frame) outside each shape, 0 inside: ``centre``
         and ``size`` (half sizes) per coordinate, scalars for one shape or ``(S, 1, 1)`` arrays for several."""
         ex = [np.abs(v - ci) for v, ci in zip(p, centre)]
+        if kind == "sphere":
+            out = np.maximum(np.sqrt(ex[0] ** 2 + ex[1] ** 2 + ex[2] ** 2) - size[0], 0.0)
+            return out
         if kind == "box":
             out = sum(np.maximum(e - h, 0.0) ** 2 for e, h in zip(ex, size))
         else:
@@ -735,7 +833,7 @@ class ProximityKernel:
             ci, ti, where = ci[keep], ti[keep], where[keep]
         if not ci.size:
             return
-        args = [np.broadcast_to(a[i], sq.shape)[ci, ti] - c[i] for i in range(3)]
+        args = [np.broadcast_to(a[i], sq.shape)[ci, ti] - np.broadcast_to(c[i], sq.shape)[ci, ti] for i in range(3)]
         args += [np.broadcast_to(d[i], sq.shape)[ci, ti] for i in range(3)]
         args += [np.broadcast_to(np.asarray(v, dtype=_FLOAT), sq.shape)[ci, ti] for v in size]
         hits.setdefault(kind, []).append((where, args, np.broadcast_to(r, sq.shape)[ci, ti]))
@@ -762,52 +860,56 @@ class ProximityKernel:
         cut: np.ndarray | None,
         pose: np.ndarray | None,
         lbs: list | None = None,
+        crow: np.ndarray | None = None,
+        batch: _Batch | None = None,
     ) -> None:
         """Evaluate one product group for the samples ``t0 .. t1``; ``P0``, ``D``: ``(3, C, T)`` segment starts and
         directions of every capsule.
 
-        ``pose (n, 4, 4)``: the per-sample pose of a moving group's shape. ``cut (n,)``: :meth:`_bounds` has
-        written block lower bounds ``lbs`` into ``buf``; only the blocks whose bound is ``<= cut`` somewhere in
-        the block are evaluated exactly (gathered into one flat batch per shape), the others keep their bound.
+        ``pose (n, 4, 4)``: the per-sample pose of a moving group's shape. ``cut (R, n)``: :meth:`_bounds` has
+        written block lower bounds ``lbs`` into ``buf``; only the blocks whose bound is ``<= cut[crow[k]]``
+        (row k's cutoff) somewhere in the block are evaluated exactly, the others keep their bound: the near
+        entries of every shape go into ``batch`` (:class:`_Batch`: evaluated per kind, :data:`~.blocks.BATCH` at a
+        time).
         """
         T = buf.shape[1]
         n = t1 - t0
         r = g.r
         if cut is not None:
-            flat = buf.reshape(-1)
-            cut_b = _blocks(cut[None], lbs[0].shape[1])[0].max(axis=1)
+            cut_b = blocks(cut, lbs[0].shape[1]).max(axis=2)  # (R, nb): each cutoff row's largest per block
             # flat takes of the entries straight from (3, C * T): no (3, Cg, n) copy of the group's capsules
             Tp = P0.shape[2]
             a2, d2 = np.ascontiguousarray(P0).reshape(3, -1), np.ascontiguousarray(D).reshape(3, -1)
             base = g.caps * Tp + t0
+            if pose is not None:  # the pose's [R c] entries as contiguous rows (12, n): one take per batch
+                rc = np.ascontiguousarray(pose[:, :3, :].reshape(n, 12).T)
             for s, lb in enumerate(lbs):
                 rows = g.rows[s]
-                near = lb <= cut_b
+                near = lb <= cut_b[crow[np.maximum(rows, 0)]]
                 near &= (rows >= 0)[:, None]
-                ci, bi = np.nonzero(near)
-                if not ci.size:
-                    continue
-                ti = (bi[:, None] * _BLOCK + np.arange(_BLOCK)).ravel()
-                ci = np.repeat(ci, _BLOCK)
-                if n % _BLOCK:  # the last block is short
-                    ok = ti < n
-                    ci, ti = ci[ok], ti[ok]
-                flat_i = base[ci] + ti  # (3, m): one flat batch of (capsule, sample) entries
-                ga, gd = np.take(a2, flat_i, axis=1), np.take(d2, flat_i, axis=1)
-                if pose is not None:
-                    R, c0 = pose[ti, :3, :3], pose[ti, :3, 3]
-                    ga, gd = np.stack(_to_local(*ga, R, c0)), np.stack(_to_local(*gd, R, c0, translate=False))
-                elif g.rot is not None:
-                    ga, gd = g.rot.T @ ga, g.rot.T @ gd
-                ga, gd = ga[:, None, :], gd[:, None, :]
-                where = rows[ci] * T + t0 + ti
-                o = np.empty((1, len(where)))
                 c = tuple(v[s] for v in g.centre)
                 size = tuple(v[s] for v in g.size)
-                self._shape_eval(g.kind, ga, gd, self._prep(g.kind, gd), c, size, r[ci, 0][None], lambda ci, ti: where[ti], hits, o)
-                flat[where] = o[0]
+                for ci, ti in near_entries(*np.nonzero(near), n):
+                    flat_i = base[ci] + ti  # (3, m): one flat batch of (capsule, sample) entries
+                    ga, gd = np.take(a2, flat_i, axis=1), np.take(d2, flat_i, axis=1)
+                    if pose is not None and g.kind == "sphere":  # as :meth:`_local`: a ball needs only p - c
+                        ga = ga - np.take(rc[3::4], ti, axis=1)
+                    elif pose is not None:
+                        Rc = np.take(rc, ti, axis=1)
+                        ga, gd = _rows_to_local(ga, Rc), _rows_to_local(gd, Rc, translate=False)
+                    elif g.rot is not None:
+                        ga, gd = _rotate_back(g.rot, ga), _rotate_back(g.rot, gd)
+                    batch.add(g.kind, (ga, gd, c, size, r[ci, 0], rows[ci] * T + t0 + ti))
             return
         a, d = self._local(g, P0[:, g.caps, t0:t1], D[:, g.caps, t0:t1], pose)
+        if n == 1 and pose is None:  # one sample (capsules that stand still): a few entries per shape, batched
+            for s in range(len(g.centre[0])):
+                rows = g.rows[s]
+                ci = np.flatnonzero(rows >= 0)
+                c = tuple(v[s] for v in g.centre)
+                size = tuple(v[s] for v in g.size)
+                batch.add(g.kind, (a[:, ci, 0], d[:, ci, 0], c, size, r[ci, 0], rows[ci] * T + t0))
+            return
         aux = self._prep(g.kind, d)
         for s in range(len(g.centre[0])):
             c = tuple(ci[s] for ci in g.centre)
@@ -824,6 +926,23 @@ class ProximityKernel:
             if view is None:
                 keep = rows >= 0
                 buf[rows[keep], t0 : t0 + n] = o[keep]
+
+    def _flush(self, batch: dict, buf: np.ndarray, hits: dict) -> None:
+        """Evaluate the near entries that :meth:`_product` gathered, one kernel call per shape kind: ``batch[kind]``
+        lists ``(a, d (3, m) in the shape's frame, centre, size (scalars), r (m,), where (m,) flat output index)``.
+        Elementwise, so every value is the one a call per shape gives, bit for bit."""
+        flat = buf.reshape(-1)
+        for kind, parts in batch.items():
+            a = np.concatenate([p[0] for p in parts], axis=1)[:, None, :]
+            d = np.concatenate([p[1] for p in parts], axis=1)[:, None, :]
+            count = [p[0].shape[1] for p in parts]
+            c = tuple(np.repeat([p[2][i] for p in parts], count)[None] for i in range(3))
+            size = tuple(np.repeat([p[3][i] for p in parts], count)[None] for i in range(len(parts[0][3])))
+            r = np.concatenate([p[4] for p in parts])[None]
+            where = np.concatenate([p[5] for p in parts])
+            o = np.empty((1, len(where)))
+            self._shape_eval(kind, a, d, self._prep(kind, d), c, size, r, lambda ci, ti: where[ti], hits, o)
+            flat[where] = o[0]
 
     @staticmethod
     def _prep(kind: str, d: np.ndarray):

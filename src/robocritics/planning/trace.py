@@ -10,11 +10,12 @@ distance (m, <= 0 on penetration) of every proximity pair:
   every object the gripper carries at some point against every other entity.
 
 A distance is exact when it is at most :data:`EXACT_WITHIN_M` or at most the arm's
-closest distance to the scene at that sample; beyond both, it may be a lower bound
-that is itself larger (what lies that far needs no exact value). So every threshold
-test up to ``EXACT_WITHIN_M`` is exact, and so is, at every sample, the closest
-distance over any set of environment pairs that includes the arm links' (the
-collision critic's ``D_t``).
+closest distance to the scene at that sample (a self pair: the closest self
+distance at that sample); beyond both, it may be a lower bound that is itself
+larger (what lies that far needs no exact value). So every threshold test up to
+``EXACT_WITHIN_M`` is exact, and so are, at every sample, the closest distance over
+any set of environment pairs that includes the arm links' (the collision critic's
+``D_t``) and the closest self distance (the pinch-point critic's).
 
 A vendor arm's capsules fitted around its link meshes (``Robot.from_urdf``) are measured as their link's own
 mesh wherever the capsule distance is at most :data:`MESH_EXACT_WITHIN_M`
@@ -43,8 +44,9 @@ __all__ = [
     "MESH_EXACT_WITHIN_M",
 ]  # fmt: skip
 
-#: Distances (robot capsules and carried objects against the scene) are exact up to this many metres
-#: (twice the collision critic's warning distance) and up to the arm's closest distance at each sample;
+#: Distances (robot capsules against the scene and against each other, carried objects against the scene) are
+#: exact up to this many metres (twice the collision critic's warning distance) and up to the closest distance of the
+#: arm (a self pair: of the self pairs) at each sample;
 #: larger ones may be a lower bound that is itself larger (:meth:`ProximityKernel.distances`).
 EXACT_WITHIN_M = 0.10
 
@@ -184,15 +186,18 @@ class _Distances:
     def __init__(self, robot, scene: Scene, carried: Sequence[str], moving: Sequence[str]):
         self.pairs, members = _reported_pairs(robot, scene, carried)
         # one kernel for robot and carried-object pairs: exact within EXACT_WITHIN_M and within the arm's closest
-        # distance at each sample (its columns' minimum stays exact); farther values are bounds, never evaluated
+        # distance at each sample (its columns' minimum stays exact; the self pairs: within the closest self
+        # distance); farther values are bounds, never evaluated
         flat = [pair for group in members for pair in group]
         self.bounds = np.cumsum([0] + [len(g) for g in members])
-        self.arm = [
+        arm = [
             j
             for k, p in enumerate(self.pairs)
             if p.kind == "environment" and p.group_a == "arm"
             for j in range(self.bounds[k], self.bounds[k + 1])
         ]
+        own = [j for k, p in enumerate(self.pairs) if p.kind == "self" for j in range(self.bounds[k], self.bounds[k + 1])]
+        self.exact_sets = [arm, own] if own else [arm]
         capsules = [(name, float(r)) for name, r in zip(robot.capsule_names, robot.capsule_radii)]
         self.kernel = prox.ProximityKernel(capsules, scene.shapes(), flat, moving=list(moving)) if flat else None
         self.flat, self.robot, self.shapes = flat, robot, scene.shapes()
@@ -207,7 +212,7 @@ class _Distances:
         if self.kernel is None:
             return np.zeros((p0.shape[0], 0))
         bounds = self.bounds
-        by_pair = self.kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=self.arm).T
+        by_pair = self.kernel.distances(p0, p1, poses=poses, far_m=EXACT_WITHIN_M, exact_min_of=self.exact_sets).T
         if self.has_meshes:
             refine_near_contact(by_pair, self.flat, self.robot, frames, p0, p1, self.shapes, poses, MESH_EXACT_WITHIN_M)
         # each reported pair is the least of its consecutive kernel rows (an entity's shapes): every pair's
@@ -292,8 +297,8 @@ class ChunkGeometry:
     of its ``(T, L, 4, 4)`` frames and ``(T, K)`` proximity: the robot, the scene's distance kernel and the
     objects' :class:`PoseSchedule`. :meth:`compute` of samples ``[lo, hi)`` gives the frames and object poses
     :func:`build_trajectory` computes for the whole motion bit for bit, and the same proximity wherever it is
-    exact (up to :data:`EXACT_WITHIN_M` and the arm's closest distance at each sample: every value a critic
-    reads); beyond, a far pair's value is a lower bound above both either way, but which one depends on the
+    exact (up to :data:`EXACT_WITHIN_M` and the arm's closest distance at each sample, a self pair's up to the
+    closest self distance: every value a critic reads); beyond, a far pair's value is a lower bound above both either way, but which one depends on the
     kernel's blocks of 32 samples and on how many samples it is given (the chunks of 16,384 samples that start
     on multiples of :data:`~robocritics.trajectory.CHUNK_ALIGN` give the whole motion's bounds too).
     """
