@@ -51,9 +51,7 @@ def main() -> None:
         for name in CRITICS:
             critic = critics[name]
             params = critic.Params()
-            takes_run = name in ("contact_speed", "separation", "payload")
-            call = (lambda c=critic, p=params: c.check(run, p)) if takes_run else (
-                lambda c=critic, p=params: c.check(run.trajectory, run.scene, p))
+            call = lambda c=critic, p=params: c.check(run, p)  # noqa: E731
             call()
             print(f"  {name:18s} {cpu_ms(call, args.repeats):8.1f} ms CPU")
         if args.unpruned:

@@ -169,7 +169,7 @@ def sample_count(duration_s: float, sample_rate_hz: float) -> int:
     """How many samples :func:`sample_times` makes for ``duration_s`` at ``sample_rate_hz`` (without making them)."""
     if not (math.isfinite(duration_s) and duration_s >= 0):
         raise PlanningError(f"a motion must last a finite, non-negative time, got {duration_s} s")
-    return max(1, int(np.ceil(duration_s / (1.0 / sample_rate_hz) - 1e-9)))
+    return max(1, math.ceil(duration_s / (1.0 / sample_rate_hz) - 1e-9))  # math.ceil: np.ceil's value, no array
 
 
 def sample_times(duration_s: float, sample_rate_hz: float, max_samples: int = MAX_SEGMENT_SAMPLES) -> np.ndarray:

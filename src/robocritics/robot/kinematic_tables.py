@@ -230,18 +230,24 @@ def pinocchio_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
     ])  # fmt: skip
 
 
-def _row_times(a, b0: float, b1: float, b2: float, last: bool) -> float:
-    """Row ``a`` of a 3x3 product times the column ``b``, summed in Eigen's order for a fixed-size 3x3 double
-    product: rows 0 and 1 as one SSE packet (left to right), row 2 alone (its last two terms first)."""
-    return a[0] * b0 + (a[1] * b1 + a[2] * b2) if last else (a[0] * b0 + a[1] * b1) + a[2] * b2
+def _rotation_product(A, B) -> tuple:
+    """The 3x3 product ``A B`` (nested sequences of floats) summed in Eigen's order for a fixed-size 3x3 double
+    product: rows 0 and 1 as one SSE packet (left to right), row 2 alone (its last two terms first). Written
+    out on Python floats: one call, no per-entry function call (the planner makes one pose per move)."""
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = A
+    (b00, b01, b02), (b10, b11, b12), (b20, b21, b22) = B
+    return (
+        ((a00 * b00 + a01 * b10) + a02 * b20, (a00 * b01 + a01 * b11) + a02 * b21, (a00 * b02 + a01 * b12) + a02 * b22),
+        ((a10 * b00 + a11 * b10) + a12 * b20, (a10 * b01 + a11 * b11) + a12 * b21, (a10 * b02 + a11 * b12) + a12 * b22),
+        (a20 * b00 + (a21 * b10 + a22 * b20), a20 * b01 + (a21 * b11 + a22 * b21), a20 * b02 + (a21 * b12 + a22 * b22)),
+    )  # fmt: skip
 
 
-def _rotation_product(A, B) -> list[list[float]]:
-    return [[_row_times(A[i], B[0][j], B[1][j], B[2][j], i == 2) for j in range(3)] for i in range(3)]
-
-
-def _rotate(A, v) -> list[float]:
-    return [_row_times(A[i], v[0], v[1], v[2], i == 2) for i in range(3)]
+def _rotate(A, v) -> tuple[float, float, float]:
+    """``A v`` for a 3x3 ``A`` and a 3-vector ``v``, in :func:`_rotation_product`'s order."""
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = A
+    v0, v1, v2 = v
+    return (a00 * v0 + a01 * v1) + a02 * v2, (a10 * v0 + a11 * v1) + a12 * v2, a20 * v0 + (a21 * v1 + a22 * v2)
 
 
 def pinocchio_frame_pose(joint_placements, joint_parents, frame_parent: int, frame_placement: np.ndarray, q) -> np.ndarray:
@@ -260,9 +266,11 @@ def pinocchio_frame_pose(joint_placements, joint_parents, frame_parent: int, fra
         if depth == 0:  # the base joint's parent is the universe (identity): oMi is its local placement
             R, p = local, M[:3, 3].tolist()
         else:
-            p = [a + b for a, b in zip(p, _rotate(R, M[:3, 3].tolist()))]
+            x, y, z = _rotate(R, M[:3, 3].tolist())
+            p = [p[0] + x, p[1] + y, p[2] + z]
             R = _rotation_product(R, local)
-    p = [a + b for a, b in zip(p, _rotate(R, frame_placement[:3, 3].tolist()))]
+    x, y, z = _rotate(R, frame_placement[:3, 3].tolist())
+    p = [p[0] + x, p[1] + y, p[2] + z]
     pose = np.eye(4)
     pose[:3, :3] = _rotation_product(R, frame_placement[:3, :3].tolist())
     pose[:3, 3] = p

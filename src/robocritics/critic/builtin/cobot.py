@@ -34,6 +34,7 @@ __all__ = [
     "part_speeds",
     "part_body_distances",
     "part_body_nearest",
+    "part_body_near",
     "robot_masses",
     "carried_mass",
     "object_mass",
@@ -115,56 +116,104 @@ def part_speeds(parts: Parts, time_s: np.ndarray) -> np.ndarray:
 
 def _exact(parts: Parts, body: "BodyModel", rows: np.ndarray, p: np.ndarray, k: np.ndarray) -> np.ndarray:
     """Capsule distances (m) of the (sample, part, body capsule) triples ``rows, p, k`` (index arrays)."""
-    return capsule_capsule(parts.p0[rows, p], parts.p1[rows, p], parts.radius_m[p], body.p0[k], body.p1[k],
-                           body.radius_m[k])
+    P = parts.p0.shape[1]
+    flat = rows * P + p
+    a0, a1 = parts.p0.reshape(-1, 3), parts.p1.reshape(-1, 3)
+    return capsule_capsule(a0[flat], a1[flat], parts.radius_m[p], body.p0[k], body.p1[k], body.radius_m[k])
 
 
-def _centre_distances(parts: Parts, body: "BodyModel") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(between, half_a, half_b)``: the distance ``(T, P, K)`` m between the segments' midpoints and the half
-    lengths ``(T, P, 1)`` and ``(K,)`` m of the segments: bounds on the capsule distance (see the callers)."""
-    mid_a = 0.5 * (parts.p0 + parts.p1)  # (T, P, 3)
-    mid_b = 0.5 * (body.p0 + body.p1)  # (K, 3)
-    half_a = 0.5 * np.linalg.norm(parts.p1 - parts.p0, axis=-1)[:, :, None]
-    half_b = 0.5 * np.linalg.norm(body.p1 - body.p0, axis=-1)
-    diff = mid_a[:, :, None, :] - mid_b[None, None]
-    return np.sqrt(np.einsum("tpki,tpki->tpk", diff, diff)), half_a, half_b
+BLOCK = 32
+"""Samples per block of :class:`_Blocks` (one exact distance per part and body capsule at each block's centre)."""
+_ROUNDING_M = 1e-9
+"""Slack, m, added to the bounds' comparisons so that rounding can only add candidates, never drop one."""
+
+
+class _Blocks:
+    """Lower bounds on the part-to-body distances from their exact values at one sample of every block.
+
+    The body is static and a part's segment moves by at most ``disp(t, p)`` = the farther of its two ends'
+    displacements from the block's centre sample ``c`` (every point of a segment is a convex combination of its
+    ends), so its distance to any fixed set moves by at most as much: ``|d(t, p, k) - d(c, p, k)| <=
+    disp(t, p)`` (m). Blocks of :data:`BLOCK` samples: ``d_c (B, P, K)`` exact at the centres, ``disp (T, P)``.
+    """
+
+    def __init__(self, parts: Parts, body: "BodyModel"):
+        T, P = parts.present.shape
+        self.T, self.P, self.K = T, P, len(body)
+        self.nb = -(-T // BLOCK)
+        centres = np.minimum(np.arange(self.nb) * BLOCK + BLOCK // 2, T - 1)
+        self.d_c = capsule_capsule(parts.p0[centres][:, :, None], parts.p1[centres][:, :, None],
+                                   parts.radius_m[:, None], body.p0, body.p1, body.radius_m)  # (B, P, K)
+        of = np.repeat(centres, BLOCK)[:T]  # (T,) the centre sample each sample is bounded from
+        self.disp = np.maximum(np.linalg.norm(parts.p0 - parts.p0[of], axis=-1),
+                               np.linalg.norm(parts.p1 - parts.p1[of], axis=-1))  # (T, P) m
+
+    def padded(self, a: np.ndarray) -> np.ndarray:
+        """``(T, P)`` array ``a`` as ``(B, BLOCK, P)`` (the last block padded with NaN, which no bound passes)."""
+        out = np.full((self.nb * BLOCK, self.P), np.nan)
+        out[: self.T] = a
+        return out.reshape(self.nb, BLOCK, self.P)
+
+    def lower(self) -> np.ndarray:
+        """``(T, P, K)`` lower bounds, m: ``d_c - disp``."""
+        low = self.d_c[:, None] - self.padded(self.disp)[..., None]
+        return low.reshape(self.nb * BLOCK, self.P, self.K)[: self.T]
+
+    def near(self, within_m: float) -> np.ndarray:
+        """``(T, P, K)`` mask of the triples whose distance may be ``<= within_m`` at that sample or the next."""
+        reach = self.padded(self.disp + (within_m + _ROUNDING_M))[..., None]  # d_c - disp <= within_m
+        need = (self.d_c[:, None] <= reach).reshape(self.nb * BLOCK, self.P, self.K)[: self.T]
+        need[:-1] |= need[1:]  # the sample before a near one: its exact distance says whether the part closes in
+        return need
 
 
 def part_body_distances(parts: Parts, body: "BodyModel", within_m: float | None = None) -> np.ndarray:
     """``(T, P, K)`` distance, m, between each part and each capsule of ``body`` (negative: overlapping); +inf
     where the part is absent.
 
-    With ``within_m``, the distance is exact wherever it may be ``<= within_m`` at that sample or the next one,
-    and elsewhere a lower bound above ``within_m`` (the distance between bounding spheres), which is all a
-    caller comparing against ``within_m`` needs: far pairs skip the segment-distance computation.
+    With ``within_m``, the distance is exact wherever it may be ``<= within_m`` at that sample or the next one
+    (:func:`part_body_near`), and elsewhere a lower bound above ``within_m`` (:class:`_Blocks`' bound from the
+    block's centre sample), which is all a caller comparing against ``within_m`` needs: far pairs skip the
+    segment-distance computation.
     """
     if within_m is None:
         rows, p, k = np.indices(parts.present.shape + (len(body),)).reshape(3, -1)
         d = _exact(parts, body, rows, p, k).reshape(parts.present.shape + (len(body),))
     else:
-        between, half_a, half_b = _centre_distances(parts, body)
-        d = between - half_a - half_b - parts.radius_m[None, :, None] - body.radius_m
-        need = d <= within_m
-        need[:-1] |= need[1:]  # the sample before a near one: its exact distance says whether the part closes in
-        rows, p, k = np.nonzero(need)
+        blocks = _Blocks(parts, body)
+        d = blocks.lower()
+        rows, p, k = np.nonzero(blocks.near(within_m))
         d[rows, p, k] = _exact(parts, body, rows, p, k)
     return np.where(parts.present[:, :, None], d, np.inf)
+
+
+def part_body_near(parts: Parts, body: "BodyModel", within_m: float) -> tuple[np.ndarray, ...]:
+    """``(rows, p, k, d)``: the (sample, part, body capsule) triples, in C order of ``(T, P, K)``, whose distance
+    may be ``<= within_m`` at that sample or the next one (every one that is, and more), with their exact
+    distances ``d`` (m; whether or not the part is present): the sparse form of :func:`part_body_distances`."""
+    rows, p, k = np.nonzero(_Blocks(parts, body).near(within_m))
+    return rows, p, k, _exact(parts, body, rows, p, k)
 
 
 def part_body_nearest(parts: Parts, body: "BodyModel") -> np.ndarray:
     """``(T, P)`` exact distance, m, between each part and the nearest capsule of ``body``; +inf where absent.
 
-    Branch and bound: a capsule whose bounding-sphere distance exceeds the least midpoint-to-midpoint distance
-    (an upper bound: both midpoints lie on the segments) cannot be the nearest, so only the others are computed.
+    Branch and bound (:class:`_Blocks`): the capsule nearest at the block's centre gives an upper bound ``u``
+    (its exact distance at the sample), and only the capsules whose lower bound ``d_c - disp`` is at most ``u``
+    can be nearer: their exact distances are computed (for a part that moves little in a block, none).
     """
-    between, half_a, half_b = _centre_distances(parts, body)
-    radii = parts.radius_m[None, :, None] + body.radius_m
-    upper = (between - radii).min(axis=2, keepdims=True)
-    candidate = between - half_a - half_b - radii <= upper
-    rows, p, k = np.nonzero(candidate)
-    d = np.full(candidate.shape, np.inf)
-    d[rows, p, k] = _exact(parts, body, rows, p, k)
-    return np.where(parts.present, d.min(axis=2), np.inf)
+    blocks = _Blocks(parts, body)
+    T, P = parts.present.shape
+    order = np.argsort(blocks.d_c, axis=2, kind="stable")  # (B, P, K) capsules by distance at the centre
+    first = np.repeat(order[:, :, 0], BLOCK, axis=0)[:T]  # (T, P) nearest at the centre
+    d = capsule_capsule(parts.p0, parts.p1, parts.radius_m, body.p0[first], body.p1[first], body.radius_m[first])
+    sorted_c = np.take_along_axis(blocks.d_c, order, axis=2)[:, None, :, 1:]  # (B, 1, P, K - 1)
+    reach = blocks.padded(d + blocks.disp + _ROUNDING_M)[..., None]  # (B, BLOCK, P, 1)
+    b, i, p, j = np.nonzero(sorted_c <= reach)  # the others' lower bound d_c - disp <= u
+    if len(b):
+        rows, k = b * BLOCK + i, order[b, p, j + 1]
+        np.minimum.at(d, (rows, p), _exact(parts, body, rows, p, k))
+    return np.where(parts.present, d, np.inf)
 
 
 def robot_masses(robot) -> tuple[float, float]:

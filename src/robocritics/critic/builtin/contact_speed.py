@@ -35,14 +35,14 @@ from .cobot import (
     carried_ids,
     carried_mass,
     nothing_to_judge,
-    part_body_distances,
+    part_body_near,
     part_speeds,
     robot_masses,
     robot_parts,
     slow_flagged_moves,
 )
 
-__all__ = ["ContactSpeedCritic", "register_critics", "contact_speeds"]
+__all__ = ["ContactSpeedCritic", "register_critics", "contact_cells", "contact_speeds"]
 
 NAME = "contact_speed"
 
@@ -69,11 +69,15 @@ def requested(execution) -> bool:
     return bool(getattr(execution.scene, "humans", ()))
 
 
-def contact_speeds(execution, params: Params, carried: list[str] | None = None, payload_kg=None):
-    """Per person: ``(body, speed (T, P, K) m/s, limit (T, K) m/s, parts)``: contact speed of each part on each
-    body capsule (0 when not closing in within ``near_m``) and the region's limit at each sample. ``carried``
-    and ``payload_kg`` (the carried parts and the tool and workpiece mass ``(T,)`` kg) are a chunk's of the whole
-    run's (default: ``execution``'s own)."""
+def contact_cells(execution, params: Params, carried: list[str] | None = None, payload_kg=None):
+    """Per person: ``(body, (rows, p, k), speed (n,) m/s, limit (T, K) m/s, parts)``: the (sample, part, body
+    capsule) triples, in C order of ``(T, P, K)``, where a moving part closes in within ``near_m`` and its
+    speed there (> 0), and the region's limit at each sample. ``carried`` and ``payload_kg`` (the carried parts
+    and the tool and workpiece mass ``(T,)`` kg) are a chunk's of the whole run's (default: ``execution``'s own).
+
+    A triple closes in when its exact distance is ``<= near_m`` and below the sample before's
+    (:func:`~.cobot.part_body_near` holds both); a part with a speed is present at both samples.
+    """
     from ...humans import BODY_REGIONS, scene_bodies, transient_speed_limit  # here: the critic is on demand
 
     trajectory, robot = execution.trajectory, execution.robot
@@ -82,17 +86,33 @@ def contact_speeds(execution, params: Params, carried: list[str] | None = None, 
     moving_kg, tool_kg = robot_masses(robot)
     if payload_kg is None:
         payload_kg = carried_mass(execution)[0] + tool_kg  # (T,) m_L: tool and workpiece
+    P = len(parts.names)
     out = []
     for body in scene_bodies(execution.scene):
-        d = part_body_distances(parts, body, within_m=params.near_m)  # (T, P, K), exact up to near_m
-        closing = np.zeros(d.shape, dtype=bool)
-        closing[1:] = d[1:] < d[:-1]
-        contact = np.where(closing & (d <= params.near_m), speed[:, :, None], 0.0)
+        rows, p, k, d = part_body_near(parts, body, params.near_m)
+        key = (rows * P + p) * len(body) + k  # sorted: C order
+        before = np.minimum(np.searchsorted(key, key - P * len(body)), len(key) - 1)  # (t - 1, p, k), held
+        hit = (rows > 0) & (d <= params.near_m)
+        hit[hit] = d[hit] < d[before[hit]]
+        hit[hit] = speed[rows[hit], p[hit]] > 0
         limit = np.empty((len(trajectory), len(body)))
-        for k, region in enumerate(body.regions):
+        for j, region in enumerate(body.regions):
             r = BODY_REGIONS[region]
             for m in np.unique(payload_kg):
-                limit[payload_kg == m, k] = transient_speed_limit(r, moving_kg, float(m))
+                limit[payload_kg == m, j] = transient_speed_limit(r, moving_kg, float(m))
+        cells = (rows[hit], p[hit], k[hit])
+        out.append((body, cells, speed[cells[0], cells[1]], limit, parts))
+    return out
+
+
+def contact_speeds(execution, params: Params, carried: list[str] | None = None, payload_kg=None):
+    """Per person: ``(body, speed (T, P, K) m/s, limit (T, K) m/s, parts)``: contact speed of each part on each
+    body capsule (0 when not closing in within ``near_m``) and the region's limit at each sample: the dense form
+    of :func:`contact_cells` (same arguments)."""
+    out = []
+    for body, cells, speed, limit, parts in contact_cells(execution, params, carried, payload_kg):
+        contact = np.zeros((len(limit), len(parts.names), len(body)))
+        contact[cells] = speed
         out.append((body, contact, limit, parts))
     return out
 
@@ -135,29 +155,32 @@ class _Contacts:
     def add(self, chunk, execution) -> None:
         if self.nothing is not None:
             return
-        lo, own = chunk.lo, chunk.own
+        lo = chunk.lo
         payload = self.payload_kg[lo : lo + len(chunk.trajectory)]
-        results = contact_speeds(execution, self.params, self.carried, payload)
+        results = contact_cells(execution, self.params, self.carried, payload)
         if not self.worst_of:
             self.worst_of = [Extreme("max") for _ in results]
-        for b, (body, contact, limit, parts) in enumerate(results):
-            contact, limit = contact[own], limit[own]
+        first, stop = chunk.start - lo, chunk.stop - lo  # the own rows
+        for b, (body, (rows, p, k), contact, limit, parts) in enumerate(results):
             self.parts = parts.names
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ratio = np.where(contact > 0, contact / limit[:, None, :], 0.0)  # inf on the head
-            per_sample = ratio.max(axis=(1, 2))
-            rows = slice(chunk.start, chunk.stop)
-            self.ratio_series[rows] = np.maximum(self.ratio_series[rows], np.where(np.isfinite(per_sample), per_sample, 1e9))
-            self.over_err[rows] |= per_sample > 1.0
-            self.over_warn[rows] |= per_sample > self.params.warn_fraction
-            P, K = ratio.shape[1:]
-
-            def detail(i, ratio=ratio, contact=contact, limit=limit, P=P, K=K):
-                t, p, k = np.unravel_index(i, ratio.shape)
-                return float(ratio[t, p, k]), int(p), int(k), float(contact[t, p, k]), float(limit[t, k])
-
-            flat = np.where(np.isfinite(ratio), ratio, 1e9).reshape(-1)
-            self.worst_of[b].offer(chunk.start * P * K, flat, detail)
+            mine = (rows >= first) & (rows < stop)
+            rows, p, k, contact = rows[mine] - first, p[mine], k[mine], contact[mine]
+            limit = limit[first:stop]
+            with np.errstate(divide="ignore"):
+                ratio = contact / limit[rows, k]  # inf on the head
+            flagged = np.where(np.isfinite(ratio), ratio, 1e9)
+            at = chunk.start + rows
+            np.maximum.at(self.ratio_series, at, flagged)
+            self.over_err[at[ratio > 1.0]] = True
+            self.over_warn[at[ratio > self.params.warn_fraction]] = True
+            P, K = len(parts.names), len(body)
+            if not len(ratio):  # no contact in the chunk: the dense ratio's first cell, 0 (never the worst)
+                self.worst_of[b].offer(chunk.start * P * K, np.zeros(1), lambda _: (0.0, 0, 0, 0.0, 0.0))
+                continue
+            i = int(np.argmax(flagged))  # the first of the largest, in C order as over the dense (T, P, K)
+            detail = (float(ratio[i]), int(p[i]), int(k[i]), float(contact[i]), float(limit[rows[i], k[i]]))
+            self.worst_of[b].offer(chunk.start * P * K + int((rows[i] * P + p[i]) * K + k[i]), flagged[i : i + 1],
+                                   lambda _, detail=detail: detail)
 
     def verdict(self) -> Verdict:
         from ...humans import BODY_REGIONS, LIMITS_SOURCE, scene_bodies  # here: the critic is on demand
