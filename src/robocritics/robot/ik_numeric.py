@@ -208,9 +208,11 @@ def numeric_ik(
     where ``J_f`` is the LOCAL frame Jacobian, and the step is
     ``dq = -Jᵀ (J Jᵀ + λ I)⁻¹ e`` with ``λ = damping + |e|²·1e-3``, scaled so
     that no joint moves more than ``max_step`` rad, applied with
-    ``pin.integrate``. Position-only uses ``e = p* - p`` and the translational
+    ``pin.integrate``; a joint at a limit that the step would push further out is held there and the step
+    solved with the others (:func:`_held_step`). Position-only uses ``e = p* - p`` and the translational
     rows rotated to the base frame. Converged when the position error ≤ ``tol``
-    m and the rotation error ≤ ``tol`` rad; otherwise up to ``restarts`` more
+    m and the rotation error ≤ ``tol`` rad; a descent whose error has not fallen 1% in
+    :data:`STALL_ITERATIONS` iterations is stuck and ends early; otherwise up to ``restarts`` more
     attempts, the first four near the seed, then from random configurations within the limits (deterministic
     ``rng``). On a redundant arm (more joints than the target constrains, a 7-joint arm) the solution then
     slides along its self-motion towards the seed (:func:`_towards_seed`, at most :data:`NULL_SPACE_STEPS`
