@@ -284,6 +284,7 @@ def pointing_ik(model: Any, data: Any, fid: int, position: Any, axis: Any, seed:
 
     def attempt(q):
         best_q, best = q, (math.inf, math.inf)
+        mark, since = math.inf, 0  # as _dls: a descent stuck STALL_ITERATIONS iterations ends
         for _ in range(max_iter):
             pin.computeJointJacobians(model, data, q)
             pin.framesForwardKinematics(model, data, q)
@@ -298,6 +299,10 @@ def pointing_ik(model: Any, data: Any, fid: int, position: Any, axis: Any, seed:
             if dp + dr < best[0] + best[1]:
                 best_q, best = q, (dp, dr)
             if dp <= tol and dr <= tol:
+                break
+            if dp + dr < STALL_GAIN * mark:
+                mark, since = dp + dr, 0
+            elif (since := since + 1) >= STALL_ITERATIONS:
                 break
             J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED).reshape(6, model.nv)  # a 1-joint model gives (6,)
             if cone is None:
