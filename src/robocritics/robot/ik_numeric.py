@@ -269,7 +269,8 @@ def pointing_ik(model: Any, data: Any, fid: int, position: Any, axis: Any, seed:
     free: five constraints, for arms with fewer than six joints (a 5-joint arm cannot choose the yaw of a
     fingers-down grasp as well). Damped least squares on ``e = [p* - p, z x z*]`` with the rows
     ``[J_v; (J_w x z) x z*]`` (world-aligned frame Jacobian), clipped to the limits; restarts as
-    :func:`numeric_ik` (the seed first, then near it, then anywhere, deterministic). Raises PlanningError.
+    :func:`numeric_ik` (the seed first, then near it, then anywhere, deterministic), each descent ending early when
+    stuck (:data:`STALL_ITERATIONS`). Raises PlanningError.
 
     ``cone_rad``: the +z axis at this angle from ``axis`` instead, leaning whichever way the arm allows (four
     constraints: a 5-joint arm's wrist leans in its own plane): ``e = [p* - p, cos(cone) - z . z*]`` with the
