@@ -4,7 +4,8 @@ critique, warm), beside the built-in UR3e on the same program measured right aft
 of those two, as the load of a shared machine drifts). CPU time (process_time), not wall time.
 
 Needs the test extra (example-robot-data, rtb-data, airo-models, pybullet).
-Run: .venv/bin/python benchmarks/bench_vendor_arms.py [REPEATS]
+Run: .venv/bin/python benchmarks/bench_vendor_arms.py [REPEATS] [ARM ...]
+(ARM: the rows whose arm name contains it, case-insensitive, e.g. ``iiwa14 xarm7``; default every row)
 """
 
 from __future__ import annotations
@@ -133,7 +134,7 @@ def program_cpu(robot: Robot, repeats: int) -> tuple[float, str, str]:
     return statistics.median(times), f"{report.score:.0f}/10", ("errors: " + ", ".join(errors)) if errors else ""
 
 
-def main(repeats: int = 3) -> None:
+def main(repeats: int = 3, *only: str) -> None:
     warnings.simplefilter("ignore", DeprecationWarning)
     ur3e = Robot.ur3e()
     ref_cpu, ref_score, _ = program_cpu(ur3e, repeats)
@@ -142,6 +143,8 @@ def main(repeats: int = 3) -> None:
     print(f"{'(built-in)':<19} {'UR3e':<16} {6:>3} {'yes':>5} {'-':>10} {'-':>9} {len(ur3e.capsules):>8} {ur3e.reach_m:>7.3f} "
           f"{ref_score:>6} {ref_cpu:>13.3f} {1.0:>7.2f}")
     for package, name, path, kwargs in arms():
+        if only and not any(word.lower() in name.lower() for word in only):
+            continue
         if path is None or not Path(path).is_file():
             print(f"{package:<19} {name:<16} {'':>3} {'no':>5}  (package not installed)")
             continue
@@ -158,8 +161,8 @@ def main(repeats: int = 3) -> None:
         ref_cpu = program_cpu(ur3e, repeats)[0]  # beside each arm: the machine's load drifts between arms
         print(f"{package:<19} {name:<16} {robot.n:>3} {'yes':>5} {load:>10.2f} {fk_error(robot, path, kwargs.get('base_pose')):>9.1e} "
               f"{len(robot.capsules):>8} {robot.reach_m:>7.3f} {score:>6} {cpu:>13.3f} {cpu / ref_cpu:>7.2f}  {notes}")
-    print(f"\nreproduce: .venv/bin/python benchmarks/bench_vendor_arms.py {repeats}")
+    print(f"\nreproduce: .venv/bin/python benchmarks/bench_vendor_arms.py {repeats}", *(repr(w) for w in only))
 
 
 if __name__ == "__main__":
-    main(*(int(a) for a in sys.argv[1:]))
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 3, *sys.argv[2:])
