@@ -258,7 +258,10 @@ def test_the_deploy_command_prints_nothing_a_terminal_would_act_on(tmp_path):
                                      for cause in ("protective_stop", "controller_silent")), verdict
     assert not any(c in err + done.stdout.decode("utf-8") for c in UNSAFE), err[:2000]
     assert "Traceback" not in err and len(err) < 20_000
-    assert err.count("nobody asked for") == 1
+    # the 300 injected packages are logged once, not 300 times; a deploy that fell silent first (the flood holding
+    # the data back on a loaded machine) stopped before it read them
+    logged = err.count("nobody asked for")
+    assert logged == 1 if "[protective_stop]" in verdict[0] else logged <= 1
 
 
 # ---------------------------------------------------------------------------- a dashboard server that attacks

@@ -105,10 +105,11 @@ def test_a_ur_rtde_recording_of_a_deployed_program_scores_like_the_program(tmp_p
     # A recording is judged from the arm's first motion to its last (moving_span: the still lead-in and tail, the
     # arm waiting and settling, are not the program's); the program's motion by the same rule. The controller
     # runs the motion as the setpoints arrive: on a loaded machine the stream can fall behind (the deploy reports
-    # its wall time), which stretches the recorded motion by about that much; beyond it, 1 %.
+    # its wall time), which stretches the recorded motion by about that much; beyond it, 2 % (the recorder's own
+    # samples, on a machine loaded to 8 runnable processes per core, drifted by 1.06 %).
     assert float(streamed.group(2)) == pytest.approx(expected.duration_s, abs=0.01)
     assert motion_s > 0.95 * expected.duration_s
-    assert abs(recorded.duration_s - motion_s) <= 0.01 * motion_s + max(0.0, late_s)
+    assert abs(recorded.duration_s - motion_s) <= 0.02 * motion_s + max(0.0, late_s)
     assert main(["check", str(csv), "--scene", "sorting"]) in (0, 1)
     assert "motion from ur_rtde recording recording.csv" in capsys.readouterr().out
 
