@@ -54,7 +54,7 @@ import numpy as np
 
 from .._arrays import equal_row_groups, first_of_equal_rows
 
-__all__ = ["Hull", "FLAT_RATIO", "convex_hull", "quickhull"]
+__all__ = ["Hull", "FLAT_RATIO", "convex_hull", "hull_triangles", "quickhull"]
 
 FLAT_RATIO = 1e-5
 """Sets whose mean-centred normalised points have smallest/largest singular value at most this are thin: they go
@@ -206,8 +206,44 @@ def convex_hull(P: np.ndarray) -> Hull:
     if norm is None:
         return _empty()
     Q, e = norm
-    if _thin(Q):  # coal's Qhull may crash the process on it
+    mesh = _coal_triangles(Q)
+    if mesh is None:
         return _quickhull(Q, e)
+    S, V, tri, normals = mesh
+    return _hull(S, e, V, _orient_merged(V, tri, normals), normals)
+
+
+def hull_triangles(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``conv(P)`` of ``P (N, 3)`` (m) as a closed triangle mesh: the indices ``(V,)`` into ``P`` of its vertices
+    (the first of equal points) and its triangles ``(F, 3)`` indexing those (not oriented; coplanar facets
+    triangulated, possibly folded over each other). Flat or tiny sets: two empty arrays. The same hull as
+    :func:`convex_hull` (coal's Qhull where it is safe, else :func:`quickhull`)."""
+    P = _points(P)
+    norm = _normalised(P)
+    empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 3), dtype=np.int64))
+    if norm is None:
+        return empty
+    Q, e = norm
+    mesh = _coal_triangles(Q)
+    if mesh is None:
+        mesh = _quickhull_triangles(Q)
+        if mesh is None:
+            return empty
+        S, (V, tri) = Q, mesh
+    else:
+        S, V, tri, _ = mesh
+    first: dict[tuple, int] = {}
+    for i, row in enumerate(map(tuple, S.tolist())):
+        first.setdefault(row, i)
+    return np.array([first[tuple(v)] for v in V.tolist()], dtype=np.int64), tri
+
+
+def _coal_triangles(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """coal's Qhull on the normalised points ``Q``: ``(S, V, tri, normals)``, ``S`` the points snapped as Qhull
+    saw them, ``V`` its vertices (rows of ``S``), ``tri`` its triangles and their outward unit normals; None where
+    Qhull might crash (a thin set) or refuses the hull (the module docstring)."""
+    if _thin(Q):  # coal's Qhull may crash the process on it
+        return None
     import coal  # noqa: PLC0415 - the proximity model loads it; kept out of this module's import
 
     # nearly coincident points (1e-15 apart) make Qhull merge facets into twisted ones and print a precision
@@ -222,12 +258,12 @@ def convex_hull(P: np.ndarray) -> Hull:
     try:
         model.buildConvexHull(True, _QHULL_OPTIONS)  # a coal.Convex of triangles, in model.convex
     except RuntimeError:  # "Too many neighbors": a vertex with more than 254 hull neighbours
-        return _quickhull(Q, e)
+        return None
     hull = model.convex
     V = np.array(hull.points(), dtype=float)  # the vertices: bit-exact copies of rows of S
     tri = np.array([(t[0], t[1], t[2]) for t in map(hull.polygons, range(hull.num_polygons))], dtype=np.int64)
     normals = np.array(hull.normals(), dtype=float).reshape(-1, 3)  # Qhull's outward unit normal of each triangle
-    return _hull(S, e, V, _orient_merged(V, tri, normals), normals)
+    return S, V, tri, normals
 
 
 def quickhull(P: np.ndarray) -> Hull:
@@ -294,10 +330,20 @@ def _visible_region(start: int, point, F, edge_facet, normals, offsets, tols) ->
 
 
 def _quickhull(Q: np.ndarray, e: int) -> Hull:
+    mesh = _quickhull_triangles(Q)
+    if mesh is None:  # all points within eps of a line or a plane
+        return _empty()
+    V, tri = mesh
+    return _hull(Q, e, V, tri, _face_normals(V, tri))
+
+
+def _quickhull_triangles(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`quickhull`'s vertices (rows of ``Q``) and outward triangles of the normalised points ``Q``; None
+    for a set within ``_EPS`` of a line or a plane."""
     eps = _EPS
     facets = _initial_tetrahedron(Q, eps)
-    if facets is None:  # all points within eps of a line or a plane
-        return _empty()
+    if facets is None:
+        return None
 
     F: list[tuple[int, int, int]] = []  # every facet made so far; dead ones stay (ids are list positions)
     normals: list[list[float]] = []  # unit outward normals
@@ -388,8 +434,7 @@ def _quickhull(Q: np.ndarray, e: int) -> Hull:
 
     live = [i for i, x in enumerate(alive) if x]
     used, tri = np.unique(np.array([F[i] for i in live], dtype=np.int64), return_inverse=True)
-    V, tri = Q[used], tri.reshape(-1, 3)
-    return _hull(Q, e, V, tri, _face_normals(V, tri))
+    return Q[used], tri.reshape(-1, 3)
 
 
 def _one_loop(horizon: list[tuple[int, int]]) -> bool:
