@@ -567,6 +567,9 @@ def _home(robot, samples, frames, p0, p1, capsule_capsule, structural) -> np.nda
         r_frames, r0, r1 = robot.forward_with_capsules(q)
         good = (_clearance(robot, r0, r1, capsule_capsule, structural) > 0) & (elbow_heights(robot, r_frames) >= 0.0)
         if good.any():
-            margin = np.where(good, _limit_margin(robot, q), -np.inf)
+            # the base joint's room counts twice: every placement the program asks for turns it first, and a base
+            # near its limit sends the posture seeds of targets on that side to far solutions
+            base = np.minimum(q[:, 0] - robot.lower[0], robot.upper[0] - q[:, 0]) / max(robot.upper[0] - robot.lower[0], 1e-9)
+            margin = np.where(good, _limit_margin(robot, q) + base, -np.inf)
             return q[int(np.argmax(margin))]
     return samples[int(ranked[0])]
