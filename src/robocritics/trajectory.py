@@ -390,10 +390,11 @@ class Trajectory:
                 yield State(t, self.q[t], self._frames[t], self._proximity[t], float(self.time[t]))
             return
         for chunk in self.chunks(halo=0):
-            piece = chunk.trajectory
-            for i in range(len(piece)):
+            # read once per chunk: a motion of one chunk is its own chunk, whose reads compute it whole
+            frames, proximity = chunk.trajectory.frames, chunk.trajectory.proximity
+            for i in range(len(frames)):
                 t = chunk.lo + i
-                yield State(t, self.q[t], piece.frames[i], piece.proximity[i], float(self.time[t]))
+                yield State(t, self.q[t], frames[i], proximity[i], float(self.time[t]))
 
     # --- serialisation -------------------------------------------------------------
 
