@@ -6,7 +6,7 @@ timed by wrapping the method in place, so the phases add up to the total up to t
 
 Reproduce::
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/profile_critique.py --repeats 15
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/profile_critique.py [--repeats N]
 """
 
 from __future__ import annotations
@@ -19,7 +19,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))  # synth.py lives with the tests
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from _table import print_table  # noqa: E402
 from synth import realistic_trajectory  # noqa: E402
 
 from robocritics.critic import BUILTIN_CRITICS, as_execution, critique, get_critics  # noqa: E402
@@ -69,12 +71,12 @@ def main(argv: list[str] | None = None) -> int:
         spent["TOTAL"] = total
         for key, value in spent.items():
             runs[key].append(value)
-    print(f"critique() of the five critics, {len(traj):,} samples; CPU ms over {args.repeats} repeats\n")
-    print(f"{'phase':<28} {'least':>8} {'median':>8}")
+    rows = [("phase", "least / median CPU ms")]
     for key in sorted(runs, key=lambda k: -min(runs[k])):
         values = sorted(runs[key])
-        print(f"{key:<28} {1000 * values[0]:>8.2f} {1000 * values[len(values) // 2]:>8.2f}")
-    print("\nreproduce: OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/profile_critique.py --repeats 15")
+        rows.append((key, f"{1000 * values[0]:.2f} / {1000 * values[len(values) // 2]:.2f}"))
+    what = f"critique() of the five critics, {len(traj):,} samples, {args.repeats} repeats"
+    print_table("profile_critique", what, rows, argv)
     return 0
 
 
