@@ -43,15 +43,19 @@ def approach_rotation(position, yaw_rad: float, tilt_rad: float, shoulder) -> np
     R = fingers_down(yaw_rad)
     if tilt_rad == 0.0:
         return R
-    u = np.array([position[0] - shoulder[0], position[1] - shoulder[1], 0.0])
-    norm = math.hypot(u[0], u[1])
+    ux, uy = position[0] - shoulder[0], position[1] - shoulder[1]
+    norm = math.hypot(ux, uy)
     if norm < 1e-9:
         return R
-    u /= norm
-    h = np.array([u[1], -u[0], 0.0])  # u x z
+    # Rodrigues about the horizontal unit h = u x z = (uy, -ux, 0)/|u|: Rot = c I + s [h]x + (1 - c) h hᵀ,
+    # written out (the numpy products cost several times this on 3x3 matrices, and tracking calls it per point)
+    hx, hy = uy / norm, -ux / norm
     c, s = math.cos(tilt_rad), math.sin(tilt_rad)
-    K = np.array([[0.0, -h[2], h[1]], [h[2], 0.0, -h[0]], [-h[1], h[0], 0.0]])
-    return (np.eye(3) + s * K + (1.0 - c) * (K @ K)) @ R
+    k = 1.0 - c
+    rot = np.array([[c + k * hx * hx, k * hx * hy, s * hy],
+                    [k * hx * hy, c + k * hy * hy, -s * hx],
+                    [-s * hy, s * hx, c]])
+    return rot.dot(R)
 
 
 def turn_rates(robot, q) -> tuple[float, float]:

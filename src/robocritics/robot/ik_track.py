@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+import eigenpy
 import numpy as np
 import pinocchio as pin
 
@@ -52,14 +53,49 @@ _MAX_STEPS = 12
 #: A converged iterate whose next step moves no joint more than this [rad] is the optimum (the step is the
 #: distance to it, to first order).
 _STEP_TOL_RAD = 1e-12
-#: A converged iterate reached by a step of at most this [rad] is the optimum: Newton's steps converge
-#: quadratically, so the distance left is of the order of this squared (1e-14 rad) and no further step is taken.
-_QUADRATIC_RAD = 1e-7
+#: A converged iterate reached by a step of at most this [rad] is the optimum: the distance left is the next
+#: step's, which shrinks by a factor of the order of ``|q - seed|`` (rad: the constraint's curvature times the
+#: multipliers; quadratic with as many joints as constraints). Measured on the vendor arms' lines (5 mm apart):
+#: 1e-3 to 1e-2, so at most ~1e-8 rad is left (the general solver stops ~1e-7 from it). A converged iterate whose next step is this small is stepped
+#: to without evaluating the error there: the step zeroes the linearised error, so what is left is the
+#: second-order term, about ``|d²f/dq²| s²`` <= 1e-12 (m, rad; the arm's reach times ``s²``), inside ``tol``.
+_QUADRATIC_RAD = 1e-6
 #: At most this last step [rad] after the steps run out still counts as settled (rounding in ``J_F J_Fᵀ``).
 _SETTLED_RAD = 1e-9
 
 #: ``residual(q) -> (e, J, position error m, rotation error rad)`` of a tracking problem at ``q``.
 Residual = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, float, float]]
+
+
+def _solve(A: np.ndarray, b: np.ndarray, spd: bool) -> np.ndarray | None:
+    """``A⁻¹ b`` for a small ``A`` (Cholesky where ``spd``: ``J_F J_Fᵀ``; else LU with partial pivoting), or
+    None where ``A`` is singular or the result is not finite (the caller's general solver decides). Eigen's
+    decompositions through eigenpy (Pinocchio's own binding): numpy's ``linalg.solve`` costs about three
+    times as much on 6x6 systems, mostly its per-call checks, and a line solves one system per point."""
+    x = (eigenpy.LLT(A) if spd else eigenpy.PartialPivLU(A)).solve(b)
+    return x if math.isfinite(float(x.dot(x))) else None
+
+
+def _kkt_step(J: np.ndarray, e: np.ndarray, q: np.ndarray, seed: np.ndarray,
+              pinned: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """The module docstring's linearised step from ``q``: ``(new q, multipliers y or None)``, None where there
+    is no step (fewer free joints than constraints, a singular system)."""
+    if pinned is None:
+        if J.shape[0] == J.shape[1]:  # as many joints as constraints: Newton's step
+            dq = _solve(J, e, spd=False)
+            return None if dq is None else (q + dq, None)
+        y = _solve(J.dot(J.T), e + J.dot(q - seed), spd=True)
+        return None if y is None else (seed + J.T.dot(y), y)
+    free = ~pinned
+    Jf = J[:, free]
+    if Jf.shape[1] < Jf.shape[0]:
+        return None  # fewer free joints than constraints: no exact solution with these joints pinned
+    y = _solve(Jf.dot(Jf.T), e + Jf.dot(q[free] - seed[free]), spd=True)
+    if y is None:
+        return None
+    new = q.copy()
+    new[free] = seed[free] + Jf.T.dot(y)
+    return new, y
 
 
 def _nearest_kkt(residual: Residual, seed: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float,
@@ -70,7 +106,7 @@ def _nearest_kkt(residual: Residual, seed: np.ndarray, lo: np.ndarray, hi: np.nd
     :data:`_QUADRATIC_RAD` (the distance left is then of the order of its square) or the next one would move
     none more than :data:`_STEP_TOL_RAD`; with a joint pinned the multipliers are checked too."""
     q = seed if guess is None else guess
-    lo_list, hi_list = lo.tolist(), hi.tolist()
+    lo_list, hi_list, seed_list = lo.tolist(), hi.tolist(), seed.tolist()
     pinned: np.ndarray | None = None  # the joints held at a limit, or None (the common case: no mask work)
     last_step = math.inf
     for _ in range(_MAX_STEPS):
@@ -78,21 +114,10 @@ def _nearest_kkt(residual: Residual, seed: np.ndarray, lo: np.ndarray, hi: np.nd
         converged = dp <= tol and dr <= tol
         if converged and pinned is None and last_step <= _QUADRATIC_RAD:
             return q
-        if pinned is None:
-            if J.shape[0] == J.shape[1]:  # as many joints as constraints: Newton's step
-                y = None
-                new = q + np.linalg.solve(J, e)
-            else:
-                y = np.linalg.solve(J.dot(J.T), e + J.dot(q - seed))
-                new = seed + J.T.dot(y)
-        else:
-            free = ~pinned
-            Jf = J[:, free]
-            if Jf.shape[1] < Jf.shape[0]:
-                return None  # fewer free joints than constraints: no exact solution with these joints pinned
-            y = np.linalg.solve(Jf.dot(Jf.T), e + Jf.dot(q[free] - seed[free]))
-            new = q.copy()
-            new[free] = seed[free] + Jf.T.dot(y)
+        stepped = _kkt_step(J, e, q, seed, pinned)
+        if stepped is None:
+            return None
+        new, y = stepped
         new_list = new.tolist()
         step = max(abs(a - b) for a, b in zip(new_list, q.tolist()))
         if converged:
@@ -108,11 +133,14 @@ def _nearest_kkt(residual: Residual, seed: np.ndarray, lo: np.ndarray, hi: np.nd
                     continue
             if step <= _STEP_TOL_RAD:
                 return q
+            if pinned is None and step <= _QUADRATIC_RAD and all(l <= a <= h for a, l, h in zip(new_list, lo_list, hi_list)):
+                return new  # converged, and the last step: see _QUADRATIC_RAD
         if any(a < l or a > h for a, l, h in zip(new_list, lo_list, hi_list)):
             beyond = (new < lo) | (new > hi)
             new = np.minimum(np.maximum(new, lo), hi)
             pinned = beyond if pinned is None else pinned | beyond
-        if max(abs(a - b) for a, b in zip(new.tolist(), seed.tolist())) > max_move_rad:
+            new_list = new.tolist()
+        if max(abs(a - b) for a, b in zip(new_list, seed_list)) > max_move_rad:
             return None
         q, last_step = new, step
     e, J, dp, dr = residual(q)
@@ -149,13 +177,16 @@ def track_pointing(model, data, fid: int, position: np.ndarray, axis: np.ndarray
     ``z . z* > 0``; the rotation error is ``|z x z*|`` (rad to first order), as
     :func:`~robocritics.robot.ik_numeric.pointing_ik` judges."""
     p_des = np.asarray(position, dtype=float)
-    z_des = np.asarray(axis, dtype=float)
-    z_des = z_des / np.linalg.norm(z_des)
-    u = np.cross(z_des, np.eye(3)[int(np.argmin(np.abs(z_des)))])
-    u /= np.linalg.norm(u)
-    v = np.cross(z_des, u)
+    ax, ay, az = np.asarray(axis, dtype=float).tolist()
+    norm = math.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax / norm, ay / norm, az / norm
+    # u = z* x (the basis vector least along z*), v = z* x u: written out, as np.cross costs ten times this
+    k = min(range(3), key=lambda i: abs((ax, ay, az)[i]))
+    ux, uy, uz = ((0.0, az, -ay), (-az, 0.0, ax), (ay, -ax, 0.0))[k]
+    norm = math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux, uy, uz = ux / norm, uy / norm, uz / norm
+    vx, vy, vz = ay * uz - az * uy, az * ux - ax * uz, ax * uy - ay * ux
     world = pin.LOCAL_WORLD_ALIGNED
-    (ux, uy, uz), (vx, vy, vz), (ax, ay, az) = u.tolist(), v.tolist(), z_des.tolist()
     across = np.empty((2, 3))
     A = np.empty((5, model.nv))
 
@@ -177,6 +208,20 @@ def track_pointing(model, data, fid: int, position: np.ndarray, axis: np.ndarray
     return _nearest_kkt(residual, seed, lo, hi, tol, max_move_rad, guess)
 
 
+def _extrapolated(rows: list[np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
+    """Where the next point of an evenly spaced line starts its Newton iterations: the last three solutions'
+    parabola one spacing on (``3 q[i-1] - 3 q[i-2] + q[i-3]``, off by about the third difference of ``q``
+    along the line, ~1e-6 rad at the planner's 5 mm: within :data:`_QUADRATIC_RAD` after one step), the last
+    two's line (``2 q[i-1] - q[i-2]``, ~|dq|²) with two, clamped to the limits; None (the seed) before."""
+    if len(rows) >= 3:
+        guess = 3.0 * (rows[-1] - rows[-2]) + rows[-3]
+    elif len(rows) == 2:
+        guess = 2.0 * rows[-1] - rows[-2]
+    else:
+        return None
+    return np.minimum(np.maximum(guess, lo), hi)
+
+
 def track_line(robot, positions: np.ndarray, seed: np.ndarray, yaw_rad: float,
                tilts: np.ndarray) -> tuple[np.ndarray, PlanningError | None]:
     """:meth:`~robocritics.robot.model.Robot.ik_line` for an arm without a closed form: ``robot.ik`` at each
@@ -184,9 +229,8 @@ def track_line(robot, positions: np.ndarray, seed: np.ndarray, yaw_rad: float,
     fingers down turned by ``yaw_rad`` and tilted by ``tilts[i]`` (rad) as ``robot.ik`` puts them; each point
     tracked (:func:`track_pose`, or :func:`track_pointing` where ``robot.ik`` points the fingers), and solved
     by ``robot.ik`` itself where tracking does not settle (and for a closed-form arm, a 5-joint arm's tilted
-    cone, a point that is not finite). The Newton iterations start from the line extrapolated from the last
-    two solutions (``2 q[i-1] - q[i-2]``, clamped to the limits: about ``|dq|²`` from the solution, a step
-    saved); the seed, what "nearest" is measured from, stays the previous solution.
+    cone, a point that is not finite). The Newton iterations start from the solutions so far extrapolated
+    (:func:`_extrapolated`); the seed, what "nearest" is measured from, stays the previous solution.
     Returns ``(q (m, n) rad, error)`` as ``ik_line`` does."""
     lo, hi = robot.lower, robot.upper
     closed_form = robot.dh is not None and robot.tcp_in_flange is not None
@@ -199,7 +243,7 @@ def track_line(robot, positions: np.ndarray, seed: np.ndarray, yaw_rad: float,
         if np.isfinite(point).all() and not (robot.n < 6 and tilt != 0.0) and not (closed_form and not pointing):
             if fid is None:
                 model, data, fid = robot.model, robot.data, robot._tcp_frame_id
-            guess = None if len(rows) < 2 else np.minimum(np.maximum(2.0 * rows[-1] - rows[-2], lo), hi)
+            guess = _extrapolated(rows, lo, hi)
             R = approach_rotation(point, yaw_rad, tilt, robot.shoulder_m)
             if pointing:
                 q = track_pointing(model, data, fid, point, R[:, 2], seed, lo, hi, guess=guess)
