@@ -133,3 +133,26 @@ def test_a_vendor_ur_file_is_recognised_as_its_dh_chain_and_gets_the_nearest_clo
 @pytest.mark.parametrize("name", ["pybullet iiwa", "pybullet xarm6", "rtb kr16", "erd panda"])
 def test_an_arm_that_is_not_a_ur_chain_keeps_numeric_ik(name):
     assert _robot(name).dh is None
+
+
+def test_a_wrist_with_less_than_a_turn_each_way_keeps_the_arms_branch():
+    """The iiwa14's last joint stops at +-175 deg. A pick, then a place whose yaw puts the planner's posture seed
+    for that wrist past -175 deg: the seed is taken at its in-limit equivalent (+ 2 pi), so numeric IK converges
+    beside it, not after random restarts on another branch of the whole arm (a flipped elbow and wrist: joints 3
+    and 6 turning by about 3 rad during a simple place)."""
+    from robocritics import Scene, simulate
+
+    robot = _robot("rtb iiwa14")
+    s = robot.reach_m / 0.6
+    scene = Scene.model_validate({
+        "name": "pick",
+        "objects": [{"id": "apple", "shape": "sphere", "size": [0.035], "position": [0.35 * s, 0.1 * s, 0.035]}],
+        "containers": [{"id": "box", "size": [0.2, 0.2, 0.08], "position": [0.3 * s, -0.25 * s, 0.04]}],
+    })
+    program = ("lib.open_gripper()\nlib.move_above(apple, 0.1)\nlib.move_linear(apple.x, apple.y, apple.z)\n"
+               "lib.close_gripper()\nlib.move_linear(apple.x, apple.y, apple.z + 0.15)\n"
+               "lib.move_to(box.x, box.y, box.top + 0.12)\nlib.open_gripper()\n")
+    q = simulate(program, scene, robot).trajectory.q
+    travel = q.max(axis=0) - q.min(axis=0)  # rad each joint sweeps over the program
+    assert travel[2] < 1.0 and travel[5] < 1.0, travel
+    assert np.all(q[:, -1] <= robot.upper[-1] + 1e-12)

@@ -590,16 +590,24 @@ class Planner:
         seed[0] = home[0] + turn * self.robot.base_turn_sign  # (the sign is +-1, or 0 for a base that does not turn)
         seed[0] += 2 * math.pi * round((self.q[0] - seed[0]) / (2 * math.pi))
         if natural:
-            lo, hi = float(self.robot.lower[0]), float(self.robot.upper[0])
-            inside = [seed[0] + 2 * math.pi * k for k in (-2, -1, 0, 1, 2) if lo <= seed[0] + 2 * math.pi * k <= hi]
-            if inside:
-                seed[0] = min(inside, key=lambda b: abs(b - self.q[0]))
+            seed[0] = self.turn_within_limits(seed[0], 0)
         # with the fingers down, turning the base by `turn` turns the fingers by +turn and the last joint
         # turns them by wrist_yaw_per_rad (-1 on a UR arm) times its angle: compensate both to keep the yaw
         k = -self.robot.wrist_yaw_per_rad
         seed[-1] = home[-1] + turn * k - (self.yaw if yaw is None else yaw) * k
         seed[-1] += 2 * math.pi * round((self.q[-1] - seed[-1]) / (2 * math.pi))
+        if not self.robot.lower[-1] <= seed[-1] <= self.robot.upper[-1]:
+            # a wrist with less than +-2 pi (an iiwa's +-175 deg): a seed past its limit has no solution
+            # near it, and numeric IK then restarts at random and lands on another branch of the whole arm
+            seed[-1] = self.turn_within_limits(seed[-1], -1)
         return seed
+
+    def turn_within_limits(self, angle_rad: float, joint: int) -> float:
+        """The equivalent of ``angle_rad`` (``+ 2 pi k``) within joint ``joint``'s limits closest to where the
+        joint is now, or ``angle_rad`` itself where no equivalent is within them."""
+        lo, hi = float(self.robot.lower[joint]), float(self.robot.upper[joint])
+        inside = [angle_rad + 2 * math.pi * k for k in (-2, -1, 0, 1, 2) if lo <= angle_rad + 2 * math.pi * k <= hi]
+        return min(inside, key=lambda a: abs(a - self.q[joint])) if inside else angle_rad
 
     def move_joint_to_point(self, point: np.ndarray, call: SkillCall, step: int) -> None:
         start = self.tcp()[:3, 3]
