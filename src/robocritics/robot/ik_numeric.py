@@ -12,6 +12,8 @@ import pinocchio as pin
 
 from robocritics.errors import PlanningError, RobotModelError
 
+from .ik_track import track_pose
+
 __all__ = ["numeric_ik", "pointing_ik"]
 
 
@@ -79,6 +81,25 @@ def _towards_seed(model, data, fid, q, seed, lo, hi, clip, attempt, tol, max_ste
             break
         q = moved
     return q
+
+
+def _nearest_along_self_motion(model, data, fid, q, seed, lo, hi, clip, attempt, tol, max_step,
+                               oMdes) -> np.ndarray:
+    """From the solution ``q`` of a redundant arm, the solution nearest ``seed`` that self-motion reaches.
+
+    For a full pose on an arm whose configuration is its joint angles: the active-set Newton iteration on the
+    conditions of ``min |q - seed|²`` subject to the pose (:func:`~robocritics.robot.ik_track.track_pose`,
+    started at ``q``), taken when it converges no farther from the seed than ``q``: it lands on the point the
+    descent of :func:`_towards_seed` approaches, in a few Newton steps instead of up to
+    :data:`NULL_SPACE_STEPS` re-converged null-space steps. Otherwise (position only, a model with quaternion
+    joints, no convergence) that descent."""
+    if clip and oMdes is not None:
+        nearest = track_pose(model, data, fid, oMdes.rotation, oMdes.translation, seed, lo, hi, tol=tol,
+                             max_move_rad=math.inf, guess=q)
+        if nearest is not None and np.linalg.norm(nearest - seed) <= np.linalg.norm(q - seed):
+            return nearest
+    task_dims = 6 if oMdes is not None else 3
+    return _towards_seed(model, data, fid, q, seed, lo, hi, clip, attempt, tol, max_step, task_dims)
 
 
 def _held_step(J: np.ndarray, err: np.ndarray, lam: float, eye: np.ndarray, q: np.ndarray, lo: np.ndarray,
@@ -215,8 +236,7 @@ def numeric_ik(
     :data:`STALL_ITERATIONS` iterations is stuck and ends early; otherwise up to ``restarts`` more
     attempts, the first four near the seed, then from random configurations within the limits (deterministic
     ``rng``). On a redundant arm (more joints than the target constrains, a 7-joint arm) the solution then
-    slides along its self-motion towards the seed (:func:`_towards_seed`, at most :data:`NULL_SPACE_STEPS`
-    steps): the null-space preference is the seed's posture. On any arm, a solution with a joint more than
+    moves along its self-motion to the solution nearest the seed (:func:`_nearest_along_self_motion`): the null-space preference is the seed's posture. On any arm, a solution with a joint more than
     :data:`NEAR_SEED_RAD` from the seed is compared with the solutions of further attempts (near the seed first)
     and the nearest of up to three is returned. Returns ``(nq,)``; raises :class:`PlanningError` with the best
     residual (m, rad) if nothing converged.
@@ -246,7 +266,8 @@ def numeric_ik(
             best = (q, dp, dr)
         if dp <= tol and dr <= tol:
             if redundant:
-                q = _towards_seed(model, data, fid, q, q0, lo, hi, clip, attempt, tol, max_step, len(eye))
+                q = _nearest_along_self_motion(model, data, fid, q, q0, lo, hi, clip, attempt, tol, max_step,
+                                               oMdes)
             found.append(np.array(q, dtype=float))
             # near the seed (every joint within NEAR_SEED_RAD), or several branches seen: the nearest of them
             if np.abs(q - q0).max() <= NEAR_SEED_RAD or len(found) >= 3:
