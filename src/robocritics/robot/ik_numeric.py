@@ -50,6 +50,10 @@ STALL_ITERATIONS = 20
 STALL_GAIN = 0.99
 #: Null-space steps :func:`numeric_ik` takes towards the seed on a redundant arm.
 NULL_SPACE_STEPS = 30
+#: Newton steps numeric IK tries from the seed before its descents. Far from the seed the iteration converges
+#: linearly (by a factor of about ``|q - seed|`` rad a step: the constraint's curvature is left out), and its
+#: steps are at most ``ik_track``'s trust length, 0.25 rad: a posture seed 0.7 rad from the solution took 16.
+NEWTON_FIRST_STEPS = 30
 #: A redundant arm's IK solution with every joint within this of the seed [rad] is taken without looking for
 #: other branches; a farther one is compared with up to two more (near-seed restarts first).
 NEAR_SEED_RAD = 1.0
@@ -264,7 +268,7 @@ def numeric_ik(
         q0 = np.clip(q0, lo, hi)
     if clip and oMdes is not None and model.nv >= 6:
         newton = track_pose(model, data, fid, oMdes.rotation, oMdes.translation, q0, lo, hi, tol=tol,
-                            max_move_rad=NEAR_SEED_RAD)
+                            max_move_rad=NEAR_SEED_RAD, max_steps=NEWTON_FIRST_STEPS)
         if newton is not None:  # Newton first: see the docstring
             return newton
     best = (q0, math.inf, math.inf)
@@ -353,7 +357,8 @@ def pointing_ik(model: Any, data: Any, fid: int, position: Any, axis: Any, seed:
         return best_q, best[0], best[1]
 
     if cone is None and model.nv >= 5:
-        newton = track_pointing(model, data, fid, p_des, z_des, q0, lo, hi, tol=tol, max_move_rad=NEAR_SEED_RAD)
+        newton = track_pointing(model, data, fid, p_des, z_des, q0, lo, hi, tol=tol, max_move_rad=NEAR_SEED_RAD,
+                                max_steps=NEWTON_FIRST_STEPS)
         if newton is not None:  # Newton first: see numeric_ik's docstring
             return newton
     best = (q0, math.inf, math.inf)

@@ -60,6 +60,10 @@ _STEP_TOL_RAD = 1e-12
 #: to without evaluating the error there: the step zeroes the linearised error, so what is left is the
 #: second-order term, about ``|d²f/dq²| s²`` <= 1e-12 (m, rad; the arm's reach times ``s²``), inside ``tol``.
 _QUADRATIC_RAD = 1e-6
+#: The longest Newton step [rad, any joint]: a longer one is shortened to this along its direction. A step this
+#: long comes only from a start far from the solution (IK from a posture seed; a line's points are millimetres
+#: apart), where a full step can overshoot across a near-singular shoulder and oscillate (the xArm7 did).
+_TRUST_RAD = 0.25
 #: At most this last step [rad] after the steps run out still counts as settled (rounding in ``J_F J_Fᵀ``).
 _SETTLED_RAD = 1e-9
 
@@ -99,7 +103,7 @@ def _kkt_step(J: np.ndarray, e: np.ndarray, q: np.ndarray, seed: np.ndarray,
 
 
 def _nearest_kkt(residual: Residual, seed: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float,
-                 max_move_rad: float, guess: np.ndarray | None) -> np.ndarray | None:
+                 max_move_rad: float, guess: np.ndarray | None, max_steps: int = _MAX_STEPS) -> np.ndarray | None:
     """The active-set Newton iteration of the module docstring from ``guess`` (default ``seed``; both within
     ``[lo, hi]``), the offsets measured from ``seed``; None where it does not settle (the caller's general
     solver decides). Converged when the error is within ``tol`` and the last step moved no joint more than
@@ -109,7 +113,7 @@ def _nearest_kkt(residual: Residual, seed: np.ndarray, lo: np.ndarray, hi: np.nd
     lo_list, hi_list, seed_list = lo.tolist(), hi.tolist(), seed.tolist()
     pinned: np.ndarray | None = None  # the joints held at a limit, or None (the common case: no mask work)
     last_step = math.inf
-    for _ in range(_MAX_STEPS):
+    for _ in range(max_steps):
         e, J, dp, dr = residual(q)
         converged = dp <= tol and dr <= tol
         if converged and pinned is None and last_step <= _QUADRATIC_RAD:
@@ -120,6 +124,9 @@ def _nearest_kkt(residual: Residual, seed: np.ndarray, lo: np.ndarray, hi: np.nd
         new, y = stepped
         new_list = new.tolist()
         step = max(abs(a - b) for a, b in zip(new_list, q.tolist()))
+        if step > _TRUST_RAD:  # far from the solution, the linearisation is not to be trusted this far
+            new = q + (new - q) * (_TRUST_RAD / step)
+            new_list, step = new.tolist(), _TRUST_RAD
         if converged:
             if pinned is not None:
                 # the multipliers of the pinned joints: one whose optimum lies inside its limit is freed
@@ -149,7 +156,7 @@ def _nearest_kkt(residual: Residual, seed: np.ndarray, lo: np.ndarray, hi: np.nd
 
 def track_pose(model, data, fid: int, rotation: np.ndarray, position: np.ndarray, seed: np.ndarray,
                lo: np.ndarray, hi: np.ndarray, *, tol: float = 1e-10, max_move_rad: float = TRACK_MAX_MOVE_RAD,
-               guess: np.ndarray | None = None) -> np.ndarray | None:
+               guess: np.ndarray | None = None, max_steps: int = _MAX_STEPS) -> np.ndarray | None:
     """Joint angles (rad) putting frame ``fid`` of the Pinocchio ``model`` at ``rotation`` (3x3) and ``position``
     (m), nearest ``seed`` (:func:`_nearest_kkt`), or None. The error is ``e = [p* - p; log3(R* Rᵀ)]`` (world
     frame), the Jacobian the frame's world-aligned one; converged when both norms are at most ``tol`` (m,
@@ -165,12 +172,12 @@ def track_pose(model, data, fid: int, rotation: np.ndarray, position: np.ndarray
         ex, ey, ez, rx, ry, rz = e.tolist()
         return e, J, math.sqrt(ex * ex + ey * ey + ez * ez), math.sqrt(rx * rx + ry * ry + rz * rz)
 
-    return _nearest_kkt(residual, seed, lo, hi, tol, max_move_rad, guess)
+    return _nearest_kkt(residual, seed, lo, hi, tol, max_move_rad, guess, max_steps)
 
 
 def track_pointing(model, data, fid: int, position: np.ndarray, axis: np.ndarray, seed: np.ndarray,
                    lo: np.ndarray, hi: np.ndarray, *, tol: float = 1e-9, max_move_rad: float = TRACK_MAX_MOVE_RAD,
-                   guess: np.ndarray | None = None) -> np.ndarray | None:
+                   guess: np.ndarray | None = None, max_steps: int = _MAX_STEPS) -> np.ndarray | None:
     """Joint angles (rad) putting frame ``fid`` at ``position`` (m) with its +z axis along ``axis`` (the turn
     about it free: five constraints), nearest ``seed``, or None. With ``u``, ``v`` unit vectors across
     ``z*``, the axis constraints are ``z . u = z . v = 0`` (rows ``(z x u)ᵀ J_w``, ``(z x v)ᵀ J_w``) and
@@ -205,7 +212,7 @@ def track_pointing(model, data, fid: int, position: np.ndarray, axis: np.ndarray
         dr = math.hypot(cu, cv) if zx * ax + zy * ay + zz * az > 0.0 else math.inf
         return e, A, math.sqrt(ex * ex + ey * ey + ez * ez), dr
 
-    return _nearest_kkt(residual, seed, lo, hi, tol, max_move_rad, guess)
+    return _nearest_kkt(residual, seed, lo, hi, tol, max_move_rad, guess, max_steps)
 
 
 def _extrapolated(rows: list[np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
