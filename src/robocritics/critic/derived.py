@@ -17,7 +17,7 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     from ..execution import Execution
 
-__all__ = ["shared", "position_planes", "position_steps", "columns_as_rows"]
+__all__ = ["shared", "position_planes", "columns_as_rows"]
 
 GATHER_BLOCK = 512
 """Samples per block of :func:`columns_as_rows` on a row-major array: 512 rows of 60 pairs (240 kB) stay in a core's
@@ -43,17 +43,6 @@ def position_planes(execution: "Execution") -> np.ndarray:
     interleaved ``(T, L, 3)`` array). A stored trajectory keeps them (:attr:`Trajectory.position_planes`, made
     once, as its ``positions``): judging it again does not transpose them again."""
     return shared(execution, "position_planes", lambda: execution.trajectory.position_planes)
-
-
-def position_steps(execution: "Execution") -> np.ndarray:
-    """``(3, L, T-1)`` m: every frame's step ``p_{t+1} - p_t`` between consecutive samples, as coordinate planes
-    (:func:`position_planes`' layout): ``steps[c, l, t] = planes[c, l, t + 1] - planes[c, l, t]``. The joint-speed
-    critic squares them, the space-usage critic's second differences start from them."""
-    def steps() -> np.ndarray:
-        Y = position_planes(execution)
-        return np.subtract(Y[:, :, 1:], Y[:, :, :-1])
-
-    return shared(execution, "position_steps", steps)
 
 
 def columns_as_rows(P: np.ndarray, columns: np.ndarray) -> np.ndarray:

@@ -42,7 +42,7 @@ from pydantic import Field, model_validator
 from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
 from ..._arrays import squared_norms
-from ..derived import position_steps
+from ..derived import position_planes
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["JointSpeedCritic", "register_critics", "link_speeds"]
@@ -99,16 +99,16 @@ def link_speeds(positions: np.ndarray, time: np.ndarray) -> np.ndarray:
     return speed
 
 
-def squared_steps(D: np.ndarray, rows: slice) -> np.ndarray:
-    """``(L, n)`` squared lengths, m^2, of the steps ``D (3, L, T-1)`` (coordinate planes of ``p_{i+1} - p_i``,
-    :func:`robocritics.critic.derived.position_steps`) for the intervals ``i`` of ``rows``, as :func:`link_speeds`
-    squares them (``x^2 + z^2 + y^2``, :func:`robocritics._arrays.squared_norms`' order)."""
-    x, z, y = (D[c][:, rows] for c in (0, 2, 1))
-    out = np.multiply(x, x)
-    part = np.multiply(z, z)
-    out += part
-    np.multiply(y, y, out=part)
-    out += part
+def squared_steps(Y: np.ndarray, rows: slice) -> np.ndarray:
+    """``(L, n)`` squared lengths, m^2, of the steps ``p_{i+1} - p_i`` of the positions ``Y (3, L, T)``
+    (coordinate planes, :func:`robocritics.critic.derived.position_planes`) for the intervals ``i`` of ``rows``,
+    as :func:`link_speeds` squares them (``x^2 + z^2 + y^2``, :func:`robocritics._arrays.squared_norms`' order)."""
+    lo, hi = rows.start, rows.stop
+    d = [Y[c, :, lo + 1 : hi + 1] - Y[c, :, lo:hi] for c in (0, 2, 1)]
+    out = np.multiply(d[0], d[0], out=d[0])
+    for dc in d[1:]:
+        dc *= dc
+        out += dc
     return out
 
 
@@ -177,13 +177,13 @@ class _Speeds:
         if len(self.trajectory) < 2 or not self.names:
             return
         window = chunk.trajectory
-        D = position_steps(execution)  # (3, L, n-1) m, shared with the space-usage critic
+        Y = position_planes(execution)  # (3, L, n) m
         if self.sel is not None:
-            D = D[:, self.sel]
+            Y = Y[:, self.sel]
         # the intervals ending at the chunk's own samples (the first sample of the run ends none)
         first = max(chunk.start, 1)
         rows = slice(first - chunk.lo - 1, chunk.stop - chunk.lo - 1)
-        squared = squared_steps(D, rows)  # (L, n) squared steps, m^2
+        squared = squared_steps(Y, rows)  # (L, n) squared steps, m^2
         dt = np.diff(window.time)[rows]
         # the fastest link per sample: sqrt and division by dt > 0 keep the order of the squared steps, so
         # sqrt(max |step|^2) / dt is max(|step| / dt) bit for bit, without a speed per link

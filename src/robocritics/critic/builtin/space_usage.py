@@ -47,7 +47,7 @@ from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
 from ..._arrays import row_max, unique_values
 from ...scene import Workspace
-from ..derived import position_planes, position_steps
+from ..derived import position_planes
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_length, make_signal, threshold_verdict
 from ...geometry.hull import convex_hull
 
@@ -81,23 +81,22 @@ def hull_points(X: np.ndarray, tolerance_m: float) -> tuple[np.ndarray, np.ndarr
     Returns ``(points (N, 3), sample index (N,), frame index (N,))``.
     """
     T = X.shape[0]
-    Y = np.ascontiguousarray(X.transpose(2, 1, 0))
-    ti, li = kept_samples(Y, np.subtract(Y[:, :, 1:], Y[:, :, :-1]), 0, 0, T, T, tolerance_m)
+    ti, li = kept_samples(np.ascontiguousarray(X.transpose(2, 1, 0)), 0, 0, T, T, tolerance_m)
     ti, li = frame_major(ti, li)
     return without_repeats(X[ti, li], ti, li)
 
 
-def second_differences(Y: np.ndarray, D: np.ndarray, rows: slice, out: np.ndarray | None = None) -> np.ndarray:
+def second_differences(Y: np.ndarray, rows: slice, out: np.ndarray | None = None) -> np.ndarray:
     """``(L, n)`` squared norms, m^2, of the second differences ``p_{t+1} - 2 p_t + p_{t-1}`` of the positions
     ``Y (3, L, T)`` (coordinate planes) at the samples ``t`` of ``rows`` (each with a sample either side), as
-    ``((p_{t+1} - p_t) - p_t) + p_{t-1}`` per coordinate, from the steps ``D (3, L, T-1)``
-    (``D[:, :, t] = p_{t+1} - p_t``, :func:`robocritics.critic.derived.position_steps`), and ``x^2 + z^2 + y^2``
+    ``((p_{t+1} - p_t) - p_t) + p_{t-1}`` per coordinate and ``x^2 + z^2 + y^2``
     (:func:`robocritics._arrays.squared_norms`' order); into ``out`` when given."""
     lo, hi = rows.start, rows.stop
     total = out
     for c in (0, 2, 1):  # x, then z and y added
         Yc = Y[c]
-        dc = np.subtract(D[c][:, lo:hi], Yc[:, lo:hi])
+        dc = np.subtract(Yc[:, lo + 1 : hi + 1], Yc[:, lo:hi])
+        dc -= Yc[:, lo:hi]
         dc += Yc[:, lo - 1 : hi - 1]
         if c == 0:
             total = np.multiply(dc, dc, out=out)
@@ -107,13 +106,12 @@ def second_differences(Y: np.ndarray, D: np.ndarray, rows: slice, out: np.ndarra
     return total
 
 
-def kept_samples(Y: np.ndarray, D: np.ndarray, lo: int, start: int, stop: int, T: int, tolerance_m: float):
+def kept_samples(Y: np.ndarray, lo: int, start: int, stop: int, T: int, tolerance_m: float):
     """``(sample (N,), frame (N,))`` indices (in the run of ``T`` samples) of the points kept from samples
     ``start..stop-1`` (``start`` a multiple of :data:`BLOCK`), frame-major: for each frame, its kept samples
     block by block. ``Y (3, L, n)`` holds the coordinate planes of samples ``lo..lo+n-1``
     (:func:`robocritics.critic.derived.position_planes`): those and the sample either side (for the second
-    differences), ``D (3, L, n-1)`` their steps (:func:`second_differences`). Without the closing sample of
-    :func:`frame_major`.
+    differences). Without the closing sample of :func:`frame_major`.
     """
     L = Y.shape[1]
     n = stop - start
@@ -124,7 +122,7 @@ def kept_samples(Y: np.ndarray, D: np.ndarray, lo: int, start: int, stop: int, T
     M = np.empty((L, nb * BLOCK))  # squared second-difference norms by frame and sample (0 where undefined)
     first, last = max(start, 1), min(stop, T - 1)  # the samples with a second difference
     if last > first:
-        second_differences(Y, D, slice(first - lo, last - lo), out=M[:, first - start : last - start])
+        second_differences(Y, slice(first - lo, last - lo), out=M[:, first - start : last - start])
     M[:, : max(first - start, 0)] = 0.0
     M[:, max(last - start, 0) :] = 0.0
     Mb = np.sqrt(M.reshape(L, nb, BLOCK).max(axis=2)).T  # (nb, L) block maxima, m
@@ -264,9 +262,9 @@ class _Swept:
 
     def add(self, chunk, execution) -> None:
         params, workspace = self.params, self.workspace
-        Y, D = position_planes(execution), position_steps(execution)  # (3, L, n) m, (3, L, n-1) m
+        Y = position_planes(execution)  # (3, L, n) m
         if self.sel is not None:
-            Y, D = Y[:, self.sel], D[:, self.sel]
+            Y = Y[:, self.sel]
         per_sample, outside, farthest = _outside(workspace, Y, slice(chunk.own.start, chunk.own.stop))
         self.per_sample.put(chunk.start, per_sample)
         frames = np.arange(Y.shape[1])
@@ -275,7 +273,7 @@ class _Swept:
         if over.size:  # the links outside at some sample where some link is: those whose farthest there is
             self.links_out.add((farthest(over) > params.outside_tolerance_m)[None, :])
         # --- the points the hull needs ----------------------------------------
-        ti, li = kept_samples(Y, D, chunk.lo, chunk.start, chunk.stop, len(self.trajectory), params.hull_tolerance_m)
+        ti, li = kept_samples(Y, chunk.lo, chunk.start, chunk.stop, len(self.trajectory), params.hull_tolerance_m)
         frame = np.where(li < 0, -1 - li, li)
         points = Y[:, frame, ti - chunk.lo].T
         self.kept.append((ti, li, points, outside(ti - chunk.start, frame)))
