@@ -124,7 +124,8 @@ def test_planes_feed_the_frame_selection(frames):
 def test_still_and_copied_frames_are_judged_as_if_computed(X, layout, centre, tolerance):
     """Frames still over the window (-1: at a point; -2: at the origin) and copies of other frames (k >= 0: of
     frame k mod L) get the kept samples and outside distances of the computation over every frame."""
-    from robocritics.critic.builtin.space_usage import Frames, frame_kinds, kept_samples
+    from robocritics.critic.builtin.space_usage import kept_samples
+    from robocritics.critic.derived import Frames, frame_kinds
 
     T, L, _ = X.shape
     extra = []

@@ -42,7 +42,7 @@ from pydantic import Field, model_validator
 from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
 from ..._arrays import squared_norms
-from ..derived import position_planes
+from ..derived import frame_kinds, moving_frames, position_planes
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["JointSpeedCritic", "register_critics", "link_speeds"]
@@ -178,12 +178,19 @@ class _Speeds:
             return
         window = chunk.trajectory
         Y = position_planes(execution)  # (3, L, n) m
+        kinds = moving_frames(execution) if self.sel is None else None
         if self.sel is not None:
             Y = Y[:, self.sel]
+            kinds = frame_kinds(Y)
         # the intervals ending at the chunk's own samples (the first sample of the run ends none)
         first = max(chunk.start, 1)
         rows = slice(first - chunk.lo - 1, chunk.stop - chunk.lo - 1)
-        squared = squared_steps(Y, rows)  # (L, n) squared steps, m^2
+        # (L, n) squared steps, m^2: a still frame's are 0 and a copy's its twin's (derived.frame_kinds)
+        squared = np.empty((Y.shape[1], rows.stop - rows.start))
+        for a, b in kinds.runs:
+            squared[a:b] = squared_steps(Y[:, a:b], rows)
+        squared[kinds.still] = 0.0
+        squared[kinds.copies] = squared[kinds.twins]
         dt = np.diff(window.time)[rows]
         # the fastest link per sample: sqrt and division by dt > 0 keep the order of the squared steps, so
         # sqrt(max |step|^2) / dt is max(|step| / dt) bit for bit, without a speed per link

@@ -39,7 +39,6 @@ sets than coal's Qhull copes with are measured by the numpy quickhull (see
 from __future__ import annotations
 
 from functools import partial
-from typing import NamedTuple
 
 import numpy as np
 from pydantic import Field
@@ -48,7 +47,7 @@ from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
 from ..._arrays import row_max, unique_values
 from ...scene import Workspace
-from ..derived import position_planes
+from ..derived import Frames, frame_kinds, moving_frames, position_planes
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_length, make_signal, threshold_verdict
 from ...geometry.hull import convex_hull
 
@@ -105,44 +104,6 @@ def second_differences(Y: np.ndarray, rows: slice, out: np.ndarray | None = None
             dc *= dc
             total += dc
     return total
-
-
-class Frames(NamedTuple):
-    """Which frames of a window of positions need their own per-point work: ``runs`` of consecutive frames
-    ``[(lo, hi), ...]`` that move and are no copy of an earlier frame; ``still``, the frames at one place over the
-    whole window (a robot's base and shoulder); ``copies`` and ``twins``, the frames equal to an earlier moving
-    frame at every sample (a flange and the gripper body mounted on it), and that frame. Their second differences
-    are 0 and their twin's, bit for bit, and their centre distances a constant and their twin's."""
-
-    runs: list
-    still: np.ndarray
-    copies: np.ndarray
-    twins: np.ndarray
-
-
-def frame_kinds(Y: np.ndarray) -> Frames:
-    """:class:`Frames` of the coordinate planes ``Y (3, L, n)``: a frame is still, or a copy, only if every sample
-    says so (a few spread samples rule most frames out first, a full comparison confirms)."""
-    L, n = Y.shape[1], Y.shape[2]
-    probe = Y[:, :, :: max(1, n // 64)]  # (3, L, <= 128)
-    maybe_still = (probe == probe[:, :, :1]).all(axis=(0, 2))  # (L,)
-    maybe_equal = (probe[:, :, None, :] == probe[:, None, :, :]).all(axis=(0, 3))  # (L, L)
-    still, copies, twins, own = [], [], [], []
-    for l in range(L):
-        if maybe_still[l] and (Y[:, l] == Y[:, l, :1]).all():
-            still.append(l)
-            continue
-        twin = next((m for m in own if maybe_equal[l, m] and np.array_equal(Y[:, l], Y[:, m])), None)
-        if twin is None:
-            own.append(l)
-        else:
-            copies.append(l)
-            twins.append(twin)
-    runs = [(a, a + 1) for a in own[:1]]
-    for l in own[1:]:
-        runs[-1:] = [(runs[-1][0], l + 1)] if l == runs[-1][1] else [runs[-1], (l, l + 1)]
-    as_array = lambda x: np.array(x, dtype=np.int64)  # noqa: E731
-    return Frames(runs, as_array(still), as_array(copies), as_array(twins))
 
 
 def kept_samples(Y: np.ndarray, lo: int, start: int, stop: int, T: int, tolerance_m: float, kinds: Frames | None = None):
@@ -330,7 +291,8 @@ class _Swept:
         Y = position_planes(execution)  # (3, L, n) m
         if self.sel is not None:
             Y = Y[:, self.sel]
-        kinds = frame_kinds(Y)  # the frames that need their own work (a robot's base is still)
+        # the frames that need their own work (a robot's base is still), shared with the joint-speed critic
+        kinds = moving_frames(execution) if self.sel is None else frame_kinds(Y)
         per_sample, outside, farthest = _outside(workspace, Y, slice(chunk.own.start, chunk.own.stop), kinds)
         self.per_sample.put(chunk.start, per_sample)
         frames = np.arange(Y.shape[1])
