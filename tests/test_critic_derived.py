@@ -112,3 +112,36 @@ def test_planes_feed_the_frame_selection(frames):
     execution = as_execution(trajectory, Scene.builtin("sorting"))
     sel = [trajectory.frame_index(n) for n in frames] if frames else slice(None)
     np.testing.assert_array_equal(position_planes(execution)[:, sel], planes_of(trajectory.positions[:, sel]))
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    X=positions(min_samples=3),
+    layout=st.lists(st.integers(-2, 6), min_size=1, max_size=6),
+    centre=st.tuples(coordinates, coordinates, coordinates),
+    tolerance=st.sampled_from([0.0005, 0.01, 1.0]),
+)
+def test_still_and_copied_frames_are_judged_as_if_computed(X, layout, centre, tolerance):
+    """Frames still over the window (-1: at a point; -2: at the origin) and copies of other frames (k >= 0: of
+    frame k mod L) get the kept samples and outside distances of the computation over every frame."""
+    from robocritics.critic.builtin.space_usage import kept_samples
+    from robocritics.critic.derived import Frames, frame_kinds
+
+    T, L, _ = X.shape
+    extra = []
+    for k in layout:
+        extra.append(np.broadcast_to(X[0, 0] if k == -1 else np.zeros(3), (T, 3)) if k < 0 else X[:, k % L])
+    X = np.ascontiguousarray(np.concatenate([X, np.stack(extra, axis=1)], axis=1))
+    Y = planes_of(X)
+    every = Frames([(0, X.shape[1])], *(np.zeros(0, dtype=np.int64),) * 3)  # every frame its own work
+    kinds = frame_kinds(Y)
+    assert sum(b - a for a, b in kinds.runs) + kinds.still.size + kinds.copies.size == X.shape[1]
+    for got, want in zip(kept_samples(Y, 0, 0, T, T, tolerance, kinds), kept_samples(Y, 0, 0, T, T, tolerance, every)):
+        np.testing.assert_array_equal(got, want)
+    ws = Workspace(center=centre, radius_m=0.5)
+    reference = np.asarray(ws.outside_distance(X))  # (T, L'), point by point
+    per_sample, outside, farthest = _outside(ws, Y, slice(0, T), kinds)
+    np.testing.assert_array_equal(per_sample, row_max(reference))
+    rows, frames = np.arange(T)[:, None], np.arange(X.shape[1])[None, :]
+    np.testing.assert_array_equal(outside(rows, frames), reference)
+    np.testing.assert_array_equal(farthest(np.arange(0, T, 2)), reference[::2].max(axis=0))

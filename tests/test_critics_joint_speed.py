@@ -142,3 +142,29 @@ def test_link_speeds_are_the_per_sample_distance_over_time(seed, T, L):
         [[np.linalg.norm(X[i + 1, k] - X[i, k]) / (time[i + 1] - time[i]) for k in range(L)] for i in range(T - 1)]
     )
     np.testing.assert_allclose(link_speeds(X, time), want, rtol=1e-14, atol=0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    steps=st.lists(st.lists(st.sampled_from([0.0, 0.01, -0.01, 0.02, 0.005]), min_size=3, max_size=3), min_size=1, max_size=12),
+    limits=st.lists(st.sampled_from([0.0, 1.0, 2.0, 0.5]), min_size=3, max_size=3),
+    tolerance=st.sampled_from([0.0, 0.01]),
+)
+def test_joint_speeds_joint_by_joint_are_the_sample_major_ones(steps, limits, tolerance):
+    """The joint-major layout gives the (T-1, n) formula's speeds, flags and np.argmax pick, ties (equal steps at
+    several samples and joints) and NaN (a zero limit with no motion) included."""
+    from robocritics.critic.builtin.joint_speed import _joint_speeds
+
+    q = np.cumsum(np.vstack([np.zeros(3), np.array(steps)]), axis=0)
+    time = np.cumsum(np.r_[0.0, np.full(len(steps), 0.004)])
+    lim = np.array(limits)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w_ref = np.abs(np.diff(q, axis=0)) / np.diff(time)[:, None]
+        ratio = w_ref / lim
+        w, (ji, jj), worst, over, over_rows = _joint_speeds(q, time, lim, tolerance)
+    want_i, want_j = divmod(int(np.argmax(ratio)), ratio.shape[1])
+    np.testing.assert_array_equal(w, w_ref.T)
+    assert (ji, jj) == (want_i, want_j)
+    np.testing.assert_array_equal(worst, ratio[want_i, want_j])
+    np.testing.assert_array_equal(over, (ratio > 1.0 + tolerance).T)
+    np.testing.assert_array_equal(over_rows, (ratio > 1.0 + tolerance).any(axis=1))

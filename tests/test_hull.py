@@ -139,3 +139,13 @@ def test_times_pow2_is_ldexp(k):
         got, want = _times_pow2(x, k), np.ldexp(x, k)
     np.testing.assert_array_equal(got, want)
     assert np.array_equal(np.signbit(got), np.signbit(want))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40))
+def test_written_out_cross_product_is_numpys_bit_for_bit(seed, n):
+    from robocritics.geometry.hull import _cross
+
+    rng = np.random.default_rng(seed)
+    u, v = rng.standard_normal((n, 3)) * 10.0 ** rng.integers(-8, 8), rng.standard_normal((n, 3))
+    np.testing.assert_array_equal(_cross(u, v), np.cross(u, v))

@@ -162,6 +162,32 @@ def test_content_hash_is_the_plain_per_sample_hash(attached):
     assert traj.content_hash() == _content_hash_reference(traj)
 
 
+def test_content_hash_is_kept_and_follows_the_content():
+    """The hash is computed once, and nothing that changes the hashed content keeps the old one: a view of the
+    caller's writeable array is copied (writing into the caller's array changes nothing), assigning another array
+    is hashed again, and an unpickled trajectory is frozen again."""
+    import pickle
+
+    kw = _kwargs(6)
+    big = np.tile(kw["q"], (1, 2))  # the caller's writeable array; q is a view of it
+    kw["q"] = big[:, :6]
+    traj = Trajectory(**kw)
+    first = traj.content_hash()
+    assert traj.content_hash() is first  # kept, not recomputed
+    big[2, 0] += 0.5  # the caller writes into its own array
+    assert traj.content_hash() == _content_hash_reference(traj) == first
+    with pytest.raises(ValueError):
+        traj.q[0, 0] = 1.0  # read-only
+    moved = traj.q.copy()
+    moved[3, 1] += 0.25
+    traj.q = moved
+    assert traj.content_hash() == _content_hash_reference(traj) != first
+    back = pickle.loads(pickle.dumps(traj))
+    assert not back.q.flags.writeable and back.content_hash() == traj.content_hash()
+    piece = back.slice(1, 4)  # views of read-only memory: not copied
+    assert np.shares_memory(piece.q, back.q) and piece.content_hash() == _content_hash_reference(piece)
+
+
 @settings(max_examples=200, deadline=None)
 @given(
     st.lists(

@@ -45,6 +45,7 @@ from pydantic import Field, model_validator
 
 from ..._arrays import run_starts
 from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
+from ..derived import columns_as_rows
 from ..hookspecs import hookimpl  # not `from .. import`: the root imports the repairs, which import this module
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_length, fmt_value, make_signal, threshold_verdict
 
@@ -107,7 +108,7 @@ class Counted:
         self._proximity = trajectory.proximity
         # the counted pairs' distances (Ke, T), gathered in one pass over the (T, K) proximity (a gather per
         # group of columns reads every row again): the gripper pairs' rows get +inf where they do not count
-        self._counted = self._proximity.T[np.flatnonzero(self.columns)]
+        self._counted = columns_as_rows(self._proximity, np.flatnonzero(self.columns))
         if self.gcols.size == 0:
             return
         entities = [pairs[k].b_entity for k in self.gcols]

@@ -41,8 +41,8 @@ from pydantic import Field, model_validator
 
 from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
-from ..._arrays import row_any, squared_norms
-from ..derived import position_planes
+from ..._arrays import squared_norms
+from ..derived import frame_kinds, moving_frames, position_planes
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_value, make_signal, threshold_verdict
 
 __all__ = ["JointSpeedCritic", "register_critics", "link_speeds"]
@@ -113,16 +113,26 @@ def squared_steps(Y: np.ndarray, rows: slice) -> np.ndarray:
 
 
 def _joint_speeds(q: np.ndarray, time: np.ndarray, limits: np.ndarray, tolerance: float):
-    """Joint speeds ``w (T-1, n)`` rad/s, the (interval, joint) of the highest fraction of its limit, that
-    fraction, where a joint is over its limit by more than ``tolerance`` ``(T-1, n)``, and which intervals
-    have one ``(T-1,)``."""
-    w = np.abs(np.diff(q, axis=0)) / np.diff(time)[:, None]  # (T-1, n) rad/s
-    if not w.shape[1]:
-        return w, (0, 0), 0.0, np.zeros(w.shape, dtype=bool), np.zeros(w.shape[0], dtype=bool)
-    ratio = w / limits  # (T-1, n)
-    ji, jj = divmod(int(np.argmax(ratio)), ratio.shape[1])
-    over_joint = ratio > 1.0 + tolerance  # (T-1, n)
-    return w, (ji, jj), float(ratio[ji, jj]), over_joint, row_any(over_joint)
+    """Joint speeds ``w (n, T-1)`` rad/s (joint by joint: each joint's series contiguous, where the ``(T-1, n)``
+    layout's short rows cost numpy an overhead per row), the (interval, joint) of the highest fraction of its
+    limit, that fraction, where a joint is over its limit by more than ``tolerance`` ``(n, T-1)``, and which
+    intervals have one ``(T-1,)``. The (interval, joint) is ``np.argmax`` of the ``(T-1, n)`` fractions: the
+    earliest interval of the highest (or first NaN), then the lowest joint."""
+    qT = np.ascontiguousarray(q.T)  # (n, T)
+    w = np.abs(qT[:, 1:] - qT[:, :-1])
+    w /= np.diff(time)
+    n = w.shape[0]
+    if not n or not w.shape[1]:
+        return w, (0, 0), 0.0, np.zeros(w.shape, dtype=bool), np.zeros(w.shape[1], dtype=bool)
+    ratio = w / limits[:, None]  # (n, T-1)
+    first = ratio.argmax(axis=1)  # each joint's earliest interval of its highest fraction (or of its first NaN)
+    best = ratio[np.arange(n), first]
+    nan = np.isnan(best)
+    candidates = np.flatnonzero(nan if nan.any() else best == best.max())
+    jj = int(candidates[np.argmin(first[candidates])])  # the earliest interval; argmin: the lowest joint of a tie
+    ji = int(first[jj])
+    over_joint = ratio > 1.0 + tolerance  # (n, T-1)
+    return w, (ji, jj), float(ratio[jj, ji]), over_joint, over_joint.any(axis=0)
 
 
 def _sample_values(per_interval: np.ndarray, first=0.0) -> np.ndarray:
@@ -168,12 +178,19 @@ class _Speeds:
             return
         window = chunk.trajectory
         Y = position_planes(execution)  # (3, L, n) m
+        kinds = moving_frames(execution) if self.sel is None else None
         if self.sel is not None:
             Y = Y[:, self.sel]
+            kinds = frame_kinds(Y)
         # the intervals ending at the chunk's own samples (the first sample of the run ends none)
         first = max(chunk.start, 1)
         rows = slice(first - chunk.lo - 1, chunk.stop - chunk.lo - 1)
-        squared = squared_steps(Y, rows)  # (L, n) squared steps, m^2
+        # (L, n) squared steps, m^2: a still frame's are 0 and a copy's its twin's (derived.frame_kinds)
+        squared = np.empty((Y.shape[1], rows.stop - rows.start))
+        for a, b in kinds.runs:
+            squared[a:b] = squared_steps(Y[:, a:b], rows)
+        squared[kinds.still] = 0.0
+        squared[kinds.copies] = squared[kinds.twins]
         dt = np.diff(window.time)[rows]
         # the fastest link per sample: sqrt and division by dt > 0 keep the order of the squared steps, so
         # sqrt(max |step|^2) / dt is max(|step| / dt) bit for bit, without a speed per link
@@ -225,7 +242,7 @@ class _Speeds:
             "max_link_speed_m_s": worst_v,
             "fastest_link": names[wl],
             "max_joint_speed_fraction_of_limit": worst_ratio,
-            "fastest_joint": trajectory.limits.joint_names[jj] if w.shape[1] else "",
+            "fastest_joint": trajectory.limits.joint_names[jj] if w.shape[0] else "",
         }
 
         verdict = partial(threshold_verdict, self.name, trajectory, unit="m/s", signal=signal, details=details)
@@ -235,7 +252,7 @@ class _Speeds:
             links = [names[i] for i in np.flatnonzero(self.over_max.hit)] if err_lin else []
             joints_over = []
             if err_joint:
-                jover = over_joint.any(axis=0)
+                jover = over_joint.any(axis=1)
                 joints_over = [trajectory.limits.joint_names[i] for i in np.flatnonzero(jover)]
             details["joints_over_limit"] = joints_over
             sentences = []
@@ -246,13 +263,13 @@ class _Speeds:
                 )
             if err_joint:
                 sentences.append(
-                    f"The {trajectory.limits.joint_names[jj]} turns at {w[ji, jj]:.2f} rad/s, above its limit of "
+                    f"The {trajectory.limits.joint_names[jj]} turns at {w[jj, ji]:.2f} rad/s, above its limit of "
                     f"{limits[jj]:.2f} rad/s (at {time[ji + 1]:.2f} s)."
                 )
             if err_lin:
                 value, threshold, unit = worst_v, params.max_speed_m_s, "m/s"
             else:
-                value, threshold, unit = float(w[ji, jj]), float(limits[jj]), "rad/s"
+                value, threshold, unit = float(w[jj, ji]), float(limits[jj]), "rad/s"
             return verdict(
                 Flag.ERROR,
                 _sample_values(rows, False),

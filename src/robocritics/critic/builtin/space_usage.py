@@ -47,7 +47,7 @@ from ..chunked import AnyOver, Extreme, Series, judge_in_chunks
 from ..hookspecs import hookimpl
 from ..._arrays import row_max, unique_values
 from ...scene import Workspace
-from ..derived import position_planes
+from ..derived import Frames, frame_kinds, moving_frames, position_planes
 from .. import CriticParams, Flag, ParamNames, Verdict, fmt_length, make_signal, threshold_verdict
 from ...geometry.hull import convex_hull
 
@@ -106,12 +106,13 @@ def second_differences(Y: np.ndarray, rows: slice, out: np.ndarray | None = None
     return total
 
 
-def kept_samples(Y: np.ndarray, lo: int, start: int, stop: int, T: int, tolerance_m: float):
+def kept_samples(Y: np.ndarray, lo: int, start: int, stop: int, T: int, tolerance_m: float, kinds: Frames | None = None):
     """``(sample (N,), frame (N,))`` indices (in the run of ``T`` samples) of the points kept from samples
     ``start..stop-1`` (``start`` a multiple of :data:`BLOCK`), frame-major: for each frame, its kept samples
     block by block. ``Y (3, L, n)`` holds the coordinate planes of samples ``lo..lo+n-1``
     (:func:`robocritics.critic.derived.position_planes`): those and the sample either side (for the second
-    differences). Without the closing sample of :func:`frame_major`.
+    differences). Without the closing sample of :func:`frame_major`. The second differences are computed for
+    ``kinds.runs`` only (:func:`frame_kinds`, found here if not given): 0 for the still frames, a copy's its twin's.
     """
     L = Y.shape[1]
     n = stop - start
@@ -119,13 +120,16 @@ def kept_samples(Y: np.ndarray, lo: int, start: int, stop: int, T: int, toleranc
         li, ti = np.divmod(np.arange(n * L), n)
         return ti + start, li
     nb = -(-n // BLOCK)
-    M = np.empty((L, nb * BLOCK))  # squared second-difference norms by frame and sample (0 where undefined)
+    kinds = frame_kinds(Y) if kinds is None else kinds
+    block_max = np.zeros((L, nb))  # largest squared second-difference norm, m^2, by frame and block
     first, last = max(start, 1), min(stop, T - 1)  # the samples with a second difference
     if last > first:
-        second_differences(Y, slice(first - lo, last - lo), out=M[:, first - start : last - start])
-    M[:, : max(first - start, 0)] = 0.0
-    M[:, max(last - start, 0) :] = 0.0
-    Mb = np.sqrt(M.reshape(L, nb, BLOCK).max(axis=2)).T  # (nb, L) block maxima, m
+        for a, b in kinds.runs:
+            M = np.zeros((b - a, nb * BLOCK))  # squared second-difference norms by frame and sample (0 where undefined)
+            second_differences(Y[:, a:b], slice(first - lo, last - lo), out=M[:, first - start : last - start])
+            block_max[a:b] = M.reshape(b - a, nb, BLOCK).max(axis=2)
+        block_max[kinds.copies] = block_max[kinds.twins]
+    Mb = np.sqrt(block_max).T  # (nb, L) block maxima, m
     with np.errstate(divide="ignore"):
         smax = np.sqrt(8.0 * tolerance_m / Mb)
     # stride: largest power of two <= smax, within [1, BLOCK]; frame-major order (L, nb)
@@ -205,27 +209,49 @@ def _robot_workspace(robot):
     return default_workspace()
 
 
-def _outside(workspace, Y: np.ndarray, own: slice):
+def _outside(workspace, Y: np.ndarray, own: slice, kinds: Frames | None = None):
     """``(per_sample (n,), outside, farthest)`` for the samples ``own`` of the planes ``Y (3, L, T)``: how far
     the farthest point of each sample lies outside ``workspace``, m; ``outside(rows, frames)``, the outside
     distances of the points at those (broadcast) indices, rows counted from ``own.start``; and
     ``farthest(rows) (L,)``, each frame's largest outside distance over ``rows`` (NaN left out): all as
     ``workspace.outside_distance`` gives them, bit for bit.
 
-    The sphere's squared centre distances are taken once; the farthest of several points is the one of largest
-    squared distance (``outside_of_squared`` does not decrease), so only the samples', the frames' and the asked
-    points' square roots are taken. A workspace that defines its own ``outside_distance`` is asked for every point.
+    The farthest of several points is the one of largest squared centre distance (``outside_of_squared`` does
+    not decrease), so only the samples' square roots are taken for every sample, and the squared distances only
+    of the frames of ``kinds.runs`` (:func:`frame_kinds`): a still frame's is one number, a copy's its twin's.
+    The asked points' are computed where asked. A workspace that defines its own ``outside_distance`` is asked
+    for every point.
     """
     if type(workspace).outside_distance is not Workspace.outside_distance:
         distance = np.asarray(workspace.outside_distance(Y[:, :, own].transpose(2, 1, 0)), dtype=float)  # (n, L)
         return (row_max(distance), lambda rows, frames: distance[rows, frames],
                 lambda rows: np.fmax.reduce(distance[rows], axis=0))  # fmt: skip
-    squared = workspace.squared_centre_distance(Y[0, :, own], Y[1, :, own], Y[2, :, own])  # (L, n) m^2
-    return (
-        workspace.outside_of_squared(squared.max(axis=0)),
-        lambda rows, frames: workspace.outside_of_squared(squared[frames, rows]),
-        lambda rows: workspace.outside_of_squared(np.fmax.reduce(squared[:, rows], axis=1)),
-    )
+    kinds = frame_kinds(Y) if kinds is None else kinds
+    squared = workspace.squared_centre_distance  # (x, y, z) -> |p - c|^2, m^2, elementwise
+    widest = None  # (n,) the largest squared centre distance of each sample, m^2
+    for a, b in kinds.runs:
+        part = squared(Y[0, a:b, own], Y[1, a:b, own], Y[2, a:b, own]).max(axis=0)
+        widest = part if widest is None else np.maximum(widest, part, out=widest)
+    if kinds.still.size:
+        at = own.start
+        part = float(squared(Y[0, kinds.still, at], Y[1, kinds.still, at], Y[2, kinds.still, at]).max())
+        widest = np.full(own.stop - own.start, part) if widest is None else np.maximum(widest, part, out=widest)
+
+    def outside(rows, frames):
+        t = np.asarray(rows) + own.start
+        return workspace.outside_of_squared(squared(Y[0, frames, t], Y[1, frames, t], Y[2, frames, t]))
+
+    def farthest(rows):
+        t = np.asarray(rows) + own.start
+        widest = np.empty(Y.shape[1])  # each frame's largest squared centre distance over the rows, m^2
+        for a, b in kinds.runs:
+            X = Y[:, a:b]
+            widest[a:b] = np.fmax.reduce(squared(X[0][:, t], X[1][:, t], X[2][:, t]), axis=1)
+        widest[kinds.still] = squared(Y[0, kinds.still, t[0]], Y[1, kinds.still, t[0]], Y[2, kinds.still, t[0]])
+        widest[kinds.copies] = widest[kinds.twins]
+        return workspace.outside_of_squared(widest)
+
+    return workspace.outside_of_squared(widest), outside, farthest
 
 
 class SpaceUsageCritic:
@@ -265,7 +291,9 @@ class _Swept:
         Y = position_planes(execution)  # (3, L, n) m
         if self.sel is not None:
             Y = Y[:, self.sel]
-        per_sample, outside, farthest = _outside(workspace, Y, slice(chunk.own.start, chunk.own.stop))
+        # the frames that need their own work (a robot's base is still), shared with the joint-speed critic
+        kinds = moving_frames(execution) if self.sel is None else frame_kinds(Y)
+        per_sample, outside, farthest = _outside(workspace, Y, slice(chunk.own.start, chunk.own.stop), kinds)
         self.per_sample.put(chunk.start, per_sample)
         frames = np.arange(Y.shape[1])
         self.farthest.offer(chunk.start, per_sample, lambda i: int(np.argmax(outside(i, frames))))
@@ -273,7 +301,7 @@ class _Swept:
         if over.size:  # the links outside at some sample where some link is: those whose farthest there is
             self.links_out.add((farthest(over) > params.outside_tolerance_m)[None, :])
         # --- the points the hull needs ----------------------------------------
-        ti, li = kept_samples(Y, chunk.lo, chunk.start, chunk.stop, len(self.trajectory), params.hull_tolerance_m)
+        ti, li = kept_samples(Y, chunk.lo, chunk.start, chunk.stop, len(self.trajectory), params.hull_tolerance_m, kinds)
         frame = np.where(li < 0, -1 - li, li)
         points = Y[:, frame, ti - chunk.lo].T
         self.kept.append((ti, li, points, outside(ti - chunk.start, frame)))
