@@ -296,3 +296,20 @@ def test_a_compact_trajectory_pickles_and_gives_its_states(stored_and_compact):
     np.testing.assert_array_equal(states[-1].P, stored.trajectory.proximity[-1])
     with pytest.raises(TrajectoryError, match="multiple of 64"):
         next(compact.trajectory.chunks(100))
+
+
+def test_the_deploy_gate_rehashes_a_motion_written_behind_the_kept_hash():
+    """The kept content hash follows assignment; code that turns a sample array's write flag back on and writes
+    to it is not seen by the kept hash, so the gate hashes again (``recompute=True``) and refuses the motion."""
+    from robocritics import Robot, Scene, critique, simulate
+    from robocritics.deploy.gate import check_report
+
+    execution = simulate("lib.move_to(0.3, 0.1, 0.2)\n", Scene.builtin("sorting"), Robot.ur3e())
+    report = critique(execution)
+    traj = execution.trajectory
+    kept = traj.content_hash()
+    traj.q.setflags(write=True)
+    traj.q[-1, 0] += 0.01
+    assert traj.content_hash() == kept  # the kept hash cannot see it
+    assert traj.content_hash(recompute=True) != kept
+    assert "hash_mismatch" in [reason[0] for reason in check_report(traj, report, allow_errors=True)]

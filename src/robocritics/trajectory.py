@@ -482,17 +482,19 @@ class Trajectory:
             raise TrajectoryError(f"trajectory JSON is an object, got {type(data).__name__}")
         return cls.from_dict(data)
 
-    def content_hash(self) -> str:
+    def content_hash(self, *, recompute: bool = False) -> str:
         """SHA-256 of the executed content (joint samples, time, gripper, attachment).
 
         Binds a :class:`~robocritics.critic.Report` to the exact motion it judged,
         so the deploy gate can refuse any other motion. Computed once (2 ms for 30,000 samples) and kept with the
         arrays it hashed: those are read-only and own their memory or view read-only memory (:func:`_frozen`), so
         only assigning another array or limits to the trajectory changes the content, and that is seen.
+        ``recompute``: hash the arrays again whatever is kept (the deploy gate does: code that turns an array's
+        write flag back on and writes to it changes the motion without assigning anything).
         """
         hashed = (self.q, self.time, self.gripper_opening_m, self.attached, self.limits)
         cached = self.__dict__.get("_content_hash")
-        if cached is not None and all(a is b for a, b in zip(cached[0], hashed)):
+        if not recompute and cached is not None and all(a is b for a, b in zip(cached[0], hashed)):
             return cached[1]
         digest = self._hash()
         self.__dict__["_content_hash"] = (hashed, digest)

@@ -292,7 +292,7 @@ class URArm:
             watchdog_min_hz=watchdog_min_hz,
             max_start_deviation_rad=min(0.5, start_tolerance_rad + 0.005),
         )
-        trajectory_hash = traj.content_hash()
+        trajectory_hash = traj.content_hash(recompute=True)
         if dry_run:
             self._probe_secondary()
             return _dry_run_result(traj, plan, state, trajectory_hash, program)

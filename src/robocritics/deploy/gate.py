@@ -127,7 +127,7 @@ def check_report(trajectory: Trajectory, report: Report | None, *, allow_errors:
             f"the critics' report has {len(errors)} Error(s) — {listed} — fix the program, or pass "
             "allow_errors=True to deploy anyway",
         ))
-    actual_hash = trajectory.content_hash()
+    actual_hash = trajectory.content_hash(recompute=True)
     if report.trajectory_hash != actual_hash:
         reasons.append((
             "hash_mismatch",
