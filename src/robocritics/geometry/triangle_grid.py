@@ -12,6 +12,7 @@ a mesh of a few large faces gets a coarse grid (few cells, where a scan is cheap
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,25 +25,27 @@ ENTRIES_PER_TRIANGLE = 8
 
 @dataclass(frozen=True)
 class TriangleGrid:
-    """``origin (3,)`` (m) the grid's low corner, ``cell`` (m) its cell edge, ``shape (3,)`` cells per axis;
-    ``keys (E,)`` sorted cell numbers and ``members (E,)`` the triangle of each entry."""
+    """``origin (3,)`` (m) the grid's low corner, ``cell`` (m) its cell edge, ``shape`` cells per axis;
+    ``cells``: each cell's number ``ix + sx (iy + sy iz)`` to the triangles entered in it."""
 
-    origin: np.ndarray
+    origin: tuple[float, float, float]
     cell: float
-    shape: np.ndarray
-    keys: np.ndarray
-    members: np.ndarray
+    shape: tuple[int, int, int]
+    cells: dict[int, np.ndarray]
 
-    def near(self, p: np.ndarray) -> np.ndarray:
+    def near(self, p) -> np.ndarray:
         """The indices of the triangles entered in the cell of ``p (3,)`` (m): every triangle within the grid's
         margin of ``p`` is among them. Empty outside the grid."""
-        index = np.floor((np.asarray(p, dtype=float) - self.origin) / self.cell)
-        if (index < 0).any() or (index >= self.shape).any():
-            return self.members[:0]
-        ix, iy, iz = (int(i) for i in index)
-        key = ix + int(self.shape[0]) * (iy + int(self.shape[1]) * iz)
-        lo, hi = np.searchsorted(self.keys, [key, key + 1])
-        return self.members[lo:hi]
+        x, y, z = (float(v) for v in p)  # in scalars: a call costs a dictionary look-up, not numpy's overheads
+        ix, iy, iz = (math.floor((x - self.origin[0]) / self.cell), math.floor((y - self.origin[1]) / self.cell),
+                      math.floor((z - self.origin[2]) / self.cell))
+        sx, sy, sz = self.shape
+        if not (0 <= ix < sx and 0 <= iy < sy and 0 <= iz < sz):
+            return _NONE
+        return self.cells.get(ix + sx * (iy + sy * iz), _NONE)
+
+
+_NONE = np.zeros(0, dtype=np.int64)
 
 
 def triangle_grid(corners: np.ndarray, margin: float) -> TriangleGrid:
@@ -59,13 +62,16 @@ def triangle_grid(corners: np.ndarray, margin: float) -> TriangleGrid:
         if span.prod(axis=1).sum() <= ENTRIES_PER_TRIANGLE * max(len(corners), 1) or cells == 1:
             break
     shape = np.maximum(last.max(axis=0) + 1, 1) if len(lo) else np.ones(3, np.int64)
-    keys, members = [], []
-    for t in range(len(corners)):  # once per piece at load: a triangle's cells, its box's range on each axis
-        x, y, z = (np.arange(first[t, k], last[t, k] + 1) for k in range(3))
-        grid = x[:, None, None] + shape[0] * (y[None, :, None] + shape[1] * z[None, None, :])
-        keys.append(grid.ravel())
-        members.append(np.full(grid.size, t, dtype=np.int64))
-    keys = np.concatenate(keys) if keys else np.zeros(0, np.int64)
-    members = np.concatenate(members) if members else np.zeros(0, np.int64)
+    # every (triangle, cell) entry at once: entry k of triangle t is its box's cell (k mod sx, k // sx mod sy, ...)
+    count = span.prod(axis=1)
+    members = np.repeat(np.arange(len(corners), dtype=np.int64), count)
+    k = np.arange(int(count.sum()), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
+    sx, sy = span[members, 0], span[members, 1]
+    x, y, z = first[members, 0] + k % sx, first[members, 1] + (k // sx) % sy, first[members, 2] + k // (sx * sy)
+    keys = x + shape[0] * (y + shape[1] * z)
     order = np.argsort(keys, kind="stable")
-    return TriangleGrid(origin, cell, shape, keys[order], members[order])
+    keys, members = keys[order], members[order]
+    starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if len(keys) else np.zeros(0, np.int64)
+    ends = np.r_[starts[1:], len(keys)]
+    cells = {int(keys[lo]): members[lo:hi] for lo, hi in zip(starts.tolist(), ends.tolist())}
+    return TriangleGrid(tuple(origin.tolist()), float(cell), tuple(int(v) for v in shape), cells)
