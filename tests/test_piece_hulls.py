@@ -19,7 +19,7 @@ from robocritics.geometry.pairs import coal_geometry
 from robocritics.geometry.piece_hulls import ON_PIECE_M, piece_hull
 from robocritics.geometry.triangle_grid import ENTRIES_PER_TRIANGLE, triangle_grid
 
-from mesh_reference import point_triangle
+from mesh_reference import bumpy_sphere, point_triangle
 
 
 def _boxes(boxes) -> tuple[np.ndarray, np.ndarray]:
@@ -136,25 +136,7 @@ def test_hull_triangles_has_the_convex_hull_vertices_and_encloses_every_point():
         assert ((P @ n.T - (a[keep] * n).sum(axis=1)) <= 1e-9 * np.ptp(P, axis=0).max()).all()  # all inside
 
 
-def _bumpy_sphere(n: int = 24) -> tuple[np.ndarray, np.ndarray]:
-    """A closed UV sphere of ``2 n (n - 1)`` triangles, radius 0.05 m with bumps (convex and dented patches)."""
-    theta, phi = np.meshgrid(np.linspace(0, np.pi, n + 1)[1:-1], np.linspace(0, 2 * np.pi, 2 * n, endpoint=False), indexing="ij")
-    r = 0.05 * (1 + 0.15 * np.sin(3 * theta) * np.cos(4 * phi))
-    ring = np.stack([r * np.sin(theta) * np.cos(phi), r * np.sin(theta) * np.sin(phi), r * np.cos(theta)], axis=-1).reshape(-1, 3)
-    V = np.vstack([ring, [[0, 0, 0.05], [0, 0, -0.05]]])
-    top, bottom, m = len(ring), len(ring) + 1, 2 * n
-    F = []
-    for j in range(m):
-        F.append((top, j, (j + 1) % m))
-        F.append((bottom, (n - 2) * m + (j + 1) % m, (n - 2) * m + j))
-    for i in range(n - 2):
-        for j in range(m):
-            a, b, c, d = i * m + j, i * m + (j + 1) % m, (i + 1) * m + j, (i + 1) * m + (j + 1) % m
-            F += [(a, c, b), (b, c, d)]
-    return V, np.array(F, np.int64)
-
-
-BUMPY = _bumpy_sphere()
+BUMPY = bumpy_sphere()
 BUMPY_HULL = piece_hull(*BUMPY)
 #: the same hull with a grid of one cell holding every triangle: on_piece then scans them all (the old rule)
 BUMPY_FULL_SCAN = replace(BUMPY_HULL, grid=triangle_grid(np.stack([BUMPY_HULL.a, BUMPY_HULL.a + BUMPY_HULL.e1,
