@@ -138,9 +138,11 @@ def test_hull_triangles_has_the_convex_hull_vertices_and_encloses_every_point():
 
 BUMPY = bumpy_sphere()
 BUMPY_HULL = piece_hull(*BUMPY)
-#: the same hull with a grid of one cell holding every triangle: on_piece then scans them all (the old rule)
-BUMPY_FULL_SCAN = replace(BUMPY_HULL, grid=triangle_grid(np.stack([BUMPY_HULL.a, BUMPY_HULL.a + BUMPY_HULL.e1,
-                                                                   BUMPY_HULL.a + BUMPY_HULL.e2], axis=1), 1.0))
+#: the same hull with grids of one cell holding every triangle and vertex: on_piece then scans them all (the old rule)
+BUMPY_FULL_SCAN = replace(
+    BUMPY_HULL,
+    grid=triangle_grid(np.stack([BUMPY_HULL.a, BUMPY_HULL.a + BUMPY_HULL.e1, BUMPY_HULL.a + BUMPY_HULL.e2], axis=1), 1.0),
+    corner_grid=triangle_grid(np.repeat(BUMPY_HULL.corners[:, None], 3, axis=1), 1.0))
 
 
 @settings(max_examples=300, deadline=None)
@@ -148,15 +150,17 @@ BUMPY_FULL_SCAN = replace(BUMPY_HULL, grid=triangle_grid(np.stack([BUMPY_HULL.a,
     face=st.integers(0, len(BUMPY[1]) - 1),
     weights=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
     lift=st.sampled_from([0.0, 3e-11, -3e-11, 1e-10, 2e-10, 1e-9, 1e-6, 1e-3]),
+    corner=st.booleans(),
 )
-def test_on_piece_through_the_grid_is_the_full_scan(face, weights, lift):
+def test_on_piece_through_the_grid_is_the_full_scan(face, weights, lift, corner):
     """The grid only skips triangles farther than ON_PIECE_M: the answer is the full scan's, on and off the mesh."""
     V, F = BUMPY
     w = np.array(weights) + 1e-3
     tri = V[F[face]]
     normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
-    p = (w / w.sum()) @ tri + lift * normal / np.linalg.norm(normal)
+    p = (tri[0] if corner else (w / w.sum()) @ tri) + lift * normal / np.linalg.norm(normal)  # a corner: a vertex
     assert len(BUMPY_FULL_SCAN.grid.near(p)) == len(BUMPY_HULL.a)
+    assert len(BUMPY_FULL_SCAN.corner_grid.near(p)) == len(BUMPY_HULL.corners)
     assert BUMPY_HULL.on_piece(p) == BUMPY_FULL_SCAN.on_piece(p)
 
 
