@@ -24,7 +24,9 @@ What is measured (coal, ``coal.distance``): the piece's bounding-volume hierarch
 the other side of the pair: a scene primitive (box, cylinder, sphere) at its pose of that sample, a scene mesh
 fixture's hierarchy, a capsule without a mesh (the tool's), or another link's piece (self pairs). Apart: the
 exact distance (to :data:`GJK_TOLERANCE`); the least over a link's capsules is then the distance of its whole
-mesh. Crossing: coal's depth past the deepest touched triangle of the link's **whole** mesh (negative; the
+mesh. Where the capsules are apart it is found through the pieces' hierarchies of hulls
+(:mod:`robocritics.geometry.hull_tree`: a few hull calls and coal on a leaf's own triangles, the same value as
+coal's call on the piece); a scene mesh fixture, and every sample whose capsules overlap, take coal's call. Crossing: coal's depth past the deepest touched triangle of the link's **whole** mesh (negative; the
 other side's whole mesh too for a self pair), as coal reads the raw mesh: depth does not split over pieces
 (part of a triangle can be shallower than the triangle).
 
