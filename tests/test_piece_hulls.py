@@ -6,6 +6,8 @@ where the hull's witness is off the mesh)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import coal
 import numpy as np
 import pytest
@@ -15,8 +17,9 @@ from hypothesis import strategies as st
 from robocritics.geometry.hull import convex_hull, hull_triangles
 from robocritics.geometry.pairs import coal_geometry
 from robocritics.geometry.piece_hulls import ON_PIECE_M, piece_hull
+from robocritics.geometry.triangle_grid import ENTRIES_PER_TRIANGLE, triangle_grid
 
-from mesh_reference import point_triangle
+from mesh_reference import bumpy_sphere, point_triangle
 
 
 def _boxes(boxes) -> tuple[np.ndarray, np.ndarray]:
@@ -131,3 +134,47 @@ def test_hull_triangles_has_the_convex_hull_vertices_and_encloses_every_point():
         n = n[keep] / np.linalg.norm(n[keep], axis=1, keepdims=True)
         n *= np.where(((corners.mean(axis=0) - a[keep]) * n).sum(axis=1) > 0, -1.0, 1.0)[:, None]
         assert ((P @ n.T - (a[keep] * n).sum(axis=1)) <= 1e-9 * np.ptp(P, axis=0).max()).all()  # all inside
+
+
+BUMPY = bumpy_sphere()
+BUMPY_HULL = piece_hull(*BUMPY)
+#: the same hull with grids of one cell holding every triangle and vertex: on_piece then scans them all (the old rule)
+BUMPY_FULL_SCAN = replace(
+    BUMPY_HULL,
+    grid=triangle_grid(np.stack([BUMPY_HULL.a, BUMPY_HULL.a + BUMPY_HULL.e1, BUMPY_HULL.a + BUMPY_HULL.e2], axis=1), 1.0),
+    corner_grid=triangle_grid(np.repeat(BUMPY_HULL.corners[:, None], 3, axis=1), 1.0))
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    face=st.integers(0, len(BUMPY[1]) - 1),
+    weights=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
+    lift=st.sampled_from([0.0, 3e-11, -3e-11, 1e-10, 2e-10, 1e-9, 1e-6, 1e-3]),
+    corner=st.booleans(),
+)
+def test_on_piece_through_the_grid_is_the_full_scan(face, weights, lift, corner):
+    """The grid only skips triangles farther than ON_PIECE_M: the answer is the full scan's, on and off the mesh."""
+    V, F = BUMPY
+    w = np.array(weights) + 1e-3
+    tri = V[F[face]]
+    normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    p = (tri[0] if corner else (w / w.sum()) @ tri) + lift * normal / np.linalg.norm(normal)  # a corner: a vertex
+    assert len(BUMPY_FULL_SCAN.grid.near(p)) == len(BUMPY_HULL.a)
+    assert len(BUMPY_FULL_SCAN.corner_grid.near(p)) == len(BUMPY_HULL.corners)
+    assert BUMPY_HULL.on_piece(p) == BUMPY_FULL_SCAN.on_piece(p)
+
+
+BUMPY_GRIDS = {margin: triangle_grid(BUMPY[0][BUMPY[1]], margin) for margin in (1e-10, 1e-3, 1e-2)}
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    p=st.tuples(st.floats(-0.07, 0.07), st.floats(-0.07, 0.07), st.floats(-0.07, 0.07)),
+    margin=st.sampled_from(sorted(BUMPY_GRIDS)),
+)
+def test_the_grid_holds_every_triangle_within_its_margin(p, margin):
+    V, F = BUMPY
+    grid = BUMPY_GRIDS[margin]
+    within = set(np.flatnonzero(point_triangle(np.array(p), V[F]) <= margin).tolist())
+    assert within <= set(grid.near(np.array(p)).tolist())
+    assert sum(len(m) for m in grid.cells.values()) <= ENTRIES_PER_TRIANGLE * len(F)

@@ -24,7 +24,9 @@ What is measured (coal, ``coal.distance``): the piece's bounding-volume hierarch
 the other side of the pair: a scene primitive (box, cylinder, sphere) at its pose of that sample, a scene mesh
 fixture's hierarchy, a capsule without a mesh (the tool's), or another link's piece (self pairs). Apart: the
 exact distance (to :data:`GJK_TOLERANCE`); the least over a link's capsules is then the distance of its whole
-mesh. Crossing: coal's depth past the deepest touched triangle of the link's **whole** mesh (negative; the
+mesh. Where the capsules are apart it is found through the pieces' hierarchies of hulls
+(:mod:`robocritics.geometry.hull_tree`: a few hull calls and coal on a leaf's own triangles, the same value as
+coal's call on the piece); a scene mesh fixture, and every sample whose capsules overlap, take coal's call. Crossing: coal's depth past the deepest touched triangle of the link's **whole** mesh (negative; the
 other side's whole mesh too for a self pair), as coal reads the raw mesh: depth does not split over pieces
 (part of a triangle can be shallower than the triangle).
 
@@ -55,7 +57,7 @@ import numpy as np
 from ..scene import Shape
 from .meshes import capsule_frames, inscribed_radius, is_closed, mesh_model, winding_numbers
 from .pairs import coal_geometry
-from .piece_hulls import PieceHull, piece_hull
+from .hull_tree import HullTree, hull_tree, primitive_tree, tree_distance
 
 __all__ = ["refine_near_contact", "mesh_parts", "SAME_POSE_M", "GJK_TOLERANCE"]
 
@@ -82,8 +84,7 @@ class _Side:
     rho: float
     piece: np.ndarray | None = None  # a piece's vertices (own frame), for its bounding ball
     whole: object = None  # a link's whole mesh (coal), measured instead of the piece where they overlap
-    hull: "PieceHull | None" = None  # a piece's convex hull, the fast first look (_hull_distance)
-    convex: bool = False  # the geometry is convex (a primitive): its own hull, every witness on it
+    tree: HullTree | None = None  # a piece's hierarchy of hulls, or a primitive's one node: the fast path
 
 
 _CACHE: dict[tuple[int, str], tuple[object, object]] = {}
@@ -178,9 +179,9 @@ def _link_side(part: tuple, poses: np.ndarray) -> _Side:
     whole_geometry = _cached(whole, lambda: coal_geometry("mesh", (whole.vertices, whole.triangles)))
     closed = _cached(whole.triangles, lambda: is_closed(whole.vertices, whole.triangles))
     points = _cached(piece.triangles, lambda: _component_points(piece.vertices, piece.triangles))
-    hull = _cached(piece, lambda: piece_hull(piece.vertices, piece.triangles), "hull")
+    tree = _cached(piece, lambda: hull_tree(piece.vertices, piece.triangles), "tree")
     return _Side(geometry, poses, (whole.vertices, whole.triangles) if closed else None, points, 0.0,
-                 piece=piece.vertices, whole=whole_geometry, hull=hull)
+                 piece=piece.vertices, whole=whole_geometry, tree=tree)
 
 
 def _capsule_side(p0: np.ndarray, p1: np.ndarray, radius_m: float) -> _Side:
@@ -191,7 +192,8 @@ def _capsule_side(p0: np.ndarray, p1: np.ndarray, radius_m: float) -> _Side:
     poses = np.zeros((len(p0), 4, 4))
     poses[:, :3, :3], poses[:, :3, 3], poses[:, 3, 3] = rotations, centres, 1.0
     # a capsule is rigid (a finger's slides, keeping its length): one geometry, its length the mean (FK rounding)
-    return _Side(coal.Capsule(radius_m, float(lengths.mean())), poses, None, np.zeros((1, 3)), radius_m, convex=True)
+    capsule = coal.Capsule(radius_m, float(lengths.mean()))
+    return _Side(capsule, poses, None, np.zeros((1, 3)), radius_m, tree=primitive_tree(capsule))
 
 
 def _shape_side(shape: Shape, poses: Mapping[str, np.ndarray], near: np.ndarray) -> _Side:
@@ -201,8 +203,8 @@ def _shape_side(shape: Shape, poses: Mapping[str, np.ndarray], near: np.ndarray)
         vertices, triangles = shape.mesh
         solid = (vertices, triangles) if is_closed(vertices, triangles) else None
         return _Side(mesh_model(shape), at, solid, np.zeros((0, 3)), 0.0)
-    return _Side(coal_geometry(shape.kind, shape.size), at, None, np.zeros((1, 3)), inscribed_radius(shape.kind, shape.size),
-                 convex=True)
+    geometry = coal_geometry(shape.kind, shape.size)
+    return _Side(geometry, at, None, np.zeros((1, 3)), inscribed_radius(shape.kind, shape.size), tree=primitive_tree(geometry))
 
 
 def _signed(this: _Side, other: _Side, capsule: np.ndarray, within_m: float) -> np.ndarray:
@@ -241,11 +243,13 @@ def _signed(this: _Side, other: _Side, capsule: np.ndarray, within_m: float) -> 
                 values[t] = max(float(capsule[t]), bound)
                 continue
         where = coal.Transform3s(np.ascontiguousarray(relative[t, :3, :3]), np.ascontiguousarray(relative[t, :3, 3]))
-        # capsules apart (no containment to decide): the hulls first, a lower bound of the pieces' distance
-        hull = _hull_distance(this, other, relative[t], where, request, result) if capsule[t] > 0.0 else None
-        if hull is not None and (hull[1] or hull[0] > within_m):
-            # certified (both witnesses on their pieces: piece_hulls), it is the pieces' distance; else a bound
-            values[t] = d_last = hull[0] if hull[1] else max(float(capsule[t]), hull[0])
+        # capsules apart (no containment to decide): the hierarchies of hulls (hull_tree), exact or a bound
+        fast = None
+        if capsule[t] > 0.0 and this.tree is not None and other.tree is not None:
+            fast = tree_distance(this.tree, other.tree, relative[t], where, request, result, within_m)
+        if fast is not None:
+            # exact (the least over pairs of leaves), else a lower bound above within_m
+            values[t] = d_last = fast[0] if fast[1] else max(float(capsule[t]), fast[0])
             last = t
             continue
         result.clear()
@@ -260,24 +264,6 @@ def _signed(this: _Side, other: _Side, capsule: np.ndarray, within_m: float) -> 
                 d_last = -d_last
         values[t], last = d_last, t
     return values
-
-
-def _hull_distance(this: _Side, other: _Side, relative: np.ndarray, where, request, result) -> tuple[float, bool] | None:
-    """``(d, exact)``: the distance ``d`` (m) of ``this`` piece's hull at ``where`` (``relative (4, 4)``, in the
-    other side's frame) from the other side's hull (itself for a primitive), a lower bound of the pieces'
-    distance, and whether both witness points are certified on their pieces (then it is the pieces' distance,
-    :mod:`robocritics.geometry.piece_hulls`); None where there is no hull (a scene mesh) or the hulls cross."""
-    import coal
-
-    if this.hull is None or not (other.convex or other.hull is not None):
-        return None
-    result.clear()
-    d = coal.distance(this.hull.convex, where, other.geometry if other.convex else other.hull.convex, coal.Transform3s(), request, result)
-    if not d > 0:
-        return None
-    mine = relative[:3, :3].T @ (np.asarray(result.getNearestPoint1()) - relative[:3, 3])
-    exact = this.hull.on_piece(mine) and (other.convex or other.hull.on_piece(np.asarray(result.getNearestPoint2())))
-    return float(d), exact
 
 
 def _ball(side: _Side) -> tuple[np.ndarray, float]:

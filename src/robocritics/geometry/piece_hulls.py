@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .hull import hull_triangles
+from .triangle_grid import TriangleGrid, triangle_grid
 
 __all__ = ["ON_PIECE_M", "PieceHull", "piece_hull"]
 
@@ -40,7 +41,9 @@ ON_PIECE_M = 1e-10
 class PieceHull:
     """``convex``: the hull as a ``coal.Convex`` (the piece's frame); ``corners (H, 3)`` its vertices;
     ``a``, ``e1``, ``e2``, ``normal`` ``(F, 3)``: the mesh triangles with all corners on the hull's surface (corner
-    ``a``, edges ``e1 = b - a``, ``e2 = c - a``, unit normal)."""
+    ``a``, edges ``e1 = b - a``, ``e2 = c - a``, unit normal); ``grid`` those triangles and ``corner_grid`` the hull's
+    vertices bucketed for points within ``2 ON_PIECE_M`` (twice: rounding in the tests below cannot pass one the
+    grid left out)."""
 
     convex: object
     corners: np.ndarray
@@ -48,16 +51,21 @@ class PieceHull:
     e1: np.ndarray
     e2: np.ndarray
     normal: np.ndarray
+    grid: TriangleGrid
+    corner_grid: TriangleGrid
 
     def on_piece(self, p: np.ndarray) -> bool:
         """Whether the point ``p (3,)`` (m, the piece's frame) is within :data:`ON_PIECE_M` of the piece."""
-        if np.min(((self.corners - p) ** 2).sum(axis=1)) <= ON_PIECE_M**2:
+        corners = self.corner_grid.near(p)  # the vertices within 2 ON_PIECE_M of p's cell (few, mostly none)
+        if len(corners) and np.min(((self.corners[corners] - p) ** 2).sum(axis=1)) <= ON_PIECE_M**2:
             return True
-        w = p - self.a
-        near = np.flatnonzero(np.abs((w * self.normal).sum(axis=1)) <= ON_PIECE_M)  # in a triangle's plane
+        near = self.grid.near(p)  # the triangles whose grown boxes hold p: the others are farther than ON_PIECE_M
         if not len(near):
             return False
-        return bool(_point_triangle(w[near], self.e1[near], self.e2[near]).min() <= ON_PIECE_M)
+        near = near[np.abs(((p - self.a[near]) * self.normal[near]).sum(axis=1)) <= ON_PIECE_M]  # in a triangle's plane
+        if not len(near):
+            return False
+        return bool(_point_triangle(p - self.a[near], self.e1[near], self.e2[near]).min() <= ON_PIECE_M)
 
 
 def _point_triangle(w: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
@@ -109,4 +117,7 @@ def piece_hull(vertices: np.ndarray, triangles: np.ndarray) -> PieceHull | None:
     normal = np.cross(b - a, c - a)
     length = np.linalg.norm(normal, axis=1)
     keep = length > 0  # a zero-area triangle lies on its neighbours' edges
-    return PieceHull(convex, corners, a[keep], (b - a)[keep], (c - a)[keep], normal[keep] / length[keep, None])
+    normal = normal[keep] / length[keep, None]
+    return PieceHull(convex, corners, a[keep], (b - a)[keep], (c - a)[keep], normal,
+                     triangle_grid(np.stack([a, b, c], axis=1)[keep], 2 * ON_PIECE_M),
+                     triangle_grid(np.repeat(corners[:, None], 3, axis=1), 2 * ON_PIECE_M))
