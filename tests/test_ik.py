@@ -12,6 +12,8 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from ik_reference import near_seed_postures, self_motion_descent
+
 from robocritics.errors import PlanningError, RobotModelError
 from robocritics.robot.ik import (
     DH,
@@ -586,28 +588,15 @@ def test_seven_joint_ik_lands_where_the_self_motion_descent_does_or_nearer():
     farther from the seed than the descent's end (to 1e-6 rad), and is stationary: with no joint at a limit,
     ``q - seed`` has no component along the self-motion (the Jacobian's null space)."""
     from robocritics import Robot
-    from robocritics.robot import ik_numeric
 
     panda = Robot.panda()
     model, data, fid = panda.model, panda.data, panda._tcp_frame_id
-    rng = np.random.default_rng(5)
-    inner_lo, inner_hi = panda.lower + 0.05, panda.upper - 0.05
     stationary = 0
-    for _ in range(40):
-        seed = np.clip(panda.home_q + rng.normal(0, 0.5, panda.n), inner_lo, inner_hi)
-        made = np.clip(seed + rng.normal(0, 0.3, panda.n), inner_lo, inner_hi)
+    for seed, made in near_seed_postures(panda, np.random.default_rng(5), 40, 0.5, 0.3):
         target = panda.tcp_pose(made)
         q = panda.ik(target[:3, 3], target[:3, :3], seed=seed)
         np.testing.assert_allclose(panda.tcp_pose(q), target, atol=1e-8)
-        eye = np.eye(6)
-        oMdes = pin.SE3(target[:3, :3], target[:3, 3])
-
-        def attempt(start):
-            return ik_numeric._dls(model, data, fid, start, target[:3, 3], oMdes, eye, panda.lower, panda.upper,
-                                   True, 100, 1e-10, 1e-10, 0.5)
-
-        descended = ik_numeric._towards_seed(model, data, fid, made, seed, panda.lower, panda.upper, True, attempt,
-                                             1e-10, 0.5, 6)
+        descended = self_motion_descent(panda, target, seed, made)
         assert np.linalg.norm(q - seed) <= np.linalg.norm(descended - seed) + 1e-6
         if np.all((q > panda.lower + 1e-6) & (q < panda.upper - 1e-6)):
             J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
@@ -628,12 +617,8 @@ def test_pointing_ik_answers_near_the_seed_are_stationary_for_the_distance_to_it
 
     panda = Robot.panda()
     model, data, fid = panda.model, panda.data, panda._tcp_frame_id
-    rng = np.random.default_rng(8)
-    inner_lo, inner_hi = panda.lower + 0.05, panda.upper - 0.05
     stationary = 0
-    for _ in range(30):
-        seed = np.clip(panda.home_q + rng.normal(0, 0.4, panda.n), inner_lo, inner_hi)
-        made = np.clip(seed + rng.normal(0, 0.2, panda.n), inner_lo, inner_hi)
+    for seed, made in near_seed_postures(panda, np.random.default_rng(8), 30, 0.4, 0.2):
         pose = panda.tcp_pose(made)
         axis = pose[:3, 2]
         q = pointing_ik(model, data, fid, pose[:3, 3], axis, seed, panda.lower, panda.upper)

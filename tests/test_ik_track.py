@@ -5,31 +5,13 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-import pinocchio as pin
+from ik_reference import descent_reference
 
 from robocritics import Robot
 from robocritics.robot import ik_numeric
 from robocritics.robot.ik_track import track_pose
 
 PANDA = Robot.panda()
-
-
-def descent_reference(robot, target, seed, made=None):
-    """The slow obvious answer that numeric IK's Newton-first path stands in for: damped least squares from the
-    seed (from ``made``, the posture that made the target, where that descent does not converge), then the
-    re-converged null-space descent towards the seed (``ik_numeric._towards_seed``)."""
-    model, data, fid = robot.model, robot.data, robot._tcp_frame_id
-    oMdes, eye = pin.SE3(target[:3, :3], target[:3, 3]), np.eye(6)
-
-    def attempt(start):
-        return ik_numeric._dls(model, data, fid, start, target[:3, 3], oMdes, eye, robot.lower, robot.upper,
-                               True, 100, 1e-10, 1e-10, 0.5)
-
-    q, dp, dr = attempt(np.asarray(seed, float))
-    if not (dp <= 1e-10 and dr <= 1e-10):
-        q = made
-    return ik_numeric._towards_seed(model, data, fid, q, seed, robot.lower, robot.upper, True, attempt, 1e-10,
-                                    0.5, 6)
 
 
 @settings(max_examples=25, deadline=None)
